@@ -1,0 +1,144 @@
+"""Reward classifiers g_j: torch models from (view features of s, action, view features of s') to K
+reward classes.
+
+Every classifier here is a *batch* of ``n_models`` independent models with stacked parameters, so
+that the vectorised tabular path fits one model per run in one call; the neural path uses
+``n_models = 1``. Models never share a parameter, a gradient or a random draw, so a run's model is
+the same whatever else is in the batch.
+
+- ``model="mlp"`` with ``loss="cross_entropy"``: a two-layer perceptron.
+- ``model="linear"`` with ``loss="hinge"``: a linear multi-class SVM (Weston-Watkins hinge) with the
+  L2 penalty 1/2 ||theta||^2, the seed paper's Eq. 8 exactly.
+
+Runs may hold different numbers of classes: ``class_mask`` (n_models, K) marks the classes a run
+has seen in its labels; the others get no score and can never be predicted.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from itertools import pairwise
+from typing import Literal
+
+import torch
+from torch import nn
+
+ModelKind = Literal["mlp", "linear"]
+LossKind = Literal["cross_entropy", "hinge"]
+MODEL_KINDS: tuple[str, ...] = ("mlp", "linear")
+LOSS_KINDS: tuple[str, ...] = ("cross_entropy", "hinge")
+_MASKED = -1e9
+
+
+@dataclass(frozen=True)
+class ClassifierConfig:
+    """Hyperparameters of a reward classifier.
+
+    :param model: ``"mlp"`` or ``"linear"``.
+    :param loss: ``"cross_entropy"`` or ``"hinge"``.
+    :param hidden: width of the MLP's hidden layer.
+    :param epochs: full-batch Adam steps per fit.
+    :param lr: Adam learning rate.
+    :param l2: weight of the penalty 1/2 ||theta||^2, divided by the number of training samples.
+    """
+
+    model: ModelKind = "mlp"
+    loss: LossKind = "cross_entropy"
+    hidden: int = 32
+    epochs: int = 150
+    lr: float = 0.02
+    l2: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if self.model not in MODEL_KINDS:
+            raise ValueError(f"classifier model must be one of {MODEL_KINDS}, got {self.model!r}")
+        if self.loss not in LOSS_KINDS:
+            raise ValueError(f"classifier loss must be one of {LOSS_KINDS}, got {self.loss!r}")
+
+
+class BatchedRewardClassifier(nn.Module):
+    """``n_models`` independent classifiers over inputs of ``n_features`` and ``n_classes`` outputs.
+
+    :param n_models: number of independent models (runs) in the batch.
+    :param n_features: input width.
+    :param n_classes: maximum number of reward classes K.
+    :param config: hyperparameters.
+    :param seeds: one seed per model for its initial parameters.
+    """
+
+    def __init__(
+        self, n_models: int, n_features: int, n_classes: int, config: ClassifierConfig, seeds: list[int]
+    ) -> None:
+        super().__init__()
+        if len(seeds) != n_models:
+            raise ValueError(f"need one seed per model: {n_models} models, {len(seeds)} seeds")
+        self.config = config
+        widths = [n_features, config.hidden, n_classes] if config.model == "mlp" else [n_features, n_classes]
+        self.weights = nn.ParameterList()
+        self.biases = nn.ParameterList()
+        for fan_in, fan_out in pairwise(widths):
+            bound = 1.0 / fan_in**0.5
+            w, b = [], []
+            for seed in seeds:
+                gen = torch.Generator().manual_seed(int(seed) * 7919 + fan_in * 31 + fan_out)
+                w.append((torch.rand(fan_in, fan_out, generator=gen, dtype=torch.float64) * 2 - 1) * bound)
+                b.append((torch.rand(fan_out, generator=gen, dtype=torch.float64) * 2 - 1) * bound)
+            self.weights.append(nn.Parameter(torch.stack(w)))
+            self.biases.append(nn.Parameter(torch.stack(b)[:, None, :]))
+
+    def forward(self, x: torch.Tensor, class_mask: torch.Tensor) -> torch.Tensor:
+        """Outputs (logits or decision values) of shape (n_models, N, K); absent classes get -1e9.
+
+        :param x: inputs of shape (n_models, N, n_features).
+        :param class_mask: bool (n_models, K), the classes each model may predict.
+        """
+        h = x
+        for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            h = torch.baddbmm(b, h, w)
+            if i < len(self.weights) - 1:
+                h = torch.relu(h)
+        return h.masked_fill(~class_mask[:, None, :], _MASKED)
+
+    def class_losses(self, outputs: torch.Tensor, class_mask: torch.Tensor) -> torch.Tensor:
+        """Loss L(y, g(x)) for every candidate label y: shape (n_models, N, K); +inf for absent classes."""
+        if self.config.loss == "cross_entropy":
+            losses = -torch.log_softmax(outputs, dim=-1)
+        else:
+            # Weston-Watkins: L(y) = sum over present c != y of max(0, 1 - f_y + f_c).
+            margins = torch.relu(1.0 - outputs[..., :, None] + outputs[..., None, :])
+            present = class_mask[:, None, None, :].to(outputs.dtype)
+            losses = (margins * present).sum(-1) - 1.0  # drops the c == y term, which is exactly 1
+        return losses.masked_fill(~class_mask[:, None, :], float("inf"))
+
+    def scores(self, x: torch.Tensor, class_mask: torch.Tensor) -> torch.Tensor:
+        """Confidence of every class in [0, 1]: softmax of the outputs; shape (n_models, N, K)."""
+        with torch.no_grad():
+            return torch.softmax(self(x, class_mask), dim=-1)
+
+    def fit(
+        self, x: torch.Tensor, y: torch.Tensor, weight: torch.Tensor, class_mask: torch.Tensor
+    ) -> torch.Tensor:
+        """Minimise sum_i w_i L(y_i, g(x_i)) / sum_i w_i + l2/2 ||theta||^2 / n, per model.
+
+        Eq. 8 of the paper with labels weighted 1 and pseudo-labels by their self-paced weight.
+
+        :param x: (n_models, N, n_features).
+        :param y: int (n_models, N), class index of each sample (any value where ``weight`` is 0).
+        :param weight: (n_models, N) sample weights in [0, 1].
+        :param class_mask: bool (n_models, K).
+        :return: the final weighted loss of each model, shape (n_models,).
+        """
+        optimiser = torch.optim.Adam(self.parameters(), lr=self.config.lr)
+        y = y.clamp(min=0)[..., None]
+        total = weight.sum(-1).clamp(min=1e-12)
+        n = (weight > 0).sum(-1).clamp(min=1)
+        for _ in range(self.config.epochs):
+            optimiser.zero_grad()
+            per_sample = self.class_losses(self(x, class_mask), class_mask).gather(-1, y)[..., 0]
+            data = (torch.where(weight > 0, per_sample, 0.0) * weight).sum(-1) / total
+            penalty = sum((w**2).sum(dim=(1, 2)) for w in self.weights)
+            loss = data + 0.5 * self.config.l2 * penalty / n
+            # Summing keeps each model's gradient its own: d(sum)/d(loss_b) = 1.
+            loss.sum().backward()
+            optimiser.step()
+        return loss.detach()

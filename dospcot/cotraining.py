@@ -1,0 +1,212 @@
+"""Self-paced multi-view co-training of reward classifiers: one round of DESIGN.md section 2.
+
+This file holds steps 2 (select, fit, score per view, serially), 3 (the Eq. 9 pseudo-reward) and 5
+(ageing and stopping) for any number of views m and any agent kind: it sees only a pool of samples
+(features per view, labels, the unlabelled set), never an agent or the hidden rewards. The drivers
+that own the agents (the tabular one in :mod:`dospcot.tabular_cotraining`) collect the pool and
+apply steps 1 and 4.
+
+Everything is batched over B independent runs; each run has its own classifiers, labels, pool and
+schedule, and nothing crosses between runs.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from dospcot.classifier import BatchedRewardClassifier, ClassifierConfig
+from dospcot.consensus import consensus_labels
+from dospcot.selection import WEIGHTINGS, Weighting, spamco_select
+
+
+@dataclass(frozen=True)
+class CoTrainingConfig:
+    """Hyperparameters of the self-paced schedule.
+
+    :param gamma: co-regularisation weight (SPaMCo default 0.3).
+    :param weighting: ``"hard"`` (SPaMCo default) or ``"soft"`` self-paced weights.
+    :param add_fraction_start: add_num in round 1, as a share of the unlabelled pool.
+    :param add_fraction_step: growth of that share per round (lambda falls as it grows). It is not
+        capped at 1: per-class quotas ``ceil(share_c * add_num)`` keep a class from taking more than
+        its share, so only an add_num beyond |U| lets every class's candidates in, and U be fully
+        admitted.
+    :param tol: stop once under this share of pseudo-labels changed in a round (0 disables).
+    :param stop_when_fully_admitted: stop once every unlabelled sample is admitted.
+    :param max_classes: the most distinct reward values a run may see.
+    :param classifier: the reward classifiers' hyperparameters.
+    """
+
+    gamma: float = 0.3
+    weighting: Weighting = "hard"
+    add_fraction_start: float = 0.2
+    add_fraction_step: float = 0.4
+    tol: float = 0.0
+    stop_when_fully_admitted: bool = False
+    max_classes: int = 16
+    classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
+
+    def __post_init__(self) -> None:
+        if self.gamma < 0:
+            raise ValueError(f"gamma must be >= 0, got {self.gamma}")
+        if self.weighting not in WEIGHTINGS:
+            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
+        if self.add_fraction_start <= 0:
+            raise ValueError(f"add_fraction_start must be > 0, got {self.add_fraction_start}")
+        if self.add_fraction_step < 0:
+            raise ValueError(f"add_fraction_step must be >= 0, got {self.add_fraction_step}")
+
+
+@dataclass(frozen=True)
+class Pool:
+    """The samples of one round, for B runs over N pool slots.
+
+    :param features: per view, (B, N, d_j) classifier inputs.
+    :param labelled: (B, N) bool, samples whose true reward was revealed.
+    :param label_class: (B, N) int class index of the revealed reward (-1 elsewhere).
+    :param unlabelled: (B, N) bool, the unlabelled pool U (disjoint from ``labelled``).
+    :param class_mask: (B, K) bool, the classes each run has seen.
+    """
+
+    features: list[np.ndarray]
+    labelled: np.ndarray
+    label_class: np.ndarray
+    unlabelled: np.ndarray
+    class_mask: np.ndarray
+
+
+@dataclass(frozen=True)
+class RoundResult:
+    """What one co-training round decided.
+
+    :param pseudo_class: (B, N) consensus class of each sample of U, -1 if no view admitted it.
+    :param pseudo_weight: (B, N) its self-paced weight, the largest v_j over views (0 elsewhere).
+    :param view_weight: (m, B, N) the weights v_j of each view.
+    :param view_class: (m, B, N) the class each view predicts.
+    :param threshold: (m, B, K) lambda_{j,c}.
+    :param classifier_loss: (m, B) final training loss of each classifier.
+    :param pace: (B,) admitted share of U, in [0, 1].
+    :param changed: (B,) share of U whose pseudo-label changed since the previous round.
+    :param stopped: (B,) bool, runs whose stopping rule fired this round.
+    """
+
+    pseudo_class: np.ndarray
+    pseudo_weight: np.ndarray
+    view_weight: np.ndarray
+    view_class: np.ndarray
+    threshold: np.ndarray
+    classifier_loss: np.ndarray
+    pace: np.ndarray
+    changed: np.ndarray
+    stopped: np.ndarray
+
+
+class SelfPacedCoTrainer:
+    """m reward classifiers co-trained by serial SPaMCo over B independent runs.
+
+    :param view_dims: input width of each view's classifier (m entries).
+    :param n_runs: B.
+    :param config: the schedule's hyperparameters.
+    :param seeds: one seed per run; view j of run b initialises from ``(seeds[b], j)``.
+    """
+
+    def __init__(self, view_dims: list[int], n_runs: int, config: CoTrainingConfig, seeds: list[int]) -> None:
+        self.config = config
+        self.n_views = len(view_dims)
+        if self.n_views < 1:
+            raise ValueError("co-training needs at least one view")
+        self.classifiers = [
+            BatchedRewardClassifier(
+                n_runs, dim, config.max_classes, config.classifier, [s * 101 + j for s in seeds]
+            )
+            for j, dim in enumerate(view_dims)
+        ]
+        self.round = 0
+        self._previous: np.ndarray | None = None
+
+    @property
+    def add_fraction(self) -> float:
+        """add_num of the current round as a share of |U| (grows by ``add_fraction_step`` each round)."""
+        return self.config.add_fraction_start + self.config.add_fraction_step * self.round
+
+    def step(self, pool: Pool) -> RoundResult:
+        """Run one round: for each view in turn select, fit and score; then Eq. 9; then age."""
+        cfg, m = self.config, self.n_views
+        mask = torch.from_numpy(pool.class_mask)
+        xs = [torch.from_numpy(np.asarray(f, dtype=np.float64)) for f in pool.features]
+        label_class = torch.from_numpy(pool.label_class)
+        labelled_w = torch.from_numpy(pool.labelled.astype(np.float64))
+        share = _label_share(pool)
+        add_num = np.ceil(self.add_fraction * pool.unlabelled.sum(axis=1) - 1e-9).astype(np.int64)
+
+        if self.round == 0:  # the paper's initialisation: each classifier first learns the labels alone
+            for clf, x in zip(self.classifiers, xs, strict=True):
+                clf.fit(x, label_class, labelled_w, mask)
+        scores = [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
+        losses = np.stack([_class_losses(clf, x, mask) for clf, x in zip(self.classifiers, xs, strict=True)])
+        n_runs, n_samples = pool.labelled.shape
+        weights = np.zeros((m, n_runs, n_samples))
+        view_class = np.zeros((m, n_runs, n_samples), dtype=np.int64)
+        threshold = np.zeros((m, n_runs, cfg.max_classes))
+        fit_loss = np.zeros((m, n_runs))
+
+        for j in range(m):
+            others = [k for k in range(m) if k != j]
+            if others:
+                boost = cfg.gamma * weights[others].mean(axis=0)
+                consensus = consensus_labels(losses[others], weights[others])
+            else:
+                boost, consensus = np.zeros((n_runs, n_samples)), np.full((n_runs, n_samples), -1)
+            sel = spamco_select(
+                scores[j], pool.unlabelled, share, add_num, boost, consensus, cfg.gamma, cfg.weighting
+            )
+            weights[j], view_class[j], threshold[j] = sel.weight, sel.predicted, sel.threshold
+            # g_j learns its admitted samples under the current consensus (Eq. 9 with the new v_j).
+            pseudo = consensus_labels(losses, weights)
+            targets = torch.from_numpy(np.where(pool.labelled, pool.label_class, pseudo))
+            sample_w = torch.from_numpy(np.where(pool.labelled, 1.0, weights[j]))
+            fit_loss[j] = self.classifiers[j].fit(xs[j], targets, sample_w, mask).numpy()
+            scores[j] = self.classifiers[j].scores(xs[j], mask).numpy()
+            losses[j] = _class_losses(self.classifiers[j], xs[j], mask)
+
+        pseudo_class = np.where(pool.unlabelled, consensus_labels(losses, weights), -1)
+        pseudo_weight = np.where(pseudo_class >= 0, weights.max(axis=0), 0.0)
+        n_unlabelled = np.maximum(pool.unlabelled.sum(axis=1), 1)
+        pace = (pseudo_weight > 0).sum(axis=1) / n_unlabelled
+        changed = self._changed_share(pseudo_class, pool.unlabelled)
+        stopped = np.zeros(n_runs, dtype=bool)
+        if cfg.tol > 0 and self.round > 0:
+            stopped |= changed < cfg.tol
+        if cfg.stop_when_fully_admitted:
+            stopped |= pace >= 1.0
+        self.round += 1
+        return RoundResult(
+            pseudo_class, pseudo_weight, weights, view_class, threshold, fit_loss, pace, changed, stopped
+        )
+
+    def _changed_share(self, pseudo_class: np.ndarray, unlabelled: np.ndarray) -> np.ndarray:
+        previous = self._previous
+        self._previous = pseudo_class.copy()
+        if previous is None:
+            return np.ones(pseudo_class.shape[0])
+        n = min(previous.shape[1], pseudo_class.shape[1])
+        differs = (previous[:, :n] != pseudo_class[:, :n]) & unlabelled[:, :n]
+        return differs.sum(axis=1) / np.maximum(unlabelled.sum(axis=1), 1)
+
+
+def _label_share(pool: Pool) -> np.ndarray:
+    """(B, K) share of each class among each run's labels."""
+    n_classes = pool.class_mask.shape[1]
+    onehot = (pool.label_class[..., None] == np.arange(n_classes)) & pool.labelled[..., None]
+    counts = onehot.sum(axis=1).astype(np.float64)
+    return counts / np.maximum(counts.sum(axis=1, keepdims=True), 1.0)
+
+
+def _class_losses(clf: BatchedRewardClassifier, x: torch.Tensor, mask: torch.Tensor) -> np.ndarray:
+    with torch.no_grad():
+        return clf.class_losses(clf(x, mask), mask).numpy()
+
+
+__all__ = ["CoTrainingConfig", "Pool", "RoundResult", "SelfPacedCoTrainer"]

@@ -1,0 +1,93 @@
+"""Metrics of DESIGN.md section 4: policy quality against the exact optimum, pseudo-reward quality
+against the hidden truth, and summaries over seeds.
+
+These functions are the only readers of the hidden reward; nothing they return is fed back to a
+learner.
+"""
+
+from __future__ import annotations
+
+import json
+from importlib import resources
+
+import numpy as np
+
+from dospcot.envs.tabular import TabularMDP
+
+
+def paper_reference_policy() -> np.ndarray:
+    """The 48 greedy actions the seed paper's code scores CliffWalking policies against."""
+    text = resources.files("dospcot").joinpath("data/paper_reference_policy.json").read_text()
+    return np.array(json.loads(text)["greedy_action"], dtype=np.int64)
+
+
+def paper_tables() -> dict:
+    """The numbers printed in the seed paper (for side-by-side comparison only)."""
+    return json.loads(resources.files("dospcot").joinpath("data/paper_tables.json").read_text())
+
+
+def paper_accuracy(greedy: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Share of states whose greedy action equals the reference: (B,) from greedy actions (B, S)."""
+    return (greedy == reference[None, :]).mean(axis=1)
+
+
+def optimal_action_agreement(greedy: np.ndarray, optimal: np.ndarray, states: np.ndarray) -> np.ndarray:
+    """Share of ``states`` where the greedy action is optimal (any of tied optima): (B,).
+
+    :param greedy: (B, S) greedy actions.
+    :param optimal: (S, A) bool optimal-action sets from value iteration.
+    :param states: (S,) bool, the states that count (reachable and non-terminal).
+    """
+    hits = optimal[np.arange(optimal.shape[0])[None, :], greedy]
+    return hits[:, states].mean(axis=1)
+
+
+def greedy_rollout(mdp: TabularMDP, greedy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Undiscounted true return and success (goal reached) of each greedy policy (B, S): two (B,)."""
+    n = greedy.shape[0]
+    state = np.full(n, mdp.start_state)
+    ret = np.zeros(n)
+    running = np.ones(n, dtype=bool)
+    success = np.zeros(n, dtype=bool)
+    for _ in range(mdp.max_episode_steps):
+        action = greedy[np.arange(n), state]
+        ret += np.where(running, mdp.reward[state, action], 0.0)
+        ended = mdp.terminal[state, action] & running
+        success |= ended
+        running &= ~ended
+        state = mdp.next_state[state, action]
+    return ret, success
+
+
+def random_policy_return(mdp: TabularMDP) -> float:
+    """Exact expected undiscounted return of the uniform random policy over one episode."""
+    value = np.zeros(mdp.n_states)
+    for _ in range(mdp.max_episode_steps):
+        value = (mdp.reward + (~mdp.terminal) * value[mdp.next_state]).mean(axis=1)
+    return float(value[mdp.start_state])
+
+
+def normalised_score(ret: np.ndarray, random_return: float, oracle_return: float) -> np.ndarray:
+    """``(R - R_random) / (R_oracle - R_random)``: 0 for the random policy, 1 for the optimum."""
+    return (ret - random_return) / (oracle_return - random_return)
+
+
+def bootstrap_ci(
+    values: np.ndarray, confidence: float = 0.95, n_resamples: int = 10_000, seed: int = 0
+) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean of ``values`` (seeded, so tables are reproducible)."""
+    values = np.asarray(values, dtype=np.float64)
+    if values.size == 0:
+        return float("nan"), float("nan")
+    rng = np.random.default_rng(seed)
+    means = values[rng.integers(0, values.size, (n_resamples, values.size))].mean(axis=1)
+    alpha = (1.0 - confidence) / 2.0
+    low, high = np.quantile(means, [alpha, 1.0 - alpha])
+    return float(low), float(high)
+
+
+def iqm(values: np.ndarray) -> float:
+    """Interquartile mean: the mean after dropping ``floor(n / 4)`` values at each end (as rliable)."""
+    values = np.sort(np.asarray(values, dtype=np.float64))
+    cut = values.size // 4
+    return float(values[cut : values.size - cut].mean())

@@ -1,0 +1,393 @@
+"""DOSPCoT with tabular agents on a masked discrete MDP, vectorised over runs (the validation path).
+
+A *run* is one method with one seed: m agents (one per view) sharing a transition store and, for
+co-training, m reward classifiers. Many runs step in lock step; nothing crosses between them, so a
+run's result is the same alone or in a batch (a test checks this).
+
+One round, top to bottom (DESIGN.md section 2), in :meth:`TabularCoTraining.run`:
+
+1. **Collect**: every agent plays ``episodes_per_round`` epsilon-greedy episodes and learns online
+   from each step with the reward and weight of its run's current reward table: the true reward
+   where the step was labelled (revealed by the mask), the pseudo-reward and its self-paced weight
+   where admitted, weight 0 elsewhere. Every transition enters the run's store, deduplicated by
+   (s, a) key.
+2. **Co-train** (method ``"cotrain"``): the store's labelled keys and unlabelled pool U go to the
+   :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
+3. **Pseudo-reward**: the consensus classes become the run's reward table.
+4. **Policy update**: ``replay_sweeps`` synchronous weighted TD sweeps over the stored transitions.
+5. **Age**: the pace (admitted share of U) sets the next round's exploration rate.
+
+Baselines run the same loop with a fixed table: ``oracle`` (every key labelled), ``masked-zero``
+(masked rewards read as 0, weight 1) and ``labels-only`` (masked keys weight 0). Self-training is
+``cotrain`` with one view.
+
+The hidden reward of a masked key reaches only :mod:`dospcot.metrics`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
+from itertools import groupby
+
+import numpy as np
+
+from dospcot import metrics
+from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.envs.masking import StateActionMask, check_label_fraction
+from dospcot.envs.tabular import TabularMDP
+from dospcot.policies.tabular import TabularAgents, check_agent_kind
+from dospcot.reward_classes import RewardClasses
+
+METHODS: tuple[str, ...] = ("oracle", "masked-zero", "labels-only", "cotrain")
+
+
+@dataclass(frozen=True)
+class TabularRunSpec:
+    """One run: a method, its agents (one per view), gamma and a seed.
+
+    :param method: one of :data:`METHODS`.
+    :param agents: agent kind of each view, e.g. ``("esarsa", "q")``.
+    :param views: the view of each agent (its reward classifier's input).
+    :param gamma: co-regularisation weight (co-training only).
+    :param seed: seeds the mask, the exploration streams and the classifiers; runs of different
+        methods with the same seed share the labelled key set.
+    """
+
+    method: str
+    agents: tuple[str, ...]
+    views: tuple[str, ...]
+    gamma: float = 0.3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if len(self.agents) < 1 or len(self.agents) != len(self.views):
+            raise ValueError(
+                "need one view per agent and at least one agent; "
+                f"got agents={self.agents}, views={self.views}"
+            )
+        for kind in self.agents:
+            check_agent_kind(kind)
+
+
+@dataclass(frozen=True)
+class TabularConfig:
+    """Hyperparameters shared by every run of a study.
+
+    :param rounds: co-training rounds (each one a collection of ``episodes_per_round`` episodes).
+    :param episodes_per_round: episodes each agent plays per round.
+    :param learning_rate: TD step size.
+    :param discount: discount factor (also the one value iteration uses for the optimum).
+    :param eps_start: exploration rate at pace 0.
+    :param eps_end: exploration rate at pace 1; eps(p) = eps_start + (eps_end - eps_start) * p.
+    :param label_fraction: share of labelled (s, a) keys, in (0, 1].
+    :param replay_sweeps: synchronous TD sweeps over the store after each round's co-training.
+    :param cotraining: the self-paced schedule (its gamma is replaced by each run's).
+    """
+
+    rounds: int = 5
+    episodes_per_round: int = 500
+    learning_rate: float = 0.8
+    discount: float = 0.95
+    eps_start: float = 0.1
+    eps_end: float = 0.1
+    label_fraction: float = 0.1
+    replay_sweeps: int = 1
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+
+    def __post_init__(self) -> None:
+        check_label_fraction(self.label_fraction)
+        if self.rounds < 1 or self.episodes_per_round < 1 or self.replay_sweeps < 0:
+            raise ValueError(
+                f"rounds and episodes_per_round must be >= 1 and replay_sweeps >= 0; got {self.rounds}, "
+                f"{self.episodes_per_round}, {self.replay_sweeps}"
+            )
+        for name in ("eps_start", "eps_end"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+
+
+@dataclass
+class TabularResult:
+    """What a study returns.
+
+    :param records: one dict per run, round and agent (the rows of ``metrics.csv``).
+    :param q: (n_slots, S, A) final Q-tables, slot order = runs in order, agents in order.
+    :param slot_run: (n_slots,) the run of each slot.
+    """
+
+    records: list[dict]
+    q: np.ndarray
+    slot_run: np.ndarray
+
+
+class TabularCoTraining:
+    """Trains a batch of tabular runs on one masked MDP.
+
+    :param mdp: the task; its ``views`` must hold every view the specs name.
+    :param specs: the runs.
+    :param config: shared hyperparameters.
+    :param reference_policy: (S,) actions for the paper accuracy, if the task has one.
+    """
+
+    def __init__(
+        self,
+        mdp: TabularMDP,
+        specs: Sequence[TabularRunSpec],
+        config: TabularConfig,
+        reference_policy: np.ndarray | None = None,
+    ) -> None:
+        missing = sorted({v for spec in specs for v in spec.views} - set(mdp.views))
+        if missing:
+            raise ValueError(f"unknown view(s) {missing}; this task has {sorted(mdp.views)}")
+        self.mdp, self.specs, self.config = mdp, list(specs), config
+        self.reference_policy = reference_policy
+        n_runs, n_s, n_a = len(self.specs), mdp.n_states, mdp.n_actions
+        self.slot_run = np.array([r for r, spec in enumerate(self.specs) for _ in spec.agents])
+        self.slot_agent = np.array([k for spec in self.specs for k in range(len(spec.agents))])
+        kinds = [kind for spec in self.specs for kind in spec.agents]
+        seeds = [
+            int(np.random.SeedSequence([self.specs[r].seed, k]).generate_state(1)[0])
+            for r, k in zip(self.slot_run, self.slot_agent, strict=True)
+        ]
+        self.agents = TabularAgents(kinds, n_s, n_a, config.learning_rate, config.discount, seeds)
+        self.labelled = np.stack(
+            [
+                np.ones((n_s, n_a), dtype=bool)
+                if spec.method == "oracle"
+                else StateActionMask(n_s, n_a, config.label_fraction, spec.seed).labelled
+                for spec in self.specs
+            ]
+        )
+        # The run's store: which keys were seen, with their s', termination and revealed reward.
+        self.visited = np.zeros((n_runs, n_s, n_a), dtype=bool)
+        self.stored_next = np.zeros((n_runs, n_s, n_a), dtype=np.int64)
+        self.stored_terminal = np.zeros((n_runs, n_s, n_a), dtype=bool)
+        self.label_value = np.zeros((n_runs, n_s, n_a))
+        # The reward table for unlabelled keys: pseudo-rewards and their weights (or a baseline's rule).
+        self.table_reward = np.zeros((n_runs, n_s, n_a))
+        self.table_weight = np.array([1.0 if s.method == "masked-zero" else 0.0 for s in self.specs])[
+            :, None, None
+        ] * np.ones((n_runs, n_s, n_a))
+        self.pace = np.zeros(n_runs)
+        self.active = np.ones(n_runs, dtype=bool)
+        self.groups = self._make_groups()
+        self._optimal = mdp.optimal_actions(config.discount)
+        self._counted = mdp.reachable_nonterminal()
+        self._random_return = metrics.random_policy_return(mdp)
+        opt_greedy = mdp.value_iteration(config.discount).argmax(axis=1)[None, :]
+        self._oracle_return = float(metrics.greedy_rollout(mdp, opt_greedy)[0][0])
+
+    def _make_groups(self) -> list[tuple[list[int], SelfPacedCoTrainer, RewardClasses]]:
+        """One co-trainer per (views, gamma): runs that share them are batched in one classifier."""
+        cotrain = [r for r, s in enumerate(self.specs) if s.method == "cotrain"]
+
+        def signature(r: int) -> tuple:
+            return self.specs[r].views, self.specs[r].gamma
+
+        groups = []
+        for (views, gamma), members in groupby(sorted(cotrain, key=signature), key=signature):
+            runs = list(members)
+            cfg = replace(self.config.cotraining, gamma=gamma)
+            dims = [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in views]
+            trainer = SelfPacedCoTrainer(dims, len(runs), cfg, [self.specs[r].seed for r in runs])
+            groups.append((runs, trainer, RewardClasses(len(runs), cfg.max_classes)))
+        return groups
+
+    def eps(self) -> np.ndarray:
+        """(n_runs,) exploration rate eps(pace)."""
+        cfg = self.config
+        return cfg.eps_start + (cfg.eps_end - cfg.eps_start) * self.pace
+
+    def run(self, progress: Callable[[int], None] | None = None) -> TabularResult:
+        """Train every run for ``config.rounds`` rounds (or until its stopping rule fires).
+
+        :param progress: called with the number of episodes just finished (summed over slots).
+        """
+        records: list[dict] = []
+        for round_index in range(1, self.config.rounds + 1):
+            self._collect(progress)  # 1. collect, learning online from the current table
+            round_stats = {}
+            for runs, trainer, classes in self.groups:  # 2-3. co-train, pseudo-rewards
+                live = [r for r in runs if self.active[r]]
+                if live:
+                    round_stats.update(self._cotrain(runs, trainer, classes))
+            reward, weight = self._effective_table()
+            slot_eps = self.eps()[self.slot_run]
+            live_slots = self.active[self.slot_run][:, None, None]
+            for _ in range(self.config.replay_sweeps):  # 4. policy update
+                self.agents.sweep(
+                    self.visited[self.slot_run] & live_slots,
+                    self.stored_next[self.slot_run],
+                    self.stored_terminal[self.slot_run],
+                    reward[self.slot_run],
+                    weight[self.slot_run],
+                    slot_eps,
+                )
+            for r, stats in round_stats.items():  # 5. age: the pace drives exploration
+                self.pace[r] = stats["pace"]
+                if stats.pop("stopped"):
+                    self.active[r] = False
+            records.extend(self._records(round_index, round_stats))
+        return TabularResult(records, self.agents.q.copy(), self.slot_run.copy())
+
+    def _collect(self, progress: Callable[[int], None] | None) -> None:
+        mdp, agents, n_slots = self.mdp, self.agents, len(self.slot_run)
+        target = self.config.episodes_per_round
+        eps = self.eps()[self.slot_run]
+        running = self.active[self.slot_run].copy()
+        state = np.full(n_slots, mdp.start_state)
+        steps = np.zeros(n_slots, dtype=np.int64)
+        episodes = np.zeros(n_slots, dtype=np.int64)
+        action = np.zeros(n_slots, dtype=np.int64)
+        idx = np.flatnonzero(running)
+        action[idx] = agents.act(idx, state[idx], eps[idx])
+        while idx.size:
+            run, s, a = self.slot_run[idx], state[idx], action[idx]
+            s2, terminated = mdp.next_state[s, a], mdp.terminal[s, a]
+            revealed = self.labelled[run, s, a]
+            # The mask: a learner sees the true reward only where the key is labelled.
+            observed_reward = np.where(revealed, mdp.reward[s, a], 0.0)
+            reward = np.where(revealed, observed_reward, self.table_reward[run, s, a])
+            weight = np.where(revealed, 1.0, self.table_weight[run, s, a])
+            self.visited[run, s, a] = True
+            self.stored_next[run, s, a] = s2
+            self.stored_terminal[run, s, a] = terminated
+            self.label_value[run, s, a] = np.where(revealed, observed_reward, self.label_value[run, s, a])
+            next_action = agents.act(idx, s2, eps[idx])
+            agents.update(idx, s, a, reward, weight, s2, terminated, next_action, eps[idx])
+            steps[idx] += 1
+            ended = terminated | (steps[idx] >= mdp.max_episode_steps)
+            episodes[idx] += ended
+            state[idx] = np.where(ended, mdp.start_state, s2)
+            steps[idx] = np.where(ended, 0, steps[idx])
+            action[idx] = next_action
+            restart = idx[ended & (episodes[idx] < target)]
+            if restart.size:
+                action[restart] = agents.act(restart, state[restart], eps[restart])
+            if progress is not None and ended.any():
+                progress(int(ended.sum()))
+            running[idx[ended & (episodes[idx] >= target)]] = False
+            idx = np.flatnonzero(running)
+
+    def _cotrain(
+        self, runs: list[int], trainer: SelfPacedCoTrainer, classes: RewardClasses
+    ) -> dict[int, dict]:
+        n_runs = len(runs)
+        labelled = (self.visited[runs] & self.labelled[runs]).reshape(n_runs, -1)
+        unlabelled = (self.visited[runs] & ~self.labelled[runs]).reshape(n_runs, -1)
+        values = self.label_value[runs].reshape(n_runs, -1)
+        for b in range(n_runs):
+            classes.observe(b, np.unique(values[b, labelled[b]]))
+        label_class = np.where(labelled, classes.encode(values), -1)
+        views = self.specs[runs[0]].views
+        pool = Pool([self._features(runs, v) for v in views], labelled, label_class, unlabelled, classes.mask)
+        result = trainer.step(pool)
+        pseudo = classes.decode(result.pseudo_class)
+        shape = (n_runs, self.mdp.n_states, self.mdp.n_actions)
+        self.table_reward[runs] = np.nan_to_num(pseudo, nan=0.0).reshape(shape)
+        self.table_weight[runs] = result.pseudo_weight.reshape(shape)
+        return self._pseudo_stats(runs, pool, result, classes)
+
+    def _features(self, runs: list[int], view: str) -> np.ndarray:
+        """(B, S*A, 2d + A): view of s, one-hot action, view of the stored s' (zeros if unseen)."""
+        feats = self.mdp.views[view]
+        n_s, n_a = self.mdp.n_states, self.mdp.n_actions
+        s, a = np.divmod(np.arange(n_s * n_a), n_a)
+        base = np.concatenate([feats[s], np.eye(n_a, dtype=np.float32)[a]], axis=1)
+        nxt = self.stored_next[runs].reshape(len(runs), -1)
+        seen = self.visited[runs].reshape(len(runs), -1)[..., None]
+        return np.concatenate([np.broadcast_to(base, (len(runs), *base.shape)), feats[nxt] * seen], axis=2)
+
+    def _pseudo_stats(
+        self, runs: list[int], pool: Pool, result: RoundResult, classes: RewardClasses
+    ) -> dict[int, dict]:
+        """Pseudo-reward accuracy and coverage per run and view (reads the hidden truth: metrics only)."""
+        truth = self.mdp.reward.reshape(-1)
+        consensus_correct = classes.decode(result.pseudo_class) == truth
+        view_correct = [classes.decode(c) == truth for c in result.view_class]
+        stats = {}
+        for b, r in enumerate(runs):
+            u = pool.unlabelled[b]
+            admitted = result.pseudo_weight[b] > 0
+            per_view = []
+            for j in range(result.view_weight.shape[0]):
+                taken = result.view_weight[j, b] > 0
+                lam = result.threshold[j, b]
+                per_view.append(
+                    {
+                        "coverage": float(taken[u].mean()) if u.any() else 0.0,
+                        "pseudo_accuracy": float(view_correct[j][b, taken].mean())
+                        if taken.any()
+                        else float("nan"),
+                        "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
+                        "classifier_loss": float(result.classifier_loss[j, b]),
+                    }
+                )
+            stats[r] = {
+                "pace": float(result.pace[b]),
+                "coverage": float(admitted[u].mean()) if u.any() else 0.0,
+                "pseudo_accuracy": float(consensus_correct[b, admitted].mean())
+                if admitted.any()
+                else float("nan"),
+                "stopped": bool(result.stopped[b]),
+                "views": per_view,
+            }
+        return stats
+
+    def _effective_table(self) -> tuple[np.ndarray, np.ndarray]:
+        """Reward and weight of every key per run: revealed labels, else the run's table."""
+        known = self.visited & self.labelled
+        return (
+            np.where(known, self.label_value, self.table_reward),
+            np.where(known, 1.0, self.table_weight),
+        )
+
+    def _records(self, round_index: int, round_stats: dict[int, dict]) -> list[dict]:
+        greedy = self.agents.greedy_actions()
+        ret, success = metrics.greedy_rollout(self.mdp, greedy)
+        agreement = metrics.optimal_action_agreement(greedy, self._optimal, self._counted)
+        score = metrics.normalised_score(ret, self._random_return, self._oracle_return)
+        paper = (
+            metrics.paper_accuracy(greedy, self.reference_policy)
+            if self.reference_policy is not None
+            else np.full(len(greedy), np.nan)
+        )
+        eps = self.eps()
+        rows = []
+        for slot, (r, k) in enumerate(zip(self.slot_run, self.slot_agent, strict=True)):
+            spec = self.specs[r]
+            stats = round_stats.get(r)
+            view_stats = stats["views"][k] if stats else {}
+            rows.append(
+                {
+                    "run": int(r),
+                    "method": spec.method,
+                    "agents": "-".join(spec.agents),
+                    "views": "-".join(spec.views),
+                    "m": len(spec.agents),
+                    "gamma": spec.gamma,
+                    "seed": spec.seed,
+                    "round": round_index,
+                    "agent": int(k),
+                    "kind": spec.agents[k],
+                    "view": spec.views[k],
+                    "paper_accuracy": float(paper[slot]),
+                    "agreement": float(agreement[slot]),
+                    "greedy_return": float(ret[slot]),
+                    "success": float(success[slot]),
+                    "normalised_score": float(score[slot]),
+                    "eps": float(eps[r]),
+                    "pace": float(self.pace[r]),
+                    "coverage": stats["coverage"] if stats else float("nan"),
+                    "pseudo_accuracy": stats["pseudo_accuracy"] if stats else float("nan"),
+                    "view_coverage": view_stats.get("coverage", float("nan")),
+                    "view_pseudo_accuracy": view_stats.get("pseudo_accuracy", float("nan")),
+                    "lambda": view_stats.get("lambda", float("nan")),
+                    "classifier_loss": view_stats.get("classifier_loss", float("nan")),
+                    "active": bool(self.active[r]),
+                }
+            )
+        return rows

@@ -1,0 +1,110 @@
+"""Reward masking: the true reward of a transition reaches the learner only when it is labelled.
+
+Two modes (DESIGN.md section 1):
+
+- ``"state-action"``: a fixed, seeded subset of the (s, a) keys of a discrete env, of share
+  ``label_fraction``, is labelled; the subset is drawn once from ``mask_seed`` and stays the same
+  across resets.
+- ``"transition"``: each step is revealed with probability ``label_fraction``, from a generator
+  seeded by ``mask_seed``.
+
+A masked step returns reward 0.0 with ``info["reward_observed"] = False``. The true reward is kept
+in ``info["hidden_reward"]`` for metrics only.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal
+
+import gymnasium as gym
+import numpy as np
+
+MaskMode = Literal["state-action", "transition"]
+MASK_MODES: tuple[str, ...] = ("state-action", "transition")
+
+
+def check_label_fraction(label_fraction: float) -> float:
+    """Return ``label_fraction`` as a float, or raise ``ValueError`` if it is outside (0, 1]."""
+    fraction = float(label_fraction)
+    if not 0.0 < fraction <= 1.0:
+        raise ValueError(f"label_fraction must lie in (0, 1], got {label_fraction!r}")
+    return fraction
+
+
+class StateActionMask:
+    """A seeded subset of the ``n_states * n_actions`` keys of a discrete env.
+
+    Exactly ``round(label_fraction * n_states * n_actions)`` keys are labelled (at least one).
+
+    :param n_states: number of discrete states.
+    :param n_actions: number of discrete actions.
+    :param label_fraction: share of labelled keys, in (0, 1].
+    :param seed: seed of the draw; the same seed always labels the same keys.
+    """
+
+    def __init__(self, n_states: int, n_actions: int, label_fraction: float, seed: int) -> None:
+        fraction = check_label_fraction(label_fraction)
+        n_keys = n_states * n_actions
+        n_labelled = max(1, round(fraction * n_keys))
+        chosen = np.random.default_rng(seed).permutation(n_keys)[:n_labelled]
+        labelled = np.zeros(n_keys, dtype=bool)
+        labelled[chosen] = True
+        self.labelled: np.ndarray = labelled.reshape(n_states, n_actions)
+        """Boolean array of shape (n_states, n_actions): True where the reward is revealed."""
+
+    def __contains__(self, key: tuple[int, int]) -> bool:
+        state, action = key
+        return bool(self.labelled[state, action])
+
+
+class RewardMaskWrapper(gym.Wrapper):
+    """Hide the reward of unlabelled transitions.
+
+    :param env: the env to mask. In ``"state-action"`` mode both spaces must be ``Discrete``.
+    :param label_fraction: share of labelled keys (state-action mode) or probability that a step
+        is revealed (transition mode), in (0, 1].
+    :param mode: ``"state-action"`` or ``"transition"``.
+    :param mask_seed: seed of the mask, independent of the seed passed to ``reset``.
+    """
+
+    def __init__(
+        self,
+        env: gym.Env,
+        label_fraction: float,
+        mode: MaskMode = "state-action",
+        mask_seed: int = 0,
+    ) -> None:
+        super().__init__(env)
+        if mode not in MASK_MODES:
+            raise ValueError(f"mode must be one of {MASK_MODES}, got {mode!r}")
+        self.label_fraction = check_label_fraction(label_fraction)
+        self.mode: MaskMode = mode
+        self.mask: StateActionMask | None = None
+        if mode == "state-action":
+            spaces = {"observation_space": env.observation_space, "action_space": env.action_space}
+            for name, space in spaces.items():
+                if not isinstance(space, gym.spaces.Discrete):
+                    raise ValueError(
+                        f"mode='state-action' needs a Discrete {name}, got {space}; "
+                        f"use mode='transition' for other spaces"
+                    )
+            self.mask = StateActionMask(
+                int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed
+            )
+        self._reveal_rng = np.random.default_rng(mask_seed)
+        self._state: int | None = None
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._state = obs if self.mode == "state-action" else None
+        return obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if self.mask is not None:
+            observed = (int(self._state), int(action)) in self.mask
+            self._state = obs
+        else:
+            observed = bool(self._reveal_rng.random() < self.label_fraction)
+        info = dict(info, reward_observed=observed, hidden_reward=float(reward))
+        return obs, float(reward) if observed else 0.0, terminated, truncated, info
