@@ -1,1 +1,5 @@
 """Agents that learn from rewards and self-paced weights given by the co-trainer (``dospcot.policies``)."""
+
+from dospcot.policies.esarsa_dqn import ExpectedSarsaDQN, RelabellingReplayBuffer, RewardTable
+
+__all__ = ["ExpectedSarsaDQN", "RelabellingReplayBuffer", "RewardTable"]

@@ -28,6 +28,11 @@ def section(text: str, heading: str) -> str:
     return (heading + (rest[: match.start()] if match else rest)).strip()
 
 
+def demote(markdown: str, levels: int = 2) -> str:
+    """Push every heading ``levels`` deeper, so the tables nest under the README's own headings."""
+    return re.sub(r"^(#+) ", lambda m: "#" * (len(m.group(1)) + levels) + " ", markdown, flags=re.MULTILINE)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("run_dir", type=Path)
@@ -44,7 +49,7 @@ def main() -> None:
     block = "\n\n".join(
         [
             header,
-            accuracy.replace("## ", "#### ").replace("### ", "##### "),
+            demote(accuracy),
             "#### Optimal-action agreement, Table 3 (after 5 rounds)",
             section(agreement, "### Table 3").split("\n", 1)[1].strip(),
         ]

@@ -1,0 +1,155 @@
+"""A replay buffer that relabels rewards and self-paced weights at sample time.
+
+Modelled on stable-baselines3's HER buffer: instead of rewriting stored rewards when the
+co-trainer's pseudo-labels change, each stored transition keeps its id in the co-trainer's shared
+store and whether its reward was observed; :meth:`RelabellingReplayBuffer._get_samples` looks the
+current reward and weight up in a :class:`RewardTable`. Relabelling therefore never copies the buffer.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Literal, NamedTuple
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.buffers import ReplayBuffer
+from stable_baselines3.common.vec_env import VecNormalize
+
+
+class WeightedReplayBufferSamples(NamedTuple):
+    """SB3's ``ReplayBufferSamples`` plus per-sample self-paced weights of shape (batch, 1)."""
+
+    observations: th.Tensor
+    actions: th.Tensor
+    next_observations: th.Tensor
+    dones: th.Tensor
+    rewards: th.Tensor
+    discounts: th.Tensor | None
+    weights: th.Tensor
+
+
+class RewardTable:
+    """Current reward and self-paced weight of every transition in the co-trainer's shared store.
+
+    The co-trainer writes it after each round; buffers read it at sample time.
+    """
+
+    def __init__(self) -> None:
+        self.reward = np.zeros(0, dtype=np.float32)
+        self.weight = np.zeros(0, dtype=np.float32)
+
+    def __len__(self) -> int:
+        return int(self.reward.size)
+
+    def set(self, ids: np.ndarray, reward: np.ndarray, weight: np.ndarray) -> None:
+        """Set the reward and weight of store ids ``ids`` (growing the table as needed).
+
+        :raises ValueError: on a NaN or infinite reward or a weight outside [0, 1].
+        """
+        ids = np.asarray(ids, dtype=np.int64)
+        reward = np.asarray(reward, dtype=np.float64)
+        weight = np.asarray(weight, dtype=np.float64)
+        if not np.all(np.isfinite(reward)):
+            bad = reward[~np.isfinite(reward)][0]
+            raise ValueError(f"reward must be finite, got {bad} (store id {ids[~np.isfinite(reward)][0]})")
+        outside = ~((weight >= 0) & (weight <= 1))
+        if outside.any():
+            raise ValueError(f"weight must lie in [0, 1], got {weight[outside][0]} (store id {ids[outside][0]})")
+        if ids.size and ids.max() >= len(self):
+            size = int(ids.max()) + 1
+            self.reward = np.concatenate([self.reward, np.zeros(size - len(self), np.float32)])
+            self.weight = np.concatenate([self.weight, np.zeros(size - len(self.weight), np.float32)])
+        self.reward[ids] = reward
+        self.weight[ids] = weight
+
+
+class RelabellingReplayBuffer(ReplayBuffer):
+    """SB3 ``ReplayBuffer`` whose samples carry relabelled rewards and self-paced weights.
+
+    Reads two keys of each step's ``info``: ``reward_observed`` (default True: an unmasked env) and
+    ``store_id`` (the transition's id in the co-trainer's store, default -1: none).
+
+    At sample time a transition whose reward was observed keeps it with weight 1. Otherwise, if the
+    reward table knows its store id, it takes the table's reward and weight; if not, its weight is 0
+    (``masked_reward="ignore"``, the labels-only rule) or its stored reward, 0.0, counts with
+    weight 1 (``masked_reward="zero"``, the masked-zero baseline).
+
+    :param reward_table: the co-trainer's table, or None.
+    :param masked_reward: ``"ignore"`` or ``"zero"``.
+    Other parameters: as SB3's ``ReplayBuffer``.
+    """
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        device: th.device | str = "auto",
+        n_envs: int = 1,
+        optimize_memory_usage: bool = False,
+        handle_timeout_termination: bool = True,
+        reward_table: RewardTable | None = None,
+        masked_reward: Literal["ignore", "zero"] = "ignore",
+    ) -> None:
+        super().__init__(
+            buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage,
+            handle_timeout_termination,
+        )
+        if masked_reward not in ("ignore", "zero"):
+            raise ValueError(f"masked_reward must be 'ignore' or 'zero', got {masked_reward!r}")
+        self.reward_table = reward_table
+        self.masked_reward = masked_reward
+        self.store_ids = np.full((self.buffer_size, self.n_envs), -1, dtype=np.int64)
+        self.observed = np.ones((self.buffer_size, self.n_envs), dtype=bool)
+
+    def add(
+        self,
+        obs: np.ndarray,
+        next_obs: np.ndarray,
+        action: np.ndarray,
+        reward: np.ndarray,
+        done: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
+        reward = np.asarray(reward)
+        if not np.all(np.isfinite(reward)):
+            raise ValueError(f"reward must be finite, got {reward} at buffer position {self.pos}")
+        self.observed[self.pos] = [info.get("reward_observed", True) for info in infos]
+        self.store_ids[self.pos] = [info.get("store_id", -1) for info in infos]
+        super().add(obs, next_obs, action, reward, done, infos)
+
+    def relabel(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Current (reward, weight) of the stored transitions ``(batch_inds, env_indices)``."""
+        reward = self.rewards[batch_inds, env_indices].astype(np.float32)
+        observed = self.observed[batch_inds, env_indices]
+        unobserved_weight = 1.0 if self.masked_reward == "zero" else 0.0
+        weight = np.where(observed, 1.0, unobserved_weight).astype(np.float32)
+        table = self.reward_table
+        if table is not None:
+            ids = self.store_ids[batch_inds, env_indices]
+            known = ~observed & (ids >= 0) & (ids < len(table))
+            safe = np.where(known, ids, 0)
+            if len(table):
+                reward = np.where(known, table.reward[safe], reward)
+                weight = np.where(known, table.weight[safe], weight)
+        return reward, weight
+
+    def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> WeightedReplayBufferSamples:
+        # Same draws, in the same order, as ReplayBuffer._get_samples, so seeds match stock DQN.
+        env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
+        if self.optimize_memory_usage:
+            next_obs = self.observations[(batch_inds + 1) % self.buffer_size, env_indices, :]
+        else:
+            next_obs = self.next_observations[batch_inds, env_indices, :]
+        reward, weight = self.relabel(batch_inds, env_indices)
+        dones = self.dones[batch_inds, env_indices] * (1 - self.timeouts[batch_inds, env_indices])
+        return WeightedReplayBufferSamples(
+            observations=self.to_torch(self._normalize_obs(self.observations[batch_inds, env_indices, :], env)),
+            actions=self.to_torch(self.actions[batch_inds, env_indices, :]),
+            next_observations=self.to_torch(self._normalize_obs(next_obs, env)),
+            dones=self.to_torch(dones.reshape(-1, 1)),
+            rewards=self.to_torch(self._normalize_reward(reward.reshape(-1, 1), env)),
+            discounts=None,
+            weights=self.to_torch(weight.reshape(-1, 1)),
+        )

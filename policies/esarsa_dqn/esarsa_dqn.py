@@ -1,0 +1,165 @@
+"""ExpectedSarsaDQN: stable-baselines3's DQN with an Expected-SARSA target, exploration driven by the
+co-trainer's pace, and self-paced weights from a relabelling replay buffer.
+
+TD target: ``r + discount * (1 - done) * sum_a pi_eps(a | s') Q_target(s', a)``, where pi_eps is
+epsilon-greedy around the **online** network's greedy action at s' (the greedy mass split across
+tied maxima), and eps is the agent's current exploration rate. Choosing the greedy action with the
+online net, as Double DQN does, keeps the target from chasing the target net's own overestimates;
+at eps = 0 the target is therefore the Double-DQN target, which equals SB3's max target whenever
+the two nets agree on the greedy action (for example right after a target update). ``target="q"``
+gives SB3's max target exactly, for ablations.
+
+The loss is the weighted mean of the per-sample Huber loss, ``sum_i w_i l_i / sum_i w_i``; weight-0
+samples drive nothing.
+
+The saved zip holds the stock ``DQNPolicy`` and nothing of dospcot, so
+``stable_baselines3.DQN.load`` reads it in a process that never imported dospcot.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+import torch as th
+import torch.nn.functional as F
+from gymnasium import spaces
+from stable_baselines3 import DQN
+from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.utils import LinearSchedule
+
+from dospcot.policies.esarsa_dqn.buffers import RelabellingReplayBuffer
+
+Target = Literal["expected_sarsa", "q"]
+TARGETS: tuple[str, ...] = ("expected_sarsa", "q")
+
+
+def epsilon_greedy_expectation(online_q: th.Tensor, target_q: th.Tensor, eps: float) -> th.Tensor:
+    """``sum_a pi_eps(a | s') Q_target(s', a)`` with pi_eps epsilon-greedy around argmax of ``online_q``.
+
+    :param online_q: (batch, A) online-network values, which pick the greedy action(s).
+    :param target_q: (batch, A) target-network values being averaged.
+    :param eps: exploration rate in [0, 1].
+    :return: (batch,) expected values.
+    """
+    ties = (online_q == online_q.max(dim=1, keepdim=True).values).to(target_q.dtype)
+    probs = eps / online_q.shape[1] + (1.0 - eps) * ties / ties.sum(dim=1, keepdim=True)
+    return (probs * target_q).sum(dim=1)
+
+
+def weighted_huber_loss(current: th.Tensor, target: th.Tensor, weights: th.Tensor) -> th.Tensor:
+    """``sum_i w_i huber(current_i, target_i) / sum_i w_i`` (0 when every weight is 0)."""
+    per_sample = F.smooth_l1_loss(current, target, reduction="none")
+    return (weights * per_sample).sum() / weights.sum().clamp(min=1e-12)
+
+
+def _check_eps(name: str, value: float) -> float:
+    value = float(value)
+    if not 0.0 <= value <= 1.0:
+        raise ValueError(f"{name} must lie in [0, 1], got {value}")
+    return value
+
+
+class ExpectedSarsaDQN(DQN):
+    """DQN with an Expected-SARSA target and pace-driven exploration (see the module docstring).
+
+    :param policy: ``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"`` or a ``DQNPolicy`` class.
+    :param env: the environment (discrete actions only).
+    :param target: ``"expected_sarsa"`` (default) or ``"q"`` (SB3's max target).
+    :param exploration_horizon: env steps over which eps decays from ``exploration_initial_eps`` to
+        ``exploration_final_eps`` (within ``exploration_fraction`` of them) when no co-trainer sets a
+        pace. Counted in total steps, so the schedule continues across ``learn()`` calls; None takes
+        the ``total_timesteps`` of the first ``learn()``.
+    :param kwargs: every other argument of ``stable_baselines3.DQN``. ``replay_buffer_class``
+        defaults to :class:`RelabellingReplayBuffer`.
+    """
+
+    policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = DQN.policy_aliases
+
+    def __init__(
+        self,
+        policy: str | type[BasePolicy],
+        env: Any,
+        *,
+        target: Target = "expected_sarsa",
+        exploration_horizon: int | None = None,
+        **kwargs: Any,
+    ) -> None:
+        if target not in TARGETS:
+            raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
+        action_space = getattr(env, "action_space", None)
+        if action_space is not None and not isinstance(action_space, spaces.Discrete):
+            raise ValueError(f"ExpectedSarsaDQN needs a Discrete action space, got {action_space}")
+        for name in ("exploration_initial_eps", "exploration_final_eps"):
+            if name in kwargs:
+                _check_eps(name, kwargs[name])
+        if exploration_horizon is not None and exploration_horizon < 1:
+            raise ValueError(f"exploration_horizon must be a positive step count, got {exploration_horizon}")
+        kwargs.setdefault("replay_buffer_class", RelabellingReplayBuffer)
+        self.target = target
+        self.exploration_horizon = exploration_horizon
+        self.pace: float | None = None
+        super().__init__(policy, env, **kwargs)
+
+    def set_pace(self, pace: float) -> None:
+        """Drive exploration by the co-trainer's pace p in [0, 1]: eps = initial + (final - initial) * p."""
+        pace = float(pace)
+        if not 0.0 <= pace <= 1.0:
+            raise ValueError(f"pace must lie in [0, 1], got {pace}")
+        self.pace = pace
+        self.exploration_rate = self._scheduled_eps()
+
+    def _scheduled_eps(self) -> float:
+        initial, final = self.exploration_initial_eps, self.exploration_final_eps
+        if self.pace is not None:
+            return initial + (final - initial) * self.pace
+        horizon = self.exploration_horizon or 1
+        progress_remaining = max(0.0, 1.0 - self.num_timesteps / horizon)
+        return LinearSchedule(initial, final, self.exploration_fraction)(progress_remaining)
+
+    def _setup_learn(self, total_timesteps: int, *args: Any, **kwargs: Any):
+        if self.exploration_horizon is None:
+            self.exploration_horizon = int(total_timesteps)
+        return super()._setup_learn(total_timesteps, *args, **kwargs)
+
+    def _on_step(self) -> None:
+        super()._on_step()  # target-network updates as DQN; its eps would restart every learn()
+        self.exploration_rate = self._scheduled_eps()
+        self.logger.record("rollout/exploration_rate", self.exploration_rate)
+
+    def train(self, gradient_steps: int, batch_size: int = 100) -> None:
+        self.policy.set_training_mode(True)
+        self._update_learning_rate(self.policy.optimizer)
+        losses = []
+        for _ in range(gradient_steps):
+            data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
+            discounts = data.discounts if data.discounts is not None else self.gamma
+            weights = getattr(data, "weights", None)
+            if weights is None:
+                weights = th.ones_like(data.rewards)
+            if float(weights.sum()) == 0.0:
+                continue  # nothing labelled in this batch: no update
+            with th.no_grad():
+                next_q_target = self.q_net_target(data.next_observations)
+                if self.target == "q":
+                    next_value = next_q_target.max(dim=1).values
+                else:
+                    next_value = epsilon_greedy_expectation(
+                        self.q_net(data.next_observations), next_q_target, self.exploration_rate
+                    )
+                target_q = data.rewards + (1 - data.dones) * discounts * next_value.reshape(-1, 1)
+            current_q = th.gather(self.q_net(data.observations), dim=1, index=data.actions.long())
+            loss = weighted_huber_loss(current_q, target_q, weights)
+            losses.append(loss.item())
+            self.policy.optimizer.zero_grad()
+            loss.backward()
+            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self.policy.optimizer.step()
+        self._n_updates += gradient_steps
+        self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
+        if losses:
+            self.logger.record("train/loss", float(np.mean(losses)))
+
+    def _excluded_save_params(self) -> list[str]:
+        # The buffer class lives in dospcot: keep it out of the zip so plain DQN.load works anywhere.
+        return [*super()._excluded_save_params(), "replay_buffer_class", "replay_buffer_kwargs"]
