@@ -16,8 +16,9 @@ has seen in its labels; the others get no score and can never be predicted.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from itertools import pairwise
+from pathlib import Path
 from typing import Literal
 
 import torch
@@ -142,3 +143,32 @@ class BatchedRewardClassifier(nn.Module):
             loss.sum().backward()
             optimiser.step()
         return loss.detach()
+
+
+def save_classifier(clf: BatchedRewardClassifier, path: str | Path) -> None:
+    """Save a classifier's shape, config and parameters with ``torch.save`` (no pickled classes)."""
+    first = clf.weights[0]
+    torch.save(
+        {
+            "n_models": int(first.shape[0]),
+            "n_features": int(first.shape[1]),
+            "n_classes": int(clf.weights[-1].shape[2]),
+            "config": asdict(clf.config),
+            "state_dict": clf.state_dict(),
+        },
+        path,
+    )
+
+
+def load_classifier(path: str | Path) -> BatchedRewardClassifier:
+    """Load what :func:`save_classifier` wrote, with ``weights_only=True`` (no code runs on load)."""
+    data = torch.load(path, weights_only=True)
+    clf = BatchedRewardClassifier(
+        data["n_models"],
+        data["n_features"],
+        data["n_classes"],
+        ClassifierConfig(**data["config"]),
+        seeds=[0] * data["n_models"],
+    )
+    clf.load_state_dict(data["state_dict"])
+    return clf

@@ -5,7 +5,7 @@ from gymnasium.envs.registration import register
 from dospcot.envs.cliffwalking import CLIFF_VIEWS, make_masked_cliffwalking
 from dospcot.envs.masking import RewardMaskWrapper, StateActionMask, check_label_fraction
 from dospcot.envs.tabular import TabularMDP
-from dospcot.envs.views import MultiViewWrapper, View, select_views
+from dospcot.envs.views import MultiViewWrapper, View, ViewObservationWrapper, select_views
 
 register(id="dospcot/MaskedCliffWalking-v1", entry_point="dospcot.envs.cliffwalking:make_masked_cliffwalking")
 
@@ -16,6 +16,7 @@ __all__ = [
     "StateActionMask",
     "TabularMDP",
     "View",
+    "ViewObservationWrapper",
     "check_label_fraction",
     "make_masked_cliffwalking",
     "select_views",

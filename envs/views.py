@@ -71,3 +71,21 @@ class MultiViewWrapper(gym.Wrapper):
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         return obs, reward, terminated, truncated, dict(info, views=self._views())
+
+
+class ViewObservationWrapper(gym.ObservationWrapper):
+    """Make one view the observation, for an agent that reads its own view only.
+
+    :param env: the env; ``state_fn(env)`` must return its current state.
+    :param view: the view to observe.
+    :param state_fn: reads the current state from the env, by default ``env.unwrapped.s``.
+    """
+
+    def __init__(self, env: gym.Env, view: View, state_fn: Callable[[gym.Env], Any] | None = None) -> None:
+        super().__init__(env)
+        self.view = view
+        self.observation_space = view.space
+        self._state_fn = state_fn or (lambda e: e.unwrapped.s)
+
+    def observation(self, observation: Any) -> np.ndarray:
+        return self.view.fn(self._state_fn(self.env))

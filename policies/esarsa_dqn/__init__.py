@@ -1,6 +1,10 @@
 """ExpectedSarsaDQN: stable-baselines3 DQN with an Expected-SARSA target and relabelled weighted replay."""
 
-from dospcot.policies.esarsa_dqn.buffers import RelabellingReplayBuffer, RewardTable, WeightedReplayBufferSamples
+from dospcot.policies.esarsa_dqn.buffers import (
+    RelabellingReplayBuffer,
+    RewardTable,
+    WeightedReplayBufferSamples,
+)
 from dospcot.policies.esarsa_dqn.esarsa_dqn import (
     ExpectedSarsaDQN,
     epsilon_greedy_expectation,

@@ -55,7 +55,9 @@ class RewardTable:
             raise ValueError(f"reward must be finite, got {bad} (store id {ids[~np.isfinite(reward)][0]})")
         outside = ~((weight >= 0) & (weight <= 1))
         if outside.any():
-            raise ValueError(f"weight must lie in [0, 1], got {weight[outside][0]} (store id {ids[outside][0]})")
+            raise ValueError(
+                f"weight must lie in [0, 1], got {weight[outside][0]} (store id {ids[outside][0]})"
+            )
         if ids.size and ids.max() >= len(self):
             size = int(ids.max()) + 1
             self.reward = np.concatenate([self.reward, np.zeros(size - len(self), np.float32)])
@@ -93,7 +95,12 @@ class RelabellingReplayBuffer(ReplayBuffer):
         masked_reward: Literal["ignore", "zero"] = "ignore",
     ) -> None:
         super().__init__(
-            buffer_size, observation_space, action_space, device, n_envs, optimize_memory_usage,
+            buffer_size,
+            observation_space,
+            action_space,
+            device,
+            n_envs,
+            optimize_memory_usage,
             handle_timeout_termination,
         )
         if masked_reward not in ("ignore", "zero"):
@@ -135,9 +142,11 @@ class RelabellingReplayBuffer(ReplayBuffer):
                 weight = np.where(known, table.weight[safe], weight)
         return reward, weight
 
-    def _get_samples(self, batch_inds: np.ndarray, env: VecNormalize | None = None) -> WeightedReplayBufferSamples:
+    def _get_samples(
+        self, batch_inds: np.ndarray, env: VecNormalize | None = None
+    ) -> WeightedReplayBufferSamples:
         # Same draws, in the same order, as ReplayBuffer._get_samples, so seeds match stock DQN.
-        env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
+        env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))  # noqa: NPY002
         if self.optimize_memory_usage:
             next_obs = self.observations[(batch_inds + 1) % self.buffer_size, env_indices, :]
         else:
@@ -145,7 +154,9 @@ class RelabellingReplayBuffer(ReplayBuffer):
         reward, weight = self.relabel(batch_inds, env_indices)
         dones = self.dones[batch_inds, env_indices] * (1 - self.timeouts[batch_inds, env_indices])
         return WeightedReplayBufferSamples(
-            observations=self.to_torch(self._normalize_obs(self.observations[batch_inds, env_indices, :], env)),
+            observations=self.to_torch(
+                self._normalize_obs(self.observations[batch_inds, env_indices, :], env)
+            ),
             actions=self.to_torch(self.actions[batch_inds, env_indices, :]),
             next_observations=self.to_torch(self._normalize_obs(next_obs, env)),
             dones=self.to_torch(dones.reshape(-1, 1)),
