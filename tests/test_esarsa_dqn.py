@@ -181,7 +181,8 @@ def test_plain_dqn_loads_the_zip_in_a_process_without_dospcot(tmp_path):
         from stable_baselines3 import DQN
         model = DQN.load({str(tmp_path / "agent.zip")!r})
         assert not any(m.startswith("dospcot") for m in sys.modules), "dospcot was imported"
-        print(",".join(map(str, model.predict(np.load({str(tmp_path / "obs.npy")!r}), deterministic=True)[0])))
+        actions = model.predict(np.load({str(tmp_path / "obs.npy")!r}), deterministic=True)[0]
+        print(",".join(map(str, actions)))
     """)
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ",".join(map(str, ours))
