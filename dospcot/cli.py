@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import shlex
 import sys
 from collections.abc import Sequence
@@ -84,6 +85,16 @@ def build_parser() -> argparse.ArgumentParser:
         "--out", type=Path, default=Path("runs/paper"), help="output folder (default runs/paper)"
     )
     paper.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    bench = commands.add_parser(
+        "bench",
+        help="measure performance claims against their peers and write BENCHMARKS.md",
+        description="Run every benchmark (ours and a peer in the same run) and write BENCHMARKS.md.",
+    )
+    bench.add_argument("--quick", action="store_true", help="short runs: a smoke test, not a measurement")
+    bench.add_argument("--repeats", type=positive_int, default=3, help="repetitions per figure (default 3)")
+    bench.add_argument(
+        "--out", type=Path, default=Path("BENCHMARKS.md"), help="output file (default BENCHMARKS.md)"
+    )
     return parser
 
 
@@ -105,7 +116,16 @@ def main(argv: Sequence[str] | None = None) -> int:
         )
         summary = (run_dir / "summary.json").read_text()
         print(f"wrote {run_dir}/tables.md and tables.csv")
-        print(f"wall time: {__import__('json').loads(summary)['wall_time_s']:.1f} s")
+        print(f"wall time: {json.loads(summary)['wall_time_s']:.1f} s")
+    elif args.command == "bench":
+        from dospcot.bench import run_benchmarks
+
+        rows = run_benchmarks(args.out, args.quick, args.repeats, shlex.join(["dospcot", *argv]))
+        for row in rows:
+            print(
+                f"{row.name}: ratio {row.ratio:.3f} (target {row.target}, {'met' if row.met else 'not met'})"
+            )
+        print(f"wrote {args.out}")
     return 0
 
 

@@ -363,7 +363,6 @@ class TabularCoTraining:
             view_stats = stats["views"][k] if stats else {}
             rows.append(
                 {
-                    "run": int(r),
                     "method": spec.method,
                     "agents": "-".join(spec.agents),
                     "views": "-".join(spec.views),

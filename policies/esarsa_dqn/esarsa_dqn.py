@@ -26,7 +26,6 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.policies import BasePolicy
-from stable_baselines3.common.utils import LinearSchedule
 
 from dospcot.policies.esarsa_dqn.buffers import RelabellingReplayBuffer
 
@@ -43,8 +42,8 @@ def epsilon_greedy_expectation(online_q: th.Tensor, target_q: th.Tensor, eps: fl
     :return: (batch,) expected values.
     """
     ties = (online_q == online_q.max(dim=1, keepdim=True).values).to(target_q.dtype)
-    probs = eps / online_q.shape[1] + (1.0 - eps) * ties / ties.sum(dim=1, keepdim=True)
-    return (probs * target_q).sum(dim=1)
+    greedy = (ties * target_q).sum(dim=1) / ties.sum(dim=1)
+    return eps * target_q.mean(dim=1) + (1.0 - eps) * greedy
 
 
 def weighted_huber_loss(current: th.Tensor, target: th.Tensor, weights: th.Tensor) -> th.Tensor:
@@ -113,9 +112,9 @@ class ExpectedSarsaDQN(DQN):
         initial, final = self.exploration_initial_eps, self.exploration_final_eps
         if self.pace is not None:
             return initial + (final - initial) * self.pace
-        horizon = self.exploration_horizon or 1
-        progress_remaining = max(0.0, 1.0 - self.num_timesteps / horizon)
-        return LinearSchedule(initial, final, self.exploration_fraction)(progress_remaining)
+        # SB3's LinearSchedule, but over total steps rather than the current learn() call's progress.
+        progress = self.num_timesteps / ((self.exploration_horizon or 1) * self.exploration_fraction)
+        return final if progress >= 1.0 else initial + progress * (final - initial)
 
     def _setup_learn(self, total_timesteps: int, *args: Any, **kwargs: Any):
         if self.exploration_horizon is None:
@@ -137,18 +136,23 @@ class ExpectedSarsaDQN(DQN):
             weights = getattr(data, "weights", None)
             if weights is None:
                 weights = th.ones_like(data.rewards)
-            if float(weights.sum()) == 0.0:
+            elif not weights.any():
                 continue  # nothing labelled in this batch: no update
-            with th.no_grad():
-                next_q_target = self.q_net_target(data.next_observations)
-                if self.target == "q":
-                    next_value = next_q_target.max(dim=1).values
-                else:
+            batch = data.observations.shape[0]
+            if self.target == "q":
+                current_all = self.q_net(data.observations)
+                with th.no_grad():
+                    next_value = self.q_net_target(data.next_observations).max(dim=1).values
+            else:
+                # One online forward for s and s' together: fewer module calls than two.
+                online = self.q_net(th.cat([data.observations, data.next_observations]))
+                current_all = online[:batch]
+                with th.no_grad():
                     next_value = epsilon_greedy_expectation(
-                        self.q_net(data.next_observations), next_q_target, self.exploration_rate
+                        online[batch:], self.q_net_target(data.next_observations), self.exploration_rate
                     )
-                target_q = data.rewards + (1 - data.dones) * discounts * next_value.reshape(-1, 1)
-            current_q = th.gather(self.q_net(data.observations), dim=1, index=data.actions.long())
+            target_q = data.rewards + (1 - data.dones) * discounts * next_value.reshape(-1, 1)
+            current_q = th.gather(current_all, dim=1, index=data.actions.long())
             loss = weighted_huber_loss(current_q, target_q, weights)
             losses.append(loss.item())
             self.policy.optimizer.zero_grad()

@@ -1,0 +1,139 @@
+"""``dospcot bench``: performance claims measured against a peer in the same run, written to
+BENCHMARKS.md by this module (never by hand).
+
+Every row reports our figure and the peer's, each the median of ``repeats`` repetitions with its
+min and max, their ratio and the target. Repetitions of ours and the peer alternate, so drift in the
+machine's speed hits both alike.
+"""
+
+from __future__ import annotations
+
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+
+import gymnasium as gym
+import torch
+from stable_baselines3 import DQN
+
+from dospcot.envs import CLIFF_VIEWS, ViewObservationWrapper
+from dospcot.policies import ExpectedSarsaDQN
+
+
+@dataclass(frozen=True)
+class Measurement:
+    """Median, min and max of repeated measurements, in ``unit``."""
+
+    median: float
+    low: float
+    high: float
+    unit: str
+
+    @classmethod
+    def of(cls, values: list[float], unit: str) -> Measurement:
+        return cls(statistics.median(values), min(values), max(values), unit)
+
+    def __str__(self) -> str:
+        return f"{self.median:,.0f} {self.unit} [{self.low:,.0f}, {self.high:,.0f}]"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One benchmark: ours against the peer, their ratio and the target it should meet."""
+
+    name: str
+    setting: str
+    ours: Measurement
+    peer: Measurement
+    higher_is_better: bool
+    target: float
+
+    @property
+    def ratio(self) -> float:
+        return self.ours.median / self.peer.median
+
+    @property
+    def met(self) -> bool:
+        return self.ratio >= self.target if self.higher_is_better else self.ratio <= self.target
+
+
+def _onehot_cliff() -> gym.Env:
+    return ViewObservationWrapper(gym.make("CliffWalking-v1", max_episode_steps=100), CLIFF_VIEWS["onehot"])
+
+
+def _steps_per_second(algo: type[DQN], steps: int, seed: int, net: list[int], batch: int) -> float:
+    model = algo(
+        "MlpPolicy",
+        _onehot_cliff(),
+        learning_starts=500,
+        train_freq=4,
+        gradient_steps=1,
+        batch_size=batch,
+        buffer_size=50_000,
+        policy_kwargs={"net_arch": net},
+        seed=seed,
+    )
+    start = time.perf_counter()
+    model.learn(steps)
+    return steps / (time.perf_counter() - start)
+
+
+def bench_esarsa_dqn(steps: int, repeats: int, net: list[int], batch: int) -> Row:
+    """Env steps per second of ExpectedSarsaDQN against SB3 DQN with identical settings."""
+    ours, peer = [], []
+    for rep in range(repeats):
+        order: list[tuple[list[float], type[DQN]]] = [(ours, ExpectedSarsaDQN), (peer, DQN)]
+        for results, algo in order if rep % 2 == 0 else order[::-1]:
+            results.append(_steps_per_second(algo, steps, rep, net, batch))
+    return Row(
+        "ExpectedSarsaDQN vs SB3 DQN: env steps per second",
+        f"CliffWalking-v1 one-hot, {steps:,} steps, MlpPolicy {net}, train_freq 4, batch {batch}",
+        Measurement.of(ours, "steps/s"),
+        Measurement.of(peer, "steps/s"),
+        higher_is_better=True,
+        target=0.95,
+    )
+
+
+BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
+    # SB3's defaults: a small network, where the fixed per-update cost of the extra target ops shows most.
+    "esarsa_dqn": lambda quick, repeats: bench_esarsa_dqn(3_000 if quick else 20_000, repeats, [64, 64], 32),
+    "esarsa_dqn_wide": lambda quick, repeats: bench_esarsa_dqn(
+        3_000 if quick else 20_000, repeats, [256, 256], 256
+    ),
+}
+
+
+def render(rows: list[Row], command: str, repeats: int) -> str:
+    """The text of BENCHMARKS.md."""
+    cpu = platform.processor() or platform.machine()
+    lines = [
+        "# Benchmarks",
+        "",
+        f"Written by `{command}` on {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC.  ",
+        f"Machine: {cpu}, {torch.get_num_threads()} torch threads, Python {platform.python_version()}, "
+        f"torch {torch.__version__}; no GPU.  ",
+        f"Each figure: median of {repeats} repetitions [min, max]; "
+        "ours and the peer alternate in the same run.",
+        "",
+        "| benchmark | setting | ours | peer | ratio | target | met |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for row in rows:
+        sign = ">=" if row.higher_is_better else "<="
+        lines.append(
+            f"| {row.name} | {row.setting} | {row.ours} | {row.peer} | {row.ratio:.3f} | "
+            f"{sign} {row.target} | {'yes' if row.met else 'no'} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def run_benchmarks(out: Path, quick: bool, repeats: int, command: str) -> list[Row]:
+    """Run every benchmark and write ``out``."""
+    rows = [bench(quick, repeats) for bench in BENCHMARKS.values()]
+    out.write_text(render(rows, command, repeats))
+    return rows
