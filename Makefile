@@ -5,13 +5,12 @@ PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-slow lint paper clean
+.PHONY: install run test test-slow lint bench clean
 
 # torch is installed first, through the constraints file, so that no dependency can pull the
 # registry's CUDA build of torch.
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
-	$(PIP) install -q --upgrade pip
 	$(PIP) install -q -c constraints.txt torch
 	$(PIP) install -q -c constraints.txt -e ".[dev]"
 	touch $(STAMP)
@@ -27,6 +26,9 @@ test: $(STAMP)
 
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow
+
+bench: $(STAMP)  ## every benchmark row, written to BENCHMARKS.md (a few minutes)
+	$(VENV)/bin/dospcot bench
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

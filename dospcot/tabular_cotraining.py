@@ -211,8 +211,7 @@ class TabularCoTraining:
             self._collect(progress)  # 1. collect, learning online from the current table
             round_stats = {}
             for runs, trainer, classes in self.groups:  # 2-3. co-train, pseudo-rewards
-                live = [r for r in runs if self.active[r]]
-                if live:
+                if self.active[runs].any():
                     round_stats.update(self._cotrain(runs, trainer, classes))
             reward, weight = self._effective_table()
             slot_eps = self.eps()[self.slot_run]
@@ -284,12 +283,16 @@ class TabularCoTraining:
         label_class = np.where(labelled, classes.encode(values), -1)
         views = self.specs[runs[0]].views
         pool = Pool([self._features(runs, v) for v in views], labelled, label_class, unlabelled, classes.mask)
+        # Stopped runs stay in the batch (its classifiers are stacked) but keep their last table.
         result = trainer.step(pool)
-        pseudo = classes.decode(result.pseudo_class)
-        shape = (n_runs, self.mdp.n_states, self.mdp.n_actions)
-        self.table_reward[runs] = np.nan_to_num(pseudo, nan=0.0).reshape(shape)
-        self.table_weight[runs] = result.pseudo_weight.reshape(shape)
-        return self._pseudo_stats(runs, pool, result, classes)
+        live = self.active[runs]
+        shape = (int(live.sum()), self.mdp.n_states, self.mdp.n_actions)
+        pseudo = classes.decode(result.pseudo_class)[live]
+        live_runs = np.asarray(runs)[live]
+        self.table_reward[live_runs] = np.nan_to_num(pseudo, nan=0.0).reshape(shape)
+        self.table_weight[live_runs] = result.pseudo_weight[live].reshape(shape)
+        stats = self._pseudo_stats(runs, pool, result, classes)
+        return {r: stats[r] for r in live_runs}
 
     def _features(self, runs: list[int], view: str) -> np.ndarray:
         """(B, S*A, 2d + A): view of s, one-hot action, view of the stored s' (zeros if unseen)."""

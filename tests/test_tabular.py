@@ -157,3 +157,23 @@ def test_metrics_by_hand():
     assert ref.shape == (48,)
     # The data file's own statement: an all-zero Q-table (argmax 0 everywhere) scores 21/48.
     assert metrics.paper_accuracy(np.zeros((1, 48), int), ref)[0] == pytest.approx(21 / 48)
+
+
+def test_a_run_whose_pool_is_fully_admitted_stops_and_freezes(mdp):
+    from dataclasses import replace
+
+    cfg = replace(
+        SMALL,
+        rounds=3,
+        cotraining=replace(SMALL.cotraining, add_fraction_start=10.0, stop_when_fully_admitted=True),
+    )
+    specs = [
+        TabularRunSpec("cotrain", ("esarsa",), ("patch",), seed=1),
+        TabularRunSpec("labels-only", ("esarsa",), ("coords",), seed=1),
+    ]
+    three = TabularCoTraining(mdp, specs, cfg).run()
+    one = TabularCoTraining(mdp, specs, replace(cfg, rounds=1)).run()
+    first = [r for r in three.records if r["method"] == "cotrain"]
+    assert first[0]["coverage"] == 1.0 and [r["active"] for r in first] == [False, False, False]
+    assert np.array_equal(three.q[0], one.q[0])  # no learning after the stop
+    assert not np.array_equal(three.q[1], one.q[1])  # the baseline run went on

@@ -138,21 +138,16 @@ class ExpectedSarsaDQN(DQN):
                 weights = th.ones_like(data.rewards)
             elif not weights.any():
                 continue  # nothing labelled in this batch: no update
-            batch = data.observations.shape[0]
-            if self.target == "q":
-                current_all = self.q_net(data.observations)
-                with th.no_grad():
-                    next_value = self.q_net_target(data.next_observations).max(dim=1).values
-            else:
-                # One online forward for s and s' together: fewer module calls than two.
-                online = self.q_net(th.cat([data.observations, data.next_observations]))
-                current_all = online[:batch]
-                with th.no_grad():
-                    next_value = epsilon_greedy_expectation(
-                        online[batch:], self.q_net_target(data.next_observations), self.exploration_rate
-                    )
+            with th.no_grad():
+                next_q_target = self.q_net_target(data.next_observations)
+                if self.target == "q":
+                    next_value = next_q_target.max(dim=1).values
+                else:
+                    # The online net picks the greedy action; no gradient flows through this forward.
+                    next_online = self.q_net(data.next_observations)
+                    next_value = epsilon_greedy_expectation(next_online, next_q_target, self.exploration_rate)
             target_q = data.rewards + (1 - data.dones) * discounts * next_value.reshape(-1, 1)
-            current_q = th.gather(current_all, dim=1, index=data.actions.long())
+            current_q = th.gather(self.q_net(data.observations), dim=1, index=data.actions.long())
             loss = weighted_huber_loss(current_q, target_q, weights)
             losses.append(loss.item())
             self.policy.optimizer.zero_grad()
