@@ -186,99 +186,64 @@ METRICS = (
 
 def build_tables(records: list[dict], paper: dict) -> list[dict]:
     """Long-format rows: one per table, row, gamma column and metric (the content of tables.csv)."""
-    rows: list[dict] = []
-
-    def add(table: str, agents: str, method: str, gamma: float | None, rnd: int, metric: str, key, ref):
-        cell = summarise(values[metric].get(key, []))
-        rows.append(
-            {
-                "table": table,
-                "agents": agents,
-                "method": method,
-                "gamma": gamma,
-                "round": rnd,
-                "metric": metric,
-                **asdict(cell),
-                "paper": ref,
-            }
-        )
-
     names = [m for m, _ in METRICS] + ["pseudo_accuracy", "coverage"]
     values = {m: per_seed(records, m) for m in names}
-    metric_names = [m for m, _ in METRICS]
-    for metric in metric_names:
+    rows: list[dict] = []
+
+    def add(table: str, agents: str, method: str, gamma: float | None, rnd: int, metric: str, key, ref=None):
+        cell = summarise(values[metric].get(key, []))
+        rows.append(
+            {"table": table, "agents": agents, "method": method, "gamma": gamma, "round": rnd,
+             "metric": metric, **asdict(cell), "paper": ref}
+        )  # fmt: skip
+
+    def add_pair(table: str, a: str, b: str, gamma: float, rnd: int, metric: str, ref=None):
+        name = f"{KIND_NAMES[a]}-{KIND_NAMES[b]}"
+        add(
+            table,
+            name,
+            "DOSPCoT",
+            gamma,
+            rnd,
+            metric,
+            ("cotrain", f"{a}-{b}", "-".join(PAIR_VIEWS), gamma, rnd),
+            ref,
+        )
+
+    def add_baselines(table: str, kind: str, rnd: int, metric: str, baselines=BASELINES, ref=None):
+        for label, method, view in baselines:
+            add(table, KIND_NAMES[kind], label, None, rnd, metric, (method, kind, view, 0.3, rnd), ref)
+
+    for metric in (m for m, _ in METRICS):
+        on_paper = metric == "paper_accuracy"
         for kind in KINDS:
-            for label, method, view in BASELINES:
-                ref = paper["table1_baseline"][KIND_NAMES[kind]] if metric == "paper_accuracy" else None
-                add(
-                    "1", KIND_NAMES[kind], label, None, ROUNDS, metric, (method, kind, view, 0.3, ROUNDS), ref
-                )
-        for table, rnd, paper_key in (("2", 1, "table2_one_round"), ("3", ROUNDS, "table3_five_rounds")):
-            for kind in KINDS:
-                pair = f"{kind}-{kind}"
-                pair_name = f"{KIND_NAMES[kind]}-{KIND_NAMES[kind]}"
-                for gamma in GAMMAS:
-                    ref = paper[paper_key][pair_name][str(gamma)] if metric == "paper_accuracy" else None
-                    add(
-                        table,
-                        pair_name,
-                        "DOSPCoT",
-                        gamma,
-                        rnd,
-                        metric,
-                        ("cotrain", pair, "coords-patch", gamma, rnd),
-                        ref,
-                    )
-                for label, method, view in BASELINES:
-                    add(
-                        table,
-                        KIND_NAMES[kind],
-                        label,
-                        None,
-                        rnd,
-                        metric,
-                        (method, kind, view, 0.3, rnd),
-                        None,
-                    )
-        for a, b in HETERO_PAIRS:
-            name = f"{KIND_NAMES[a]}-{KIND_NAMES[b]}"
-            ref = paper["table4_heterogeneous_gamma_0.3"][name] if metric == "paper_accuracy" else None
-            add(
-                "4",
-                name,
-                "DOSPCoT",
-                0.3,
+            add_baselines(
+                "1",
+                kind,
                 ROUNDS,
                 metric,
-                ("cotrain", f"{a}-{b}", "coords-patch", 0.3, ROUNDS),
-                ref,
+                ref=paper["table1_baseline"][KIND_NAMES[kind]] if on_paper else None,
             )
+        for table, rnd, paper_key in (("2", 1, "table2_one_round"), ("3", ROUNDS, "table3_five_rounds")):
+            for kind in KINDS:
+                for gamma in GAMMAS:
+                    pair_name = f"{KIND_NAMES[kind]}-{KIND_NAMES[kind]}"
+                    ref = paper[paper_key][pair_name][str(gamma)] if on_paper else None
+                    add_pair(table, kind, kind, gamma, rnd, metric, ref)
+                add_baselines(table, kind, rnd, metric)
+        for a, b in HETERO_PAIRS:
+            ref = (
+                paper["table4_heterogeneous_gamma_0.3"][f"{KIND_NAMES[a]}-{KIND_NAMES[b]}"]
+                if on_paper
+                else None
+            )
+            add_pair("4", a, b, 0.3, ROUNDS, metric, ref)
     for metric in ("pseudo_accuracy", "coverage"):
         for rnd in (1, ROUNDS):
             for kind in KINDS:
                 for gamma in GAMMAS:
-                    pair = f"{kind}-{kind}"
-                    add(
-                        "pseudo",
-                        f"{KIND_NAMES[kind]}-{KIND_NAMES[kind]}",
-                        "DOSPCoT",
-                        gamma,
-                        rnd,
-                        metric,
-                        ("cotrain", pair, "coords-patch", gamma, rnd),
-                        None,
-                    )
-                for label, method, view in BASELINES[3:]:
-                    add(
-                        "pseudo",
-                        KIND_NAMES[kind],
-                        label,
-                        None,
-                        rnd,
-                        metric,
-                        (method, kind, view, 0.3, rnd),
-                        None,
-                    )
+                    add_pair("pseudo", kind, kind, gamma, rnd, metric)
+                add_baselines("pseudo", kind, rnd, metric, baselines=BASELINES[3:])
     return rows
 
 
