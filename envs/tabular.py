@@ -70,16 +70,32 @@ class TabularMDP:
     def value_iteration(self, discount: float, tol: float = 1e-10, max_iter: int = 100_000) -> np.ndarray:
         """Optimal action values Q* of shape (S, A) under the true rewards.
 
-        Converges for ``discount = 1`` too, because every policy that avoids the goal forever earns
-        an unbounded negative return here (a stochastic shortest path problem).
+        With ``discount = 1`` this is a stochastic shortest path problem: states that can reach no
+        terminal transition (pockets walled off from the goal) have value -inf, and the others
+        converge because every step costs.
         """
-        q = np.zeros((self.n_states, self.n_actions))
+        proper = self.can_terminate()
+        counted = proper if discount == 1.0 else np.ones(self.n_states, dtype=bool)
+        v = np.zeros(self.n_states)
         for _ in range(max_iter):
-            target = self.reward + discount * (~self.terminal) * q.max(axis=1)[self.next_state]
-            if np.max(np.abs(target - q)) < tol:
-                return target
-            q = target
+            new_v = self._backup(v, discount).max(axis=1)
+            if np.max(np.abs(new_v - v)[counted], initial=0.0) < tol:
+                return self._backup(np.where(counted, new_v, -np.inf), discount)
+            v = new_v
         raise RuntimeError(f"value iteration did not converge in {max_iter} sweeps")
+
+    def _backup(self, v: np.ndarray, discount: float) -> np.ndarray:
+        """``r + discount * v(s')`` for every (s, a), with no bootstrap after a terminal transition."""
+        return np.where(self.terminal, self.reward, self.reward + discount * v[self.next_state])
+
+    def can_terminate(self) -> np.ndarray:
+        """Bool array (S,): states from which some sequence of actions ends the episode."""
+        proper = self.terminal.any(axis=1)
+        while True:
+            grown = proper | proper[self.next_state].any(axis=1)
+            if np.array_equal(grown, proper):
+                return proper
+            proper = grown
 
     def optimal_actions(self, discount: float, atol: float = 1e-8) -> np.ndarray:
         """Bool array (S, A): True for every action within ``atol`` of the optimum (all ties)."""
