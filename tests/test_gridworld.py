@@ -6,7 +6,14 @@ import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
-from dospcot.envs import GridLayout, GridWorld, TabularMDP, ViewObservationWrapper, grid_views, make_masked_gridworld
+from dospcot.envs import (
+    GridLayout,
+    GridWorld,
+    TabularMDP,
+    ViewObservationWrapper,
+    grid_views,
+    make_masked_gridworld,
+)
 
 MAP_4X4 = """
 ...G
@@ -90,7 +97,7 @@ def test_views_by_hand():
 
 def test_masked_gridworld_has_views_and_hides_rewards():
     env = make_masked_gridworld(0.5, views=("coords", "patch", "rays"), size=8, layout_seed=0)
-    obs, info = env.reset(seed=0)
+    _, info = env.reset(seed=0)
     assert set(info["views"]) == {"coords", "patch", "rays"}
     observed = []
     for t in range(40):
