@@ -32,15 +32,27 @@ class WeightedReplayBufferSamples(NamedTuple):
 class RewardTable:
     """Current reward and self-paced weight of every transition in the co-trainer's shared store.
 
-    The co-trainer writes it after each round; buffers read it at sample time.
+    The co-trainer writes it after each round; buffers read it at sample time. Storage grows by
+    doubling, so writing ids one round at a time stays linear.
     """
 
     def __init__(self) -> None:
-        self.reward = np.zeros(0, dtype=np.float32)
-        self.weight = np.zeros(0, dtype=np.float32)
+        self._reward = np.zeros(0, dtype=np.float32)
+        self._weight = np.zeros(0, dtype=np.float32)
+        self._size = 0
 
     def __len__(self) -> int:
-        return int(self.reward.size)
+        return self._size
+
+    @property
+    def reward(self) -> np.ndarray:
+        """(len,) reward of each store id."""
+        return self._reward[: self._size]
+
+    @property
+    def weight(self) -> np.ndarray:
+        """(len,) self-paced weight of each store id, in [0, 1]."""
+        return self._weight[: self._size]
 
     def set(self, ids: np.ndarray, reward: np.ndarray, weight: np.ndarray) -> None:
         """Set the reward and weight of store ids ``ids`` (growing the table as needed).
@@ -48,22 +60,29 @@ class RewardTable:
         :raises ValueError: on a NaN or infinite reward or a weight outside [0, 1].
         """
         ids = np.asarray(ids, dtype=np.int64)
-        reward = np.asarray(reward, dtype=np.float64)
-        weight = np.asarray(weight, dtype=np.float64)
-        if not np.all(np.isfinite(reward)):
-            bad = reward[~np.isfinite(reward)][0]
-            raise ValueError(f"reward must be finite, got {bad} (store id {ids[~np.isfinite(reward)][0]})")
+        reward = np.broadcast_to(np.asarray(reward, dtype=np.float64), ids.shape)
+        weight = np.broadcast_to(np.asarray(weight, dtype=np.float64), ids.shape)
+        bad = ~np.isfinite(reward)
+        if bad.any():
+            raise ValueError(f"reward must be finite, got {reward[bad][0]} (store id {ids[bad][0]})")
         outside = ~((weight >= 0) & (weight <= 1))
         if outside.any():
             raise ValueError(
                 f"weight must lie in [0, 1], got {weight[outside][0]} (store id {ids[outside][0]})"
             )
-        if ids.size and ids.max() >= len(self):
-            size = int(ids.max()) + 1
-            self.reward = np.concatenate([self.reward, np.zeros(size - len(self), np.float32)])
-            self.weight = np.concatenate([self.weight, np.zeros(size - len(self.weight), np.float32)])
-        self.reward[ids] = reward
-        self.weight[ids] = weight
+        if ids.size:
+            needed = int(ids.max()) + 1
+            if needed > self._reward.size:
+                capacity = max(needed, 2 * self._reward.size)
+                self._reward = np.concatenate(
+                    [self._reward, np.zeros(capacity - self._reward.size, np.float32)]
+                )
+                self._weight = np.concatenate(
+                    [self._weight, np.zeros(capacity - self._weight.size, np.float32)]
+                )
+            self._size = max(self._size, needed)
+        self._reward[ids] = reward
+        self._weight[ids] = weight
 
 
 class RelabellingReplayBuffer(ReplayBuffer):
