@@ -36,6 +36,7 @@ from dospcot import metrics
 from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
 from dospcot.envs.masking import StateActionMask, check_label_fraction
 from dospcot.envs.tabular import TabularMDP
+from dospcot.key_pool import key_features
 from dospcot.policies.tabular import TabularAgents, check_agent_kind
 from dospcot.reward_classes import RewardClasses
 
@@ -282,7 +283,10 @@ class TabularCoTraining:
             classes.observe(b, np.unique(values[b, labelled[b]]))
         label_class = np.where(labelled, classes.encode(values), -1)
         views = self.specs[runs[0]].views
-        pool = Pool([self._features(runs, v) for v in views], labelled, label_class, unlabelled, classes.mask)
+        visited = self.visited[runs].reshape(n_runs, -1)
+        next_state = self.stored_next[runs].reshape(n_runs, -1)
+        features = [key_features(self.mdp.views[v], next_state, visited, self.mdp.n_actions) for v in views]
+        pool = Pool(features, labelled, label_class, unlabelled, classes.mask)
         # Stopped runs stay in the batch (its classifiers are stacked) but keep their last table.
         result = trainer.step(pool)
         live = self.active[runs]
@@ -293,16 +297,6 @@ class TabularCoTraining:
         self.table_weight[live_runs] = result.pseudo_weight[live].reshape(shape)
         stats = self._pseudo_stats(runs, pool, result, classes)
         return {r: stats[r] for r in live_runs}
-
-    def _features(self, runs: list[int], view: str) -> np.ndarray:
-        """(B, S*A, 2d + A): view of s, one-hot action, view of the stored s' (zeros if unseen)."""
-        feats = self.mdp.views[view]
-        n_s, n_a = self.mdp.n_states, self.mdp.n_actions
-        s, a = np.divmod(np.arange(n_s * n_a), n_a)
-        base = np.concatenate([feats[s], np.eye(n_a, dtype=np.float32)[a]], axis=1)
-        nxt = self.stored_next[runs].reshape(len(runs), -1)
-        seen = self.visited[runs].reshape(len(runs), -1)[..., None]
-        return np.concatenate([np.broadcast_to(base, (len(runs), *base.shape)), feats[nxt] * seen], axis=2)
 
     def _pseudo_stats(
         self, runs: list[int], pool: Pool, result: RoundResult, classes: RewardClasses
