@@ -1,0 +1,321 @@
+"""DOSPCoT with neural agents (ExpectedSarsaDQN) on a masked discrete task: one run, m views.
+
+Each agent reads its own view as its observation and keeps its own relabelling replay buffer; all
+agents write every step into the run's :class:`TransitionStore`, whose pool is deduplicated by
+(s, a) key. One round, top to bottom, in :meth:`NeuralCoTraining.run_round`:
+
+1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
+   rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
+   time, so the last round's pseudo-rewards drive this round's updates.
+2. **Co-train** (method ``"cotrain"``): the store's labelled keys and unlabelled pool U go to the
+   :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
+3. **Pseudo-reward**: each admitted key's consensus reward and weight go into the reward table, for
+   every stored step of that key.
+4. **Policy update**: happens inside the next round's ``learn()`` (replay relabels at sample time).
+5. **Age**: the pace (admitted share of U) sets every agent's exploration rate via ``set_pace``.
+   Baselines, which have no pace, follow the share of rounds done, a plain linear schedule.
+
+Baselines: ``oracle`` (every key labelled), ``masked-zero`` (masked rewards read as 0 with weight 1)
+and ``labels-only`` (masked steps weigh 0). The hidden reward reaches only the metrics.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from dospcot import metrics
+from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
+from dospcot.envs.masking import RewardMaskWrapper, check_label_fraction
+from dospcot.envs.tabular import TabularMDP
+from dospcot.envs.views import View, ViewObservationWrapper
+from dospcot.key_pool import key_features
+from dospcot.policies import ExpectedSarsaDQN, RewardTable
+from dospcot.reward_classes import RewardClasses
+
+METHODS: tuple[str, ...] = ("oracle", "masked-zero", "labels-only", "cotrain")
+VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
+AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q"}
+"""Agent kinds: ExpectedSarsaDQN with its Expected-SARSA target, or with DQN's max target."""
+
+
+class TransitionStore:
+    """Every step the agents of one run took, each with a store id; the pool is keyed by (s, a).
+
+    :param n_states: S.
+    :param n_actions: A.
+    """
+
+    def __init__(self, n_states: int, n_actions: int) -> None:
+        self.n_actions = n_actions
+        n_keys = n_states * n_actions
+        self.key_of_id = np.zeros(0, dtype=np.int64)
+        self._n = 0
+        self.visited = np.zeros(n_keys, dtype=bool)
+        self.next_state = np.zeros(n_keys, dtype=np.int64)
+        self.labelled = np.zeros(n_keys, dtype=bool)
+        self.label_value = np.zeros(n_keys)
+        self.hidden_reward = np.zeros(n_keys)
+        """The true reward of each seen key: metrics only, never the learners."""
+
+    def __len__(self) -> int:
+        return self._n
+
+    def ids(self) -> np.ndarray:
+        """(len,) the key of every store id."""
+        return self.key_of_id[: self._n]
+
+    def add(
+        self, state: int, action: int, next_state: int, observed: bool, reward: float, hidden: float
+    ) -> int:
+        """Record one step; return its store id."""
+        if self._n == self.key_of_id.size:
+            self.key_of_id = np.concatenate([self.key_of_id, np.zeros(max(1024, self._n), np.int64)])
+        key = state * self.n_actions + action
+        self.key_of_id[self._n] = key
+        self.visited[key] = True
+        self.next_state[key] = next_state
+        self.hidden_reward[key] = hidden
+        if observed:
+            self.labelled[key] = True
+            self.label_value[key] = reward
+        self._n += 1
+        return self._n - 1
+
+
+class StoreWrapper(gym.Wrapper):
+    """Write every step into a :class:`TransitionStore` and put its id in ``info["store_id"]``.
+
+    Sits above :class:`~dospcot.envs.RewardMaskWrapper`, whose ``info`` says whether the reward was
+    observed; the hidden reward it passes on is stored for the metrics only.
+    """
+
+    def __init__(self, env: gym.Env, store: TransitionStore) -> None:
+        super().__init__(env)
+        self.store = store
+        self._state = 0
+
+    def reset(self, **kwargs: Any):
+        obs, info = self.env.reset(**kwargs)
+        self._state = int(self.env.unwrapped.s)
+        return obs, info
+
+    def step(self, action: Any):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        next_state = int(self.env.unwrapped.s)
+        info = dict(info)
+        info["store_id"] = self.store.add(
+            self._state,
+            int(action),
+            next_state,
+            info["reward_observed"],
+            float(reward),
+            info["hidden_reward"],
+        )
+        self._state = next_state
+        return obs, reward, terminated, truncated, info
+
+
+@dataclass(frozen=True)
+class NeuralRunSpec:
+    """One run: a method, one agent kind per view, gamma and a seed."""
+
+    method: str
+    agents: tuple[str, ...]
+    views: tuple[str, ...]
+    gamma: float = 0.3
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if len(self.agents) < 1 or len(self.agents) != len(self.views):
+            raise ValueError(
+                f"need one view per agent and at least one agent; got {self.agents}, {self.views}"
+            )
+        unknown = [a for a in self.agents if a not in AGENT_TARGETS]
+        if unknown:
+            raise ValueError(f"unknown agent kind(s) {unknown}; allowed: {sorted(AGENT_TARGETS)}")
+
+
+@dataclass(frozen=True)
+class NeuralConfig:
+    """Hyperparameters of a neural run.
+
+    :param rounds: co-training rounds.
+    :param steps_per_round: env steps each agent takes per round.
+    :param label_fraction: share of labelled (s, a) keys.
+    :param max_episode_steps: the episode length limit.
+    :param eps_start: exploration at pace 0; ``eps_end``: at pace 1.
+    :param dqn: further keyword arguments of every agent (SB3 DQN's).
+    :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
+    """
+
+    rounds: int = 5
+    steps_per_round: int = 5_000
+    label_fraction: float = 0.05
+    max_episode_steps: int = 64
+    eps_start: float = 1.0
+    eps_end: float = 0.05
+    dqn: dict[str, Any] = field(default_factory=dict)
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+
+    def __post_init__(self) -> None:
+        check_label_fraction(self.label_fraction)
+        if self.rounds < 1 or self.steps_per_round < 1:
+            raise ValueError(
+                f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
+            )
+
+
+class NeuralCoTraining:
+    """One neural run on a deterministic discrete task.
+
+    :param make_env: builds a fresh copy of the task (a toy-text env with ``P`` and ``s``).
+    :param views: every view the task offers, by name.
+    :param spec: the run.
+    :param config: its hyperparameters.
+    """
+
+    def __init__(
+        self,
+        make_env: Callable[[], gym.Env],
+        views: dict[str, View],
+        spec: NeuralRunSpec,
+        config: NeuralConfig,
+    ) -> None:
+        missing = sorted(set(spec.views) - set(views))
+        if missing:
+            raise ValueError(f"unknown view(s) {missing}; this task has {sorted(views)}")
+        self.spec, self.config, self.views = spec, config, views
+        probe = make_env()
+        self.mdp = TabularMDP.from_env(
+            probe, {name: views[name] for name in spec.views}, config.max_episode_steps
+        )
+        self.store = TransitionStore(self.mdp.n_states, self.mdp.n_actions)
+        self.table = RewardTable()
+        fraction = 1.0 if spec.method == "oracle" else config.label_fraction
+        buffer_kwargs = {
+            "reward_table": self.table if spec.method == "cotrain" else None,
+            "masked_reward": "zero" if spec.method == "masked-zero" else "ignore",
+        }
+        self.agents: list[ExpectedSarsaDQN] = []
+        for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True)):
+            env = gym.wrappers.TimeLimit(make_env(), config.max_episode_steps)
+            env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=spec.seed)
+            env = ViewObservationWrapper(StoreWrapper(env, self.store), views[view])
+            agent = ExpectedSarsaDQN(
+                "MlpPolicy", env, target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k,
+                exploration_initial_eps=config.eps_start, exploration_final_eps=config.eps_end,
+                replay_buffer_kwargs=buffer_kwargs, **config.dqn,
+            )  # fmt: skip
+            agent.set_pace(0.0)
+            self.agents.append(agent)
+        self.trainer: SelfPacedCoTrainer | None = None
+        self.classes = RewardClasses(1, config.cotraining.max_classes)
+        if spec.method == "cotrain":
+            dims = [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in spec.views]
+            cfg = CoTrainingConfig(**{**config.cotraining.__dict__, "gamma": spec.gamma})
+            self.trainer = SelfPacedCoTrainer(dims, 1, cfg, [spec.seed])
+        self.round = 0
+        self._optimal = self.mdp.optimal_actions(discount=1.0)
+        self._counted = self.mdp.reachable_nonterminal()
+        self._random_return = metrics.random_policy_return(self.mdp)
+        best = self.mdp.value_iteration(discount=1.0).argmax(axis=1)[None]
+        self._oracle_return = float(metrics.greedy_rollout(self.mdp, best)[0][0])
+
+    def run(self) -> list[dict]:
+        """All rounds; returns one record per round and agent."""
+        return [row for _ in range(self.config.rounds) for row in self.run_round()]
+
+    def run_round(self) -> list[dict]:
+        """One round of DESIGN.md section 2; returns its records."""
+        self.round += 1
+        for agent in self.agents:  # 1. collect and learn, with last round's rewards and weights
+            agent.learn(self.config.steps_per_round, reset_num_timesteps=False)
+        stats = self._cotrain() if self.trainer is not None else {}  # 2-3. co-train, pseudo-rewards
+        pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
+        for agent in self.agents:
+            agent.set_pace(min(pace, 1.0))
+        return self._records(stats)
+
+    def _cotrain(self) -> dict:
+        store, n_actions = self.store, self.mdp.n_actions
+        labelled = (store.visited & store.labelled)[None]
+        unlabelled = (store.visited & ~store.labelled)[None]
+        self.classes.observe(0, np.unique(store.label_value[labelled[0]]))
+        label_class = np.where(labelled, self.classes.encode(store.label_value[None]), -1)
+        features = [
+            key_features(self.mdp.views[v], store.next_state[None], store.visited[None], n_actions)
+            for v in self.spec.views
+        ]
+        result = self.trainer.step(Pool(features, labelled, label_class, unlabelled, self.classes.mask))
+        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
+        keys = store.ids()
+        self.table.set(np.arange(len(keys)), pseudo[keys], result.pseudo_weight[0][keys])
+        truth = store.hidden_reward  # metrics only
+        u, admitted = unlabelled[0], result.pseudo_weight[0] > 0
+        per_view = []
+        for j in range(len(self.spec.views)):
+            taken = result.view_weight[j, 0] > 0
+            correct = self.classes.decode(result.view_class[j])[0] == truth
+            lam = result.threshold[j, 0]
+            per_view.append({
+                "view_coverage": float(taken[u].mean()) if u.any() else 0.0,
+                "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
+                "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
+                "classifier_loss": float(result.classifier_loss[j, 0]),
+            })  # fmt: skip
+        return {
+            "pace": float(result.pace[0]),
+            "coverage": float(admitted[u].mean()) if u.any() else 0.0,
+            "pseudo_accuracy": float((pseudo == truth)[admitted].mean()) if admitted.any() else float("nan"),
+            "views": per_view,
+        }
+
+    def greedy_actions(self) -> np.ndarray:
+        """(m, S) each agent's greedy action in every state, read through its own view."""
+        return np.stack(
+            [
+                agent.predict(self.mdp.views[v], deterministic=True)[0]
+                for agent, v in zip(self.agents, self.spec.views, strict=True)
+            ]
+        )
+
+    def _records(self, stats: dict) -> list[dict]:
+        greedy = self.greedy_actions()
+        ret, success = metrics.greedy_rollout(self.mdp, greedy)
+        agreement = metrics.optimal_action_agreement(greedy, self._optimal, self._counted)
+        score = metrics.normalised_score(ret, self._random_return, self._oracle_return)
+        rows = []
+        for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
+            view_stats = stats["views"][k] if stats else {}
+            rows.append(
+                {
+                    "method": self.spec.method,
+                    "agents": "-".join(self.spec.agents),
+                    "views": "-".join(self.spec.views),
+                    "m": len(self.spec.agents),
+                    "gamma": self.spec.gamma,
+                    "seed": self.spec.seed,
+                    "round": self.round,
+                    "agent": k,
+                    "kind": kind,
+                    "view": view,
+                    "env_steps": int(self.agents[k].num_timesteps),
+                    "agreement": float(agreement[k]),
+                    "greedy_return": float(ret[k]),
+                    "success": float(success[k]),
+                    "normalised_score": float(score[k]),
+                    "eps": float(self.agents[k].exploration_rate),
+                    "pace": stats.get("pace", float("nan")),
+                    "coverage": stats.get("coverage", float("nan")),
+                    "pseudo_accuracy": stats.get("pseudo_accuracy", float("nan")),
+                    **{key: view_stats.get(key, float("nan")) for key in VIEW_STATS},
+                }
+            )
+        return rows
