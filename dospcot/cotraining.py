@@ -125,6 +125,7 @@ class SelfPacedCoTrainer:
         ]
         self.round = 0
         self._previous: np.ndarray | None = None
+        self._weights: np.ndarray | None = None
 
     @property
     def add_fraction(self) -> float:
@@ -147,7 +148,11 @@ class SelfPacedCoTrainer:
         scores = [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
         losses = np.stack([_class_losses(clf, x, mask) for clf, x in zip(self.classifiers, xs, strict=True)])
         n_runs, n_samples = pool.labelled.shape
+        # Serial SPaMCo: a view not yet revisited this round co-regularises with its last weights.
         weights = np.zeros((m, n_runs, n_samples))
+        if self._weights is not None:
+            n = min(n_samples, self._weights.shape[2])
+            weights[:, :, :n] = self._weights[:, :, :n] * pool.unlabelled[None, :, :n]
         view_class = np.zeros((m, n_runs, n_samples), dtype=np.int64)
         threshold = np.zeros((m, n_runs, cfg.max_classes))
         fit_loss = np.zeros((m, n_runs))
@@ -171,6 +176,7 @@ class SelfPacedCoTrainer:
             scores[j] = self.classifiers[j].scores(xs[j], mask).numpy()
             losses[j] = _class_losses(self.classifiers[j], xs[j], mask)
 
+        self._weights = weights.copy()
         pseudo_class = np.where(pool.unlabelled, consensus_labels(losses, weights), -1)
         pseudo_weight = np.where(pseudo_class >= 0, weights.max(axis=0), 0.0)
         n_unlabelled = np.maximum(pool.unlabelled.sum(axis=1), 1)
