@@ -36,8 +36,8 @@ from dospcot.envs.views import View, ViewObservationWrapper
 from dospcot.key_pool import key_features
 from dospcot.policies import ExpectedSarsaDQN, RewardTable
 from dospcot.reward_classes import RewardClasses
+from dospcot.run_spec import RunSpec
 
-METHODS: tuple[str, ...] = ("oracle", "masked-zero", "labels-only", "cotrain")
 VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
 AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q"}
 """Agent kinds: ExpectedSarsaDQN with its Expected-SARSA target, or with DQN's max target."""
@@ -120,26 +120,12 @@ class StoreWrapper(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-@dataclass(frozen=True)
-class NeuralRunSpec:
-    """One run: a method, one agent kind per view, gamma and a seed."""
+class NeuralRunSpec(RunSpec):
+    """A neural run; agent kinds from :data:`AGENT_TARGETS`."""
 
-    method: str
-    agents: tuple[str, ...]
-    views: tuple[str, ...]
-    gamma: float = 0.3
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if len(self.agents) < 1 or len(self.agents) != len(self.views):
-            raise ValueError(
-                f"need one view per agent and at least one agent; got {self.agents}, {self.views}"
-            )
-        unknown = [a for a in self.agents if a not in AGENT_TARGETS]
-        if unknown:
-            raise ValueError(f"unknown agent kind(s) {unknown}; allowed: {sorted(AGENT_TARGETS)}")
+    def check_agent(self, kind: str) -> None:
+        if kind not in AGENT_TARGETS:
+            raise ValueError(f"unknown agent kind {kind!r}; allowed: {sorted(AGENT_TARGETS)}")
 
 
 @dataclass(frozen=True)

@@ -39,38 +39,14 @@ from dospcot.envs.tabular import TabularMDP
 from dospcot.key_pool import key_features
 from dospcot.policies.tabular import TabularAgents, check_agent_kind
 from dospcot.reward_classes import RewardClasses
+from dospcot.run_spec import RunSpec
 
-METHODS: tuple[str, ...] = ("oracle", "masked-zero", "labels-only", "cotrain")
 
+class TabularRunSpec(RunSpec):
+    """A tabular run; agent kinds from :data:`dospcot.policies.tabular.AGENT_KINDS`."""
 
-@dataclass(frozen=True)
-class TabularRunSpec:
-    """One run: a method, its agents (one per view), gamma and a seed.
-
-    :param method: one of :data:`METHODS`.
-    :param agents: agent kind of each view, e.g. ``("esarsa", "q")``.
-    :param views: the view of each agent (its reward classifier's input).
-    :param gamma: co-regularisation weight (co-training only).
-    :param seed: seeds the mask, the exploration streams and the classifiers; runs of different
-        methods with the same seed share the labelled key set.
-    """
-
-    method: str
-    agents: tuple[str, ...]
-    views: tuple[str, ...]
-    gamma: float = 0.3
-    seed: int = 0
-
-    def __post_init__(self) -> None:
-        if self.method not in METHODS:
-            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
-        if len(self.agents) < 1 or len(self.agents) != len(self.views):
-            raise ValueError(
-                "need one view per agent and at least one agent; "
-                f"got agents={self.agents}, views={self.views}"
-            )
-        for kind in self.agents:
-            check_agent_kind(kind)
+    def check_agent(self, kind: str) -> None:
+        check_agent_kind(kind)
 
 
 @dataclass(frozen=True)
