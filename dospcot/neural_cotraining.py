@@ -22,7 +22,7 @@ and ``labels-only`` (masked steps weigh 0). The hidden reward reaches only the m
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import gymnasium as gym
@@ -205,7 +205,7 @@ class NeuralCoTraining:
         self.classes = RewardClasses(1, config.cotraining.max_classes)
         if spec.method == "cotrain":
             dims = [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in spec.views]
-            cfg = CoTrainingConfig(**{**config.cotraining.__dict__, "gamma": spec.gamma})
+            cfg = replace(config.cotraining, gamma=spec.gamma)
             self.trainer = SelfPacedCoTrainer(dims, 1, cfg, [spec.seed])
         self.round = 0
         self._optimal = self.mdp.optimal_actions(discount=1.0)

@@ -19,7 +19,7 @@ import platform
 import queue
 import time
 from collections import defaultdict
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -88,16 +88,21 @@ def cliffwalking_mdp(label_fraction: float = 0.1) -> TabularMDP:
     return TabularMDP.from_env(env, CLIFF_VIEWS, max_episode_steps=100)
 
 
+def _train(
+    config: TabularConfig, specs: list[TabularRunSpec], progress: Callable[[int], None] | None = None
+) -> list[dict]:
+    trainer = TabularCoTraining(
+        cliffwalking_mdp(config.label_fraction), specs, config, metrics.paper_reference_policy()
+    )
+    return trainer.run(progress=progress).records
+
+
 def _train_chunk(args: tuple[TabularConfig, list[TabularRunSpec], object]) -> list[dict]:
     import torch
 
     torch.set_num_threads(1)
     config, specs, progress_queue = args
-    trainer = TabularCoTraining(
-        cliffwalking_mdp(config.label_fraction), specs, config, metrics.paper_reference_policy()
-    )
-    report = progress_queue.put if progress_queue is not None else None
-    return trainer.run(progress=report).records
+    return _train(config, specs, progress_queue.put)
 
 
 def train_protocol(
@@ -113,16 +118,7 @@ def train_protocol(
     total = config.rounds * config.episodes_per_round * total_agents
     bar = tqdm(total=total, unit="ep", desc="reproduce-paper", disable=not show_progress, mininterval=1.0)
     if len(chunks) == 1:
-        records = (
-            TabularCoTraining(
-                cliffwalking_mdp(config.label_fraction),
-                protocol_specs(chunks[0]),
-                config,
-                metrics.paper_reference_policy(),
-            )
-            .run(progress=bar.update)
-            .records
-        )
+        records = _train(config, protocol_specs(chunks[0]), bar.update)
         bar.close()
         return records
     ctx = multiprocessing.get_context("spawn")
@@ -135,6 +131,8 @@ def train_protocol(
             except queue.Empty:
                 pass
         records = [rec for f in futures for rec in f.result()]
+        while not progress_queue.empty():  # reports sent after the last poll
+            bar.update(progress_queue.get())
     bar.close()
     return records
 

@@ -92,12 +92,10 @@ class TabularResult:
 
     :param records: one dict per run, round and agent (the rows of ``metrics.csv``).
     :param q: (n_slots, S, A) final Q-tables, slot order = runs in order, agents in order.
-    :param slot_run: (n_slots,) the run of each slot.
     """
 
     records: list[dict]
     q: np.ndarray
-    slot_run: np.ndarray
 
 
 class TabularCoTraining:
@@ -207,7 +205,7 @@ class TabularCoTraining:
                 if stats.pop("stopped"):
                     self.active[r] = False
             records.extend(self._records(round_index, round_stats))
-        return TabularResult(records, self.agents.q.copy(), self.slot_run.copy())
+        return TabularResult(records, self.agents.q.copy())
 
     def _collect(self, progress: Callable[[int], None] | None) -> None:
         mdp, agents, n_slots = self.mdp, self.agents, len(self.slot_run)
