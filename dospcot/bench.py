@@ -13,7 +13,7 @@ import statistics
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from functools import partial
 from pathlib import Path
 
@@ -131,7 +131,7 @@ def render(rows: list[Row], command: str, repeats: int) -> str:
     lines = [
         "# Benchmarks",
         "",
-        f"Written by `{command}` on {datetime.now(timezone.utc):%Y-%m-%d %H:%M} UTC.  ",
+        f"Written by `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC.  ",
         f"Machine: {cpu}, {torch.get_num_threads()} torch threads, Python {platform.python_version()}, "
         f"torch {torch.__version__}; no GPU.  ",
         f"Each figure: median of {repeats} repetitions [min, max]; "

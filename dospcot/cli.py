@@ -8,6 +8,7 @@ import shlex
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import NoReturn
 
 
 def parse_seeds(text: str) -> list[int]:
@@ -46,11 +47,47 @@ def positive_int(text: str) -> int:
     return value
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line (and exit status 2), as every other
+    error of the CLI."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from dospcot.paper import PRESETS
 
-    parser = argparse.ArgumentParser(prog="dospcot", description=__doc__)
-    commands = parser.add_subparsers(dest="command", required=True)
+    parser = OneLineParser(prog="dospcot", description=__doc__)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+    train = commands.add_parser(
+        "train",
+        help="train one run of a config (a shipped preset or a .toml path)",
+        description="Train one neural run and write runs/<name>/<stamp>/ (config, TensorBoard, "
+        "metrics.csv, summary.json, agents, classifiers, plots, checkpoint).",
+    )
+    train.add_argument("config", nargs="?", help="a preset name (see --list) or a path to a .toml")
+    train.add_argument(
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="override a config key, e.g. --set training.rounds=3 --set seed=2 (repeatable)",
+    )
+    train.add_argument(
+        "--resume", type=Path, metavar="RUN_DIR", help="continue a killed run from its checkpoint"
+    )
+    train.add_argument("--runs-dir", type=Path, default=Path("runs"), help="where runs write (default runs)")
+    train.add_argument("--list", action="store_true", help="list the shipped presets and exit")
+    train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    evaluate = commands.add_parser(
+        "evaluate",
+        help="re-evaluate the saved agents of a run folder",
+        description="Load agent_<view>.zip with plain stable_baselines3.DQN.load and evaluate them "
+        "greedily on the run's task; writes evaluation.json.",
+    )
+    evaluate.add_argument("run_dir", type=Path, help="a run folder, runs/<name>/<stamp>")
     paper = commands.add_parser(
         "reproduce-paper",
         help="the seed paper's CliffWalking protocol (Tables 1-4) with real reward masking",
@@ -100,7 +137,18 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    args = build_parser().parse_args(argv)
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    command = shlex.join(["dospcot", *argv])
+    if args.command in ("train", "evaluate"):
+        from dospcot.run_folder import RunFolderError
+        from dospcot.train_config import ConfigError
+
+        try:
+            return _train(args, command) if args.command == "train" else _evaluate(args)
+        except (ConfigError, RunFolderError) as err:
+            print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+            return 2
     if args.command == "reproduce-paper":
         from dospcot.paper import reproduce_paper
 
@@ -111,7 +159,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             episodes=args.episodes,
             workers=args.workers,
             out_dir=args.out,
-            command=shlex.join(["dospcot", *argv]),
+            command=command,
             show_progress=not args.no_progress,
         )
         summary = (run_dir / "summary.json").read_text()
@@ -120,12 +168,50 @@ def main(argv: Sequence[str] | None = None) -> int:
     elif args.command == "bench":
         from dospcot.bench import run_benchmarks
 
-        rows = run_benchmarks(args.out, args.quick, args.repeats, shlex.join(["dospcot", *argv]))
+        rows = run_benchmarks(args.out, args.quick, args.repeats, command)
         for row in rows:
             print(
                 f"{row.name}: ratio {row.ratio:.3f} (target {row.target}, {'met' if row.met else 'not met'})"
             )
         print(f"wrote {args.out}")
+    return 0
+
+
+def _train(args: argparse.Namespace, command: str) -> int:
+    from dospcot.train import resume, train
+    from dospcot.train_config import ConfigError, load_config, preset_names
+
+    if args.list:
+        print("\n".join(preset_names()))
+        return 0
+    if args.resume is not None:
+        if args.config or args.overrides:
+            raise ConfigError("--resume RUN_DIR takes no CONFIG or --set: the run folder holds its config")
+        run_dir = resume(args.resume, show_progress=not args.no_progress, command=command)
+    else:
+        if not args.config:
+            raise ConfigError(f"give a CONFIG: a preset ({', '.join(preset_names())}) or a path to a .toml")
+        cfg = load_config(args.config, args.overrides)
+        run_dir = train(cfg, args.runs_dir, show_progress=not args.no_progress, command=command)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    mean = summary["mean"]
+    print(
+        f"{run_dir}: normalised score {mean['normalised_score']:.3f}, agreement {mean['agreement']:.3f}, "
+        f"success {mean['success']:.2f} (mean over {summary['m']} agent(s), round {summary['rounds']})"
+    )
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from dospcot.train import evaluate
+
+    result = evaluate(args.run_dir)
+    for view, row in result["per_view"].items():
+        print(
+            f"{view:>8}: return {row['greedy_return']:8.1f}  success {row['success']:.0f}  "
+            f"normalised score {row['normalised_score']:.3f}  agreement {row['agreement']:.3f}"
+        )
+    print(f"wrote {args.run_dir / 'evaluation.json'}")
     return 0
 
 

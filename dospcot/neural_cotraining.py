@@ -21,12 +21,16 @@ and ``labels-only`` (masked steps weigh 0). The hidden reward reaches only the m
 
 from __future__ import annotations
 
+import io
+import random
 from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch as th
+from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot import metrics
 from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
@@ -208,21 +212,33 @@ class NeuralCoTraining:
             cfg = replace(config.cotraining, gamma=spec.gamma)
             self.trainer = SelfPacedCoTrainer(dims, 1, cfg, [spec.seed])
         self.round = 0
+        self.stopped = False
+        """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
         self._optimal = self.mdp.optimal_actions(discount=1.0)
         self._counted = self.mdp.reachable_nonterminal()
-        self._random_return = metrics.random_policy_return(self.mdp)
+        self.random_return = metrics.random_policy_return(self.mdp)
         best = self.mdp.value_iteration(discount=1.0).argmax(axis=1)[None]
-        self._oracle_return = float(metrics.greedy_rollout(self.mdp, best)[0][0])
+        self.oracle_return = float(metrics.greedy_rollout(self.mdp, best)[0][0])
 
     def run(self) -> list[dict]:
-        """All rounds; returns one record per round and agent."""
-        return [row for _ in range(self.config.rounds) for row in self.run_round()]
+        """All rounds, or until the stopping rule fires; returns one record per round and agent."""
+        records: list[dict] = []
+        while self.round < self.config.rounds and not self.stopped:
+            records += self.run_round()
+        return records
 
-    def run_round(self) -> list[dict]:
-        """One round of DESIGN.md section 2; returns its records."""
+    def run_round(self, callback: MaybeCallback = None) -> list[dict]:
+        """One round of DESIGN.md section 2; returns its records.
+
+        :param callback: passed to every agent's ``learn()`` (SB3 callbacks, e.g. a progress bar).
+        """
         self.round += 1
-        for agent in self.agents:  # 1. collect and learn, with last round's rewards and weights
-            agent.learn(self.config.steps_per_round, reset_num_timesteps=False)
+        for k, agent in enumerate(self.agents):  # 1. collect and learn, with last round's rewards and weights
+            # Every round starts from fresh episodes with seeded resets, so a run resumed from the
+            # checkpoint of the last round continues exactly as the uninterrupted run would.
+            agent.get_env().seed(self.spec.seed * 1000 + k + 7919 * self.round)
+            agent._last_obs = None  # SB3 resets the env when learn() finds no last observation
+            agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
         stats = self._cotrain() if self.trainer is not None else {}  # 2-3. co-train, pseudo-rewards
         pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
         for agent in self.agents:
@@ -256,12 +272,55 @@ class NeuralCoTraining:
                 "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
                 "classifier_loss": float(result.classifier_loss[j, 0]),
             })  # fmt: skip
+        self.stopped = bool(result.stopped[0])
         return {
             "pace": float(result.pace[0]),
             "coverage": float(admitted[u].mean()) if u.any() else 0.0,
             "pseudo_accuracy": float((pseudo == truth)[admitted].mean()) if admitted.any() else float("nan"),
             "views": per_view,
         }
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything the next rounds depend on, picklable: agents (SB3 zips as bytes), their replay
+        buffers, the store, the reward table, the co-trainer and the global and action-space RNGs.
+
+        The envs hold no state across rounds (each round starts from seeded resets).
+        """
+        zips = []
+        for agent in self.agents:
+            blob = io.BytesIO()
+            agent.save(blob)
+            zips.append(blob.getvalue())
+        return {
+            "round": self.round,
+            "stopped": self.stopped,
+            "agents": zips,
+            "buffers": [agent.replay_buffer for agent in self.agents],
+            "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
+            "store": self.store.__dict__,
+            "table": self.table.__dict__,
+            "classes": self.classes,
+            "trainer": self.trainer,
+            # SB3 draws exploration and replay batches from the legacy global generators.
+            "rng": {"python": random.getstate(), "numpy": np.random.get_state(), "torch": th.get_rng_state()},  # noqa: NPY002
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
+        self.round, self.stopped = state["round"], state["stopped"]
+        self.store.__dict__.update(state["store"])  # the StoreWrappers keep pointing at self.store
+        self.table.__dict__.update(state["table"])
+        self.classes, self.trainer = state["classes"], state["trainer"]
+        for k, agent in enumerate(self.agents):
+            loaded = ExpectedSarsaDQN.load(io.BytesIO(state["agents"][k]), env=agent.get_env())
+            loaded.replay_buffer = state["buffers"][k]
+            loaded.replay_buffer.reward_table = agent.replay_buffer.reward_table
+            loaded.action_space.np_random.bit_generator.state = state["action_space_rng"][k]
+            self.agents[k] = loaded
+        # Loading re-seeds the global generators (SB3's _setup_model): restore them last.
+        random.setstate(state["rng"]["python"])
+        np.random.set_state(state["rng"]["numpy"])  # noqa: NPY002
+        th.set_rng_state(state["rng"]["torch"])
 
     def greedy_actions(self) -> np.ndarray:
         """(m, S) each agent's greedy action in every state, read through its own view."""
@@ -276,7 +335,7 @@ class NeuralCoTraining:
         greedy = self.greedy_actions()
         ret, success = metrics.greedy_rollout(self.mdp, greedy)
         agreement = metrics.optimal_action_agreement(greedy, self._optimal, self._counted)
-        score = metrics.normalised_score(ret, self._random_return, self._oracle_return)
+        score = metrics.normalised_score(ret, self.random_return, self.oracle_return)
         rows = []
         for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
             view_stats = stats["views"][k] if stats else {}

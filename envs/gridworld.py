@@ -154,6 +154,10 @@ class GridWorld(gym.Env):
     :param step_cost: reward of an ordinary step.
     :param lava_penalty: reward of a step into lava (which returns to the start).
     :param goal_reward: reward of the step into the goal (which ends the episode).
+    :param exploring_starts: start each episode on a uniformly drawn free cell (from ``np_random``)
+        rather than the map's start; lava still returns to the map's start, and
+        ``initial_state_distrib`` (what :class:`~dospcot.envs.TabularMDP` and the metrics evaluate
+        from) stays the map's start.
     :param render_mode: None or ``"ansi"``.
     """
 
@@ -169,6 +173,7 @@ class GridWorld(gym.Env):
         step_cost: float = -1.0,
         lava_penalty: float = -100.0,
         goal_reward: float = 0.0,
+        exploring_starts: bool = False,
         render_mode: str | None = None,
     ) -> None:
         if isinstance(layout, str):
@@ -191,6 +196,8 @@ class GridWorld(gym.Env):
         self.initial_state_distrib = np.zeros(n * n)
         self.initial_state_distrib[self.start_state] = 1.0
         self.s = self.start_state
+        self.exploring_starts = exploring_starts
+        self._free_states = np.flatnonzero(self.layout.terrain.reshape(-1) == FREE)
 
     def _tables(self, step_cost: float, lava_penalty: float, goal_reward: float):
         n, terrain = self.layout.size, self.layout.terrain
@@ -209,7 +216,10 @@ class GridWorld(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)
-        self.s = self.start_state
+        if self.exploring_starts:
+            self.s = int(self._free_states[self.np_random.integers(self._free_states.size)])
+        else:
+            self.s = self.start_state
         return self.s, {}
 
     def step(self, action: int):

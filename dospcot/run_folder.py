@@ -1,0 +1,109 @@
+"""The files of a run folder (DESIGN.md section 5), each written atomically.
+
+Every file is written to a temporary name in the same folder and renamed over its target with
+:func:`os.replace`, so a run killed at any moment leaves each file either whole and old or whole and
+new, never half-written.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import os
+import pickle
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from functools import partial
+from pathlib import Path
+from typing import IO, Any
+
+import tomli_w
+
+CONFIG_FILE = "config.toml"
+METRICS_FILE = "metrics.csv"
+SUMMARY_FILE = "summary.json"
+CHECKPOINT_FILE = "checkpoint.pkl"
+CHECKPOINT_FORMAT = 1
+
+
+class RunFolderError(RuntimeError):
+    """A run folder that cannot be read: missing, incomplete or corrupt files (message is one line)."""
+
+
+def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
+    """Write ``path`` through ``write(file)`` into a temporary file, then rename it over ``path``."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as handle:
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.chmod(tmp, 0o644)  # mkstemp makes files private; run files are for sharing
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def write_text(path: Path, text: str) -> None:
+    atomic_write(path, lambda handle: handle.write(text.encode()))
+
+
+def write_json(path: Path, data: Any) -> None:
+    write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
+
+
+def write_toml(path: Path, data: dict[str, Any]) -> None:
+    write_text(path, tomli_w.dumps(data))
+
+
+def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
+    """One row per dict; the columns are the first row's keys."""
+    text = io.StringIO()
+    writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    write_text(path, text.getvalue())
+
+
+def new_run_dir(root: Path, name: str) -> Path:
+    """``root/name/<stamp>/``, created; the stamp is the local time, made unique with a suffix."""
+    stamp = time.strftime("%Y%m%d-%H%M%S")
+    for k in range(1000):
+        run_dir = root / name / (stamp if k == 0 else f"{stamp}-{k}")
+        try:
+            run_dir.mkdir(parents=True)
+            return run_dir
+        except FileExistsError:
+            continue
+    raise RunFolderError(f"cannot make a new run folder under {root / name}")
+
+
+def write_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:
+    """Pickle the state of the last finished round to ``checkpoint.pkl``, atomically."""
+    payload = {"format": CHECKPOINT_FORMAT, "state": state}
+    atomic_write(run_dir / CHECKPOINT_FILE, partial(pickle.dump, payload, protocol=pickle.HIGHEST_PROTOCOL))
+
+
+def read_checkpoint(run_dir: Path) -> dict[str, Any]:
+    """The state :func:`write_checkpoint` saved.
+
+    The checkpoint is a pickle: like SB3 zips, load it only from a source you trust.
+
+    :raises RunFolderError: missing, truncated, corrupt or of another format.
+    """
+    path = run_dir / CHECKPOINT_FILE
+    if not path.is_file():
+        raise RunFolderError(f"{path} does not exist: the run finished no round, start it again")
+    try:
+        with path.open("rb") as handle:
+            payload = pickle.load(handle)
+    except Exception as err:  # any unpickling failure means the same here: truncated or corrupt
+        reason = type(err).__name__
+        raise RunFolderError(f"{path} is corrupt or truncated ({reason}); start the run again") from None
+    if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
+        raise RunFolderError(f"{path} is not a dospcot checkpoint of format {CHECKPOINT_FORMAT}")
+    return payload["state"]

@@ -1,0 +1,250 @@
+"""``dospcot train`` and ``dospcot evaluate``: one neural run of a config, with its run folder.
+
+A run writes ``runs/<name>/<stamp>/`` (DESIGN.md section 5):
+
+- ``config.toml``: the resolved config (rerun it with ``dospcot train runs/<name>/<stamp>/config.toml``);
+- ``tb/agent_<view>/``: TensorBoard events, SB3's ``rollout/`` and ``train/`` scalars plus ``dospcot/``
+  scalars per round (pace, eps, lambda, coverage, pseudo-reward accuracy, classifier loss, greedy
+  return, agreement, ...), against the agent's env steps;
+- ``metrics.csv``: one row per round and view; ``summary.json``: the last round, per view and averaged;
+- ``agent_<view>.zip`` (loads with plain ``stable_baselines3.DQN.load``), ``classifier_<view>.pt``
+  (:func:`dospcot.classifier.load_classifier`) and ``reward_classes.json`` (class index -> reward);
+- ``learning_curves.png``; ``run_info.json`` (command, versions, wall time);
+- ``checkpoint.pkl``: the state after the last finished round, for ``dospcot train --resume``.
+
+Every file is rewritten atomically at the end of every round, so a killed run resumes from its last
+finished round and ends with the same ``summary.json`` as an uninterrupted run.
+"""
+
+from __future__ import annotations
+
+import math
+import platform
+import time
+from functools import partial
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import stable_baselines3
+import torch as th
+from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.logger import configure
+from tqdm.auto import tqdm
+
+import dospcot
+from dospcot import metrics
+from dospcot.classifier import save_classifier
+from dospcot.envs import GridLayout, GridWorld, TabularMDP, grid_views
+from dospcot.envs.views import View
+from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
+from dospcot.plots import plot_learning_curves
+from dospcot.run_folder import (
+    CONFIG_FILE,
+    METRICS_FILE,
+    SUMMARY_FILE,
+    RunFolderError,
+    atomic_write,
+    new_run_dir,
+    read_checkpoint,
+    write_checkpoint,
+    write_csv,
+    write_json,
+    write_toml,
+)
+from dospcot.train_config import TrainConfig, load_config
+
+ROUND_SCALARS = (
+    "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
+    "classifier_loss", "greedy_return", "success", "normalised_score", "agreement",
+)  # fmt: skip
+"""The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
+SUMMARY_METRICS = ("normalised_score", "agreement", "greedy_return", "success", "pseudo_accuracy", "coverage")
+
+
+def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], GridLayout]:
+    """The env factory, the views and the map of a config."""
+    env = cfg.env
+    layout = GridLayout.random(env.size, env.layout_seed, env.lava_density, env.wall_density)
+    make_env = partial(
+        GridWorld, layout, step_cost=env.step_cost, lava_penalty=env.lava_penalty,
+        goal_reward=env.goal_reward, exploring_starts=env.exploring_starts,
+    )  # fmt: skip
+    return make_env, grid_views(layout, env.patch_size), layout
+
+
+def build_run(cfg: TrainConfig) -> NeuralCoTraining:
+    """The co-trainer of a config, before its first round."""
+    make_env, views, _ = build_task(cfg)
+    training = cfg.training
+    dqn = cfg.dqn.sb3_kwargs()
+    # Steps beyond a run's total never enter the buffer: capping it changes nothing but memory and
+    # the size of every checkpoint.
+    dqn["buffer_size"] = min(dqn["buffer_size"], training.rounds * training.steps_per_round)
+    config = NeuralConfig(
+        rounds=training.rounds, steps_per_round=training.steps_per_round,
+        label_fraction=training.label_fraction, max_episode_steps=cfg.env.episode_steps,
+        eps_start=training.eps_start, eps_end=training.eps_end, dqn=dqn, cotraining=cfg.cotraining,
+    )  # fmt: skip
+    spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
+    return NeuralCoTraining(make_env, views, spec, config)
+
+
+class _StepBar(BaseCallback):
+    """Advance a tqdm bar by every env step an agent takes."""
+
+    def __init__(self, bar: tqdm) -> None:
+        super().__init__()
+        self.bar = bar
+
+    def _on_step(self) -> bool:
+        self.bar.update(1)
+        return True
+
+
+def train(
+    cfg: TrainConfig, runs_root: Path = Path("runs"), *, show_progress: bool = True, command: str = ""
+) -> Path:
+    """Train ``cfg`` in a new folder ``runs_root/<name>/<stamp>/``; return that folder."""
+    run_dir = new_run_dir(runs_root, cfg.name)
+    write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
+    return _train_in(run_dir, cfg, None, show_progress, command)
+
+
+def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> Path:
+    """Continue a killed run from the checkpoint of its last finished round."""
+    config_path = run_dir / CONFIG_FILE
+    if not config_path.is_file():
+        raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
+    cfg = load_config(str(config_path))
+    return _train_in(run_dir, cfg, read_checkpoint(run_dir), show_progress, command)
+
+
+def _train_in(
+    run_dir: Path, cfg: TrainConfig, state: dict[str, Any] | None, show_progress: bool, command: str
+) -> Path:
+    started = time.perf_counter()
+    run = build_run(cfg)
+    records: list[dict] = []
+    elapsed, sessions = 0.0, 1
+    if state is not None:
+        run.load_state_dict(state["run"])
+        records, elapsed, sessions = state["records"], state["elapsed_s"], state["sessions"] + 1
+    for agent, view in zip(run.agents, cfg.views, strict=True):
+        agent.set_logger(configure(str(run_dir / "tb" / f"agent_{view}"), ["tensorboard"]))
+    per_round = cfg.training.steps_per_round * len(run.agents)
+    bar = tqdm(
+        total=cfg.training.rounds * per_round, initial=run.round * per_round, unit="step",
+        desc=f"{cfg.name} round {run.round + 1}/{cfg.training.rounds}", disable=not show_progress,
+        dynamic_ncols=True,
+    )  # fmt: skip
+    while run.round < cfg.training.rounds and not run.stopped:
+        bar.set_description(f"{cfg.name} round {run.round + 1}/{cfg.training.rounds}")
+        rows = run.run_round(callback=_StepBar(bar))
+        records += rows
+        _log_round(run, rows)
+        score = np.mean([r["normalised_score"] for r in rows])
+        bar.set_postfix(score=f"{score:.2f}", pace=f"{rows[0]['pace']:.2f}")
+        _write_round_files(run_dir, run, cfg, records)
+        write_checkpoint(
+            run_dir,
+            {
+                "run": run.state_dict(),
+                "records": records,
+                "elapsed_s": elapsed + time.perf_counter() - started,
+                "sessions": sessions,
+            },
+        )
+    bar.close()
+    for agent in run.agents:
+        agent.logger.close()
+    write_json(run_dir / SUMMARY_FILE, summarise(records, run))
+    plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
+    write_json(
+        run_dir / "run_info.json",
+        {"command": command, "wall_time_s": round(elapsed + time.perf_counter() - started, 2),
+         "sessions": sessions, "dospcot": dospcot.__version__, "torch": th.__version__,
+         "stable_baselines3": stable_baselines3.__version__, "python": platform.python_version(),
+         "machine": f"{platform.machine()} {platform.system()}, {th.get_num_threads()} torch threads"},
+    )  # fmt: skip
+    return run_dir
+
+
+def _log_round(run: NeuralCoTraining, rows: list[dict]) -> None:
+    for agent, row in zip(run.agents, rows, strict=True):
+        for key in ROUND_SCALARS:
+            if math.isfinite(row[key]):
+                agent.logger.record(f"dospcot/{key}", row[key])
+        agent.logger.record("dospcot/round", run.round)
+        agent.logger.dump(step=agent.num_timesteps)
+
+
+def _write_round_files(run_dir: Path, run: NeuralCoTraining, cfg: TrainConfig, records: list[dict]) -> None:
+    write_csv(run_dir / METRICS_FILE, records)
+    for agent, view in zip(run.agents, cfg.views, strict=True):
+        atomic_write(run_dir / f"agent_{view}.zip", agent.save)
+    if run.trainer is not None:
+        for clf, view in zip(run.trainer.classifiers, cfg.views, strict=True):
+            atomic_write(run_dir / f"classifier_{view}.pt", partial(save_classifier, clf))
+        rewards = run.classes.values[0][run.classes.mask[0]]
+        write_json(run_dir / "reward_classes.json", {"rewards": [float(v) for v in rewards]})
+
+
+def summarise(records: list[dict], run: NeuralCoTraining) -> dict[str, Any]:
+    """The last round's metrics per view and averaged over the views (no timings: a resumed run
+    ends with the summary of the uninterrupted one)."""
+    last = [r for r in records if r["round"] == run.round]
+    return {
+        "method": run.spec.method,
+        "views": list(run.spec.views),
+        "agents": list(run.spec.agents),
+        "m": len(run.spec.views),
+        "seed": run.spec.seed,
+        "rounds": run.round,
+        "stopped_early": run.stopped,
+        "env_steps_per_agent": int(last[0]["env_steps"]),
+        "optimal_return": run.oracle_return,
+        "random_return": run.random_return,
+        "mean": {key: float(np.mean([r[key] for r in last])) for key in SUMMARY_METRICS},
+        "per_view": {r["view"]: {key: r[key] for key in (*SUMMARY_METRICS, "eps", "pace")} for r in last},
+    }
+
+
+def evaluate(run_dir: Path) -> dict[str, Any]:
+    """Re-evaluate a run's saved agents (loaded with plain ``stable_baselines3.DQN.load``) on its task.
+
+    :return: per view and averaged: greedy return, success, normalised score and agreement.
+    """
+    config_path = run_dir / CONFIG_FILE
+    if not config_path.is_file():
+        raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
+    cfg = load_config(str(config_path))
+    make_env, views, _ = build_task(cfg)
+    mdp = TabularMDP.from_env(make_env(), {v: views[v] for v in cfg.views}, cfg.env.episode_steps)
+    greedy = np.stack([_load_agent(run_dir / f"agent_{v}.zip").predict(mdp.views[v], deterministic=True)[0]
+                       for v in cfg.views])  # fmt: skip
+    ret, success = metrics.greedy_rollout(mdp, greedy)
+    best = mdp.value_iteration(discount=1.0).argmax(axis=1)[None]
+    oracle = float(metrics.greedy_rollout(mdp, best)[0][0])
+    score = metrics.normalised_score(ret, metrics.random_policy_return(mdp), oracle)
+    optimal = mdp.optimal_actions(discount=1.0)
+    agreement = metrics.optimal_action_agreement(greedy, optimal, mdp.reachable_nonterminal())
+    per_view = {
+        v: {"greedy_return": float(ret[k]), "success": float(success[k]), "normalised_score": float(score[k]),
+            "agreement": float(agreement[k])}
+        for k, v in enumerate(cfg.views)
+    }  # fmt: skip
+    keys = ("greedy_return", "success", "normalised_score", "agreement")
+    mean = {k: float(np.mean([p[k] for p in per_view.values()])) for k in keys}
+    result = {"per_view": per_view, "mean": mean}
+    write_json(run_dir / "evaluation.json", result)
+    return result
+
+
+def _load_agent(path: Path) -> stable_baselines3.DQN:
+    if not path.is_file():
+        raise RunFolderError(f"{path} does not exist: the run finished no round")
+    try:
+        return stable_baselines3.DQN.load(path, device="cpu")
+    except Exception as err:  # zipfile, pickle and torch raise many types for a damaged file
+        raise RunFolderError(f"{path} is not a readable SB3 agent ({type(err).__name__}: {err})") from None

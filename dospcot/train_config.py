@@ -1,0 +1,334 @@
+"""The configuration of ``dospcot train``: TOML presets, ``--set`` overrides and validation.
+
+A config is a TOML table read with the stdlib's :mod:`tomllib`. Its keys mirror
+:class:`TrainConfig`; sections (``[env]``, ``[training]``, ``[dqn]``, ``[cotraining]``,
+``[cotraining.classifier]``) mirror its nested dataclasses. Every key is checked against the
+dataclass fields and their type hints before anything is built, so a typo or a wrong type stops the
+run with one line (:class:`ConfigError`) naming the key and what is allowed.
+
+Presets ship in ``dospcot/presets/*.toml``; a name without ``.toml`` is looked up there, anything
+else is read as a path. A config may start from another with ``extends = "<preset or path>"``: its
+tables are merged key by key over the base's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import types
+import typing
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any, Literal
+
+from dospcot.cotraining import CoTrainingConfig
+
+GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
+AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn")
+
+
+class ConfigError(ValueError):
+    """A config that cannot run; the message is one line naming the key and what is allowed."""
+
+
+@dataclass(frozen=True)
+class EnvConfig:
+    """The masked grid world (:class:`dospcot.envs.GridWorld`).
+
+    :param size: side N of the map.
+    :param layout_seed: seed of the map (the run's ``seed`` draws the mask and the agents).
+    :param lava_density: share of lava cells.
+    :param wall_density: share of wall cells.
+    :param step_cost: reward of an ordinary step.
+    :param lava_penalty: reward of a step into lava (which returns to the start).
+    :param goal_reward: reward of the step into the goal (which ends the episode).
+    :param exploring_starts: start training episodes on a uniformly drawn free cell (evaluation always
+        starts from the map's start).
+    :param max_episode_steps: the episode length limit (0: 4 N).
+    :param patch_size: side k of the ``patch`` view (odd).
+    """
+
+    size: int = 16
+    layout_seed: int = 0
+    lava_density: float = 0.1
+    wall_density: float = 0.1
+    step_cost: float = -1.0
+    lava_penalty: float = -100.0
+    goal_reward: float = 0.0
+    exploring_starts: bool = False
+    max_episode_steps: int = 0
+    patch_size: int = 5
+
+    def __post_init__(self) -> None:
+        if not 4 <= self.size <= 256:
+            raise ValueError(f"size must lie in [4, 256], got {self.size}")
+        if self.max_episode_steps < 0:
+            raise ValueError(f"max_episode_steps must be >= 0 (0: 4 N), got {self.max_episode_steps}")
+        if self.patch_size < 1 or self.patch_size % 2 == 0:
+            raise ValueError(f"patch_size must be odd and positive, got {self.patch_size}")
+
+    @property
+    def episode_steps(self) -> int:
+        """The episode length limit, ``4 N`` unless set."""
+        return self.max_episode_steps or 4 * self.size
+
+
+@dataclass(frozen=True)
+class TrainingConfig:
+    """The rounds of one run (:class:`dospcot.neural_cotraining.NeuralConfig`).
+
+    :param rounds: co-training rounds.
+    :param steps_per_round: env steps each agent takes per round.
+    :param label_fraction: share of (s, a) keys whose reward is revealed, in (0, 1].
+    :param eps_start: exploration at pace 0.
+    :param eps_end: exploration at pace 1.
+    """
+
+    rounds: int = 5
+    steps_per_round: int = 5_000
+    label_fraction: float = 0.05
+    eps_start: float = 1.0
+    eps_end: float = 0.05
+
+    def __post_init__(self) -> None:
+        if self.rounds < 1 or self.steps_per_round < 1:
+            raise ValueError(
+                f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
+            )
+        if not 0 < self.label_fraction <= 1:
+            raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
+        for name in ("eps_start", "eps_end"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class DQNConfig:
+    """Keyword arguments of every agent (stable-baselines3 ``DQN``'s, same names and units).
+
+    :param net_arch: hidden layer widths of the Q-network.
+    """
+
+    learning_rate: float = 1e-3
+    buffer_size: int = 100_000
+    learning_starts: int = 500
+    batch_size: int = 64
+    tau: float = 1.0
+    gamma: float = 0.97
+    train_freq: int = 4
+    gradient_steps: int = 1
+    target_update_interval: int = 500
+    max_grad_norm: float = 10.0
+    net_arch: tuple[int, ...] = (128, 128)
+
+    def __post_init__(self) -> None:
+        for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1:
+            raise ValueError(f"gamma and tau must lie in (0, 1], got {self.gamma}, {self.tau}")
+        if self.learning_rate <= 0 or any(width < 1 for width in self.net_arch):
+            raise ValueError("learning_rate must be > 0 and every net_arch width >= 1")
+
+    def sb3_kwargs(self) -> dict[str, Any]:
+        """The SB3 ``DQN`` keyword arguments."""
+        kwargs = dataclasses.asdict(self)
+        kwargs["policy_kwargs"] = {"net_arch": list(kwargs.pop("net_arch"))}
+        return kwargs
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One ``dospcot train`` run.
+
+    :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
+    :param seed: seeds the mask, the agents and the classifiers.
+    :param method: ``oracle``, ``masked-zero``, ``labels-only`` or ``cotrain`` (DOSPCoT; one view is
+        self-training).
+    :param views: one view per agent, from ``coords``, ``patch``, ``rays``.
+    :param agents: the agent kind of each view (``esarsa_dqn`` or ``dqn``); empty: ``esarsa_dqn``
+        for every view.
+    """
+
+    name: str = "run"
+    seed: int = 0
+    method: Literal["oracle", "masked-zero", "labels-only", "cotrain"] = "cotrain"
+    views: tuple[str, ...] = ("coords", "patch")
+    agents: tuple[str, ...] = ()
+    env: EnvConfig = field(default_factory=EnvConfig)
+    training: TrainingConfig = field(default_factory=TrainingConfig)
+    dqn: DQNConfig = field(default_factory=DQNConfig)
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+
+    def __post_init__(self) -> None:
+        if not self.name or "/" in self.name or self.name.startswith("."):
+            raise ConfigError(f"name: must be a plain folder name, got {self.name!r}")
+        if self.seed < 0:
+            raise ConfigError(f"seed: must be >= 0, got {self.seed}")
+        if not self.views:
+            raise ConfigError(f"views: need at least one view; allowed: {', '.join(GRID_VIEWS)}")
+        for view in self.views:
+            if view not in GRID_VIEWS:
+                allowed = ", ".join(GRID_VIEWS)
+                raise ConfigError(f"views: the grid world has no view {view!r}; allowed: {allowed}")
+        if len(set(self.views)) != len(self.views):
+            raise ConfigError(f"views: each view may appear once, got {list(self.views)}")
+        if self.agents and len(self.agents) != len(self.views):
+            raise ConfigError(
+                f"agents: need one agent kind per view ({len(self.views)}), got {len(self.agents)}"
+            )
+        for kind in self.agents:
+            if kind not in AGENT_KINDS:
+                raise ConfigError(f"agents: unknown agent kind {kind!r}; allowed: {', '.join(AGENT_KINDS)}")
+
+    @property
+    def agent_kinds(self) -> tuple[str, ...]:
+        """The agent kind of each view."""
+        return self.agents or ("esarsa_dqn",) * len(self.views)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The config as plain TOML-ready values (tuples become lists)."""
+        return _plain(dataclasses.asdict(self))
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, dict):
+        return {key: _plain(item) for key, item in value.items()}
+    if isinstance(value, tuple | list):
+        return [_plain(item) for item in value]
+    return value
+
+
+def _presets() -> Any:
+    return resources.files("dospcot").joinpath("presets")
+
+
+def preset_names() -> list[str]:
+    """The shipped presets, by name."""
+    return sorted(p.name[:-5] for p in _presets().iterdir() if p.name.endswith(".toml"))
+
+
+def read_config_text(config: str) -> tuple[str, str]:
+    """The TOML text of a preset name or a path, and where it came from."""
+    if not config.endswith(".toml") and "/" not in config:
+        if config not in preset_names():
+            names = ", ".join(preset_names())
+            raise ConfigError(f"no preset {config!r}; presets: {names} (or a path to a .toml)")
+        return _presets().joinpath(f"{config}.toml").read_text(), f"preset {config}"
+    path = Path(config)
+    if not path.is_file():
+        raise ConfigError(f"no config file {config}")
+    return path.read_text(), str(path)
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``"training.rounds=3"`` -> (["training", "rounds"], 3); values are TOML, bare words strings."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip():
+        raise ConfigError(f"--set takes key=value, got {text!r}")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key.strip().split("."), value
+
+
+def read_config_data(config: str, _seen: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The TOML table of a preset or a path, with its ``extends`` chain merged in."""
+    if config in _seen:
+        raise ConfigError(f"extends: a cycle through {' -> '.join([*_seen, config])}")
+    text, origin = read_config_text(config)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{origin} is not valid TOML: {err}") from None
+    base = data.pop("extends", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError(f"extends: expected a preset name or a path, got {base!r}")
+    if "/" in base and not Path(base).is_absolute() and "/" in config:
+        base = str(Path(config).parent / base)
+    return _merge(read_config_data(base, (*_seen, config)), data)
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def load_config(config: str, overrides: Sequence[str] = ()) -> TrainConfig:
+    """Read a preset or a TOML file, apply ``--set`` overrides and validate the result."""
+    data = read_config_data(config)
+    for override in overrides:
+        path, value = parse_override(override)
+        table = data
+        for part in path[:-1]:
+            table = table.setdefault(part, {})
+            if not isinstance(table, dict):
+                raise ConfigError(f"--set {override}: {part!r} is not a section")
+        table[path[-1]] = value
+    return from_mapping(TrainConfig, data)
+
+
+def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
+    """Build the dataclass ``cls`` from ``data``, checking every key and type (recursively)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a table, got {data!r}")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    for key in data:
+        if key not in fields:
+            raise ConfigError(f"unknown key '{prefix}{key}'; allowed: {', '.join(fields)}")
+    hints = typing.get_type_hints(cls)
+    kwargs = {key: _convert(hints[key], value, f"{prefix}{key}") for key, value in data.items()}
+    try:
+        return cls(**kwargs)
+    except ConfigError:
+        raise
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: {err}") from None
+
+
+def _convert(hint: Any, value: Any, key: str) -> Any:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if dataclasses.is_dataclass(hint):
+        return from_mapping(hint, value, f"{key}.")
+    if origin is Literal:
+        if value not in args:
+            raise ConfigError(f"{key}: {value!r} is not allowed; allowed: {', '.join(map(str, args))}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{key}: expected a list, got {value!r}")
+        return tuple(_convert(args[0], item, key) for item in value)
+    if origin is types.UnionType or origin is typing.Union:
+        for option in args:
+            try:
+                return _convert(option, value, key)
+            except ConfigError:
+                continue
+        raise ConfigError(f"{key}: {value!r} matches none of {hint}")
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{key}: expected an integer, got {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{key}: expected a number, got {value!r}")
+        return float(value)
+    if hint is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}: expected a string, got {value!r}")
+        return value
+    raise ConfigError(f"{key}: cannot be set from a config")  # pragma: no cover - a field type we never use
