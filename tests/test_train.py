@@ -1,0 +1,162 @@
+"""`dospcot train` / `evaluate`: configs, run folders, TensorBoard tags, checkpoints and resume."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from stable_baselines3 import DQN
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+from dospcot.classifier import load_classifier
+from dospcot.cli import main
+from dospcot.envs import GridWorld
+from dospcot.run_folder import RunFolderError, read_checkpoint
+from dospcot.train import ROUND_SCALARS, evaluate
+from dospcot.train_config import ConfigError, load_config, preset_names
+
+ISSUE_PRESETS = [
+    "grid16-dospcot", "grid16-oracle", "grid16-masked-zero", "grid16-labels-only", "grid16-self-training",
+    "grid32-dospcot",
+]  # fmt: skip
+RUN_FILES = [
+    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json", "checkpoint.pkl",
+]  # fmt: skip
+
+
+def _train(tmp_path: Path, *overrides: str) -> Path:
+    args = ["train", "tiny", "--runs-dir", str(tmp_path), "--no-progress"]
+    assert main([*args, *(a for o in overrides for a in ("--set", o))]) == 0
+    (run_dir,) = (tmp_path / "tiny").iterdir()
+    return run_dir
+
+
+def test_every_issue_preset_ships_and_validates():
+    assert set(ISSUE_PRESETS) <= set(preset_names())
+    methods = {name: load_config(name).method for name in ISSUE_PRESETS}
+    assert methods["grid16-oracle"] == "oracle" and methods["grid16-dospcot"] == "cotrain"
+    assert load_config("grid16-self-training").views == ("coords",)
+    assert load_config("grid32-dospcot").env.size == 32
+    assert load_config("grid16-dospcot").training.label_fraction == 0.05
+
+
+def test_set_overrides_are_typed_and_extends_merges(tmp_path):
+    cfg = load_config("grid16-dospcot", ["training.rounds=3", "method=oracle", 'views=["rays"]', "dqn.gamma=0.9"])
+    assert (cfg.training.rounds, cfg.method, cfg.views, cfg.dqn.gamma) == (3, "oracle", ("rays",), 0.9)
+    assert cfg.env.size == 16  # inherited from the base preset
+    child = tmp_path / "child.toml"
+    child.write_text('extends = "grid16-dospcot"\nname = "mine"\n[env]\nsize = 8\n')
+    mine = load_config(str(child))
+    assert (mine.name, mine.env.size, mine.env.layout_seed, mine.views) == ("mine", 8, 0, ("coords", "patch"))
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("training.stepz=3", "unknown key 'training.stepz'; allowed: rounds, steps_per_round"),
+        ("training.rounds=two", "training.rounds: expected an integer, got 'two'"),
+        ("training.label_fraction=1.5", "training: label_fraction must lie in (0, 1], got 1.5"),
+        ("training.label_fraction=0", "training: label_fraction must lie in (0, 1], got 0.0"),
+        ('views=["coords", "lidar"]', "views: the grid world has no view 'lidar'; allowed: coords, patch, rays"),
+        ("views=[]", "views: need at least one view; allowed: coords, patch, rays"),
+        ("method=ppo", "method: 'ppo' is not allowed; allowed: oracle, masked-zero, labels-only, cotrain"),
+        ('agents=["a2c", "dqn"]', "agents: unknown agent kind 'a2c'; allowed: esarsa_dqn, dqn"),
+    ],
+)
+def test_bad_config_stops_before_training_with_one_line(tmp_path, capsys, override, message):
+    assert main(["train", "tiny", "--set", override, "--runs-dir", str(tmp_path), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
+    assert not (tmp_path / "tiny").exists()  # nothing was trained or written
+
+
+def test_unknown_preset_and_bad_resume_folder_fail_with_one_line(tmp_path, capsys):
+    assert main(["train", "grid-99"]) == 2
+    assert "no preset 'grid-99'; presets: grid16" in capsys.readouterr().err
+    assert main(["train", "--resume", str(tmp_path)]) == 2
+    assert "has no config.toml" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("views", [["coords"], ["coords", "patch"], ["coords", "patch", "rays"]])
+def test_tiny_run_writes_every_file_for_one_two_and_three_views(tmp_path, views):
+    run_dir = _train(tmp_path, f"views={json.dumps(views)}")
+    for name in RUN_FILES:
+        assert (run_dir / name).is_file(), name
+    assert (run_dir / "learning_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    rows = (run_dir / "metrics.csv").read_text().splitlines()
+    assert len(rows) == 1 + 2 * len(views)  # one row per round and view
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["rounds"] == 2 and summary["m"] == len(views) and list(summary["per_view"]) == views
+    assert summary["env_steps_per_agent"] == 600
+    assert load_config(str(run_dir / "config.toml")).views == tuple(views)
+    assert json.loads((run_dir / "reward_classes.json").read_text())["rewards"]
+    for view in views:
+        agent = DQN.load(run_dir / f"agent_{view}.zip", device="cpu")  # plain SB3, no dospcot class
+        clf = load_classifier(run_dir / f"classifier_{view}.pt")
+        assert clf.weights[0].shape[1] == 2 * agent.observation_space.shape[0] + 4  # (s, a, s') features
+        tags = EventAccumulator(str(run_dir / "tb" / f"agent_{view}")).Reload().Tags()["scalars"]
+        assert {f"dospcot/{key}" for key in ROUND_SCALARS} <= set(tags)
+        assert {"rollout/exploration_rate", "train/loss"} <= set(tags)  # SB3's own scalars
+
+
+def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(tmp_path, capsys):
+    run_dir = _train(tmp_path)
+    capsys.readouterr()
+    assert main(["evaluate", str(run_dir)]) == 0
+    assert "wrote" in capsys.readouterr().out
+    summary = json.loads((run_dir / "summary.json").read_text())
+    evaluation = json.loads((run_dir / "evaluation.json").read_text())
+    for view, row in evaluation["per_view"].items():
+        for key in ("greedy_return", "success", "normalised_score", "agreement"):
+            assert row[key] == pytest.approx(summary["per_view"][view][key])
+    assert evaluation == evaluate(run_dir)
+
+
+def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
+    run_dir = _train(tmp_path)
+    data = (run_dir / "checkpoint.pkl").read_bytes()
+    (run_dir / "checkpoint.pkl").write_bytes(data[: len(data) // 2])
+    with pytest.raises(RunFolderError, match="corrupt or truncated"):
+        read_checkpoint(run_dir)
+    assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
+    assert "checkpoint.pkl is corrupt or truncated" in capsys.readouterr().err
+    (run_dir / "agent_patch.zip").write_bytes(b"not a zip")
+    assert main(["evaluate", str(run_dir)]) == 2
+    assert "agent_patch.zip is not a readable SB3 agent" in capsys.readouterr().err
+
+
+def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tmp_path):
+    overrides = ["--set", "training.rounds=3", "--set", "training.steps_per_round=800", "--no-progress"]
+    full = _train(tmp_path / "full", "training.rounds=3", "training.steps_per_round=800")
+    cmd = [sys.executable, "-m", "dospcot", "train", "tiny", "--runs-dir", str(tmp_path / "killed"), *overrides]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not list((tmp_path / "killed").glob("tiny/*/checkpoint.pkl")):
+            assert proc.poll() is None and time.monotonic() < deadline, "the run ended before its first checkpoint"
+            time.sleep(0.02)
+        os.kill(proc.pid, signal.SIGKILL)  # in round 2: round 1's checkpoint has just landed
+    finally:
+        proc.wait()
+    (killed,) = (tmp_path / "killed" / "tiny").iterdir()
+    assert read_checkpoint(killed)["run"]["round"] == 1 and not (killed / "summary.json").exists()
+    assert main(["train", "--resume", str(killed), "--no-progress"]) == 0
+    assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
+    assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
+    assert json.loads((killed / "run_info.json").read_text())["sessions"] == 2
+
+
+def test_exploring_starts_draw_free_cells_from_the_seed_and_lava_returns_to_the_map_start():
+    env = GridWorld(size=8, layout_seed=1, exploring_starts=True)
+    starts = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
+    again = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
+    assert starts == again and len(set(starts)) > 10
+    free = env.layout.terrain.reshape(-1) == 0
+    assert free[starts].all()
+    lava_moves = np.argwhere(env.reward == -100.0)
+    assert (env.next_state[tuple(lava_moves.T)] == env.start_state).all()
