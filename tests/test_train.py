@@ -18,7 +18,7 @@ from dospcot.cli import main
 from dospcot.envs import GridWorld
 from dospcot.run_folder import RunFolderError, read_checkpoint
 from dospcot.train import ROUND_SCALARS, evaluate
-from dospcot.train_config import ConfigError, load_config, preset_names
+from dospcot.train_config import load_config, preset_names
 
 ISSUE_PRESETS = [
     "grid16-dospcot", "grid16-oracle", "grid16-masked-zero", "grid16-labels-only", "grid16-self-training",
@@ -46,7 +46,9 @@ def test_every_issue_preset_ships_and_validates():
 
 
 def test_set_overrides_are_typed_and_extends_merges(tmp_path):
-    cfg = load_config("grid16-dospcot", ["training.rounds=3", "method=oracle", 'views=["rays"]', "dqn.gamma=0.9"])
+    cfg = load_config(
+        "grid16-dospcot", ["training.rounds=3", "method=oracle", 'views=["rays"]', "dqn.gamma=0.9"]
+    )
     assert (cfg.training.rounds, cfg.method, cfg.views, cfg.dqn.gamma) == (3, "oracle", ("rays",), 0.9)
     assert cfg.env.size == 16  # inherited from the base preset
     child = tmp_path / "child.toml"
@@ -62,7 +64,10 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
         ("training.rounds=two", "training.rounds: expected an integer, got 'two'"),
         ("training.label_fraction=1.5", "training: label_fraction must lie in (0, 1], got 1.5"),
         ("training.label_fraction=0", "training: label_fraction must lie in (0, 1], got 0.0"),
-        ('views=["coords", "lidar"]', "views: the grid world has no view 'lidar'; allowed: coords, patch, rays"),
+        (
+            'views=["coords", "lidar"]',
+            "views: the grid world has no view 'lidar'; allowed: coords, patch, rays",
+        ),
         ("views=[]", "views: need at least one view; allowed: coords, patch, rays"),
         ("method=ppo", "method: 'ppo' is not allowed; allowed: oracle, masked-zero, labels-only, cotrain"),
         ('agents=["a2c", "dqn"]', "agents: unknown agent kind 'a2c'; allowed: esarsa_dqn, dqn"),
@@ -133,12 +138,23 @@ def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
 def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tmp_path):
     overrides = ["--set", "training.rounds=3", "--set", "training.steps_per_round=800", "--no-progress"]
     full = _train(tmp_path / "full", "training.rounds=3", "training.steps_per_round=800")
-    cmd = [sys.executable, "-m", "dospcot", "train", "tiny", "--runs-dir", str(tmp_path / "killed"), *overrides]
+    cmd = [
+        sys.executable,
+        "-m",
+        "dospcot",
+        "train",
+        "tiny",
+        "--runs-dir",
+        str(tmp_path / "killed"),
+        *overrides,
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         deadline = time.monotonic() + 120
         while not list((tmp_path / "killed").glob("tiny/*/checkpoint.pkl")):
-            assert proc.poll() is None and time.monotonic() < deadline, "the run ended before its first checkpoint"
+            assert proc.poll() is None and time.monotonic() < deadline, (
+                "the run ended before its first checkpoint"
+            )
             time.sleep(0.02)
         os.kill(proc.pid, signal.SIGKILL)  # in round 2: round 1's checkpoint has just landed
     finally:
