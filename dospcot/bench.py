@@ -23,6 +23,8 @@ from stable_baselines3 import DQN
 
 from dospcot.envs import CLIFF_VIEWS, ViewObservationWrapper
 from dospcot.policies import ExpectedSarsaDQN
+from dospcot.train import build_run, build_task
+from dospcot.train_config import TrainConfig, load_config
 
 
 @dataclass(frozen=True)
@@ -39,7 +41,8 @@ class Measurement:
         return cls(statistics.median(values), min(values), max(values), unit)
 
     def __str__(self) -> str:
-        return f"{self.median:,.0f} {self.unit} [{self.low:,.0f}, {self.high:,.0f}]"
+        fmt = ",.0f" if self.median >= 100 else ".2f"
+        return f"{self.median:{fmt}} {self.unit} [{self.low:{fmt}}, {self.high:{fmt}}]"
 
 
 @dataclass(frozen=True)
@@ -103,6 +106,60 @@ def bench_esarsa_dqn(
     )
 
 
+def _cotraining_seconds(cfg: TrainConfig) -> float:
+    run = build_run(cfg)
+    start = time.perf_counter()
+    run.run()
+    return time.perf_counter() - start
+
+
+def _independent_seconds(cfg: TrainConfig) -> float:
+    """The peer: each view's agent alone, the same env stack, DQN kwargs and steps, no co-training."""
+    make_env, views, _ = build_task(cfg)
+    run = build_run(cfg)  # the same buffer cap and DQN kwargs as the co-trainer's agents
+    total = cfg.training.rounds * cfg.training.steps_per_round
+    seconds = 0.0
+    for k, (agent, view) in enumerate(zip(run.agents, cfg.views, strict=True)):
+        limit = cfg.env.train_episode_steps or cfg.env.episode_steps
+        env = ViewObservationWrapper(gym.wrappers.TimeLimit(make_env(), limit), views[view])
+        model = ExpectedSarsaDQN(
+            "MlpPolicy", env, seed=cfg.seed * 1000 + k, exploration_horizon=total,
+            exploration_initial_eps=cfg.training.eps_start, exploration_final_eps=cfg.training.eps_end,
+            exploration_fraction=1.0, **{key: getattr(agent, key) for key in _DQN_KEYS},
+            policy_kwargs=cfg.dqn.sb3_kwargs()["policy_kwargs"],
+        )  # fmt: skip
+        start = time.perf_counter()
+        model.learn(total)
+        seconds += time.perf_counter() - start
+    return seconds
+
+
+_DQN_KEYS = (
+    "learning_rate", "buffer_size", "learning_starts", "batch_size", "tau", "gamma", "train_freq",
+    "gradient_steps", "target_update_interval", "max_grad_norm",
+)  # fmt: skip
+
+
+def bench_cotraining_overhead(quick: bool, repeats: int) -> Row:
+    """Wall time of a DOSPCoT run over that of its agents trained alone for the same steps."""
+    overrides = ["training.rounds=2", "training.steps_per_round=1000"] if quick else []
+    cfg = load_config("grid16-dospcot", overrides)
+    ours, peer = [], []
+    for rep in range(repeats):
+        order = [(ours, _cotraining_seconds), (peer, _independent_seconds)]
+        for results, measure in order if rep % 2 == 0 else order[::-1]:
+            results.append(measure(cfg))
+    steps = cfg.training.rounds * cfg.training.steps_per_round
+    return Row(
+        "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time",
+        f"`grid16-dospcot` (patch + rays), {cfg.training.rounds} rounds, {steps:,} steps per agent",
+        Measurement.of(ours, "s"),
+        Measurement.of(peer, "s"),
+        higher_is_better=False,
+        target=1.3,
+    )
+
+
 BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     # SB3's defaults: a small network, where the fixed per-update cost of the extra target ops shows most.
     "esarsa_dqn": lambda quick, repeats: bench_esarsa_dqn(3_000 if quick else 20_000, repeats, [64, 64], 32),
@@ -113,6 +170,7 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "esarsa_dqn_q_target": lambda quick, repeats: bench_esarsa_dqn(
         3_000 if quick else 20_000, repeats, [256, 256], 256, target="q"
     ),
+    "cotraining_overhead": bench_cotraining_overhead,
 }
 
 
@@ -122,6 +180,9 @@ NOTES = [
     "at s' (DESIGN.md), which costs one more forward pass per gradient step than DQN's max target. The "
     "`target='q'` row runs the same agent with DQN's target, so it shows what relabelling and "
     "self-paced weighting alone cost; the gap between the rows is that forward pass.",
+    "- The co-training overhead row times `NeuralCoTraining.run()` (learning, the shared store, one "
+    "classifier fit and scoring per view and round, relabelling and the per-round evaluation) against "
+    "each agent's `learn()` over the same steps without a co-trainer, summed over the agents.",
 ]
 
 
@@ -151,7 +212,8 @@ def render(rows: list[Row], command: str, repeats: int) -> str:
 
 
 def run_benchmarks(out: Path, quick: bool, repeats: int, command: str) -> list[Row]:
-    """Run every benchmark and write ``out``."""
+    """Run every benchmark and write ``out`` (on one torch thread, as ``dospcot train`` runs)."""
+    torch.set_num_threads(1)
     rows = [bench(quick, repeats) for bench in BENCHMARKS.values()]
     out.write_text(render(rows, command, repeats))
     return rows

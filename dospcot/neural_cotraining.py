@@ -139,7 +139,9 @@ class NeuralConfig:
     :param rounds: co-training rounds.
     :param steps_per_round: env steps each agent takes per round.
     :param label_fraction: share of labelled (s, a) keys.
-    :param max_episode_steps: the episode length limit.
+    :param max_episode_steps: the episode length limit of the evaluation (greedy rollouts).
+    :param train_episode_steps: the episode length limit while training (None: ``max_episode_steps``).
+        Short training episodes with exploring starts scatter the agents over the map.
     :param eps_start: exploration at pace 0; ``eps_end``: at pace 1.
     :param dqn: further keyword arguments of every agent (SB3 DQN's).
     :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
@@ -149,6 +151,7 @@ class NeuralConfig:
     steps_per_round: int = 5_000
     label_fraction: float = 0.05
     max_episode_steps: int = 64
+    train_episode_steps: int | None = None
     eps_start: float = 1.0
     eps_end: float = 0.05
     dqn: dict[str, Any] = field(default_factory=dict)
@@ -195,7 +198,8 @@ class NeuralCoTraining:
         }
         self.agents: list[ExpectedSarsaDQN] = []
         for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True)):
-            env = gym.wrappers.TimeLimit(make_env(), config.max_episode_steps)
+            limit = config.train_episode_steps or config.max_episode_steps
+            env = gym.wrappers.TimeLimit(make_env(), limit)
             env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=spec.seed)
             env = ViewObservationWrapper(StoreWrapper(env, self.store), views[view])
             agent = ExpectedSarsaDQN(

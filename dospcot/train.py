@@ -84,6 +84,7 @@ def build_run(cfg: TrainConfig) -> NeuralCoTraining:
     config = NeuralConfig(
         rounds=training.rounds, steps_per_round=training.steps_per_round,
         label_fraction=training.label_fraction, max_episode_steps=cfg.env.episode_steps,
+        train_episode_steps=cfg.env.train_episode_steps or None,
         eps_start=training.eps_start, eps_end=training.eps_end, dqn=dqn, cotraining=cfg.cotraining,
     )  # fmt: skip
     spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)

@@ -46,7 +46,10 @@ class EnvConfig:
     :param goal_reward: reward of the step into the goal (which ends the episode).
     :param exploring_starts: start training episodes on a uniformly drawn free cell (evaluation always
         starts from the map's start).
-    :param max_episode_steps: the episode length limit (0: 4 N).
+    :param max_episode_steps: the episode length limit of the evaluation from the map's start (0: 4 N).
+    :param train_episode_steps: the episode length limit while training (0: ``max_episode_steps``);
+        with exploring starts, short episodes scattered over the map reach the goal far more often
+        than long ones.
     :param patch_size: side k of the ``patch`` view (odd).
     """
 
@@ -59,13 +62,17 @@ class EnvConfig:
     goal_reward: float = 0.0
     exploring_starts: bool = False
     max_episode_steps: int = 0
+    train_episode_steps: int = 0
     patch_size: int = 5
 
     def __post_init__(self) -> None:
         if not 4 <= self.size <= 256:
             raise ValueError(f"size must lie in [4, 256], got {self.size}")
-        if self.max_episode_steps < 0:
-            raise ValueError(f"max_episode_steps must be >= 0 (0: 4 N), got {self.max_episode_steps}")
+        if self.max_episode_steps < 0 or self.train_episode_steps < 0:
+            raise ValueError(
+                "max_episode_steps and train_episode_steps must be >= 0 (0: the default), "
+                f"got {self.max_episode_steps}, {self.train_episode_steps}"
+            )
         if self.patch_size < 1 or self.patch_size % 2 == 0:
             raise ValueError(f"patch_size must be odd and positive, got {self.patch_size}")
 

@@ -87,14 +87,16 @@ def test_cli_reproduce_paper_writes_tables(tmp_path, capsys):
         (["reproduce-paper", "--seeds", "abc"], "--seeds takes a count"),
         (["reproduce-paper", "--preset", "paper"], "invalid choice: 'paper'"),
         (["reproduce-paper", "--workers", "0"], "expected a positive integer"),
-        (["train"], "invalid choice: 'train'"),
+        (["sweep"], "invalid choice: 'sweep'"),
+        (["train"], "give a CONFIG: a preset"),
+        (["evaluate"], "the following arguments are required: run_dir"),
     ],
 )
 def test_cli_bad_arguments_exit_nonzero_with_a_message(args, message):
     out = subprocess.run([sys.executable, "-m", "dospcot", *args], capture_output=True, text=True)
     assert out.returncode != 0
     assert message in out.stderr
-    assert "Traceback" not in out.stderr
+    assert out.stderr.count("\n") == 1  # one line, no usage block and no traceback
 
 
 def test_bench_quick_writes_every_row(tmp_path):
@@ -102,4 +104,5 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert main(["bench", "--quick", "--repeats", "3", "--out", str(out)]) == 0
     text = out.read_text()
     assert text.count("ExpectedSarsaDQN (target=") == 3 and "median of 3 repetitions" in text
+    assert "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time" in text
     assert "| ratio | target | met |" in text

@@ -40,7 +40,7 @@ def test_every_issue_preset_ships_and_validates():
     assert set(ISSUE_PRESETS) <= set(preset_names())
     methods = {name: load_config(name).method for name in ISSUE_PRESETS}
     assert methods["grid16-oracle"] == "oracle" and methods["grid16-dospcot"] == "cotrain"
-    assert load_config("grid16-self-training").views == ("coords",)
+    assert load_config("grid16-self-training").views == ("patch",)
     assert load_config("grid32-dospcot").env.size == 32
     assert load_config("grid16-dospcot").training.label_fraction == 0.05
 
@@ -54,7 +54,7 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
     child = tmp_path / "child.toml"
     child.write_text('extends = "grid16-dospcot"\nname = "mine"\n[env]\nsize = 8\n')
     mine = load_config(str(child))
-    assert (mine.name, mine.env.size, mine.env.layout_seed, mine.views) == ("mine", 8, 0, ("coords", "patch"))
+    assert (mine.name, mine.env.size, mine.env.layout_seed, mine.views) == ("mine", 8, 0, ("patch", "rays"))
 
 
 @pytest.mark.parametrize(
