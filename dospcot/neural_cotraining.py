@@ -288,7 +288,8 @@ class NeuralCoTraining:
         """Everything the next rounds depend on, picklable: agents (SB3 zips as bytes), their replay
         buffers, the store, the reward table, the co-trainer and the global and action-space RNGs.
 
-        The envs hold no state across rounds (each round starts from seeded resets).
+        The envs hold no state across rounds (each round starts from seeded resets). The dict refers
+        to live objects: pickle it at once (as ``dospcot train`` does), do not keep it.
         """
         zips = []
         for agent in self.agents:

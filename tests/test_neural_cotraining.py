@@ -68,3 +68,13 @@ def test_bad_specs_raise():
         )
     with pytest.raises(ValueError, match="label_fraction"):
         replace(CONFIG, label_fraction=0.0)
+
+
+def test_training_episodes_follow_their_own_limit_while_evaluation_keeps_the_horizon():
+    config = replace(CONFIG, rounds=1, train_episode_steps=5)
+    spec = NeuralRunSpec("oracle", ("esarsa_dqn",), ("coords",), seed=0)
+    run = NeuralCoTraining(partial(GridWorld, LAYOUT, exploring_starts=True), VIEWS, spec, config)
+    run.run()
+    # 300 steps in episodes of at most 5 steps: at least 60 episodes (fewer steps end at the goal).
+    assert run.agents[0]._episode_num >= 60
+    assert run.mdp.max_episode_steps == CONFIG.max_episode_steps
