@@ -193,7 +193,7 @@ def render(rows: list[Row], command: str, repeats: int) -> str:
         "# Benchmarks",
         "",
         f"Written by `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC.  ",
-        f"Machine: {cpu}, {torch.get_num_threads()} torch threads, Python {platform.python_version()}, "
+        f"Machine: {cpu}, torch threads: {torch.get_num_threads()}, Python {platform.python_version()}, "
         f"torch {torch.__version__}; no GPU.  ",
         f"Each figure: median of {repeats} repetitions [min, max]; "
         "ours and the peer alternate in the same run.",
