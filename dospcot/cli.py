@@ -144,8 +144,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = build_parser().parse_args(argv)
     command = shlex.join(["dospcot", *argv])
     if args.command in ("train", "evaluate"):
         from dospcot.run_folder import RunFolderError
