@@ -72,6 +72,35 @@ def normalised_score(ret: np.ndarray, random_return: float, oracle_return: float
     return (ret - random_return) / (oracle_return - random_return)
 
 
+class GreedyPolicyMetrics:
+    """Exact metrics of greedy policies on a deterministic task (DESIGN.md section 4), with the optimum
+    and the random policy's return computed once.
+
+    :param mdp: the task.
+    :param discount: discount of the value iteration that defines the optimal actions and the
+        optimal greedy policy (whose undiscounted return is the score's R_oracle).
+    """
+
+    def __init__(self, mdp: TabularMDP, discount: float) -> None:
+        self.mdp = mdp
+        self.optimal_actions = mdp.optimal_actions(discount)
+        self.counted = mdp.reachable_nonterminal()
+        self.random_return = random_policy_return(mdp)
+        best = mdp.value_iteration(discount).argmax(axis=1)[None]
+        self.optimal_return = float(greedy_rollout(mdp, best)[0][0])
+
+    def __call__(self, greedy: np.ndarray) -> dict[str, np.ndarray]:
+        """(B,) ``greedy_return``, ``success`` (bool), ``normalised_score`` and ``agreement`` of the
+        greedy policies (B, S)."""
+        ret, success = greedy_rollout(self.mdp, greedy)
+        return {
+            "greedy_return": ret,
+            "success": success,
+            "normalised_score": normalised_score(ret, self.random_return, self.optimal_return),
+            "agreement": optimal_action_agreement(greedy, self.optimal_actions, self.counted),
+        }
+
+
 def bootstrap_ci(
     values: np.ndarray, confidence: float = 0.95, n_resamples: int = 10_000, seed: int = 0
 ) -> tuple[float, float]:

@@ -218,11 +218,7 @@ class NeuralCoTraining:
         self.round = 0
         self.stopped = False
         """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
-        self._optimal = self.mdp.optimal_actions(discount=1.0)
-        self._counted = self.mdp.reachable_nonterminal()
-        self.random_return = metrics.random_policy_return(self.mdp)
-        best = self.mdp.value_iteration(discount=1.0).argmax(axis=1)[None]
-        self.oracle_return = float(metrics.greedy_rollout(self.mdp, best)[0][0])
+        self.policy_metrics = metrics.GreedyPolicyMetrics(self.mdp, discount=1.0)
 
     def run(self) -> list[dict]:
         """All rounds, or until the stopping rule fires; returns one record per round and agent."""
@@ -338,9 +334,7 @@ class NeuralCoTraining:
 
     def _records(self, stats: dict) -> list[dict]:
         greedy = self.greedy_actions()
-        ret, success = metrics.greedy_rollout(self.mdp, greedy)
-        agreement = metrics.optimal_action_agreement(greedy, self._optimal, self._counted)
-        score = metrics.normalised_score(ret, self.random_return, self.oracle_return)
+        policy = self.policy_metrics(greedy)
         rows = []
         for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
             view_stats = stats["views"][k] if stats else {}
@@ -357,10 +351,10 @@ class NeuralCoTraining:
                     "kind": kind,
                     "view": view,
                     "env_steps": int(self.agents[k].num_timesteps),
-                    "agreement": float(agreement[k]),
-                    "greedy_return": float(ret[k]),
-                    "success": float(success[k]),
-                    "normalised_score": float(score[k]),
+                    "agreement": float(policy["agreement"][k]),
+                    "greedy_return": float(policy["greedy_return"][k]),
+                    "success": float(policy["success"][k]),
+                    "normalised_score": float(policy["normalised_score"][k]),
                     "eps": float(self.agents[k].exploration_rate),
                     "pace": stats.get("pace", float("nan")),
                     "coverage": stats.get("coverage", float("nan")),

@@ -149,11 +149,7 @@ class TabularCoTraining:
         self.pace = np.zeros(n_runs)
         self.active = np.ones(n_runs, dtype=bool)
         self.groups = self._make_groups()
-        self._optimal = mdp.optimal_actions(config.discount)
-        self._counted = mdp.reachable_nonterminal()
-        self._random_return = metrics.random_policy_return(mdp)
-        opt_greedy = mdp.value_iteration(config.discount).argmax(axis=1)[None, :]
-        self._oracle_return = float(metrics.greedy_rollout(mdp, opt_greedy)[0][0])
+        self.policy_metrics = metrics.GreedyPolicyMetrics(mdp, config.discount)
 
     def _make_groups(self) -> list[tuple[list[int], SelfPacedCoTrainer, RewardClasses]]:
         """One co-trainer per (views, gamma): runs that share them are batched in one classifier."""
@@ -318,9 +314,7 @@ class TabularCoTraining:
 
     def _records(self, round_index: int, round_stats: dict[int, dict]) -> list[dict]:
         greedy = self.agents.greedy_actions()
-        ret, success = metrics.greedy_rollout(self.mdp, greedy)
-        agreement = metrics.optimal_action_agreement(greedy, self._optimal, self._counted)
-        score = metrics.normalised_score(ret, self._random_return, self._oracle_return)
+        policy = self.policy_metrics(greedy)
         paper = (
             metrics.paper_accuracy(greedy, self.reference_policy)
             if self.reference_policy is not None
@@ -345,10 +339,10 @@ class TabularCoTraining:
                     "kind": spec.agents[k],
                     "view": spec.views[k],
                     "paper_accuracy": float(paper[slot]),
-                    "agreement": float(agreement[slot]),
-                    "greedy_return": float(ret[slot]),
-                    "success": float(success[slot]),
-                    "normalised_score": float(score[slot]),
+                    "agreement": float(policy["agreement"][slot]),
+                    "greedy_return": float(policy["greedy_return"][slot]),
+                    "success": float(policy["success"][slot]),
+                    "normalised_score": float(policy["normalised_score"][slot]),
                     "eps": float(eps[r]),
                     "pace": float(self.pace[r]),
                     "coverage": stats["coverage"] if stats else float("nan"),

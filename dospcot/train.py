@@ -204,8 +204,8 @@ def summarise(records: list[dict], run: NeuralCoTraining) -> dict[str, Any]:
         "rounds": run.round,
         "stopped_early": run.stopped,
         "env_steps_per_agent": int(last[0]["env_steps"]),
-        "optimal_return": run.oracle_return,
-        "random_return": run.random_return,
+        "optimal_return": run.policy_metrics.optimal_return,
+        "random_return": run.policy_metrics.random_return,
         "mean": {key: float(np.mean([r[key] for r in last])) for key in SUMMARY_METRICS},
         "per_view": {r["view"]: {key: r[key] for key in (*SUMMARY_METRICS, "eps", "pace")} for r in last},
     }
@@ -224,20 +224,9 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
     mdp = TabularMDP.from_env(make_env(), {v: views[v] for v in cfg.views}, cfg.env.episode_steps)
     greedy = np.stack([_load_agent(run_dir / f"agent_{v}.zip").predict(mdp.views[v], deterministic=True)[0]
                        for v in cfg.views])  # fmt: skip
-    ret, success = metrics.greedy_rollout(mdp, greedy)
-    best = mdp.value_iteration(discount=1.0).argmax(axis=1)[None]
-    oracle = float(metrics.greedy_rollout(mdp, best)[0][0])
-    score = metrics.normalised_score(ret, metrics.random_policy_return(mdp), oracle)
-    optimal = mdp.optimal_actions(discount=1.0)
-    agreement = metrics.optimal_action_agreement(greedy, optimal, mdp.reachable_nonterminal())
-    per_view = {
-        v: {"greedy_return": float(ret[k]), "success": float(success[k]), "normalised_score": float(score[k]),
-            "agreement": float(agreement[k])}
-        for k, v in enumerate(cfg.views)
-    }  # fmt: skip
-    keys = ("greedy_return", "success", "normalised_score", "agreement")
-    mean = {k: float(np.mean([p[k] for p in per_view.values()])) for k in keys}
-    result = {"per_view": per_view, "mean": mean}
+    policy = metrics.GreedyPolicyMetrics(mdp, discount=1.0)(greedy)
+    per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
+    result = {"per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()}}
     write_json(run_dir / "evaluation.json", result)
     return result
 
