@@ -23,7 +23,7 @@ from stable_baselines3 import DQN
 
 from dospcot.envs import CLIFF_VIEWS, ViewObservationWrapper
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.train import build_run, build_task
+from dospcot.train import agent_kwargs, build_run, build_task
 from dospcot.train_config import TrainConfig, load_config
 
 
@@ -116,28 +116,20 @@ def _cotraining_seconds(cfg: TrainConfig) -> float:
 def _independent_seconds(cfg: TrainConfig) -> float:
     """The peer: each view's agent alone, the same env stack, DQN kwargs and steps, no co-training."""
     make_env, views, _ = build_task(cfg)
-    run = build_run(cfg)  # the same buffer cap and DQN kwargs as the co-trainer's agents
     total = cfg.training.rounds * cfg.training.steps_per_round
+    limit = cfg.env.train_episode_steps or cfg.env.episode_steps
     seconds = 0.0
-    for k, (agent, view) in enumerate(zip(run.agents, cfg.views, strict=True)):
-        limit = cfg.env.train_episode_steps or cfg.env.episode_steps
+    for k, view in enumerate(cfg.views):
         env = ViewObservationWrapper(gym.wrappers.TimeLimit(make_env(), limit), views[view])
         model = ExpectedSarsaDQN(
             "MlpPolicy", env, seed=cfg.seed * 1000 + k, exploration_horizon=total,
             exploration_initial_eps=cfg.training.eps_start, exploration_final_eps=cfg.training.eps_end,
-            exploration_fraction=1.0, **{key: getattr(agent, key) for key in _DQN_KEYS},
-            policy_kwargs=cfg.dqn.sb3_kwargs()["policy_kwargs"],
+            exploration_fraction=1.0, **agent_kwargs(cfg),
         )  # fmt: skip
         start = time.perf_counter()
         model.learn(total)
         seconds += time.perf_counter() - start
     return seconds
-
-
-_DQN_KEYS = (
-    "learning_rate", "buffer_size", "learning_starts", "batch_size", "tau", "gamma", "train_freq",
-    "gradient_steps", "target_update_interval", "max_grad_norm",
-)  # fmt: skip
 
 
 def bench_cotraining_overhead(quick: bool, repeats: int) -> Row:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from functools import partial
 from pathlib import Path
 
 import matplotlib
@@ -9,6 +10,8 @@ import matplotlib
 matplotlib.use("Agg")  # headless: runs write PNGs on machines without a display
 import matplotlib.pyplot as plt
 import numpy as np
+
+from dospcot.run_folder import atomic_write
 
 PANELS = (
     ("greedy_return", "greedy return"),
@@ -37,8 +40,5 @@ def plot_learning_curves(records: list[dict], path: Path, title: str = "") -> No
         else:
             ax.text(0.5, 0.5, "no co-training in this run", ha="center", va="center", transform=ax.transAxes)
     fig.suptitle(title)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.name}.tmp")
-    fig.savefig(tmp, dpi=100, format="png")
+    atomic_write(path, partial(fig.savefig, dpi=100, format="png"))
     plt.close(fig)
-    tmp.replace(path)

@@ -73,19 +73,24 @@ def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], G
     return make_env, grid_views(layout, env.patch_size), layout
 
 
+def agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
+    """The SB3 ``DQN`` arguments of every agent of a config."""
+    dqn = cfg.dqn.sb3_kwargs()
+    # Steps beyond a run's total never enter the buffer: capping it changes nothing but memory and
+    # the size of every checkpoint.
+    dqn["buffer_size"] = min(dqn["buffer_size"], cfg.training.rounds * cfg.training.steps_per_round)
+    return dqn
+
+
 def build_run(cfg: TrainConfig) -> NeuralCoTraining:
     """The co-trainer of a config, before its first round."""
     make_env, views, _ = build_task(cfg)
     training = cfg.training
-    dqn = cfg.dqn.sb3_kwargs()
-    # Steps beyond a run's total never enter the buffer: capping it changes nothing but memory and
-    # the size of every checkpoint.
-    dqn["buffer_size"] = min(dqn["buffer_size"], training.rounds * training.steps_per_round)
     config = NeuralConfig(
         rounds=training.rounds, steps_per_round=training.steps_per_round,
         label_fraction=training.label_fraction, max_episode_steps=cfg.env.episode_steps,
-        train_episode_steps=cfg.env.train_episode_steps or None,
-        eps_start=training.eps_start, eps_end=training.eps_end, dqn=dqn, cotraining=cfg.cotraining,
+        train_episode_steps=cfg.env.train_episode_steps or None, eps_start=training.eps_start,
+        eps_end=training.eps_end, dqn=agent_kwargs(cfg), cotraining=cfg.cotraining,
     )  # fmt: skip
     spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
     return NeuralCoTraining(make_env, views, spec, config)
@@ -114,11 +119,15 @@ def train(
 
 def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> Path:
     """Continue a killed run from the checkpoint of its last finished round."""
+    cfg = _run_config(run_dir)
+    return _train_in(run_dir, cfg, read_checkpoint(run_dir), show_progress, command)
+
+
+def _run_config(run_dir: Path) -> TrainConfig:
     config_path = run_dir / CONFIG_FILE
     if not config_path.is_file():
         raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
-    cfg = load_config(str(config_path))
-    return _train_in(run_dir, cfg, read_checkpoint(run_dir), show_progress, command)
+    return load_config(str(config_path))
 
 
 def _train_in(
@@ -216,10 +225,7 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
 
     :return: per view and averaged: greedy return, success, normalised score and agreement.
     """
-    config_path = run_dir / CONFIG_FILE
-    if not config_path.is_file():
-        raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
-    cfg = load_config(str(config_path))
+    cfg = _run_config(run_dir)
     make_env, views, _ = build_task(cfg)
     mdp = TabularMDP.from_env(make_env(), {v: views[v] for v in cfg.views}, cfg.env.episode_steps)
     greedy = np.stack([_load_agent(run_dir / f"agent_{v}.zip").predict(mdp.views[v], deterministic=True)[0]
