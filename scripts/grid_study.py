@@ -13,7 +13,6 @@ README.md between the ``<!-- grid16-table:start -->`` and ``<!-- grid16-table:en
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import platform
 import shlex
@@ -25,9 +24,11 @@ from datetime import UTC, datetime
 from pathlib import Path
 
 import numpy as np
+from readme_block import replace_readme_block
 from tqdm.auto import tqdm
 
 from dospcot.metrics import bootstrap_ci
+from dospcot.run_folder import write_csv
 
 ROOT = Path(__file__).resolve().parent.parent
 START, END = "<!-- grid16-table:start -->", "<!-- grid16-table:end -->"
@@ -134,14 +135,13 @@ def main() -> None:
         "--render-only", action="store_true", help="train nothing: rebuild the table from the runs in --out"
     )
     args = parser.parse_args()
-    seeds = list(range(args.seeds))
     command = shlex.join(["python", "scripts/grid_study.py", *sys.argv[1:]])
     if args.render_only:
         summaries = [read_run(path.parent) for path in sorted(args.out.glob("*/*/summary.json"))]
         info = json.loads((args.out / "table.json").read_text())
         command, wall = info["command"], info["wall_time_s"]
     else:
-        jobs = [(preset, seed) for seed in seeds for preset in args.presets]
+        jobs = [(preset, seed) for seed in range(args.seeds) for preset in args.presets]
         started = time.perf_counter()
         with ProcessPoolExecutor(args.workers) as pool:
             futures = [pool.submit(train_one, p, s, args.overrides, args.out) for p, s in jobs]
@@ -152,17 +152,11 @@ def main() -> None:
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "table.json").write_text(json.dumps({"command": command, "wall_time_s": wall}) + "\n")
     (args.out / "table.md").write_text(table)
-    with (args.out / "table.csv").open("w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(args.out / "table.csv", rows)
     print(table)
     if args.docs:
         (ROOT / "docs" / "grid16-study.md").write_text("# The 16 x 16 grid study\n\n" + table)
-        readme = (ROOT / "README.md").read_text()
-        head, rest = readme.split(START)
-        _, tail = rest.split(END)
-        (ROOT / "README.md").write_text(f"{head}{START}\n{table}{END}{tail}")
+        replace_readme_block(START, END, table)
 
 
 if __name__ == "__main__":

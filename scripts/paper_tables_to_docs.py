@@ -15,6 +15,8 @@ import json
 import re
 from pathlib import Path
 
+from readme_block import replace_readme_block
+
 ROOT = Path(__file__).resolve().parent.parent
 START, END = "<!-- paper-tables:start -->", "<!-- paper-tables:end -->"
 
@@ -56,10 +58,7 @@ def main() -> None:
             section(agreement, "### Table 3").split("\n", 1)[1].strip(),
         ]
     )
-    readme = (ROOT / "README.md").read_text()
-    head, rest = readme.split(START)
-    _, tail = rest.split(END)
-    (ROOT / "README.md").write_text(f"{head}{START}\n{block}\n{END}{tail}")
+    replace_readme_block(START, END, block)
 
 
 if __name__ == "__main__":
