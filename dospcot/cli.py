@@ -95,6 +95,53 @@ def build_parser() -> argparse.ArgumentParser:
         "greedily on the run's task; writes evaluation.json.",
     )
     evaluate.add_argument("run_dir", type=Path, help="a run folder, runs/<name>/<stamp>")
+    sweep = commands.add_parser(
+        "sweep",
+        help="train every combination of a grid of config values over seeds, each as its own run",
+        description="Train every config x grid combination x seed as a run folder under "
+        "SWEEP_DIR/trials/. Running the same command again (or --resume) runs only the unfinished trials.",
+    )
+    sweep.add_argument("configs", nargs="*", metavar="CONFIG", help="one or more presets or .toml paths")
+    sweep.add_argument(
+        "--grid",
+        action="extend",
+        nargs="+",
+        default=[],
+        metavar="KEY=V1,V2",
+        help="a config key and its values, e.g. training.label_fraction=0.01,0.1 cotraining.gamma=0,0.3",
+    )
+    sweep.add_argument(
+        "--seeds",
+        type=parse_seeds,
+        default=[0],
+        help="a count (5 means seeds 0-4) or a comma list (default 1)",
+    )
+    sweep.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help="override a key in every trial (repeatable)",
+    )  # fmt: skip
+    sweep.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
+    sweep.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    sweep.add_argument(
+        "--ray-address", metavar="ADDRESS", help="an existing Ray cluster (default: start a local instance)"
+    )
+    sweep.add_argument(
+        "--name", help="the sweep folder's name under --runs-dir (default: from the first config's name)"
+    )
+    sweep.add_argument(
+        "--runs-dir", type=Path, default=Path("runs/sweeps"), help="where sweeps write (default runs/sweeps)"
+    )
+    sweep.add_argument(
+        "--resume", type=Path, metavar="SWEEP_DIR", help="run the unfinished trials of a sweep"
+    )
+    sweep.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    report = commands.add_parser(
+        "report",
+        help="aggregate a sweep's runs: tables (mean, 95%% bootstrap interval, IQM) and plots",
+        description="Write report.md, report.csv and PNG plots from the finished trials of a sweep.",
+    )
+    report.add_argument("sweep_dir", type=Path, help="a sweep folder, runs/sweeps/<name>")
+    report.add_argument("--out", type=Path, help="output folder (default: the sweep folder)")
     paper = commands.add_parser(
         "reproduce-paper",
         help="the seed paper's CliffWalking protocol (Tables 1-4) with real reward masking",
@@ -146,13 +193,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     command = shlex.join(["dospcot", *argv])
-    if args.command in ("train", "evaluate"):
+    if args.command in RUN_COMMANDS:
         from dospcot.run_folder import RunFolderError
+        from dospcot.sweep import SweepError
         from dospcot.train_config import ConfigError
 
         try:
-            return _train(args, command) if args.command == "train" else _evaluate(args)
-        except (ConfigError, RunFolderError) as err:
+            return RUN_COMMANDS[args.command](args, command)
+        except (ConfigError, RunFolderError, SweepError) as err:
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
             return 2
     if args.command == "reproduce-paper":
@@ -211,7 +259,7 @@ def _train(args: argparse.Namespace, command: str) -> int:
     return 0
 
 
-def _evaluate(args: argparse.Namespace) -> int:
+def _evaluate(args: argparse.Namespace, command: str) -> int:
     from dospcot.train import evaluate
 
     result = evaluate(args.run_dir)
@@ -222,6 +270,54 @@ def _evaluate(args: argparse.Namespace) -> int:
         )
     print(f"wrote {args.run_dir / 'evaluation.json'}")
     return 0
+
+
+def _sweep(args: argparse.Namespace, command: str) -> int:
+    from dospcot.sweep import SweepSpec, default_sweep_dir, open_sweep, run_sweep
+    from dospcot.train_config import ConfigError
+
+    if args.resume is not None:
+        if args.configs or args.grid or args.overrides or args.name:
+            raise ConfigError(
+                "--resume SWEEP_DIR takes no CONFIG, --grid, --set or --name: the folder holds them"
+            )
+        sweep_dir, spec = args.resume, None
+        open_sweep(sweep_dir, None)
+    else:
+        if not args.configs:
+            raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
+        from dospcot.sweep import parse_grid
+
+        spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), tuple(args.seeds), tuple(args.overrides))
+        spec.trials()  # a bad grid fails here, before a folder is made
+        sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
+    result = run_sweep(
+        sweep_dir, spec, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
+        show_progress=not args.no_progress,
+    )  # fmt: skip
+    print(
+        f"{sweep_dir}: {len(result.trials)} trials; {len(result.skipped)} already finished, "
+        f"{len(result.ran) - len(result.failed)} run now, {len(result.failed)} failed "
+        f"({args.backend} backend)"
+    )
+    for trial_id, error in result.failed.items():
+        print(f"dospcot sweep: trial {trial_id} failed: {error}", file=sys.stderr)
+    if not result.failed:
+        print(f"next: dospcot report {sweep_dir}")
+    return 1 if result.failed else 0
+
+
+def _report(args: argparse.Namespace, command: str) -> int:
+    from dospcot.report import write_report
+
+    paths = write_report(args.sweep_dir, args.out)
+    print(paths[0].read_text())
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+RUN_COMMANDS = {"train": _train, "evaluate": _evaluate, "sweep": _sweep, "report": _report}
+"""Commands whose bad configs and folders end in one line on stderr and exit status 2."""
 
 
 if __name__ == "__main__":

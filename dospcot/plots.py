@@ -1,7 +1,8 @@
-"""PNG plots of a run's learning curves (matplotlib, no display needed)."""
+"""PNG plots of a run's learning curves and of a sweep's cells (matplotlib, no display needed)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
 
@@ -40,5 +41,51 @@ def plot_learning_curves(records: list[dict], path: Path, title: str = "") -> No
         else:
             ax.text(0.5, 0.5, "no co-training in this run", ha="center", va="center", transform=ax.transAxes)
     fig.suptitle(title)
+    atomic_write(path, partial(fig.savefig, dpi=100, format="png"))
+    plt.close(fig)
+
+
+@dataclass(frozen=True)
+class Band:
+    """A line and its band: ``mean`` against ``x``, shaded from ``low`` to ``high`` (equal lengths)."""
+
+    label: str
+    x: np.ndarray
+    mean: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    def labelled(self, label: str) -> Band:
+        return replace(self, label=label)
+
+
+def plot_bands(
+    panels: dict[str, list[Band]],
+    xlabel: str,
+    ylabel: str,
+    path: Path,
+    *,
+    log_x: bool = False,
+    markers: bool = False,
+) -> None:
+    """One panel per key of ``panels`` (its title), each line with its shaded band."""
+    cols = min(3, len(panels))
+    rows = -(-len(panels) // cols)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(5.2 * cols, 3.8 * rows), squeeze=False, constrained_layout=True, sharey=True
+    )
+    for ax, (title, bands) in zip(axes.flat, panels.items(), strict=False):
+        for band in bands:
+            (line,) = ax.plot(band.x, band.mean, marker="o" if markers else None, ms=4, label=band.label)
+            ax.fill_between(band.x, band.low, band.high, color=line.get_color(), alpha=0.2, linewidth=0)
+        ax.set_title(title)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        if log_x:
+            ax.set_xscale("log")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    for ax in list(axes.flat)[len(panels) :]:
+        ax.set_visible(False)
     atomic_write(path, partial(fig.savefig, dpi=100, format="png"))
     plt.close(fig)

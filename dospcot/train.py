@@ -10,6 +10,7 @@ A run writes ``runs/<name>/<stamp>/`` (DESIGN.md section 5):
 - ``agent_<view>.zip`` (loads with plain ``stable_baselines3.DQN.load``), ``classifier_<view>.pt``
   (:func:`dospcot.classifier.load_classifier`) and ``reward_classes.json`` (class index -> reward);
 - ``learning_curves.png``; ``run_info.json`` (command, versions, wall time);
+- ``summary.json`` is written last: a folder that has it holds a finished run;
 - ``checkpoint.pkl``: the state after the last finished round, for ``dospcot train --resume``.
 
 Every file is rewritten atomically at the end of every round, so a killed run resumes from its last
@@ -112,7 +113,12 @@ def train(
     cfg: TrainConfig, runs_root: Path = Path("runs"), *, show_progress: bool = True, command: str = ""
 ) -> Path:
     """Train ``cfg`` in a new folder ``runs_root/<name>/<stamp>/``; return that folder."""
-    run_dir = new_run_dir(runs_root, cfg.name)
+    return train_at(new_run_dir(runs_root, cfg.name), cfg, show_progress=show_progress, command=command)
+
+
+def train_at(run_dir: Path, cfg: TrainConfig, *, show_progress: bool = True, command: str = "") -> Path:
+    """Train ``cfg`` in ``run_dir`` (created if missing, as ``dospcot sweep`` names its trials)."""
+    run_dir.mkdir(parents=True, exist_ok=True)
     write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
     return _train_in(run_dir, cfg, None, show_progress, command)
 
@@ -168,7 +174,6 @@ def _train_in(
     bar.close()
     for agent in run.agents:
         agent.logger.close()
-    write_json(run_dir / SUMMARY_FILE, summarise(records, run))
     plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
     write_json(
         run_dir / "run_info.json",
@@ -177,6 +182,8 @@ def _train_in(
          "stable_baselines3": stable_baselines3.__version__, "python": platform.python_version(),
          "machine": f"{platform.machine()} {platform.system()}, {th.get_num_threads()} torch threads"},
     )  # fmt: skip
+    # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
+    write_json(run_dir / SUMMARY_FILE, summarise(records, run))
     return run_dir
 
 

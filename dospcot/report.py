@@ -1,0 +1,246 @@
+"""``dospcot report``: a sweep's finished runs aggregated per cell, as tables and plots.
+
+A cell is one config with one combination of grid values; its figures are over the cell's seeds, each
+seed contributing its run's mean over agents at the last round (``summary.json``). Per cell and metric
+the report gives the number of seeds, the mean, the 95% percentile-bootstrap interval of the mean and
+the interquartile mean (IQM, as rliable). It writes into the sweep folder (or ``out``):
+
+- ``report.md`` and ``report.csv``: one table per metric; the CSV has one row per cell and metric;
+- ``learning_curves.png``: normalised score against env steps per agent, one panel per config,
+  one line per cell, a band for the 95% interval over seeds;
+- ``pseudo_accuracy.png``: pseudo-reward accuracy against round, likewise (co-training cells only);
+- ``score_vs_<key>.png``: the normalised score against each numeric grid key (the label fraction
+  study), one line per config and remaining grid values.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from dospcot.metrics import bootstrap_ci, iqm
+from dospcot.plots import Band, plot_bands
+from dospcot.run_folder import METRICS_FILE, SUMMARY_FILE, write_csv, write_text
+from dospcot.sweep import SWEEP_FILE, TRIAL_FILE, SweepError, SweepSpec, Trial
+
+METRICS = {
+    "normalised_score": "normalised score",
+    "success": "success",
+    "agreement": "optimal-action agreement",
+    "pseudo_accuracy": "pseudo-reward accuracy",
+    "coverage": "coverage",
+}
+"""Summary metrics of the report (``summary.json``'s ``mean``), with their titles."""
+
+
+@dataclass(frozen=True)
+class TrialRun:
+    """A finished trial: its identity, its ``summary.json`` and its ``metrics.csv`` rows."""
+
+    trial: Trial
+    summary: dict[str, Any]
+    curves: list[dict[str, float]]
+
+
+@dataclass(frozen=True)
+class Stat:
+    """Mean, 95% bootstrap interval and IQM of one metric over the seeds of a cell."""
+
+    n: int
+    mean: float
+    low: float
+    high: float
+    iqm: float
+
+    @classmethod
+    def of(cls, values: Sequence[float]) -> Stat:
+        finite = np.array([v for v in values if math.isfinite(v)], dtype=np.float64)
+        if finite.size == 0:
+            return cls(0, math.nan, math.nan, math.nan, math.nan)
+        low, high = bootstrap_ci(finite)
+        return cls(int(finite.size), float(finite.mean()), low, high, iqm(finite))
+
+    def __str__(self) -> str:
+        if self.n == 0:
+            return "n/a"
+        return f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}]"
+
+
+def load_runs(sweep_dir: Path) -> tuple[SweepSpec, list[TrialRun]]:
+    """The sweep's spec and its finished trials, in the sweep's order (config, then grid values).
+
+    :raises SweepError: ``sweep_dir`` is not a sweep folder, or no trial of it has finished.
+    """
+    path = sweep_dir / SWEEP_FILE
+    if not path.is_file():
+        raise SweepError(f"{sweep_dir} is not a sweep folder: it has no {SWEEP_FILE}")
+    spec = SweepSpec.from_dict(json.loads(path.read_text()))
+    runs = []
+    for trial_path in sweep_dir.glob(f"trials/*/*/{TRIAL_FILE}"):
+        if not (trial_path.parent / SUMMARY_FILE).is_file():
+            continue
+        trial = Trial.from_dict(json.loads(trial_path.read_text()))
+        curves_path = trial_path.parent / METRICS_FILE
+        curves = _read_csv(curves_path) if curves_path.is_file() else []
+        runs.append(TrialRun(trial, json.loads((trial_path.parent / SUMMARY_FILE).read_text()), curves))
+    if not runs:
+        raise SweepError(f"{sweep_dir} has no finished trial yet")
+    runs.sort(key=lambda run: (*_cell_order(spec, run.trial), run.trial.seed))
+    return spec, runs
+
+
+def _read_csv(path: Path) -> list[dict[str, float]]:
+    with path.open(newline="") as handle:
+        return [{k: _number(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+
+
+def _number(text: str) -> Any:
+    try:
+        return float(text)
+    except ValueError:
+        return text
+
+
+def _cell_order(spec: SweepSpec, trial: Trial) -> tuple[int, ...]:
+    config = spec.configs.index(trial.config) if trial.config in spec.configs else len(spec.configs)
+    return (config, *(spec.grid[k].index(v) for k, v in trial.params.items()))
+
+
+def cells(runs: Sequence[TrialRun]) -> dict[tuple[str, tuple[tuple[str, str], ...]], list[TrialRun]]:
+    """The runs grouped by cell: (config name, grid values); insertion order is the sweep's."""
+    grouped: dict[tuple[str, tuple[tuple[str, str], ...]], list[TrialRun]] = {}
+    for run in runs:
+        grouped.setdefault((run.trial.name, tuple(run.trial.params.items())), []).append(run)
+    return grouped
+
+
+def aggregate(runs: Sequence[TrialRun], metrics: Sequence[str] = tuple(METRICS)) -> list[dict[str, Any]]:
+    """One row per cell and metric: config, grid values, metric, n, mean, ci_low, ci_high, iqm, seeds."""
+    rows = []
+    for (name, params), members in cells(runs).items():
+        for metric in metrics:
+            stat = Stat.of([run.summary["mean"][metric] for run in members])
+            rows.append(
+                {"config": name, **dict(params), "metric": metric, "n": stat.n, "mean": stat.mean,
+                 "ci_low": stat.low, "ci_high": stat.high, "iqm": stat.iqm,
+                 "seeds": " ".join(str(run.trial.seed) for run in members)}
+            )  # fmt: skip
+    return rows
+
+
+def short_key(key: str) -> str:
+    """``training.label_fraction`` -> ``label_fraction``: column titles and plot axes."""
+    return key.rsplit(".", 1)[-1]
+
+
+def render_markdown(spec: SweepSpec, runs: Sequence[TrialRun], rows: Sequence[dict[str, Any]]) -> str:
+    """``report.md``: a header naming the sweep, then one table per metric."""
+    total = len(spec.configs) * math.prod(len(v) for v in spec.grid.values()) * len(spec.seeds)
+    grid = ", ".join(f"{k} = {', '.join(v)}" for k, v in spec.grid.items()) or "none"
+    lines = [
+        f"Configs: {', '.join(spec.configs)}; grid: {grid}; seeds: {', '.join(map(str, spec.seeds))} "
+        f"({len(runs)} of {total} trials finished).",
+        "Each cell: over seeds, each seed's mean over its agents at the last round; mean "
+        "[95% bootstrap interval] and IQM (interquartile mean).",
+    ]
+    keys = list(spec.grid)
+    for metric, title in METRICS.items():
+        lines += [
+            "",
+            f"### {title}",
+            "",
+            "| config | " + "".join(f"{short_key(k)} | " for k in keys) + "seeds | mean [95% CI] | IQM |",
+            "|---|" + "---|" * len(keys) + "---|---|---|",
+        ]
+        for row in (r for r in rows if r["metric"] == metric):
+            stat = Stat(row["n"], row["mean"], row["ci_low"], row["ci_high"], row["iqm"])
+            iqm_text = "n/a" if stat.n == 0 else f"{stat.iqm:.3f}"
+            lines.append(
+                f"| {row['config']} | "
+                + "".join(f"{row[k]} | " for k in keys)
+                + f"{stat.n} | {stat} | {iqm_text} |"
+            )
+    return "\n".join(lines) + "\n"
+
+
+def round_bands(members: Sequence[TrialRun], metric: str, x_key: str) -> Band | None:
+    """Per round, the mean over seeds (of each seed's mean over views) and its 95% bootstrap band."""
+    per_seed: dict[float, list[float]] = {}
+    for run in members:
+        for round_ in sorted({row["round"] for row in run.curves}):
+            rows = [row for row in run.curves if row["round"] == round_]
+            value = float(np.mean([row[metric] for row in rows]))
+            if math.isfinite(value):
+                per_seed.setdefault(rows[0][x_key], []).append(value)
+    if not per_seed:
+        return None
+    return _band("", {x: Stat.of(values) for x, values in per_seed.items()})
+
+
+def _band(label: str, points: dict[float, Stat]) -> Band:
+    xs = sorted(points)
+    mean, low, high = (np.array([getattr(points[x], field) for x in xs]) for field in ("mean", "low", "high"))
+    return Band(label, np.array(xs), mean, low, high)
+
+
+def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
+    """Write ``report.md``, ``report.csv`` and the plots; return their paths."""
+    spec, runs = load_runs(sweep_dir)
+    out_dir = out_dir or sweep_dir
+    out_dir.mkdir(parents=True, exist_ok=True)
+    rows = aggregate(runs)
+    written = [out_dir / "report.md", out_dir / "report.csv"]
+    write_text(written[0], render_markdown(spec, runs, rows))
+    write_csv(written[1], rows)
+    grouped = cells(runs)
+    for metric, x_key, name in (
+        ("normalised_score", "env_steps", "learning_curves.png"),
+        ("pseudo_accuracy", "round", "pseudo_accuracy.png"),
+    ):
+        panels: dict[str, list[Band]] = {}
+        for (config, params), members in grouped.items():
+            band = round_bands(members, metric, x_key)
+            if band is not None:
+                label = ", ".join(f"{short_key(k)}={v}" for k, v in params) or config
+                panels.setdefault(config, []).append(band.labelled(label))
+        if panels:
+            xlabel = "env steps per agent" if x_key == "env_steps" else "round"
+            plot_bands(panels, xlabel, METRICS[metric], out_dir / name)
+            written.append(out_dir / name)
+    for key in spec.grid:
+        path = _plot_against(key, spec, grouped, out_dir)
+        if path is not None:
+            written.append(path)
+    return written
+
+
+def _plot_against(key: str, spec: SweepSpec, grouped: dict, out_dir: Path) -> Path | None:
+    """The normalised score against a numeric grid key, one line per config and other grid values."""
+    try:
+        [float(v) for v in spec.grid[key]]
+    except ValueError:
+        return None
+    lines: dict[str, dict[float, Stat]] = {}
+    for (config, params), members in grouped.items():
+        others = ", ".join(f"{short_key(k)}={v}" for k, v in params if k != key)
+        label = f"{config} ({others})" if others else config
+        stat = Stat.of([run.summary["mean"]["normalised_score"] for run in members])
+        if stat.n:
+            lines.setdefault(label, {})[float(dict(params)[key])] = stat
+    if not lines:
+        return None
+    bands = [_band(label, points) for label, points in lines.items()]
+    values = [float(v) for v in spec.grid[key]]
+    log_x = min(values) > 0 and max(values) / min(values) >= 20
+    path = out_dir / f"score_vs_{short_key(key)}.png"
+    plot_bands(
+        {"": bands}, short_key(key).replace("_", " "), "normalised score", path, log_x=log_x, markers=True
+    )
+    return path

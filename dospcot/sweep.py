@@ -1,0 +1,347 @@
+"""``dospcot sweep``: every combination of a grid of config values, over seeds, each as its own run.
+
+A sweep folder holds::
+
+    sweep.json                      the sweep: configs, grid, seeds, overrides (a rerun must match it)
+    trials/<name>/<params>__seed=<s>/
+        trial.json                  the trial's config, grid values and seed
+        config.toml ... summary.json  an ordinary ``dospcot train`` run folder
+
+A trial whose folder has ``summary.json`` (written last) is finished and never runs again, so a killed
+sweep resumes by running the same command again (or ``dospcot sweep --resume SWEEP_DIR``). A trial
+killed part-way resumes from its last finished round's checkpoint, or starts again if it finished none.
+
+Backends: ``local`` runs the trials in a pool of ``workers`` processes; ``ray`` runs the same trials as
+Ray Tune trials (the ``ray`` extra), one CPU each, on a local Ray instance or on a cluster by address.
+On a cluster every node must see the sweep folder (a shared filesystem), since trials write there.
+"""
+
+from __future__ import annotations
+
+import json
+import multiprocessing
+import re
+import shutil
+from collections.abc import Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import asdict, dataclass, field
+from itertools import product
+from pathlib import Path
+from typing import Any, Literal
+
+from tqdm.auto import tqdm
+
+from dospcot.run_folder import CHECKPOINT_FILE, SUMMARY_FILE, write_json
+from dospcot.train_config import ConfigError, load_config
+
+SWEEP_FILE = "sweep.json"
+TRIAL_FILE = "trial.json"
+SWEEP_FORMAT = 1
+Backend = Literal["local", "ray"]
+
+
+class SweepError(ValueError):
+    """A sweep that cannot run as asked (bad grid, a folder holding another sweep, failed trials)."""
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """What a sweep runs: ``configs`` x the product of ``grid`` x ``seeds``.
+
+    :param configs: preset names or paths to ``.toml`` files, as ``dospcot train`` takes them.
+    :param grid: config key -> the values it takes, as text (each read as TOML, else as a string).
+    :param seeds: the seeds every combination runs with.
+    :param overrides: ``key=value`` settings applied to every trial before the grid's.
+    """
+
+    configs: tuple[str, ...]
+    grid: dict[str, tuple[str, ...]] = field(default_factory=dict)
+    seeds: tuple[int, ...] = (0,)
+    overrides: tuple[str, ...] = ()
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": SWEEP_FORMAT, **{k: _plain(v) for k, v in asdict(self).items()}}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
+        if data.get("format") != SWEEP_FORMAT:
+            raise SweepError(f"{SWEEP_FILE} is not a dospcot sweep of format {SWEEP_FORMAT}")
+        return cls(
+            tuple(data["configs"]),
+            {k: tuple(v) for k, v in data["grid"].items()},
+            tuple(data["seeds"]),
+            tuple(data["overrides"]),
+        )
+
+    def trials(self) -> list[Trial]:
+        """Every trial, each config's checked now so that a bad grid fails before anything runs.
+
+        :raises ConfigError: a combination the config rejects (naming the key).
+        """
+        keys = list(self.grid)
+        trials = []
+        for config in self.configs:
+            for values in product(*self.grid.values()):
+                params = dict(zip(keys, values, strict=True))
+                for seed in self.seeds:
+                    trial = Trial(config, "", params, seed, self.overrides)
+                    name = load_config(config, trial.overrides()).name
+                    trials.append(Trial(config, name, params, seed, self.overrides))
+        ids = [t.trial_id for t in trials]
+        if len(set(ids)) != len(ids):
+            raise SweepError("two trials share a folder name: give each config its own `name`")
+        return trials
+
+
+def _plain(value: Any) -> Any:
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    return value
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One run of a sweep: a config with some grid values and a seed."""
+
+    config: str
+    name: str
+    params: dict[str, str]
+    seed: int
+    base_overrides: tuple[str, ...] = ()
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> Trial:
+        return cls(
+            data["config"],
+            data["name"],
+            dict(data["params"]),
+            int(data["seed"]),
+            tuple(data["base_overrides"]),
+        )
+
+    def overrides(self) -> list[str]:
+        """The ``--set`` list of this trial: the sweep's overrides, the grid values, the seed."""
+        return [*self.base_overrides, *(f"{k}={v}" for k, v in self.params.items()), f"seed={self.seed}"]
+
+    @property
+    def trial_id(self) -> str:
+        """``<config name>/<key=value>__...__seed=<s>``: the trial's folder under ``trials/``."""
+        parts = [f"{key}={_folder_text(value)}" for key, value in self.params.items()]
+        return f"{self.name}/{'__'.join([*parts, f'seed={self.seed}'])}"
+
+
+def _folder_text(value: str) -> str:
+    return re.sub(r"[^\w.+-]", "", value.replace(",", "+"))
+
+
+def parse_grid(items: Sequence[str]) -> dict[str, tuple[str, ...]]:
+    """``["training.label_fraction=0.01,0.1", 'views=["patch"],["rays"]']`` -> key -> values.
+
+    Commas inside brackets or quotes belong to a value, so lists (agent pairs, view sets) can be swept.
+
+    :raises ConfigError: an item without ``=``, without values, or with a key given twice.
+    """
+    grid: dict[str, tuple[str, ...]] = {}
+    for item in items:
+        name, _, text = item.partition("=")
+        name = name.strip()
+        values = tuple(v.strip() for v in _split_top_level(text))
+        if not re.fullmatch(r"[A-Za-z_][\w.]*", name) or not text or any(not v for v in values):
+            raise ConfigError(
+                f"--grid takes key=v1,v2,... (e.g. training.label_fraction=0.05,0.1), got {item!r}"
+            )
+        if name in grid or name == "seed":
+            raise ConfigError(
+                f"--grid {name}: " + ("use --seeds for seeds" if name == "seed" else "given twice")
+            )
+        grid[name] = values
+    return grid
+
+
+def _split_top_level(text: str) -> list[str]:
+    parts, depth, quote, start = [], 0, "", 0
+    for i, char in enumerate(text):
+        if quote:
+            quote = "" if char == quote else quote
+        elif char in "\"'":
+            quote = char
+        elif char in "[{":
+            depth += 1
+        elif char in "]}":
+            depth -= 1
+        elif char == "," and depth == 0:
+            parts.append(text[start:i])
+            start = i + 1
+    return [*parts, text[start:]]
+
+
+def open_sweep(sweep_dir: Path, spec: SweepSpec | None) -> SweepSpec:
+    """Create ``sweep_dir`` for ``spec``, or reopen it (``spec=None`` or the same spec) to resume.
+
+    :raises SweepError: the folder holds a different sweep, or (to resume) no sweep at all.
+    """
+    path = sweep_dir / SWEEP_FILE
+    if path.is_file():
+        try:
+            stored = SweepSpec.from_dict(json.loads(path.read_text()))
+        except (ValueError, KeyError, TypeError) as err:
+            raise SweepError(
+                f"{path} is damaged ({type(err).__name__}); start the sweep in a new folder"
+            ) from None
+        if spec is not None and spec != stored:
+            raise SweepError(
+                f"{sweep_dir} holds another sweep ({', '.join(stored.configs)}, grid "
+                f"{_grid_text(stored.grid)}, {len(stored.seeds)} seeds); pick another --name or resume "
+                f"it with --resume {sweep_dir}"
+            )
+        return stored
+    if spec is None:
+        raise SweepError(f"{sweep_dir} is not a sweep folder: it has no {SWEEP_FILE}")
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    write_json(path, spec.to_dict())
+    return spec
+
+
+def _grid_text(grid: dict[str, tuple[str, ...]]) -> str:
+    return " ".join(f"{key}={','.join(values)}" for key, values in grid.items()) or "none"
+
+
+def trial_dir(sweep_dir: Path, trial: Trial) -> Path:
+    return sweep_dir / "trials" / trial.trial_id
+
+
+def is_finished(sweep_dir: Path, trial: Trial) -> bool:
+    return (trial_dir(sweep_dir, trial) / SUMMARY_FILE).is_file()
+
+
+def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
+    """Run (or finish) one trial in its folder; return its ``summary.json``."""
+    import torch
+
+    from dospcot.train import resume, train_at
+
+    # One thread per trial: the pool's processes share the cores, and more threads oversubscribe them.
+    torch.set_num_threads(1)
+    run_dir = trial_dir(sweep_dir, trial)
+    command = f"dospcot train {trial.config} " + " ".join(f"--set {o}" for o in trial.overrides())
+    if not (run_dir / SUMMARY_FILE).is_file():
+        if (run_dir / CHECKPOINT_FILE).is_file():
+            resume(run_dir, show_progress=False, command=command)
+        else:
+            # Killed before its first checkpoint: nothing in the folder is worth keeping.
+            shutil.rmtree(run_dir, ignore_errors=True)
+            run_dir.mkdir(parents=True)
+            write_json(run_dir / TRIAL_FILE, asdict(trial) | {"trial_id": trial.trial_id})
+            train_at(
+                run_dir, load_config(trial.config, trial.overrides()), show_progress=False, command=command
+            )
+    return json.loads((run_dir / SUMMARY_FILE).read_text())
+
+
+@dataclass
+class SweepResult:
+    """What one ``run_sweep`` call did."""
+
+    sweep_dir: Path
+    trials: list[Trial]
+    skipped: list[Trial]
+    ran: list[Trial]
+    failed: dict[str, str]
+
+
+def run_sweep(
+    sweep_dir: Path,
+    spec: SweepSpec | None = None,
+    *,
+    backend: Backend = "local",
+    workers: int = 2,
+    ray_address: str | None = None,
+    show_progress: bool = True,
+) -> SweepResult:
+    """Run every unfinished trial of a sweep (``spec=None``: resume the sweep stored in ``sweep_dir``).
+
+    :param workers: trials at once (processes for ``local``, concurrent Ray trials for ``ray``).
+    :param ray_address: an existing Ray cluster (``ray``); ``None`` starts a local instance with
+        ``workers`` CPUs.
+    """
+    if workers < 1:
+        raise SweepError(f"--workers must be at least 1, got {workers}")
+    spec = open_sweep(sweep_dir, spec)
+    trials = spec.trials()
+    todo = [t for t in trials if not is_finished(sweep_dir, t)]
+    skipped = [t for t in trials if t not in todo]
+    if backend == "local":
+        failed = _run_local(sweep_dir, todo, workers, show_progress)
+    elif backend == "ray":
+        failed = _run_ray(sweep_dir, todo, workers, ray_address)
+    else:
+        raise SweepError(f"--backend: {backend!r} is not allowed; allowed: local, ray")
+    return SweepResult(sweep_dir, trials, skipped, todo, failed)
+
+
+def _run_local(sweep_dir: Path, trials: list[Trial], workers: int, show_progress: bool) -> dict[str, str]:
+    failed: dict[str, str] = {}
+    if not trials:
+        return failed
+    # spawn, not fork: a forked child inherits torch's thread pools and locks from the parent.
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(min(workers, len(trials)), mp_context=context) as pool:
+        futures = {pool.submit(run_trial, sweep_dir, trial): trial for trial in trials}
+        bar = tqdm(as_completed(futures), total=len(trials), unit="trial", disable=not show_progress)
+        for future in bar:
+            trial = futures[future]
+            error = future.exception()
+            if error is not None:
+                failed[trial.trial_id] = f"{type(error).__name__}: {error}"
+            bar.set_postfix(failed=len(failed))
+    return failed
+
+
+def _ray_trial(config: dict[str, Any], sweep_dir: str) -> None:
+    from ray import tune
+
+    trial = Trial.from_dict(config["trial"])
+    summary = run_trial(Path(sweep_dir), trial)
+    tune.report({key: value for key, value in summary["mean"].items() if value == value})
+
+
+def _run_ray(sweep_dir: Path, trials: list[Trial], workers: int, address: str | None) -> dict[str, str]:
+    try:
+        import ray
+        from ray import tune
+    except ImportError:
+        raise SweepError("--backend ray needs the ray extra: pip install 'dospcot[ray]'") from None
+    if not trials:
+        return {}
+    started_here = not ray.is_initialized()
+    if started_here:
+        kwargs = {"address": address} if address else {"num_cpus": workers}
+        ray.init(**kwargs, include_dashboard=False, log_to_driver=False, configure_logging=False)
+    try:
+        trainable = tune.with_resources(
+            tune.with_parameters(_ray_trial, sweep_dir=str(sweep_dir.resolve())), {"cpu": 1}
+        )
+        tuner = tune.Tuner(
+            trainable,
+            param_space={"trial": tune.grid_search([asdict(t) for t in trials])},
+            tune_config=tune.TuneConfig(max_concurrent_trials=workers),
+            run_config=tune.RunConfig(name="ray", storage_path=str((sweep_dir / "ray").resolve()), verbose=0),
+        )
+        results = tuner.fit()
+        failed = {}
+        for result in results:
+            if result.error is not None:
+                trial_id = Trial.from_dict(result.config["trial"]).trial_id
+                failed[trial_id] = f"{type(result.error).__name__}: {result.error}"
+        return failed
+    finally:
+        if started_here:
+            ray.shutdown()
+
+
+def default_sweep_dir(configs: Sequence[str], root: Path = Path("runs/sweeps")) -> Path:
+    """``runs/sweeps/<first config's stem>[+N]``: the same command always names the same folder."""
+    first = Path(configs[0]).stem
+    return root / (first if len(configs) == 1 else f"{first}+{len(configs) - 1}")
