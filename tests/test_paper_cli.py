@@ -87,7 +87,7 @@ def test_cli_reproduce_paper_writes_tables(tmp_path, capsys):
         (["reproduce-paper", "--seeds", "abc"], "--seeds takes a count"),
         (["reproduce-paper", "--preset", "paper"], "invalid choice: 'paper'"),
         (["reproduce-paper", "--workers", "0"], "expected a positive integer"),
-        (["sweep"], "invalid choice: 'sweep'"),
+        (["sweep"], "give at least one CONFIG"),
         (["train"], "give a CONFIG: a preset"),
         (["evaluate"], "the following arguments are required: run_dir"),
     ],

@@ -1,0 +1,184 @@
+"""`dospcot sweep` (local and Ray backends, resume after a kill) and `dospcot report` (by hand)."""
+
+import csv
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from dospcot.cli import main
+from dospcot.report import load_runs, write_report
+from dospcot.sweep import SweepError, SweepSpec, Trial, open_sweep, parse_grid, run_sweep
+from dospcot.train_config import ConfigError, load_config
+
+GRID = {"training.label_fraction": ("0.1", "0.5"), "cotraining.gamma": ("0", "0.3")}
+
+
+def _summaries(sweep_dir: Path) -> dict[str, str]:
+    return {
+        str(path.parent.relative_to(sweep_dir)): path.read_text()
+        for path in sorted(sweep_dir.glob("trials/*/*/summary.json"))
+    }
+
+
+def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
+    grid = parse_grid(["training.label_fraction=0.01, 0.1", 'views=["patch", "rays"],["patch"]'])
+    assert grid == {"training.label_fraction": ("0.01", "0.1"), "views": ('["patch", "rays"]', '["patch"]')}
+    trial = Trial("grid16-dospcot", "grid16-dospcot", {"views": '["patch", "rays"]'}, 3)
+    assert trial.trial_id == "grid16-dospcot/views=patch+rays__seed=3"
+    assert load_config(trial.config, trial.overrides()).views == ("patch", "rays")
+    for bad, message in [
+        ("training.label_fraction", "--grid takes key=v1,v2"),
+        ("training.label_fraction=", "--grid takes key=v1,v2"),
+        ("training.label_fraction=0.1,,0.2", "--grid takes key=v1,v2"),
+        ("seed=1,2", "use --seeds for seeds"),
+    ]:
+        with pytest.raises(ConfigError, match=message):
+            parse_grid([bad])
+    with pytest.raises(ConfigError, match="given twice"):
+        parse_grid(["cotraining.gamma=0", "cotraining.gamma=0.3"])
+    with pytest.raises(ConfigError, match="label_fraction"):
+        SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}).trials()
+
+
+def test_local_sweep_runs_every_trial_once_and_reruns_nothing(tmp_path):
+    spec = SweepSpec(("tiny",), GRID, (0, 1))
+    result = run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False)
+    assert len(result.trials) == 8 and len(result.ran) == 8 and not result.skipped and not result.failed
+    summaries = _summaries(tmp_path / "sweep")
+    assert len(summaries) == 8
+    for trial in result.trials:
+        cfg = load_config(str(tmp_path / "sweep" / "trials" / trial.trial_id / "config.toml"))
+        assert (cfg.training.label_fraction, cfg.cotraining.gamma, cfg.seed) == (
+            float(trial.params["training.label_fraction"]),
+            float(trial.params["cotraining.gamma"]),
+            trial.seed,
+        )
+    again = run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False)
+    assert len(again.skipped) == 8 and not again.ran
+    assert _summaries(tmp_path / "sweep") == summaries
+    with pytest.raises(SweepError, match="holds another sweep"):
+        open_sweep(tmp_path / "sweep", SweepSpec(("tiny",), GRID, (0, 1, 2)))
+
+
+def test_ray_backend_runs_the_same_trials_to_the_same_summaries(tmp_path):
+    ray = pytest.importorskip("ray", reason="the `ray` extra is not installed (pip install 'dospcot[ray]')")
+    spec = SweepSpec(("tiny",), GRID, (0, 1))
+    local = run_sweep(tmp_path / "local", spec, workers=2, show_progress=False)
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        remote = run_sweep(tmp_path / "ray", spec, backend="ray", workers=2)
+    finally:
+        ray.shutdown()
+    assert not local.failed and not remote.failed and len(remote.ran) == 8
+    # Same trials, same folders, same results: the backend only decides where a trial runs.
+    assert _summaries(tmp_path / "ray") == _summaries(tmp_path / "local")
+
+
+def test_a_killed_sweep_resumes_by_running_only_the_missing_trials(tmp_path):
+    sweep_dir = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "dospcot", "sweep", "tiny", "--seeds", "4", "--workers", "1"]
+    cmd += ["--runs-dir", str(tmp_path), "--name", "killed", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        while len(list(sweep_dir.glob("trials/*/*/summary.json"))) < 2:
+            assert proc.poll() is None and time.monotonic() < deadline, "the sweep ended before the kill"
+            time.sleep(0.05)
+        os.killpg(proc.pid, signal.SIGKILL)  # the parent and its pool's worker, mid-trial
+    finally:
+        proc.wait()
+    finished = {p.parent.name: p.stat().st_mtime_ns for p in sweep_dir.glob("trials/*/*/summary.json")}
+    assert 2 <= len(finished) < 4
+    assert main(["sweep", "--resume", str(sweep_dir), "--workers", "1", "--no-progress"]) == 0
+    after = {p.parent.name: p.stat().st_mtime_ns for p in sweep_dir.glob("trials/*/*/summary.json")}
+    assert len(after) == 4
+    assert {name: after[name] for name in finished} == finished  # finished trials were not run again
+    result = run_sweep(sweep_dir, workers=1, show_progress=False)
+    assert not result.ran and len(result.skipped) == 4
+
+
+def _synthetic_sweep(root: Path, scores: dict[str, list[float]]) -> Path:
+    """A sweep folder written by hand: config `a`, grid over the label fraction, seeds 0-3."""
+    sweep_dir = root / "synthetic"
+    spec = SweepSpec(("a",), {"training.label_fraction": tuple(scores)}, (0, 1, 2, 3))
+    open_sweep(sweep_dir, spec)
+    for fraction, values in scores.items():
+        for seed, score in enumerate(values):
+            trial = Trial("a", "a", {"training.label_fraction": fraction}, seed)
+            folder = sweep_dir / "trials" / trial.trial_id
+            folder.mkdir(parents=True)
+            data = {"config": "a", "name": "a", "params": trial.params, "seed": seed, "base_overrides": []}
+            (folder / "trial.json").write_text(json.dumps(data))
+            if math.isinf(score):  # an unfinished trial: no summary.json
+                continue
+            mean = {"normalised_score": score, "success": 1.0, "agreement": 0.5, "pseudo_accuracy": math.nan}
+            (folder / "summary.json").write_text(json.dumps({"mean": {**mean, "coverage": 0.25}}))
+            rows = "round,view,env_steps,normalised_score,pseudo_accuracy\n"
+            rows += "".join(f"{r},v,{100 * r},{score / r},nan\n" for r in (1, 2))
+            (folder / "metrics.csv").write_text(rows)
+    return sweep_dir
+
+
+def test_report_on_synthetic_summaries_gives_hand_checked_figures(tmp_path):
+    sweep_dir = _synthetic_sweep(
+        tmp_path,
+        {"0.1": [0.0, 1.0, 0.0, 1.0], "0.5": [1.0, 2.0, 3.0, 10.0], "1.0": [2.0, 2.0, 2.0, math.inf]},
+    )
+    paths = write_report(sweep_dir)
+    with (sweep_dir / "report.csv").open() as handle:
+        rows = {(r["training.label_fraction"], r["metric"]): r for r in csv.DictReader(handle)}
+    score = {fraction: rows[(fraction, "normalised_score")] for fraction in ("0.1", "0.5", "1.0")}
+    # {0, 1, 0, 1}: mean 0.5; IQM drops one value at each end -> mean(0, 1) = 0.5. A bootstrap mean of
+    # four draws is 0 or 1 with probability 1/16 each (> 2.5%), so the 95% interval is [0, 1].
+    assert [float(score["0.1"][k]) for k in ("mean", "iqm", "ci_low", "ci_high")] == [0.5, 0.5, 0.0, 1.0]
+    # {1, 2, 3, 10}: mean 4, IQM mean(2, 3) = 2.5; the interval lies within [1, 10] and holds the mean.
+    assert float(score["0.5"]["mean"]) == 4.0 and float(score["0.5"]["iqm"]) == 2.5
+    assert 1.0 <= float(score["0.5"]["ci_low"]) < 4.0 < float(score["0.5"]["ci_high"]) <= 10.0
+    # Three finished seeds of 2.0 (the fourth has no summary): every figure is 2.
+    assert score["1.0"]["n"] == "3" and score["1.0"]["seeds"] == "0 1 2"
+    assert {float(score["1.0"][k]) for k in ("mean", "iqm", "ci_low", "ci_high")} == {2.0}
+    # No finite pseudo-reward accuracy (no co-training): counted as no seeds, shown as n/a.
+    assert rows[("0.1", "pseudo_accuracy")]["n"] == "0"
+    text = (sweep_dir / "report.md").read_text()
+    assert "| a | 0.1 | 4 | 0.500 [0.000, 1.000] | 0.500 |" in text
+    assert "(11 of 12 trials finished)" in text and "| a | 0.1 | 0 | n/a | n/a |" in text
+    names = {p.name for p in paths}
+    assert {"learning_curves.png", "score_vs_label_fraction.png"} <= names
+    assert "pseudo_accuracy.png" not in names  # nothing finite to draw
+    for path in paths:
+        if path.suffix == ".png":
+            assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    _, runs = load_runs(sweep_dir)
+    assert [(r.trial.params["training.label_fraction"], r.trial.seed) for r in runs][:5] == [
+        ("0.1", 0), ("0.1", 1), ("0.1", 2), ("0.1", 3), ("0.5", 0),
+    ]  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["sweep"], "give at least one CONFIG"),
+        (["sweep", "tiny", "--grid", "training.rounds"], "--grid takes key=v1,v2"),
+        (["sweep", "tiny", "--grid", "training.nokey=1,2"], "unknown key 'training.nokey'"),
+        (["sweep", "tiny", "--backend", "dask"], "invalid choice: 'dask'"),
+        (["sweep", "--resume", "/nonexistent"], "is not a sweep folder"),
+        (["report", "/nonexistent"], "is not a sweep folder"),
+    ],
+)
+def test_sweep_and_report_bad_arguments_fail_with_one_line(args, message, tmp_path, capsys):
+    extra = ["--runs-dir", str(tmp_path)] if args[:1] == ["sweep"] else []
+    try:
+        code = main([*args, *extra])
+    except SystemExit as exit_:  # argparse's own errors
+        code = exit_.code
+    assert code == 2
+    err = capsys.readouterr().err
+    assert message in err and err.count("\n") == 1
+    assert not list(tmp_path.iterdir())  # nothing was written
