@@ -161,14 +161,21 @@ def save_classifier(clf: BatchedRewardClassifier, path: str | Path) -> None:
 
 
 def load_classifier(path: str | Path) -> BatchedRewardClassifier:
-    """Load what :func:`save_classifier` wrote, with ``weights_only=True`` (no code runs on load)."""
-    data = torch.load(path, weights_only=True)
-    clf = BatchedRewardClassifier(
-        data["n_models"],
-        data["n_features"],
-        data["n_classes"],
-        ClassifierConfig(**data["config"]),
-        seeds=[0] * data["n_models"],
-    )
-    clf.load_state_dict(data["state_dict"])
+    """Load what :func:`save_classifier` wrote, with ``weights_only=True`` (no code runs on load).
+
+    :raises ValueError: the file is missing, truncated, corrupt or not a classifier.
+    """
+    try:
+        data = torch.load(path, weights_only=True)
+        clf = BatchedRewardClassifier(
+            data["n_models"],
+            data["n_features"],
+            data["n_classes"],
+            ClassifierConfig(**data["config"]),
+            seeds=[0] * data["n_models"],
+        )
+        clf.load_state_dict(data["state_dict"])
+    except Exception as err:  # torch, zipfile and pickle raise many types for a damaged file
+        reason = f"{type(err).__name__}: {err}"
+        raise ValueError(f"{path} is not a readable dospcot classifier ({reason})") from None
     return clf

@@ -194,6 +194,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     command = shlex.join(["dospcot", *argv])
     if args.command in RUN_COMMANDS:
+        from dospcot.envs import NonFiniteError
         from dospcot.run_folder import RunFolderError
         from dospcot.sweep import SweepError
         from dospcot.train_config import ConfigError
@@ -203,6 +204,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         except (ConfigError, RunFolderError, SweepError) as err:
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
             return 2
+        except NonFiniteError as err:  # the env's fault, not the command line's
+            print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+            return 1
     if args.command == "reproduce-paper":
         from dospcot.paper import reproduce_paper
 

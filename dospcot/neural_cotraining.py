@@ -34,6 +34,7 @@ from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot import metrics
 from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
+from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.envs.masking import RewardMaskWrapper, check_label_fraction
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import View, ViewObservationWrapper
@@ -202,6 +203,7 @@ class NeuralCoTraining:
             env = gym.wrappers.TimeLimit(make_env(), limit)
             env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=spec.seed)
             env = ViewObservationWrapper(StoreWrapper(env, self.store), views[view])
+            env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
             agent = ExpectedSarsaDQN(
                 "MlpPolicy", env, target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k,
                 exploration_initial_eps=config.eps_start, exploration_final_eps=config.eps_end,

@@ -3,6 +3,7 @@
 from gymnasium.envs.registration import register
 
 from dospcot.envs.cliffwalking import CLIFF_VIEWS, make_masked_cliffwalking
+from dospcot.envs.finite_check import FiniteCheckWrapper, NonFiniteError
 from dospcot.envs.gridworld import GridLayout, GridWorld, grid_views, make_masked_gridworld
 from dospcot.envs.masking import RewardMaskWrapper, StateActionMask, check_label_fraction
 from dospcot.envs.tabular import TabularMDP
@@ -14,9 +15,11 @@ register(id="dospcot/MaskedGridWorld-v0", entry_point="dospcot.envs.gridworld:ma
 
 __all__ = [
     "CLIFF_VIEWS",
+    "FiniteCheckWrapper",
     "GridLayout",
     "GridWorld",
     "MultiViewWrapper",
+    "NonFiniteError",
     "RewardMaskWrapper",
     "StateActionMask",
     "TabularMDP",

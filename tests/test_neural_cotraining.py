@@ -3,11 +3,12 @@
 from dataclasses import replace
 from functools import partial
 
+import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
 
-from dospcot.envs import GridWorld, StateActionMask, grid_views
+from dospcot.envs import FiniteCheckWrapper, GridWorld, NonFiniteError, StateActionMask, grid_views
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 
 LAYOUT = GridWorld(size=6, layout_seed=0).layout
@@ -78,3 +79,49 @@ def test_training_episodes_follow_their_own_limit_while_evaluation_keeps_the_hor
     # 300 steps in episodes of at most 5 steps: at least 60 episodes (fewer steps end at the goal).
     assert run.agents[0]._episode_num >= 60
     assert run.mdp.max_episode_steps == CONFIG.max_episode_steps
+
+
+class _NaNRewardAt(GridWorld):
+    """A grid world whose 57th step returns a NaN reward."""
+
+    def __init__(self, layout, at: int = 57) -> None:
+        super().__init__(layout)
+        self.at, self.count = at, 0
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = super().step(action)
+        self.count += 1
+        return obs, float("nan") if self.count == self.at else reward, terminated, truncated, info
+
+
+def test_a_nan_reward_stops_the_run_naming_the_env_and_the_step():
+    spec = NeuralRunSpec("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed=0)
+    run = NeuralCoTraining(partial(_NaNRewardAt, LAYOUT), VIEWS, spec, CONFIG)
+    # The mask decides whether the agent sees the NaN as its reward or only as the hidden reward.
+    with pytest.raises(
+        NonFiniteError,
+        match=r"^env _NaNRewardAt \(agent 0, view coords\) returned a "
+        r"non-finite (hidden )?reward \(nan\) at env step 57 \(step \d+ of its episode",
+    ):
+        run.run()
+
+
+def test_finite_check_names_a_nan_observation_at_reset_and_at_a_step():
+    class Broken(gym.Env):
+        observation_space = gym.spaces.Box(-np.inf, np.inf, (3,))
+        action_space = gym.spaces.Discrete(2)
+
+        def reset(self, *, seed=None, options=None):
+            return np.array([0.0, np.inf, 0.0], dtype=np.float32), {}
+
+    with pytest.raises(
+        NonFiniteError, match=r"env Broken returned a non-finite observation \(inf\) at reset"
+    ):
+        FiniteCheckWrapper(Broken()).reset()
+    env = FiniteCheckWrapper(gym.make("CartPole-v1", disable_env_checker=True), name="cartpole")
+    env.reset(seed=0)
+    env.unwrapped.state = np.array([np.nan, 0.0, 0.0, 0.0])
+    with pytest.raises(
+        NonFiniteError, match=r"env cartpole returned a non-finite observation \(nan\) at env step 1"
+    ):
+        env.step(0)

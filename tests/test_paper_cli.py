@@ -105,4 +105,5 @@ def test_bench_quick_writes_every_row(tmp_path):
     text = out.read_text()
     assert text.count("ExpectedSarsaDQN (target=") == 3 and "median of 3 repetitions" in text
     assert "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time" in text
+    assert "`dospcot sweep` local backend, 2 workers vs 1: throughput" in text
     assert "| ratio | target | met |" in text

@@ -133,6 +133,11 @@ def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
     (run_dir / "agent_patch.zip").write_bytes(b"not a zip")
     assert main(["evaluate", str(run_dir)]) == 2
     assert "agent_patch.zip is not a readable SB3 agent" in capsys.readouterr().err
+    clf_path = next(run_dir.glob("classifier_*.pt"))
+    for damaged in (clf_path.read_bytes()[:100], b"", b"\x80\x04not a torch file"):
+        clf_path.write_bytes(damaged)
+        with pytest.raises(ValueError, match=r"is not a readable dospcot classifier \("):
+            load_classifier(clf_path)
 
 
 def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tmp_path):
