@@ -9,7 +9,8 @@ A sweep folder holds::
 
 A trial whose folder has ``summary.json`` (written last) is finished and never runs again, so a killed
 sweep resumes by running the same command again (or ``dospcot sweep --resume SWEEP_DIR``). A trial
-killed part-way resumes from its last finished round's checkpoint, or starts again if it finished none.
+killed part-way resumes from its last finished round's checkpoint, or starts again if it finished none
+(as ``dospcot train --resume`` does).
 
 Backends: ``local`` runs the trials in a pool of ``workers`` processes; ``ray`` runs the same trials as
 Ray Tune trials (the ``ray`` extra), one CPU each, on a local Ray instance or on a cluster by address.
@@ -31,7 +32,7 @@ from typing import Any, Literal
 
 from tqdm.auto import tqdm
 
-from dospcot.run_folder import CHECKPOINT_FILE, SUMMARY_FILE, write_json
+from dospcot.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
 from dospcot.train_config import ConfigError, load_config
 
 SWEEP_FILE = "sweep.json"
@@ -227,10 +228,9 @@ def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
     run_dir = trial_dir(sweep_dir, trial)
     command = f"dospcot train {trial.config} " + " ".join(f"--set {o}" for o in trial.overrides())
     if not (run_dir / SUMMARY_FILE).is_file():
-        if (run_dir / CHECKPOINT_FILE).is_file():
+        if (run_dir / CONFIG_FILE).is_file():
             resume(run_dir, show_progress=False, command=command)
         else:
-            # Killed before its first checkpoint: nothing in the folder is worth keeping.
             shutil.rmtree(run_dir, ignore_errors=True)
             run_dir.mkdir(parents=True)
             write_json(run_dir / TRIAL_FILE, asdict(trial) | {"trial_id": trial.trial_id})

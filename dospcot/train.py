@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import platform
+import shutil
 import time
 from functools import partial
 from pathlib import Path
@@ -41,6 +42,7 @@ from dospcot.envs.views import View
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 from dospcot.plots import plot_learning_curves
 from dospcot.run_folder import (
+    CHECKPOINT_FILE,
     CONFIG_FILE,
     METRICS_FILE,
     SUMMARY_FILE,
@@ -48,6 +50,7 @@ from dospcot.run_folder import (
     atomic_write,
     new_run_dir,
     read_checkpoint,
+    remove_stale_temporaries,
     write_checkpoint,
     write_csv,
     write_json,
@@ -124,8 +127,14 @@ def train_at(run_dir: Path, cfg: TrainConfig, *, show_progress: bool = True, com
 
 
 def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> Path:
-    """Continue a killed run from the checkpoint of its last finished round."""
+    """Continue a killed run from the checkpoint of its last finished round, or from the start if it
+    finished none."""
     cfg = _run_config(run_dir)
+    remove_stale_temporaries(run_dir)
+    if not (run_dir / CHECKPOINT_FILE).is_file():
+        # Killed in its first round: only the config is worth keeping, and old events would repeat.
+        shutil.rmtree(run_dir / "tb", ignore_errors=True)
+        return _train_in(run_dir, cfg, None, show_progress, command)
     return _train_in(run_dir, cfg, read_checkpoint(run_dir), show_progress, command)
 
 

@@ -1,11 +1,15 @@
 """`dospcot train` / `evaluate`: configs, run folders, TensorBoard tags, checkpoints and resume."""
 
+import csv
 import json
 import os
+import random
 import signal
 import subprocess
 import sys
 import time
+import tomllib
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -181,3 +185,60 @@ def test_exploring_starts_draw_free_cells_from_the_seed_and_lava_returns_to_the_
     assert free[starts].all()
     lava_moves = np.argwhere(env.reward == -100.0)
     assert (env.next_state[tuple(lava_moves.T)] == env.start_state).all()
+
+
+def _assert_every_run_file_whole(run_dir: Path) -> None:
+    """Every file a kill left in a run folder parses in full: none is half-written."""
+    for path in run_dir.iterdir():
+        if path.name.startswith(".") and path.name.endswith(".tmp"):
+            continue  # an interrupted write's temporary: never read, removed on resume
+        if path.suffix == ".json":
+            json.loads(path.read_text())
+        elif path.suffix == ".toml":
+            tomllib.loads(path.read_text())
+        elif path.suffix == ".csv":
+            with path.open() as handle:
+                rows = list(csv.reader(handle))
+            assert len(rows) > 1 and {len(r) for r in rows} == {len(rows[0])}
+        elif path.suffix == ".zip":
+            with zipfile.ZipFile(path) as archive:
+                assert archive.testzip() is None
+        elif path.suffix == ".pkl":
+            read_checkpoint(run_dir)
+        elif path.suffix == ".pt":
+            load_classifier(path)
+        elif path.suffix == ".png":
+            data = path.read_bytes()
+            assert data.startswith(b"\x89PNG") and data.endswith(b"IEND\xaeB`\x82")
+
+
+def test_a_run_killed_at_random_moments_resumes_to_the_uninterrupted_result(tmp_path):
+    overrides = ["training.rounds=3", "training.steps_per_round=800"]
+    full = _train(tmp_path / "full", *overrides)
+    rng = random.Random(11)
+    base = [sys.executable, "-m", "dospcot", "train", "--no-progress"]
+    kills = []
+    for _ in range(3):
+        folders = list((tmp_path / "killed").glob("tiny/*"))
+        if folders:
+            cmd = [*base, "--resume", str(folders[0])]
+        else:
+            cmd = [*base, "tiny", "--runs-dir", str(tmp_path / "killed")]
+            cmd += [a for o in overrides for a in ("--set", o)]
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+        deadline = time.monotonic() + 120
+        while not list((tmp_path / "killed").glob("tiny/*/config.toml")) and proc.poll() is None:
+            assert time.monotonic() < deadline, "the run never started"
+            time.sleep(0.02)
+        delay = rng.uniform(0.0, 5.0)  # from the run's start, past the imports
+        time.sleep(delay)
+        proc.kill()  # SIGKILL, wherever the run is: learning, writing a file, renaming it
+        kills.append((delay, proc.wait()))
+        for run_dir in (tmp_path / "killed").glob("tiny/*"):
+            _assert_every_run_file_whole(run_dir)
+    assert any(code == -signal.SIGKILL for _, code in kills)
+    (killed,) = (tmp_path / "killed" / "tiny").iterdir()
+    assert main(["train", "--resume", str(killed), "--no-progress"]) == 0
+    assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
+    assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
+    assert not list(killed.glob(".*.tmp"))
