@@ -8,6 +8,7 @@ machine's speed hits both alike.
 
 from __future__ import annotations
 
+import math
 import platform
 import statistics
 import tempfile
@@ -19,10 +20,12 @@ from functools import partial
 from pathlib import Path
 
 import gymnasium as gym
+import numpy as np
 import torch
 from stable_baselines3 import DQN
 
-from dospcot.envs import CLIFF_VIEWS, ViewObservationWrapper
+from dospcot.envs import CLIFF_VIEWS, StateActionMask, ViewObservationWrapper
+from dospcot.neural_cotraining import NeuralCoTraining
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.sweep import SweepSpec, run_sweep
 from dospcot.train import agent_kwargs, build_run, build_task
@@ -187,6 +190,80 @@ def bench_sweep_throughput(quick: bool, repeats: int) -> Row:
     )
 
 
+def _filled_run(n: int, seed: int) -> NeuralCoTraining:
+    """A `grid16-dospcot` co-trainer whose shared store holds ``n`` steps of a uniform random policy
+    from uniformly drawn states, revealed by the run's mask."""
+    cfg = load_config("grid16-dospcot", [f"seed={seed}"])
+    run = build_run(cfg)
+    mdp, rng = run.mdp, np.random.default_rng(seed)
+    labelled = StateActionMask(mdp.n_states, mdp.n_actions, cfg.training.label_fraction, seed).labelled
+    states, actions = rng.integers(0, mdp.n_states, n), rng.integers(0, mdp.n_actions, n)
+    for s, a in zip(states.tolist(), actions.tolist(), strict=True):
+        reward = float(mdp.reward[s, a])
+        run.store.add(s, a, int(mdp.next_state[s, a]), bool(labelled[s, a]), reward, reward)
+    return run
+
+
+def _store_bytes(run: NeuralCoTraining) -> int:
+    """Bytes the shared store and the reward table hold, spare capacity included."""
+    arrays = [*vars(run.store).values(), run.table._reward, run.table._weight]
+    return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
+
+
+def _raw_bytes(run: NeuralCoTraining, n: int) -> int:
+    """Bytes of the raw arrays of ``n`` steps: each view's observation and next observation
+    (float32), the action, the reward and the done flag."""
+    width = sum(run.mdp.views[v].shape[1] for v in run.spec.views)
+    return n * (2 * width * 4 + 8 + 4 + 1)
+
+
+def bench_store_memory(quick: bool, repeats: int) -> Row:
+    """Memory of the shared transition store per million steps against the raw arrays of those steps."""
+    n = 100_000 if quick else 1_000_000
+    ours, peer = [], []
+    for rep in range(repeats):
+        run = _filled_run(n, rep)
+        ours.append(_store_bytes(run) / n * 1e6 / 2**20)
+        peer.append(_raw_bytes(run, n) / n * 1e6 / 2**20)
+    views = " + ".join(f"{v} ({run.mdp.views[v].shape[1]} floats)" for v in run.spec.views)
+    return Row(
+        "Shared transition store vs the raw arrays: memory per million steps",
+        f"16 x 16 grid, views {views}, {n:,} steps measured",
+        Measurement.of(ours, "MiB"),
+        Measurement.of(peer, "MiB"),
+        higher_is_better=False,
+        target=1.5,
+    )
+
+
+SCALING_SIZES = (10_000, 30_000, 100_000, 300_000, 1_000_000)
+
+
+def bench_cotraining_scaling(quick: bool, repeats: int) -> Row:
+    """Wall time of one co-training step (select, fit, score, relabel) as the store grows, against
+    n log n growth from the smallest size."""
+    sizes = SCALING_SIZES[:3] if quick else SCALING_SIZES
+    seconds: dict[int, list[float]] = {n: [] for n in sizes}
+    for rep in range(repeats):
+        for n in sizes:
+            run = _filled_run(n, rep)
+            start = time.perf_counter()
+            run._cotrain()
+            seconds[n].append(time.perf_counter() - start)
+    small, large = sizes[0], sizes[-1]
+    growth = [seconds[large][r] / seconds[small][r] for r in range(repeats)]
+    bound = large * math.log(large) / (small * math.log(small))
+    curve = ", ".join(f"{n:,}: {statistics.median(seconds[n]):.3f} s" for n in sizes)
+    return Row(
+        f"One co-training step, {large:,} vs {small:,} stored steps: growth against n log n",
+        f"`grid16-dospcot`, median seconds per size: {curve}",
+        Measurement.of(growth, "x"),
+        Measurement.of([bound] * repeats, "x"),
+        higher_is_better=False,
+        target=1.0,
+    )
+
+
 BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     # SB3's defaults: a small network, where the fixed per-update cost of the extra target ops shows most.
     "esarsa_dqn": lambda quick, repeats: bench_esarsa_dqn(3_000 if quick else 20_000, repeats, [64, 64], 32),
@@ -199,6 +276,8 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     ),
     "cotraining_overhead": bench_cotraining_overhead,
     "sweep_throughput": bench_sweep_throughput,
+    "store_memory": bench_store_memory,
+    "cotraining_scaling": bench_cotraining_scaling,
 }
 
 
@@ -214,6 +293,13 @@ NOTES = [
     "- The sweep row runs the same trials in fresh sweep folders with a pool of 2 worker processes and "
     "of 1 (each on one torch thread), timing the whole `run_sweep` call, worker start-up included; the "
     "ratio is the speed-up on this machine's cores.",
+    "- The store rows fill a `grid16-dospcot` co-trainer's shared store with random steps. The store "
+    "keeps one (s, a) key id per step and per-key arrays (the pool is deduplicated by key, and each "
+    "view's features are computed per key when the classifiers need them), and the reward table keeps "
+    "a float32 reward and weight per step; spare capacity from growth by doubling counts. The peer is "
+    "the raw arrays a store of observations would hold. The scaling row times `_cotrain()` (classes, "
+    "features, select, fit, score, Eq. 9, relabelling every stored step) at each size; the peer "
+    "column is the n log n growth over the same sizes, so a ratio at most 1 means no faster growth.",
 ]
 
 
