@@ -42,11 +42,12 @@ METRICS = {
 
 @dataclass(frozen=True)
 class TrialRun:
-    """A finished trial: its identity, its ``summary.json`` and its ``metrics.csv`` rows."""
+    """A finished trial: its identity, its ``summary.json``, its ``metrics.csv`` rows and its folder."""
 
     trial: Trial
     summary: dict[str, Any]
     curves: list[dict[str, float]]
+    run_dir: Path
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,8 @@ def load_runs(sweep_dir: Path) -> tuple[SweepSpec, list[TrialRun]]:
         trial = Trial.from_dict(json.loads(trial_path.read_text()))
         curves_path = trial_path.parent / METRICS_FILE
         curves = _read_csv(curves_path) if curves_path.is_file() else []
-        runs.append(TrialRun(trial, json.loads((trial_path.parent / SUMMARY_FILE).read_text()), curves))
+        summary = json.loads((trial_path.parent / SUMMARY_FILE).read_text())
+        runs.append(TrialRun(trial, summary, curves, trial_path.parent))
     if not runs:
         raise SweepError(f"{sweep_dir} has no finished trial yet")
     runs.sort(key=lambda run: (*_cell_order(spec, run.trial), run.trial.seed))
