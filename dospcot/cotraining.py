@@ -87,7 +87,7 @@ class RoundResult:
     :param view_class: (m, B, N) the class each view predicts.
     :param threshold: (m, B, K) lambda_{j,c}.
     :param classifier_loss: (m, B) final training loss of each classifier.
-    :param pace: (B,) admitted share of U, in [0, 1].
+    :param pace: (B,) admitted share of U, in [0, 1]; 1 where U is empty.
     :param changed: (B,) share of U whose pseudo-label changed since the previous round.
     :param stopped: (B,) bool, runs whose stopping rule fired this round.
     """
@@ -179,8 +179,9 @@ class SelfPacedCoTrainer:
         self._weights = weights.copy()
         pseudo_class = np.where(pool.unlabelled, consensus_labels(losses, weights), -1)
         pseudo_weight = np.where(pseudo_class >= 0, weights.max(axis=0), 0.0)
-        n_unlabelled = np.maximum(pool.unlabelled.sum(axis=1), 1)
-        pace = (pseudo_weight > 0).sum(axis=1) / n_unlabelled
+        n_unlabelled = pool.unlabelled.sum(axis=1)
+        # With nothing unlabelled (every reward revealed), the schedule has nothing left to admit.
+        pace = np.where(n_unlabelled > 0, (pseudo_weight > 0).sum(axis=1) / np.maximum(n_unlabelled, 1), 1.0)
         changed = self._changed_share(pseudo_class, pool.unlabelled)
         stopped = np.zeros(n_runs, dtype=bool)
         if cfg.tol > 0 and self.round > 0:

@@ -39,6 +39,14 @@ def test_baselines_follow_a_linear_schedule():
     assert [r["eps"] for r in records] == pytest.approx([1.0 + (0.05 - 1.0) * 0.5, 0.05])
 
 
+def test_with_every_reward_revealed_the_pace_is_full_and_exploration_decays():
+    # No unlabelled key is left to admit: the self-paced schedule is done, not stuck at its start.
+    spec = NeuralRunSpec("cotrain", ("esarsa_dqn",), ("coords",), seed=0)
+    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, replace(CONFIG, label_fraction=1.0))
+    records = run.run()
+    assert [(r["pace"], r["coverage"], r["eps"]) for r in records] == pytest.approx([(1.0, 0.0, 0.05)] * 2)
+
+
 def _permuted_grid(seed: int) -> GridWorld:
     env = GridWorld(LAYOUT)
     masked = ~StateActionMask(env.observation_space.n, 4, CONFIG.label_fraction, seed).labelled
