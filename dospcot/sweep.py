@@ -61,7 +61,7 @@ class SweepSpec:
     overrides: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
-        return {"format": SWEEP_FORMAT, **{k: _plain(v) for k, v in asdict(self).items()}}
+        return {"format": SWEEP_FORMAT, **asdict(self)}  # tuples become JSON lists
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
@@ -92,14 +92,6 @@ class SweepSpec:
         if len(set(ids)) != len(ids):
             raise SweepError("two trials share a folder name: give each config its own `name`")
         return trials
-
-
-def _plain(value: Any) -> Any:
-    if isinstance(value, tuple):
-        return [_plain(v) for v in value]
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    return value
 
 
 @dataclass(frozen=True)
