@@ -70,6 +70,18 @@ class Row:
         return self.ratio >= self.target if self.higher_is_better else self.ratio <= self.target
 
 
+def _alternating(
+    repeats: int, ours: Callable[[int], float], peer: Callable[[int], float]
+) -> tuple[list[float], list[float]]:
+    """``repeats`` measurements of ours and of the peer (each called with the repetition index),
+    alternating which goes first, so drift in the machine's speed hits both alike."""
+    results: tuple[list[float], list[float]] = ([], [])
+    for rep in range(repeats):
+        for side in (0, 1) if rep % 2 == 0 else (1, 0):
+            results[side].append((ours, peer)[side](rep))
+    return results
+
+
 def _onehot_cliff() -> gym.Env:
     return ViewObservationWrapper(gym.make("CliffWalking-v1", max_episode_steps=100), CLIFF_VIEWS["onehot"])
 
@@ -95,12 +107,12 @@ def bench_esarsa_dqn(
     steps: int, repeats: int, net: list[int], batch: int, target: str = "expected_sarsa"
 ) -> Row:
     """Env steps per second of ExpectedSarsaDQN against SB3 DQN with identical settings."""
-    ours, peer = [], []
     ours_make = partial(ExpectedSarsaDQN, target=target)
-    for rep in range(repeats):
-        order: list[tuple[list[float], Callable[..., DQN]]] = [(ours, ours_make), (peer, DQN)]
-        for results, algo in order if rep % 2 == 0 else order[::-1]:
-            results.append(_steps_per_second(algo, steps, rep, net, batch))
+    ours, peer = _alternating(
+        repeats,
+        lambda rep: _steps_per_second(ours_make, steps, rep, net, batch),
+        lambda rep: _steps_per_second(DQN, steps, rep, net, batch),
+    )
     return Row(
         f"ExpectedSarsaDQN (target={target!r}) vs SB3 DQN: env steps per second",
         f"CliffWalking-v1 one-hot, {steps:,} steps, MlpPolicy {net}, train_freq 4, batch {batch}",
@@ -141,11 +153,9 @@ def bench_cotraining_overhead(quick: bool, repeats: int) -> Row:
     """Wall time of a DOSPCoT run over that of its agents trained alone for the same steps."""
     overrides = ["training.rounds=2", "training.steps_per_round=1000"] if quick else []
     cfg = load_config("grid16-dospcot", overrides)
-    ours, peer = [], []
-    for rep in range(repeats):
-        order = [(ours, _cotraining_seconds), (peer, _independent_seconds)]
-        for results, measure in order if rep % 2 == 0 else order[::-1]:
-            results.append(measure(cfg))
+    ours, peer = _alternating(
+        repeats, lambda _: _cotraining_seconds(cfg), lambda _: _independent_seconds(cfg)
+    )
     steps = cfg.training.rounds * cfg.training.steps_per_round
     return Row(
         "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time",
@@ -174,11 +184,9 @@ def bench_sweep_throughput(quick: bool, repeats: int) -> Row:
     spec = SweepSpec(
         ("tiny",), {"cotraining.gamma": ("0", "0.3")}, seeds, (f"training.steps_per_round={steps}",)
     )
-    ours, peer = [], []
-    for rep in range(repeats):
-        order = [(ours, 2), (peer, 1)]
-        for results, workers in order if rep % 2 == 0 else order[::-1]:
-            results.append(_trials_per_minute(spec, workers))
+    ours, peer = _alternating(
+        repeats, lambda _: _trials_per_minute(spec, 2), lambda _: _trials_per_minute(spec, 1)
+    )
     trials = len(spec.configs) * 2 * len(seeds)
     return Row(
         "`dospcot sweep` local backend, 2 workers vs 1: throughput",

@@ -67,12 +67,13 @@ def plot_bands(
     *,
     log_x: bool = False,
     markers: bool = False,
+    share_y: bool = True,
 ) -> None:
     """One panel per key of ``panels`` (its title), each line with its shaded band."""
     cols = min(3, len(panels))
     rows = -(-len(panels) // cols)
     fig, axes = plt.subplots(
-        rows, cols, figsize=(5.2 * cols, 3.8 * rows), squeeze=False, constrained_layout=True, sharey=True
+        rows, cols, figsize=(5.2 * cols, 3.8 * rows), squeeze=False, constrained_layout=True, sharey=share_y
     )
     for ax, (title, bands) in zip(axes.flat, panels.items(), strict=False):
         for band in bands:

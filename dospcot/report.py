@@ -9,8 +9,8 @@ the interquartile mean (IQM, as rliable). It writes into the sweep folder (or ``
 - ``learning_curves.png``: normalised score against env steps per agent, one panel per config,
   one line per cell, a band for the 95% interval over seeds;
 - ``pseudo_accuracy.png``: pseudo-reward accuracy against round, likewise (co-training cells only);
-- ``score_vs_<key>.png``: the normalised score against each numeric grid key (the label fraction
-  study), one line per config and remaining grid values.
+- ``score_vs_<key>.png``: the normalised score and success against each numeric grid key (the label
+  fraction study), one line per config and remaining grid values.
 """
 
 from __future__ import annotations
@@ -223,26 +223,32 @@ def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
     return written
 
 
+AGAINST_METRICS = ("normalised_score", "success")
+"""The panels of ``score_vs_<key>.png``: the score, and success, which the score can hide."""
+
+
 def _plot_against(key: str, spec: SweepSpec, grouped: dict, out_dir: Path) -> Path | None:
-    """The normalised score against a numeric grid key, one line per config and other grid values."""
+    """The normalised score and success against a numeric grid key, one line per config and other
+    grid values."""
     try:
-        [float(v) for v in spec.grid[key]]
+        values = [float(v) for v in spec.grid[key]]
     except ValueError:
         return None
-    lines: dict[str, dict[float, Stat]] = {}
-    for (config, params), members in grouped.items():
-        others = ", ".join(f"{short_key(k)}={v}" for k, v in params if k != key)
-        label = f"{config} ({others})" if others else config
-        stat = Stat.of([run.summary["mean"]["normalised_score"] for run in members])
-        if stat.n:
-            lines.setdefault(label, {})[float(dict(params)[key])] = stat
-    if not lines:
+    panels: dict[str, list[Band]] = {}
+    for metric in AGAINST_METRICS:
+        lines: dict[str, dict[float, Stat]] = {}
+        for (config, params), members in grouped.items():
+            others = ", ".join(f"{short_key(k)}={v}" for k, v in params if k != key)
+            label = f"{config} ({others})" if others else config
+            stat = Stat.of([run.summary["mean"][metric] for run in members])
+            if stat.n:
+                lines.setdefault(label, {})[float(dict(params)[key])] = stat
+        if lines:
+            panels[METRICS[metric]] = [_band(label, points) for label, points in lines.items()]
+    if not panels:
         return None
-    bands = [_band(label, points) for label, points in lines.items()]
-    values = [float(v) for v in spec.grid[key]]
     log_x = min(values) > 0 and max(values) / min(values) >= 20
     path = out_dir / f"score_vs_{short_key(key)}.png"
-    plot_bands(
-        {"": bands}, short_key(key).replace("_", " "), "normalised score", path, log_x=log_x, markers=True
-    )
+    xlabel = short_key(key).replace("_", " ")
+    plot_bands(panels, xlabel, "mean over seeds", path, log_x=log_x, markers=True, share_y=False)
     return path

@@ -104,7 +104,7 @@ def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
     grouped = cells(runs)
     names = list(dict.fromkeys(name for name, _ in grouped))
     fractions = list(dict.fromkeys(dict(params)[FRACTION] for _, params in grouped))
-    lines = ["", "![normalised score against label fraction](docs/label-fraction.png)"]
+    lines = ["", "![normalised score and success against label fraction](docs/label-fraction.png)"]
     for key in ("normalised_score", "success", "agreement"):
         lines += [
             "",

@@ -106,4 +106,6 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert text.count("ExpectedSarsaDQN (target=") == 3 and "median of 3 repetitions" in text
     assert "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time" in text
     assert "`dospcot sweep` local backend, 2 workers vs 1: throughput" in text
+    assert "Shared transition store vs the raw arrays: memory per million steps" in text
+    assert "One co-training step, 100,000 vs 10,000 stored steps: growth against n log n" in text
     assert "| ratio | target | met |" in text
