@@ -277,7 +277,7 @@ def _evaluate(args: argparse.Namespace, command: str) -> int:
 
 
 def _sweep(args: argparse.Namespace, command: str) -> int:
-    from dospcot.sweep import SweepSpec, default_sweep_dir, open_sweep, run_sweep
+    from dospcot.sweep import SweepSpec, default_sweep_dir, run_sweep
     from dospcot.train_config import ConfigError
 
     if args.resume is not None:
@@ -286,14 +286,12 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
                 "--resume SWEEP_DIR takes no CONFIG, --grid, --set or --name: the folder holds them"
             )
         sweep_dir, spec = args.resume, None
-        open_sweep(sweep_dir, None)
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
         from dospcot.sweep import parse_grid
 
         spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), tuple(args.seeds), tuple(args.overrides))
-        spec.trials()  # a bad grid fails here, before a folder is made
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
     result = run_sweep(
         sweep_dir, spec, backend=args.backend, workers=args.workers, ray_address=args.ray_address,

@@ -8,6 +8,9 @@ learner.
 from __future__ import annotations
 
 import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
 from importlib import resources
 
 import numpy as np
@@ -120,3 +123,30 @@ def iqm(values: np.ndarray) -> float:
     values = np.sort(np.asarray(values, dtype=np.float64))
     cut = values.size // 4
     return float(values[cut : values.size - cut].mean())
+
+
+@dataclass(frozen=True)
+class SeedSummary:
+    """A metric over seeds: mean, 95% bootstrap interval, IQM and the number of finite values."""
+
+    mean: float
+    low: float
+    high: float
+    iqm: float
+    n: int
+
+    @classmethod
+    def of(cls, values: Sequence[float], iqm_min_n: int = 1) -> SeedSummary:
+        """Summarise the finite ``values``; the IQM is NaN below ``iqm_min_n`` of them."""
+        finite = np.array([v for v in values if math.isfinite(v)], dtype=np.float64)
+        if finite.size == 0:
+            return cls(math.nan, math.nan, math.nan, math.nan, 0)
+        low, high = bootstrap_ci(finite)
+        iqm_value = iqm(finite) if finite.size >= iqm_min_n else math.nan
+        return cls(float(finite.mean()), low, high, iqm_value, int(finite.size))
+
+    def __str__(self) -> str:
+        if self.n == 0 or math.isnan(self.mean):
+            return "n/a"
+        digits = 1 if abs(self.mean) >= 10 else 3
+        return f"{self.mean:.{digits}f} [{self.low:.{digits}f}, {self.high:.{digits}f}]"

@@ -21,7 +21,7 @@ import time
 from collections import defaultdict
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -29,6 +29,7 @@ from tqdm import tqdm
 
 from dospcot import metrics
 from dospcot.envs import CLIFF_VIEWS, TabularMDP, make_masked_cliffwalking
+from dospcot.metrics import SeedSummary
 from dospcot.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
 
 KINDS: tuple[str, ...] = ("q", "sarsa", "esarsa")
@@ -137,30 +138,9 @@ def train_protocol(
     return records
 
 
-@dataclass(frozen=True)
-class Cell:
-    """A summary over seeds: mean, 95% bootstrap interval, IQM (NaN below 10 seeds) and count."""
-
-    mean: float
-    low: float
-    high: float
-    iqm: float
-    n: int
-
-    def __str__(self) -> str:
-        if self.n == 0 or np.isnan(self.mean):
-            return "n/a"
-        digits = 1 if abs(self.mean) >= 10 else 3
-        return f"{self.mean:.{digits}f} [{self.low:.{digits}f}, {self.high:.{digits}f}]"
-
-
-def summarise(values: Sequence[float]) -> Cell:
+def summarise(values: Sequence[float]) -> SeedSummary:
     """Mean, 95% bootstrap interval and (for >= 10 values) IQM of per-seed values."""
-    v = np.asarray([x for x in values if not np.isnan(x)], dtype=np.float64)
-    if v.size == 0:
-        return Cell(float("nan"), float("nan"), float("nan"), float("nan"), 0)
-    low, high = metrics.bootstrap_ci(v)
-    return Cell(float(v.mean()), low, high, metrics.iqm(v) if v.size >= 10 else float("nan"), int(v.size))
+    return SeedSummary.of(values, iqm_min_n=10)
 
 
 def per_seed(records: list[dict], metric: str) -> dict[tuple, list[float]]:
@@ -288,17 +268,23 @@ def _table_md(rows: list[dict], table: str, metric: str, with_gamma: bool) -> li
         for agents, method in seen:
             group = [r for r in sel if r["agents"] == agents and r["method"] == method]
             if group[0]["gamma"] is None:
-                cells = [str(Cell(*[group[0][k] for k in ("mean", "low", "high", "iqm", "n")])), "(no γ)", ""]
+                cells = [
+                    str(SeedSummary(*[group[0][k] for k in ("mean", "low", "high", "iqm", "n")])),
+                    "(no γ)",
+                    "",
+                ]
                 paper = ""
             else:
-                cells = [str(Cell(*[r[k] for k in ("mean", "low", "high", "iqm", "n")])) for r in group]
+                cells = [
+                    str(SeedSummary(*[r[k] for k in ("mean", "low", "high", "iqm", "n")])) for r in group
+                ]
                 refs = [r["paper"] for r in group]
                 paper = " / ".join(f"{x:.4f}" for x in refs) if refs[0] is not None else ""
             lines.append(f"| {agents} | {method} | " + " | ".join(cells) + f" | {paper} |")
     else:
         lines += ["| agents | method | ours | paper |", "|---|---|---|---|"]
         for r in sel:
-            cell = Cell(*[r[k] for k in ("mean", "low", "high", "iqm", "n")])
+            cell = SeedSummary(*[r[k] for k in ("mean", "low", "high", "iqm", "n")])
             paper = f"{r['paper']:.4f}" if r["paper"] is not None else ""
             lines.append(f"| {r['agents']} | {r['method']} | {cell} | {paper} |")
     return lines

@@ -25,10 +25,10 @@ from typing import Any
 
 import numpy as np
 
-from dospcot.metrics import bootstrap_ci, iqm
+from dospcot.metrics import SeedSummary
 from dospcot.plots import Band, plot_bands
 from dospcot.run_folder import METRICS_FILE, SUMMARY_FILE, write_csv, write_text
-from dospcot.sweep import SWEEP_FILE, TRIAL_FILE, SweepError, SweepSpec, Trial
+from dospcot.sweep import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
 
 METRICS = {
     "normalised_score": "normalised score",
@@ -50,39 +50,12 @@ class TrialRun:
     run_dir: Path
 
 
-@dataclass(frozen=True)
-class Stat:
-    """Mean, 95% bootstrap interval and IQM of one metric over the seeds of a cell."""
-
-    n: int
-    mean: float
-    low: float
-    high: float
-    iqm: float
-
-    @classmethod
-    def of(cls, values: Sequence[float]) -> Stat:
-        finite = np.array([v for v in values if math.isfinite(v)], dtype=np.float64)
-        if finite.size == 0:
-            return cls(0, math.nan, math.nan, math.nan, math.nan)
-        low, high = bootstrap_ci(finite)
-        return cls(int(finite.size), float(finite.mean()), low, high, iqm(finite))
-
-    def __str__(self) -> str:
-        if self.n == 0:
-            return "n/a"
-        return f"{self.mean:.3f} [{self.low:.3f}, {self.high:.3f}]"
-
-
 def load_runs(sweep_dir: Path) -> tuple[SweepSpec, list[TrialRun]]:
     """The sweep's spec and its finished trials, in the sweep's order (config, then grid values).
 
     :raises SweepError: ``sweep_dir`` is not a sweep folder, or no trial of it has finished.
     """
-    path = sweep_dir / SWEEP_FILE
-    if not path.is_file():
-        raise SweepError(f"{sweep_dir} is not a sweep folder: it has no {SWEEP_FILE}")
-    spec = SweepSpec.from_dict(json.loads(path.read_text()))
+    spec = open_sweep(sweep_dir, None)
     runs = []
     for trial_path in sweep_dir.glob(f"trials/*/*/{TRIAL_FILE}"):
         if not (trial_path.parent / SUMMARY_FILE).is_file():
@@ -128,7 +101,7 @@ def aggregate(runs: Sequence[TrialRun], metrics: Sequence[str] = tuple(METRICS))
     rows = []
     for (name, params), members in cells(runs).items():
         for metric in metrics:
-            stat = Stat.of([run.summary["mean"][metric] for run in members])
+            stat = SeedSummary.of([run.summary["mean"][metric] for run in members])
             rows.append(
                 {"config": name, **dict(params), "metric": metric, "n": stat.n, "mean": stat.mean,
                  "ci_low": stat.low, "ci_high": stat.high, "iqm": stat.iqm,
@@ -162,7 +135,7 @@ def render_markdown(spec: SweepSpec, runs: Sequence[TrialRun], rows: Sequence[di
             "|---|" + "---|" * len(keys) + "---|---|---|",
         ]
         for row in (r for r in rows if r["metric"] == metric):
-            stat = Stat(row["n"], row["mean"], row["ci_low"], row["ci_high"], row["iqm"])
+            stat = SeedSummary(row["mean"], row["ci_low"], row["ci_high"], row["iqm"], row["n"])
             iqm_text = "n/a" if stat.n == 0 else f"{stat.iqm:.3f}"
             lines.append(
                 f"| {row['config']} | "
@@ -183,10 +156,10 @@ def round_bands(members: Sequence[TrialRun], metric: str, x_key: str) -> Band | 
                 per_seed.setdefault(rows[0][x_key], []).append(value)
     if not per_seed:
         return None
-    return _band("", {x: Stat.of(values) for x, values in per_seed.items()})
+    return _band("", {x: SeedSummary.of(values) for x, values in per_seed.items()})
 
 
-def _band(label: str, points: dict[float, Stat]) -> Band:
+def _band(label: str, points: dict[float, SeedSummary]) -> Band:
     xs = sorted(points)
     mean, low, high = (np.array([getattr(points[x], field) for x in xs]) for field in ("mean", "low", "high"))
     return Band(label, np.array(xs), mean, low, high)
@@ -236,11 +209,11 @@ def _plot_against(key: str, spec: SweepSpec, grouped: dict, out_dir: Path) -> Pa
         return None
     panels: dict[str, list[Band]] = {}
     for metric in AGAINST_METRICS:
-        lines: dict[str, dict[float, Stat]] = {}
+        lines: dict[str, dict[float, SeedSummary]] = {}
         for (config, params), members in grouped.items():
             others = ", ".join(f"{short_key(k)}={v}" for k, v in params if k != key)
             label = f"{config} ({others})" if others else config
-            stat = Stat.of([run.summary["mean"][metric] for run in members])
+            stat = SeedSummary.of([run.summary["mean"][metric] for run in members])
             if stat.n:
                 lines.setdefault(label, {})[float(dict(params)[key])] = stat
         if lines:

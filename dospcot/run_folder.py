@@ -48,12 +48,10 @@ def atomic_write(path: Path, write: Callable[[IO[bytes]], None]) -> None:
         raise
 
 
-def remove_stale_temporaries(folder: Path) -> list[Path]:
+def remove_stale_temporaries(folder: Path) -> None:
     """Delete the temporary files of writes that a kill interrupted (never a finished file)."""
-    stale = sorted(folder.glob(".*.tmp"))
-    for path in stale:
+    for path in folder.glob(".*.tmp"):
         path.unlink(missing_ok=True)
-    return stale
 
 
 def write_text(path: Path, text: str) -> None:

@@ -25,7 +25,7 @@ import re
 import shutil
 from collections.abc import Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from itertools import product
 from pathlib import Path
 from typing import Any, Literal
@@ -86,8 +86,7 @@ class SweepSpec:
                 params = dict(zip(keys, values, strict=True))
                 for seed in self.seeds:
                     trial = Trial(config, "", params, seed, self.overrides)
-                    name = load_config(config, trial.overrides()).name
-                    trials.append(Trial(config, name, params, seed, self.overrides))
+                    trials.append(replace(trial, name=load_config(config, trial.overrides()).name))
         ids = [t.trial_id for t in trials]
         if len(set(ids)) != len(ids):
             raise SweepError("two trials share a folder name: give each config its own `name`")
@@ -260,8 +259,12 @@ def run_sweep(
     """
     if workers < 1:
         raise SweepError(f"--workers must be at least 1, got {workers}")
-    spec = open_sweep(sweep_dir, spec)
-    trials = spec.trials()
+    if spec is None:
+        spec = open_sweep(sweep_dir, None)
+        trials = spec.trials()
+    else:
+        trials = spec.trials()  # checked before the folder is made: a bad grid leaves nothing behind
+        open_sweep(sweep_dir, spec)
     todo = [t for t in trials if not is_finished(sweep_dir, t)]
     skipped = [t for t in trials if t not in todo]
     if backend == "local":

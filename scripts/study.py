@@ -20,7 +20,6 @@ import platform
 import shlex
 import shutil
 import sys
-import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
@@ -28,8 +27,10 @@ from pathlib import Path
 
 from readme_block import replace_readme_block
 
-from dospcot.report import Stat, TrialRun, cells, load_runs, write_report
+from dospcot.metrics import SeedSummary
+from dospcot.report import TrialRun, cells, load_runs, write_report
 from dospcot.sweep import SweepSpec, run_sweep
+from dospcot.train_config import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
 METHODS = {
@@ -53,8 +54,7 @@ FRACTION = "training.label_fraction"
 def header(runs: list[TrialRun], command: str, sweep_dirs: list[Path]) -> list[str]:
     """Where the figures come from, and what a lava-free timeout scores on this map."""
     first = runs[0]
-    config = tomllib.loads((first.run_dir / "config.toml").read_text())
-    horizon = config["env"]["max_episode_steps"] or 4 * config["env"]["size"]
+    horizon = load_config(str(first.run_dir / "config.toml")).env.episode_steps
     optimum, random = first.summary["optimal_return"], first.summary["random_return"]
     timeout = (-horizon - random) / (optimum - random)  # every step costs 1: no lava, no goal
     compute = sum(json.loads((r.run_dir / "run_info.json").read_text())["wall_time_s"] for r in runs)
@@ -81,7 +81,7 @@ def grid16_tables(runs: list[TrialRun]) -> list[str]:
         "|---|---|" + "---|" * len(COLUMNS),
     ]
     for (name, _), members in grouped.items():
-        stats = [str(Stat.of([r.summary["mean"][key] for r in members])) for key in COLUMNS]
+        stats = [str(SeedSummary.of([r.summary["mean"][key] for r in members])) for key in COLUMNS]
         lines.append(f"| {METHODS.get(name, name)} | `{name}` | " + " | ".join(stats) + " |")
     lines += [
         "",
@@ -93,7 +93,8 @@ def grid16_tables(runs: list[TrialRun]) -> list[str]:
     for (name, _), members in grouped.items():
         for view in members[0].summary["views"]:
             stats = [
-                str(Stat.of([r.summary["per_view"][view][key] for r in members])) for key in list(COLUMNS)[:3]
+                str(SeedSummary.of([r.summary["per_view"][view][key] for r in members]))
+                for key in list(COLUMNS)[:3]
             ]
             lines.append(f"| {METHODS.get(name, name)} | {view} | " + " | ".join(stats) + " |")
     return lines
@@ -115,7 +116,11 @@ def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
         ]
         for name in names:
             stats = [
-                str(Stat.of([r.summary["mean"][key] for r in grouped.get((name, ((FRACTION, f),)), [])]))
+                str(
+                    SeedSummary.of(
+                        [r.summary["mean"][key] for r in grouped.get((name, ((FRACTION, f),)), [])]
+                    )
+                )
                 for f in fractions
             ]
             lines.append(f"| {METHODS.get(name, name)} | " + " | ".join(stats) + " |")

@@ -8,7 +8,8 @@ import sys
 import pytest
 
 from dospcot.cli import main
-from dospcot.paper import Cell, build_tables, protocol_config, protocol_specs, summarise, train_protocol
+from dospcot.metrics import SeedSummary
+from dospcot.paper import build_tables, protocol_config, protocol_specs, summarise, train_protocol
 
 
 def test_protocol_has_every_run_of_the_four_tables():
@@ -26,8 +27,8 @@ def test_protocol_has_every_run_of_the_four_tables():
 def test_summary_cell_by_hand():
     cell = summarise([1.0, 2.0, 3.0, float("nan")])
     assert cell.mean == 2.0 and cell.n == 3 and cell.low <= 2.0 <= cell.high
-    assert str(Cell(0.5, 0.25, 0.75, float("nan"), 3)) == "0.500 [0.250, 0.750]"
-    assert str(Cell(-13.0, -15.0, -13.0, float("nan"), 3)) == "-13.0 [-15.0, -13.0]"
+    assert str(SeedSummary(0.5, 0.25, 0.75, float("nan"), 3)) == "0.500 [0.250, 0.750]"
+    assert str(SeedSummary(-13.0, -15.0, -13.0, float("nan"), 3)) == "-13.0 [-15.0, -13.0]"
 
 
 def test_worker_split_does_not_change_results():
