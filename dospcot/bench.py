@@ -179,15 +179,16 @@ def _trials_per_minute(spec: SweepSpec, workers: int) -> float:
 
 def bench_sweep_throughput(quick: bool, repeats: int) -> Row:
     """Trials per minute of ``dospcot sweep``'s local backend with 2 worker processes against 1."""
-    steps = 300 if quick else 1_000
-    seeds = (0,) if quick else (0, 1, 2)
-    spec = SweepSpec(
-        ("tiny",), {"cotraining.gamma": ("0", "0.3")}, seeds, (f"training.steps_per_round={steps}",)
-    )
+    # Trials of about 10 s: worker start-up (spawn, importing torch and SB3: seconds) is paid once per
+    # pool, and with trials of a few seconds it would be most of what the row measures.
+    steps = 300 if quick else 4_000
+    gammas = ("0", "0.3") if quick else ("0", "0.1", "0.3", "1")
+    seeds = (0,) if quick else (0, 1)
+    spec = SweepSpec(("tiny",), {"cotraining.gamma": gammas}, seeds, (f"training.steps_per_round={steps}",))
     ours, peer = _alternating(
         repeats, lambda _: _trials_per_minute(spec, 2), lambda _: _trials_per_minute(spec, 1)
     )
-    trials = len(spec.configs) * 2 * len(seeds)
+    trials = len(spec.configs) * len(gammas) * len(seeds)
     return Row(
         "`dospcot sweep` local backend, 2 workers vs 1: throughput",
         f"{trials} trials of `tiny` (2 rounds x {steps:,} steps), process start-up included",
@@ -195,6 +196,51 @@ def bench_sweep_throughput(quick: bool, repeats: int) -> Row:
         Measurement.of(peer, "trials/min"),
         higher_is_better=True,
         target=1.7,
+    )
+
+
+def _fast_highway_steps_per_second(steps: int, n_envs: int, seed: int) -> float:
+    from dospcot.envs.fast_highway import FastHighwayVec
+
+    env = FastHighwayVec(n_envs, seed=seed)
+    actions = np.random.default_rng(seed).integers(0, 5, (steps, n_envs))
+    env.reset(seed=seed)
+    start = time.perf_counter()
+    for a in actions:
+        env.step(a)
+    return steps * n_envs / (time.perf_counter() - start)
+
+
+def _highway_env_steps_per_second(steps: int, seed: int) -> float:
+    from dospcot.envs.highway import make_highway
+
+    env = make_highway("highway-fast-v0")
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
+def bench_fast_highway(quick: bool, repeats: int) -> Row:
+    """Env steps per second with random actions: our vectorised highway env against highway-fast-v0."""
+    n_envs, vec_steps, peer_steps = 64, (50 if quick else 500), (60 if quick else 600)
+    ours, peer = _alternating(
+        repeats,
+        lambda rep: _fast_highway_steps_per_second(vec_steps, n_envs, rep),
+        lambda rep: _highway_env_steps_per_second(peer_steps, rep),
+    )
+    return Row(
+        "FastHighwayVec vs highway-env's highway-fast-v0: env steps per second",
+        f"random actions, resets included; ours {n_envs} envs x {vec_steps} steps, "
+        f"highway-fast-v0 {peer_steps} steps (its Kinematics observation)",
+        Measurement.of(ours, "steps/s"),
+        Measurement.of(peer, "steps/s"),
+        higher_is_better=True,
+        target=50.0,
     )
 
 
@@ -286,6 +332,7 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "sweep_throughput": bench_sweep_throughput,
     "store_memory": bench_store_memory,
     "cotraining_scaling": bench_cotraining_scaling,
+    "fast_highway": bench_fast_highway,
 }
 
 
@@ -301,6 +348,9 @@ NOTES = [
     "- The sweep row runs the same trials in fresh sweep folders with a pool of 2 worker processes and "
     "of 1 (each on one torch thread), timing the whole `run_sweep` call, worker start-up included; the "
     "ratio is the speed-up on this machine's cores.",
+    "- The highway row steps 64 of our envs at once in numpy (`dospcot.envs.FastHighwayVec`; ended envs "
+    "reset inside `step`) and one highway-fast-v0 env in its Python simulator, both with uniformly random "
+    "meta-actions and their default Kinematics observation; the ratio counts env steps of all 64 envs.",
     "- The store rows fill a `grid16-dospcot` co-trainer's shared store with random steps. The store "
     "keeps one (s, a) key id per step and per-key arrays (the pool is deduplicated by key, and each "
     "view's features are computed per key when the classifiers need them), and the reward table keeps "

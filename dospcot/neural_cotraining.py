@@ -133,6 +133,35 @@ class NeuralRunSpec(RunSpec):
             raise ValueError(f"unknown agent kind {kind!r}; allowed: {sorted(AGENT_TARGETS)}")
 
 
+def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
+    """The relabelling replay buffer's arguments for a method: co-training reads the reward table,
+    masked-zero counts masked rewards as 0, the rest weigh masked steps 0."""
+    return {
+        "reward_table": table if method == "cotrain" else None,
+        "masked_reward": "zero" if method == "masked-zero" else "ignore",
+    }
+
+
+def make_agent(
+    env: gym.Env,
+    k: int,
+    kind: str,
+    view: str,
+    spec: RunSpec,
+    config: NeuralConfig,
+    buffer_kwargs: dict[str, Any],
+) -> ExpectedSarsaDQN:
+    """Agent ``k`` of a run, at pace 0, on ``env`` checked for non-finite values."""
+    env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
+    agent = ExpectedSarsaDQN(
+        "MlpPolicy", env, target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k,
+        exploration_initial_eps=config.eps_start, exploration_final_eps=config.eps_end,
+        replay_buffer_kwargs=buffer_kwargs, **config.dqn,
+    )  # fmt: skip
+    agent.set_pace(0.0)
+    return agent
+
+
 @dataclass(frozen=True)
 class NeuralConfig:
     """Hyperparameters of a neural run.
@@ -193,24 +222,14 @@ class NeuralCoTraining:
         self.store = TransitionStore(self.mdp.n_states, self.mdp.n_actions)
         self.table = RewardTable()
         fraction = 1.0 if spec.method == "oracle" else config.label_fraction
-        buffer_kwargs = {
-            "reward_table": self.table if spec.method == "cotrain" else None,
-            "masked_reward": "zero" if spec.method == "masked-zero" else "ignore",
-        }
+        buffer_kwargs = relabelling_kwargs(spec.method, self.table)
         self.agents: list[ExpectedSarsaDQN] = []
         for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True)):
             limit = config.train_episode_steps or config.max_episode_steps
             env = gym.wrappers.TimeLimit(make_env(), limit)
             env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=spec.seed)
             env = ViewObservationWrapper(StoreWrapper(env, self.store), views[view])
-            env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
-            agent = ExpectedSarsaDQN(
-                "MlpPolicy", env, target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k,
-                exploration_initial_eps=config.eps_start, exploration_final_eps=config.eps_end,
-                replay_buffer_kwargs=buffer_kwargs, **config.dqn,
-            )  # fmt: skip
-            agent.set_pace(0.0)
-            self.agents.append(agent)
+            self.agents.append(make_agent(env, k, kind, view, spec, config, buffer_kwargs))
         self.trainer: SelfPacedCoTrainer | None = None
         self.classes = RewardClasses(1, config.cotraining.max_classes)
         if spec.method == "cotrain":
@@ -334,9 +353,20 @@ class NeuralCoTraining:
             ]
         )
 
+    def evaluate_policies(self) -> dict[str, np.ndarray]:
+        """Each agent's greedy policy against the exact optimum: (m,) arrays ``greedy_return``,
+        ``success``, ``normalised_score`` and ``agreement``."""
+        return self.policy_metrics(self.greedy_actions())
+
+    def reference_returns(self) -> dict[str, float]:
+        """The returns the normalised score is measured between."""
+        return {
+            "optimal_return": self.policy_metrics.optimal_return,
+            "random_return": self.policy_metrics.random_return,
+        }
+
     def _records(self, stats: dict) -> list[dict]:
-        greedy = self.greedy_actions()
-        policy = self.policy_metrics(greedy)
+        policy = self.evaluate_policies()
         rows = []
         for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
             view_stats = stats["views"][k] if stats else {}

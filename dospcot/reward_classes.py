@@ -48,3 +48,55 @@ class RewardClasses:
         """Reward value of each class index (B, N); NaN for -1."""
         values = np.take_along_axis(self.values, np.clip(classes, 0, None), axis=1)
         return np.where(classes >= 0, values, np.nan)
+
+
+class QuantileRewardClasses:
+    """K quantile bins of a continuous reward, for one run (DESIGN.md section 2).
+
+    The bin edges are the labelled rewards' quantiles at 1/K, ..., (K-1)/K; a bin's value is the
+    mean of the labelled rewards inside it. :meth:`fit` recomputes both from all labels so far, so the
+    bins follow the labels as more arrive. Duplicate edges (a reward that fills several quantiles)
+    merge their bins, so a run may have fewer than K classes. The interface matches
+    :class:`RewardClasses` with one run: ``values`` is (1, K).
+
+    :param n_classes: K.
+    """
+
+    def __init__(self, n_classes: int) -> None:
+        if n_classes < 1:
+            raise ValueError(f"need at least one reward class, got {n_classes}")
+        self.values = np.full((1, n_classes), np.nan)
+        """(1, K) the value (bin mean) of each class, NaN where the run has no such class."""
+        self.edges = np.zeros(0)
+        """(k - 1,) the inner bin edges: class c holds rewards in [edges[c - 1], edges[c])."""
+
+    @property
+    def mask(self) -> np.ndarray:
+        """(1, K) bool, the classes the run has."""
+        return ~np.isnan(self.values)
+
+    def fit(self, rewards: np.ndarray) -> None:
+        """Set the bins from every labelled reward so far, (n,) float."""
+        rewards = np.asarray(rewards, dtype=np.float64)
+        n_classes = self.values.shape[1]
+        self.values[:] = np.nan
+        if rewards.size == 0:
+            self.edges = np.zeros(0)
+            return
+        quantiles = np.quantile(rewards, np.arange(1, n_classes) / n_classes)
+        # An edge equal to the minimum would leave its bin empty.
+        self.edges = np.unique(quantiles[quantiles > rewards.min()])
+        bins = np.searchsorted(self.edges, rewards, side="right")
+        for c in range(self.edges.size + 1):
+            self.values[0, c] = rewards[bins == c].mean()
+
+    def encode(self, rewards: np.ndarray) -> np.ndarray:
+        """Class (bin) index of each reward, (1, N) from (1, N); -1 before any label was seen."""
+        if not self.mask.any():
+            return np.full(np.shape(rewards), -1)
+        return np.searchsorted(self.edges, rewards, side="right")
+
+    def decode(self, classes: np.ndarray) -> np.ndarray:
+        """The value (bin mean) of each class index, (1, N); NaN for -1."""
+        values = np.take_along_axis(self.values, np.clip(classes, 0, None), axis=1)
+        return np.where(classes >= 0, values, np.nan)

@@ -57,6 +57,7 @@ from dospcot.run_folder import (
     write_toml,
 )
 from dospcot.train_config import TrainConfig, load_config
+from dospcot.transition_cotraining import TransitionConfig, TransitionCoTraining
 
 ROUND_SCALARS = (
     "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
@@ -87,17 +88,37 @@ def agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
 
 
 def build_run(cfg: TrainConfig) -> NeuralCoTraining:
-    """The co-trainer of a config, before its first round."""
-    make_env, views, _ = build_task(cfg)
+    """The co-trainer of a config, before its first round: the discrete one on a grid, the
+    transition one (:class:`~dospcot.transition_cotraining.TransitionCoTraining`) on a highway."""
     training = cfg.training
-    config = NeuralConfig(
+    common = dict(
         rounds=training.rounds, steps_per_round=training.steps_per_round,
-        label_fraction=training.label_fraction, max_episode_steps=cfg.env.episode_steps,
-        train_episode_steps=cfg.env.train_episode_steps or None, eps_start=training.eps_start,
-        eps_end=training.eps_end, dqn=agent_kwargs(cfg), cotraining=cfg.cotraining,
+        label_fraction=training.label_fraction, eps_start=training.eps_start, eps_end=training.eps_end,
+        dqn=agent_kwargs(cfg), cotraining=cfg.cotraining,
     )  # fmt: skip
     spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
+    if cfg.task == "highway":
+        highway = cfg.highway
+        config = TransitionConfig(
+            **common, max_episode_steps=highway.episode_steps, reward_classes=highway.reward_classes,
+            eval_episodes=highway.eval_episodes,
+        )  # fmt: skip
+        make_env = partial(_masked_highway, highway.env_id, highway.config)
+        return TransitionCoTraining(make_env, spec, config)
+    make_env, views, _ = build_task(cfg)
+    config = NeuralConfig(
+        **common, max_episode_steps=cfg.env.episode_steps,
+        train_episode_steps=cfg.env.train_episode_steps or None,
+    )  # fmt: skip
     return NeuralCoTraining(make_env, views, spec, config)
+
+
+def _masked_highway(
+    env_id: str, config: dict[str, Any], view: str, views: tuple[str, ...], fraction: float, mask_seed: int
+) -> Any:
+    from dospcot.envs.highway import make_masked_highway
+
+    return make_masked_highway(env_id, view, views, fraction, mask_seed, config)
 
 
 class _StepBar(BaseCallback):
@@ -229,8 +250,7 @@ def summarise(records: list[dict], run: NeuralCoTraining) -> dict[str, Any]:
         "rounds": run.round,
         "stopped_early": run.stopped,
         "env_steps_per_agent": int(last[0]["env_steps"]),
-        "optimal_return": run.policy_metrics.optimal_return,
-        "random_return": run.policy_metrics.random_return,
+        **run.reference_returns(),
         "mean": {key: float(np.mean([r[key] for r in last])) for key in SUMMARY_METRICS},
         "per_view": {r["view"]: {key: r[key] for key in (*SUMMARY_METRICS, "eps", "pace")} for r in last},
     }
@@ -242,11 +262,17 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
     :return: per view and averaged: greedy return, success, normalised score and agreement.
     """
     cfg = _run_config(run_dir)
-    make_env, views, _ = build_task(cfg)
-    mdp = TabularMDP.from_env(make_env(), {v: views[v] for v in cfg.views}, cfg.env.episode_steps)
-    greedy = np.stack([_load_agent(run_dir / f"agent_{v}.zip").predict(mdp.views[v], deterministic=True)[0]
-                       for v in cfg.views])  # fmt: skip
-    policy = metrics.GreedyPolicyMetrics(mdp, discount=1.0)(greedy)
+    agents = [_load_agent(run_dir / f"agent_{v}.zip") for v in cfg.views]
+    if cfg.task == "highway":  # greedy evaluation episodes on the task, as during training
+        run = build_run(cfg)
+        run.agents = agents
+        policy = run.evaluate_policies()
+    else:
+        make_env, views, _ = build_task(cfg)
+        mdp = TabularMDP.from_env(make_env(), {v: views[v] for v in cfg.views}, cfg.env.episode_steps)
+        pairs = zip(agents, cfg.views, strict=True)
+        greedy = np.stack([agent.predict(mdp.views[v], deterministic=True)[0] for agent, v in pairs])
+        policy = metrics.GreedyPolicyMetrics(mdp, discount=1.0)(greedy)
     per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
     result = {"per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()}}
     write_json(run_dir / "evaluation.json", result)

@@ -18,6 +18,7 @@ import tomllib
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from functools import partial
 from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
@@ -79,6 +80,34 @@ class EnvConfig:
     def episode_steps(self) -> int:
         """The episode length limit, ``4 N`` unless set."""
         return self.max_episode_steps or 4 * self.size
+
+
+@dataclass(frozen=True)
+class HighwayConfig:
+    """A highway task (``task = "highway"``): highway-env's or our fast env, with sensor views.
+
+    :param env_id: ``"highway-fast-v0"``, ``"highway-v0"``, ``"merge-v0"``, ``"roundabout-v0"``
+        (highway-env, the ``highway`` extra) or ``"dospcot/FastHighway-v0"`` (ours, numpy).
+    :param episode_steps: policy steps of an evaluation episode (highway-fast-v0: its 30 s at 1 Hz); an
+        episode that lasts them all counts as a success, and they bound the normalised score.
+    :param reward_classes: K, the quantile bins of the continuous reward.
+    :param eval_episodes: greedy evaluation episodes per agent and round.
+    :param config: the task's own config overrides: highway-env's keys (``vehicles_count``,
+        ``duration``, ...), or :class:`dospcot.envs.FastHighwayConfig`'s for the fast env.
+    """
+
+    env_id: str = "highway-fast-v0"
+    episode_steps: int = 30
+    reward_classes: int = 5
+    eval_episodes: int = 10
+    config: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.episode_steps < 1 or self.reward_classes < 1 or self.eval_episodes < 1:
+            raise ValueError(
+                "episode_steps, reward_classes and eval_episodes must be >= 1, got "
+                f"{self.episode_steps}, {self.reward_classes}, {self.eval_episodes}"
+            )
 
 
 @dataclass(frozen=True)
@@ -156,6 +185,7 @@ class TrainConfig:
     :param views: one view per agent, from ``coords``, ``patch``, ``rays``.
     :param agents: the agent kind of each view (``esarsa_dqn`` or ``dqn``); empty: ``esarsa_dqn``
         for every view.
+    :param task: ``grid`` (the ``[env]`` section) or ``highway`` (the ``[highway]`` section).
     """
 
     name: str = "run"
@@ -163,7 +193,9 @@ class TrainConfig:
     method: Literal["oracle", "masked-zero", "labels-only", "cotrain"] = "cotrain"
     views: tuple[str, ...] = ("coords", "patch")
     agents: tuple[str, ...] = ()
+    task: Literal["grid", "highway"] = "grid"
     env: EnvConfig = field(default_factory=EnvConfig)
+    highway: HighwayConfig = field(default_factory=HighwayConfig)
     training: TrainingConfig = field(default_factory=TrainingConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
@@ -173,12 +205,12 @@ class TrainConfig:
             raise ConfigError(f"name: must be a plain folder name, got {self.name!r}")
         if self.seed < 0:
             raise ConfigError(f"seed: must be >= 0, got {self.seed}")
+        allowed = ", ".join(self.view_names)
         if not self.views:
-            raise ConfigError(f"views: need at least one view; allowed: {', '.join(GRID_VIEWS)}")
+            raise ConfigError(f"views: need at least one view; allowed: {allowed}")
         for view in self.views:
-            if view not in GRID_VIEWS:
-                allowed = ", ".join(GRID_VIEWS)
-                raise ConfigError(f"views: the grid world has no view {view!r}; allowed: {allowed}")
+            if view not in self.view_names:
+                raise ConfigError(f"views: the {self.task_name} has no view {view!r}; allowed: {allowed}")
         if len(set(self.views)) != len(self.views):
             raise ConfigError(f"views: each view may appear once, got {list(self.views)}")
         if self.agents and len(self.agents) != len(self.views):
@@ -189,6 +221,23 @@ class TrainConfig:
             if kind not in AGENT_KINDS:
                 raise ConfigError(f"agents: unknown agent kind {kind!r}; allowed: {', '.join(AGENT_KINDS)}")
 
+        if self.task == "highway":
+            _check_highway_task(self.highway)
+
+    @property
+    def task_name(self) -> str:
+        """The task, in words."""
+        return "grid world" if self.task == "grid" else self.highway.env_id
+
+    @property
+    def view_names(self) -> tuple[str, ...]:
+        """The views the task offers."""
+        if self.task == "grid":
+            return GRID_VIEWS
+        from dospcot.envs.highway import highway_view_names
+
+        return highway_view_names(self.highway.env_id)
+
     @property
     def agent_kinds(self) -> tuple[str, ...]:
         """The agent kind of each view."""
@@ -197,6 +246,24 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         """The config as plain TOML-ready values (tuples become lists)."""
         return _plain(dataclasses.asdict(self))
+
+
+def _check_highway_task(highway: HighwayConfig) -> None:
+    from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, check_highway_config
+
+    if highway.env_id == FAST_HIGHWAY_ID:
+        from dospcot.envs.fast_highway import FastHighwayEnv
+
+        check = FastHighwayEnv.check_overrides
+    elif highway.env_id in HIGHWAY_ENV_IDS:
+        check = partial(check_highway_config, highway.env_id)
+    else:
+        allowed = ", ".join((*HIGHWAY_ENV_IDS, FAST_HIGHWAY_ID))
+        raise ConfigError(f"highway.env_id: unknown task {highway.env_id!r}; allowed: {allowed}")
+    try:
+        check(highway.config)
+    except ValueError as err:
+        raise ConfigError(f"highway.config: {err}") from None
 
 
 def _plain(value: Any) -> Any:
@@ -314,6 +381,10 @@ def _convert(hint: Any, value: Any, key: str) -> Any:
         if not isinstance(value, list | tuple):
             raise ConfigError(f"{key}: expected a list, got {value!r}")
         return tuple(_convert(args[0], item, key) for item in value)
+    if origin is dict:
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{key}: expected a table, got {value!r}")
+        return dict(value)
     if hint is bool:
         if not isinstance(value, bool):
             raise ConfigError(f"{key}: expected true or false, got {value!r}")

@@ -3,31 +3,55 @@
 from gymnasium.envs.registration import register
 
 from dospcot.envs.cliffwalking import CLIFF_VIEWS, make_masked_cliffwalking
+from dospcot.envs.fast_highway import FastHighwayConfig, FastHighwayEnv, FastHighwayVec
 from dospcot.envs.finite_check import FiniteCheckWrapper, NonFiniteError
 from dospcot.envs.gridworld import GridLayout, GridWorld, grid_views, make_masked_gridworld
+from dospcot.envs.highway import make_highway, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper, StateActionMask, check_label_fraction
+from dospcot.envs.sensors import SensorViewWrapper
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import MultiViewWrapper, View, ViewObservationWrapper, select_views
 
 register(id="dospcot/MaskedCliffWalking-v1", entry_point="dospcot.envs.cliffwalking:make_masked_cliffwalking")
 register(id="dospcot/GridWorld-v0", entry_point="dospcot.envs.gridworld:GridWorld", max_episode_steps=64)
 register(id="dospcot/MaskedGridWorld-v0", entry_point="dospcot.envs.gridworld:make_masked_gridworld")
+# Highway driving: our fast env, and every task masked per transition with sensor views (highway-env's
+# need the `highway` extra; it is imported only when one is made).
+register(id="dospcot/FastHighway-v0", entry_point="dospcot.envs.fast_highway:FastHighwayEnv")
+register(
+    id="dospcot/MaskedFastHighway-v0",
+    entry_point="dospcot.envs.highway:make_masked_highway",
+    kwargs={"env_id": "dospcot/FastHighway-v0"},
+)
+for _task in ("highway-fast-v0", "merge-v0", "roundabout-v0"):
+    _name = "".join(part.capitalize() for part in _task[:-3].split("-"))
+    register(
+        id=f"dospcot/Masked{_name}-v0",
+        entry_point="dospcot.envs.highway:make_masked_highway",
+        kwargs={"env_id": _task},
+    )
 
 __all__ = [
     "CLIFF_VIEWS",
+    "FastHighwayConfig",
+    "FastHighwayEnv",
+    "FastHighwayVec",
     "FiniteCheckWrapper",
     "GridLayout",
     "GridWorld",
     "MultiViewWrapper",
     "NonFiniteError",
     "RewardMaskWrapper",
+    "SensorViewWrapper",
     "StateActionMask",
     "TabularMDP",
     "View",
     "ViewObservationWrapper",
     "check_label_fraction",
     "grid_views",
+    "make_highway",
     "make_masked_cliffwalking",
     "make_masked_gridworld",
+    "make_masked_highway",
     "select_views",
 ]

@@ -6,7 +6,7 @@ Two modes (DESIGN.md section 1):
   ``label_fraction``, is labelled; the subset is drawn once from ``mask_seed`` and stays the same
   across resets.
 - ``"transition"``: each step is revealed with probability ``label_fraction``, from a generator
-  seeded by ``mask_seed``.
+  seeded by ``mask_seed`` (and re-seeded from ``mask_seed`` and the seed of every seeded reset).
 
 A masked step returns reward 0.0 with ``info["reward_observed"] = False``. The true reward is kept
 in ``info["hidden_reward"]`` for metrics only.
@@ -57,7 +57,7 @@ class StateActionMask:
         return bool(self.labelled[state, action])
 
 
-class RewardMaskWrapper(gym.Wrapper):
+class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Hide the reward of unlabelled transitions.
 
     :param env: the env to mask. In ``"state-action"`` mode both spaces must be ``Discrete``.
@@ -74,6 +74,9 @@ class RewardMaskWrapper(gym.Wrapper):
         mode: MaskMode = "state-action",
         mask_seed: int = 0,
     ) -> None:
+        gym.utils.RecordConstructorArgs.__init__(
+            self, label_fraction=label_fraction, mode=mode, mask_seed=mask_seed
+        )
         super().__init__(env)
         if mode not in MASK_MODES:
             raise ValueError(f"mode must be one of {MASK_MODES}, got {mode!r}")
@@ -91,12 +94,16 @@ class RewardMaskWrapper(gym.Wrapper):
             self.mask = StateActionMask(
                 int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed
             )
+        self._mask_seed = mask_seed
         self._reveal_rng = np.random.default_rng(mask_seed)
         self._state: int | None = None
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self._state = obs if self.mode == "state-action" else None
+        if kwargs.get("seed") is not None:
+            # A seeded reset replays the same reveals too, as gymnasium's determinism contract asks.
+            self._reveal_rng = np.random.default_rng([self._mask_seed, kwargs["seed"]])
         return obs, info
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:

@@ -1,0 +1,311 @@
+"""DOSPCoT with neural agents on a continuous task (highway driving): one run, m sensor views.
+
+The discrete co-trainer (:mod:`dospcot.neural_cotraining`) pools (s, a) keys; here a state is a
+sensor reading that never repeats exactly, so every stored step is one pool sample (DESIGN.md
+section 2). The round is the same, top to bottom in :meth:`TransitionCoTraining._cotrain` and the
+base class's ``run_round``:
+
+1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps on its own copy of the
+   task; each step is revealed with probability ``label_fraction`` (transition-mode masking) and
+   enters the :class:`TransitionStore` with every view of s and s'.
+2. **Co-train**: the continuous reward is binned into K quantile classes of the labels
+   (:class:`~dospcot.reward_classes.QuantileRewardClasses`); labelled steps and the unlabelled pool U
+   (every masked step) go to the :class:`~dospcot.cotraining.SelfPacedCoTrainer`, whose classifier of
+   view j reads (view j of s, one-hot action, view j of s').
+3. **Pseudo-reward**: an admitted step's reward is the mean of its consensus bin, weighed by its
+   self-paced weight, in the shared reward table.
+4-5. As in the discrete co-trainer: replay relabels at sample time; the pace sets exploration.
+
+Policies are measured by greedy evaluation episodes on unmasked copies of the task: the mean true
+return, the share of episodes that last their whole duration (no crash) and the normalised score
+``(R - R_random) / (R_max - R_random)``, where ``R_random`` is a uniformly random policy's return on
+the same evaluation seeds and ``R_max`` the number of evaluation steps (every reward of highway-env's
+normalised reward is at most 1). There is no exact optimum, so no optimal-action agreement (NaN).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, replace
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from stable_baselines3.common.evaluation import evaluate_policy
+from stable_baselines3.common.monitor import Monitor
+from stable_baselines3.common.vec_env import DummyVecEnv
+
+from dospcot.cotraining import Pool, SelfPacedCoTrainer
+from dospcot.envs.masking import RewardMaskWrapper
+from dospcot.neural_cotraining import (
+    NeuralConfig,
+    NeuralCoTraining,
+    NeuralRunSpec,
+    make_agent,
+    relabelling_kwargs,
+)
+from dospcot.policies import RewardTable
+from dospcot.reward_classes import QuantileRewardClasses
+
+EVAL_SEED = 1_000_003
+"""Evaluation episodes start from seeds ``EVAL_SEED + i``, apart from every training seed."""
+
+
+class TransitionStore:
+    """Every step the agents of one run took, one pool sample each, with every view of s and s'.
+
+    A state reading is stored once as a *row*: a step refers to the row of its s (the reset's or the
+    previous step's s') and of its s', so consecutive steps share rows.
+
+    :param view_shapes: the shape of each view, by name.
+    """
+
+    def __init__(self, view_shapes: dict[str, tuple[int, ...]]) -> None:
+        self.rows = {
+            name: np.zeros((0, int(np.prod(shape))), np.float32) for name, shape in view_shapes.items()
+        }
+        self._n_rows = 0
+        self._n = 0
+        self.state_row = np.zeros(0, np.int64)
+        self.next_row = np.zeros(0, np.int64)
+        self.action = np.zeros(0, np.int64)
+        self.labelled = np.zeros(0, bool)
+        self.label_value = np.zeros(0)
+        self.hidden_reward = np.zeros(0)
+        """The true reward of each step: metrics only, never the learners."""
+
+    def __len__(self) -> int:
+        return self._n
+
+    def add_row(self, views: dict[str, np.ndarray]) -> int:
+        """Store one state reading (every view); return its row."""
+        if self._n_rows == len(next(iter(self.rows.values()))):
+            grow = max(1024, self._n_rows)
+            self.rows = {name: _grow(rows, grow) for name, rows in self.rows.items()}
+        for name, rows in self.rows.items():
+            rows[self._n_rows] = np.ravel(views[name])
+        self._n_rows += 1
+        return self._n_rows - 1
+
+    def add(
+        self, state_row: int, action: int, next_row: int, observed: bool, reward: float, hidden: float
+    ) -> int:
+        """Record one step between two stored rows; return its store id."""
+        if self._n == self.action.size:
+            grow = max(1024, self._n)
+            for name in ("state_row", "next_row", "action", "labelled", "label_value", "hidden_reward"):
+                setattr(self, name, _grow(getattr(self, name), grow))
+        n = self._n
+        self.state_row[n], self.action[n], self.next_row[n] = state_row, action, next_row
+        self.labelled[n], self.label_value[n], self.hidden_reward[n] = (
+            observed,
+            reward if observed else 0.0,
+            hidden,
+        )
+        self._n += 1
+        return n
+
+    def features(self, view: str, n_actions: int) -> np.ndarray:
+        """(len, 2 d + A) float32: view of s, one-hot action, view of s' of every step."""
+        rows, n = self.rows[view], self._n
+        onehot = np.eye(n_actions, dtype=np.float32)[self.action[:n]]
+        return np.concatenate([rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]], axis=1)
+
+
+def _grow(array: np.ndarray, extra: int) -> np.ndarray:
+    return np.concatenate([array, np.zeros((extra, *array.shape[1:]), array.dtype)])
+
+
+class SensorStoreWrapper(gym.Wrapper):
+    """Write every step, with every view of s and s' (``info["views"]``), into a :class:`TransitionStore`
+    and put its id in ``info["store_id"]``. Sits above :class:`~dospcot.envs.RewardMaskWrapper`."""
+
+    def __init__(self, env: gym.Env, store: TransitionStore) -> None:
+        super().__init__(env)
+        self.store = store
+        self._row = -1
+
+    def reset(self, **kwargs: Any):
+        obs, info = self.env.reset(**kwargs)
+        self._row = self.store.add_row(info["views"])
+        return obs, info
+
+    def step(self, action: Any):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        next_row = self.store.add_row(info["views"])
+        info = dict(info)
+        info["store_id"] = self.store.add(
+            self._row, int(action), next_row, info["reward_observed"], float(reward), info["hidden_reward"]
+        )
+        self._row = next_row
+        return obs, reward, terminated, truncated, info
+
+
+@dataclass(frozen=True)
+class TransitionConfig(NeuralConfig):
+    """A continuous run: :class:`~dospcot.neural_cotraining.NeuralConfig` plus
+
+    :param reward_classes: K, the quantile bins of the continuous reward.
+    :param eval_episodes: greedy evaluation episodes per agent and round.
+    """
+
+    reward_classes: int = 5
+    eval_episodes: int = 10
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.reward_classes < 1 or self.eval_episodes < 1:
+            raise ValueError(
+                "reward_classes and eval_episodes must be >= 1, "
+                f"got {self.reward_classes}, {self.eval_episodes}"
+            )
+
+
+class _RandomPolicy:
+    """A uniformly random policy with SB3's ``predict`` signature (the normalised score's floor)."""
+
+    def __init__(self, action_space: gym.spaces.Discrete, seed: int) -> None:
+        self.n, self.rng = int(action_space.n), np.random.default_rng(seed)
+
+    def predict(
+        self, obs: np.ndarray, state: Any = None, episode_start: Any = None, deterministic: bool = False
+    ):
+        return self.rng.integers(self.n, size=len(obs)), None
+
+
+class TransitionCoTraining(NeuralCoTraining):
+    """One neural run on a continuous sensor task.
+
+    :param make_env: ``make_env(view, views, label_fraction, mask_seed)`` builds a masked sensor env
+        observing ``view`` and recording ``views`` (:func:`dospcot.envs.highway.make_masked_highway`).
+    :param spec: the run.
+    :param config: its hyperparameters; ``max_episode_steps`` bounds evaluation episodes and is
+        ``R_max`` of the normalised score.
+    """
+
+    def __init__(
+        self, make_env: Callable[..., gym.Env], spec: NeuralRunSpec, config: TransitionConfig
+    ) -> None:
+        self.spec, self.config = spec, config
+        fraction = 1.0 if spec.method == "oracle" else config.label_fraction
+        self.table = RewardTable()
+        buffer_kwargs = relabelling_kwargs(spec.method, self.table)
+        envs = [make_env(v, spec.views, fraction, spec.seed * 1000 + k) for k, v in enumerate(spec.views)]
+        self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
+        self.store = TransitionStore(self.shapes)
+        self.masks: list[RewardMaskWrapper] = []
+        self.agents = []
+        for k, (kind, view, env) in enumerate(zip(spec.agents, spec.views, envs, strict=True)):
+            self.masks.append(_find(env, RewardMaskWrapper))
+            env = SensorStoreWrapper(env, self.store)
+            self.agents.append(make_agent(env, k, kind, view, spec, config, buffer_kwargs))
+        self.n_actions = int(self.agents[0].action_space.n)
+        self.trainer: SelfPacedCoTrainer | None = None
+        self.classes = QuantileRewardClasses(config.reward_classes)
+        if spec.method == "cotrain":
+            dims = [2 * int(np.prod(self.shapes[v])) + self.n_actions for v in spec.views]
+            cfg = replace(config.cotraining, gamma=spec.gamma, max_classes=config.reward_classes)
+            self.trainer = SelfPacedCoTrainer(dims, 1, cfg, [spec.seed])
+        self.round = 0
+        self.stopped = False
+        self.eval_envs = [_eval_env(make_env, v, config.max_episode_steps) for v in spec.views]
+        returns = self._returns(_RandomPolicy(self.agents[0].action_space, spec.seed), self.eval_envs[0])[0]
+        self.random_return = float(np.mean(returns))
+
+    def _cotrain(self) -> dict:
+        store = self.store
+        n = len(store)
+        labelled, unlabelled = store.labelled[:n], ~store.labelled[:n]
+        self.classes.fit(store.label_value[:n][labelled])
+        label_class = np.where(labelled, self.classes.encode(store.label_value[:n][None])[0], -1)
+        features = [store.features(v, self.n_actions)[None] for v in self.spec.views]
+        result = self.trainer.step(
+            Pool(features, labelled[None], label_class[None], unlabelled[None], self.classes.mask)
+        )
+        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
+        admitted = result.pseudo_weight[0] > 0
+        self.table.set(np.arange(n), pseudo, result.pseudo_weight[0])
+        truth = self.classes.encode(store.hidden_reward[:n][None])[0]  # metrics only: the true bin
+        per_view = []
+        for j in range(len(self.spec.views)):
+            taken = result.view_weight[j, 0] > 0
+            correct = result.view_class[j, 0] == truth
+            lam = result.threshold[j, 0]
+            per_view.append({
+                "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
+                "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
+                "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
+                "classifier_loss": float(result.classifier_loss[j, 0]),
+            })  # fmt: skip
+        self.stopped = bool(result.stopped[0])
+        accurate = result.pseudo_class[0] == truth
+        return {
+            "pace": float(result.pace[0]),
+            "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
+            "pseudo_accuracy": float(accurate[admitted].mean()) if admitted.any() else float("nan"),
+            "views": per_view,
+        }
+
+    def _returns(self, policy: Any, env: DummyVecEnv) -> tuple[np.ndarray, np.ndarray]:
+        env.seed(EVAL_SEED)
+        returns, lengths = evaluate_policy(
+            policy,
+            env,
+            n_eval_episodes=self.config.eval_episodes,
+            deterministic=True,
+            return_episode_rewards=True,
+        )
+        return np.asarray(returns, dtype=np.float64), np.asarray(lengths)
+
+    def evaluate_policies(self) -> dict[str, np.ndarray]:
+        """Greedy evaluation episodes of every agent: (m,) ``greedy_return`` (mean true return),
+        ``success`` (share of episodes without a crash), ``normalised_score``; ``agreement`` is NaN."""
+        r_max = float(self.config.max_episode_steps)
+        out: dict[str, list[float]] = {
+            "greedy_return": [],
+            "success": [],
+            "normalised_score": [],
+            "agreement": [],
+        }
+        for agent, env in zip(self.agents, self.eval_envs, strict=True):
+            returns, lengths = self._returns(agent, env)
+            out["greedy_return"].append(float(returns.mean()))
+            out["success"].append(float((lengths >= self.config.max_episode_steps).mean()))
+            out["normalised_score"].append(
+                (returns.mean() - self.random_return) / (r_max - self.random_return)
+            )
+            out["agreement"].append(float("nan"))
+        return {key: np.asarray(values) for key, values in out.items()}
+
+    def reference_returns(self) -> dict[str, float]:
+        return {"max_return": float(self.config.max_episode_steps), "random_return": self.random_return}
+
+    def state_dict(self) -> dict[str, Any]:
+        state = super().state_dict()
+        state["mask_rng"] = [mask._reveal_rng.bit_generator.state for mask in self.masks]
+        return state
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        super().load_state_dict(state)
+        for mask, rng_state in zip(self.masks, state["mask_rng"], strict=True):
+            mask._reveal_rng.bit_generator.state = rng_state
+
+
+def _find(env: gym.Env, cls: type) -> Any:
+    while not isinstance(env, cls):
+        if not isinstance(env, gym.Wrapper):
+            raise ValueError(f"the task's env has no {cls.__name__}")
+        env = env.env
+    return env
+
+
+def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> DummyVecEnv:
+    """An unmasked copy of the task observing ``view`` (the hidden reward is the reward)."""
+
+    def build() -> gym.Env:
+        return Monitor(gym.wrappers.TimeLimit(make_env(view, (view,), 1.0, 0), max_steps))
+
+    return DummyVecEnv([build])
+
+
+__all__ = ["SensorStoreWrapper", "TransitionCoTraining", "TransitionConfig", "TransitionStore"]

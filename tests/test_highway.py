@@ -1,0 +1,171 @@
+"""Highway tasks: the highway-env adapter, sensor views, binned reward classes, transition co-training."""
+
+import json
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env as gym_check_env
+from stable_baselines3 import DQN
+from stable_baselines3.common.env_checker import check_env as sb3_check_env
+
+from dospcot.cli import main
+from dospcot.envs.highway import make_masked_highway
+from dospcot.reward_classes import QuantileRewardClasses
+from dospcot.train import build_run, evaluate
+from dospcot.train_config import ConfigError, load_config
+
+pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
+
+TINY = [
+    "training.rounds=2", "training.steps_per_round=120", "dqn.learning_starts=40", "dqn.net_arch=[32]",
+    "highway.eval_episodes=2",
+]  # fmt: skip
+RUN_FILES = [
+    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json", "checkpoint.pkl",
+    "agent_kinematics.zip", "agent_occupancy.zip", "classifier_kinematics.pt", "classifier_occupancy.pt",
+    "reward_classes.json",
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("env_id", ["highway-fast-v0", "dospcot/FastHighway-v0"])
+@pytest.mark.parametrize("view", ["kinematics", "occupancy"])
+def test_masked_sensor_envs_pass_gymnasium_and_sb3_env_checkers(env_id, view):
+    gym_check_env(make_masked_highway(env_id, view), skip_render_check=True)
+    sb3_check_env(make_masked_highway(env_id, view))
+
+
+@pytest.mark.parametrize(("view", "obs_type"), [("kinematics", "Kinematics"), ("occupancy", "OccupancyGrid"),
+                                                ("ttc", "TimeToCollision")])  # fmt: skip
+def test_each_view_is_the_observation_highway_env_returns_for_the_same_state(view, obs_type):
+    ours = make_masked_highway("highway-fast-v0", view, (view, "kinematics"), label_fraction=1.0)
+    theirs = gym.make("highway-fast-v0", config={"observation": {"type": obs_type}})
+    obs, info = ours.reset(seed=3)
+    expected, _ = theirs.reset(seed=3)
+    np.testing.assert_array_equal(obs, expected)
+    np.testing.assert_array_equal(info["views"][view], expected)
+    for action in [1, 3, 0, 3, 2, 4, 1, 1]:
+        obs, reward, terminated, truncated, info = ours.step(action)
+        expected, true_reward, *_ = theirs.step(action)
+        np.testing.assert_array_equal(obs, expected)
+        assert reward == true_reward == info["hidden_reward"]
+        if terminated or truncated:
+            break
+
+
+def test_transition_masking_reveals_about_the_label_fraction_and_keeps_the_truth_aside():
+    env = make_masked_highway("dospcot/FastHighway-v0", label_fraction=0.25, mask_seed=1)
+    env.reset(seed=0)
+    observed = []
+    for _ in range(400):
+        _, reward, terminated, truncated, info = env.step(env.action_space.sample())
+        observed.append(info["reward_observed"])
+        assert reward == (info["hidden_reward"] if info["reward_observed"] else 0.0)
+        assert set(info["views"]) == {"kinematics", "occupancy"}
+        if terminated or truncated:
+            env.reset()
+    assert 0.18 < np.mean(observed) < 0.32
+
+
+def test_quantile_reward_classes_bin_by_label_quantiles_and_round_trip():
+    classes = QuantileRewardClasses(4)
+    labels = np.array([0.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7])
+    classes.fit(labels)
+    # Quartile edges of the labels: 0.175, 0.35, 0.525; bin means by hand.
+    np.testing.assert_allclose(classes.edges, [0.175, 0.35, 0.525])
+    np.testing.assert_allclose(classes.values[0], [0.05, 0.25, 0.45, 0.65])
+    encoded = classes.encode(np.array([[0.0, 0.2, 0.35, 0.9, -1.0]]))
+    np.testing.assert_array_equal(encoded, [[0, 1, 2, 3, 0]])
+    every_class = np.arange(4)[None]
+    np.testing.assert_array_equal(classes.encode(classes.decode(every_class)), every_class)
+    np.testing.assert_allclose(
+        classes.decode(classes.encode(labels[None]))[0], [0.05] * 2 + [0.25] * 2 + [0.45] * 2 + [0.65] * 2
+    )
+    # A reward that fills several quantiles merges their bins; unknown classes decode to NaN.
+    classes.fit(np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0]))  # quartiles 0, 1, 1
+    np.testing.assert_allclose(classes.values[0, :2], [0.0, 1.0])
+    assert not classes.mask[0, 2:].any() and np.isnan(classes.decode(np.array([[-1]]))[0, 0])
+
+
+def _train(tmp_path, preset: str, *overrides: str):
+    args = ["train", preset, "--runs-dir", str(tmp_path), "--no-progress"]
+    assert main([*args, *(a for o in (*TINY, *overrides) for a in ("--set", o))]) == 0
+    (run_dir,) = (tmp_path / load_config(preset).name).iterdir()
+    return run_dir
+
+
+def test_short_cotraining_on_the_fast_env_writes_every_run_file_and_evaluates(tmp_path):
+    run_dir = _train(tmp_path, "fasthighway-dospcot")
+    assert sorted(RUN_FILES) == sorted(p.name for p in run_dir.iterdir() if p.is_file())
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["env_steps_per_agent"] == 240 and summary["max_return"] == 30.0
+    assert 0 <= summary["mean"]["coverage"] <= 1 and 0 <= summary["mean"]["pseudo_accuracy"] <= 1
+    classes = json.loads((run_dir / "reward_classes.json").read_text())["rewards"]
+    assert 1 <= len(classes) <= 5 and classes == sorted(classes)
+    evaluation = evaluate(run_dir)
+    for view in ("kinematics", "occupancy"):
+        assert evaluation["per_view"][view]["greedy_return"] == summary["per_view"][view]["greedy_return"]
+
+
+def test_an_agent_trained_on_the_fast_env_drives_on_highway_env_through_the_same_view(tmp_path):
+    run_dir = _train(tmp_path, "fasthighway-oracle")
+    agent = DQN.load(run_dir / "agent_kinematics.zip", device="cpu")
+    env = make_masked_highway("highway-fast-v0", "kinematics", label_fraction=1.0)
+    assert agent.observation_space == env.observation_space and agent.action_space == env.action_space
+    obs, _ = env.reset(seed=0)
+    total, steps = 0.0, 0
+    for steps in range(1, 31):  # noqa: B007
+        action, _ = agent.predict(obs, deterministic=True)
+        obs, reward, terminated, truncated, _ = env.step(action)
+        total += reward
+        if terminated or truncated:
+            break
+    assert steps >= 1 and 0.0 <= total <= steps
+
+
+def test_a_resumed_highway_run_continues_exactly():
+    cfg = load_config("fasthighway-dospcot", TINY)
+    straight = build_run(cfg)
+    straight.run()
+    first = build_run(cfg)
+    first.run_round()
+    state = pickle.loads(pickle.dumps(first.state_dict()))
+    resumed = build_run(cfg)
+    resumed.load_state_dict(state)
+    rows = resumed.run_round()
+    expected = straight._records({})  # the same agents, evaluated afresh
+    assert [r["greedy_return"] for r in rows] == [r["greedy_return"] for r in expected]
+    for a, b in zip(resumed.agents, straight.agents, strict=True):
+        for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
+            assert np.array_equal(p.detach().numpy(), q.detach().numpy())
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("highway.env_id=nope-v0", "highway.env_id: unknown task 'nope-v0'; allowed: highway-fast-v0"),
+        (
+            "highway.config={vehicle_count=3}",
+            "highway.config: highway-fast-v0 has no config key 'vehicle_count'",
+        ),
+        ('highway.config={observation={type="Kinematics"}}', "'observation' is set by dospcot"),
+        (
+            'views=["lidar"]',
+            "views: the highway-fast-v0 has no view 'lidar'; allowed: kinematics, occupancy, ttc",
+        ),
+        ("highway.reward_classes=0", "reward_classes and eval_episodes must be >= 1"),
+    ],
+)
+def test_bad_highway_configs_fail_with_one_line(tmp_path, capsys, override, message):
+    code = main(["train", "highway-dospcot", "--runs-dir", str(tmp_path), "--set", override])
+    err = capsys.readouterr().err
+    assert code == 2 and message in err and err.count("\n") == 1
+    assert not (tmp_path / "highway-dospcot").exists()
+
+
+def test_fast_env_config_keys_and_views_are_checked():
+    with pytest.raises(ConfigError, match=r"highway.config: .*speed_limit"):
+        load_config("fasthighway-dospcot", ["highway.config={speed_limit=3}"])
+    with pytest.raises(ConfigError, match="no view 'ttc'; allowed: kinematics, occupancy"):
+        load_config("fasthighway-dospcot", ['views=["ttc"]'])
