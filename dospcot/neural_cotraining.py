@@ -33,7 +33,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot import metrics
-from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
+from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.envs.masking import RewardMaskWrapper, check_label_fraction
 from dospcot.envs.tabular import TabularMDP
@@ -131,6 +131,19 @@ class NeuralRunSpec(RunSpec):
     def check_agent(self, kind: str) -> None:
         if kind not in AGENT_TARGETS:
             raise ValueError(f"unknown agent kind {kind!r}; allowed: {sorted(AGENT_TARGETS)}")
+
+
+def view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
+    """View j's round (run 0 of ``result``): coverage of U, accuracy of what it admitted, mean lambda
+    and classifier loss. ``correct`` (N,) says where its predicted class matches the hidden truth."""
+    taken = result.view_weight[j, 0] > 0
+    lam = result.threshold[j, 0]
+    return {
+        "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
+        "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
+        "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
+        "classifier_loss": float(result.classifier_loss[j, 0]),
+    }
 
 
 def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
@@ -282,17 +295,10 @@ class NeuralCoTraining:
         self.table.set(np.arange(len(keys)), pseudo[keys], result.pseudo_weight[0][keys])
         truth = store.hidden_reward  # metrics only
         u, admitted = unlabelled[0], result.pseudo_weight[0] > 0
-        per_view = []
-        for j in range(len(self.spec.views)):
-            taken = result.view_weight[j, 0] > 0
-            correct = self.classes.decode(result.view_class[j])[0] == truth
-            lam = result.threshold[j, 0]
-            per_view.append({
-                "view_coverage": float(taken[u].mean()) if u.any() else 0.0,
-                "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
-                "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
-                "classifier_loss": float(result.classifier_loss[j, 0]),
-            })  # fmt: skip
+        per_view = [
+            view_stats(result, j, u, self.classes.decode(result.view_class[j])[0] == truth)
+            for j in range(len(self.spec.views))
+        ]
         self.stopped = bool(result.stopped[0])
         return {
             "pace": float(result.pace[0]),
@@ -369,7 +375,7 @@ class NeuralCoTraining:
         policy = self.evaluate_policies()
         rows = []
         for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
-            view_stats = stats["views"][k] if stats else {}
+            round_view = stats["views"][k] if stats else {}
             rows.append(
                 {
                     "method": self.spec.method,
@@ -391,7 +397,7 @@ class NeuralCoTraining:
                     "pace": stats.get("pace", float("nan")),
                     "coverage": stats.get("coverage", float("nan")),
                     "pseudo_accuracy": stats.get("pseudo_accuracy", float("nan")),
-                    **{key: view_stats.get(key, float("nan")) for key in VIEW_STATS},
+                    **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
                 }
             )
         return rows

@@ -43,6 +43,7 @@ from dospcot.neural_cotraining import (
     NeuralRunSpec,
     make_agent,
     relabelling_kwargs,
+    view_stats,
 )
 from dospcot.policies import RewardTable
 from dospcot.reward_classes import QuantileRewardClasses
@@ -226,17 +227,10 @@ class TransitionCoTraining(NeuralCoTraining):
         admitted = result.pseudo_weight[0] > 0
         self.table.set(np.arange(n), pseudo, result.pseudo_weight[0])
         truth = self.classes.encode(store.hidden_reward[:n][None])[0]  # metrics only: the true bin
-        per_view = []
-        for j in range(len(self.spec.views)):
-            taken = result.view_weight[j, 0] > 0
-            correct = result.view_class[j, 0] == truth
-            lam = result.threshold[j, 0]
-            per_view.append({
-                "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
-                "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
-                "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
-                "classifier_loss": float(result.classifier_loss[j, 0]),
-            })  # fmt: skip
+        per_view = [
+            view_stats(result, j, unlabelled, result.view_class[j, 0] == truth)
+            for j in range(len(self.spec.views))
+        ]
         self.stopped = bool(result.stopped[0])
         accurate = result.pseudo_class[0] == truth
         return {
