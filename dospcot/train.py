@@ -37,7 +37,7 @@ from tqdm.auto import tqdm
 import dospcot
 from dospcot import metrics
 from dospcot.classifier import save_classifier
-from dospcot.envs import GridLayout, GridWorld, TabularMDP, grid_views
+from dospcot.envs import GridLayout, GridWorld, TabularMDP, grid_views, make_masked_highway
 from dospcot.envs.views import View
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 from dospcot.plots import plot_learning_curves
@@ -103,7 +103,7 @@ def build_run(cfg: TrainConfig) -> NeuralCoTraining:
             **common, max_episode_steps=highway.episode_steps, reward_classes=highway.reward_classes,
             eval_episodes=highway.eval_episodes,
         )  # fmt: skip
-        make_env = partial(_masked_highway, highway.env_id, highway.config)
+        make_env = partial(make_masked_highway, highway.env_id, config=highway.config)
         return TransitionCoTraining(make_env, spec, config)
     make_env, views, _ = build_task(cfg)
     config = NeuralConfig(
@@ -111,14 +111,6 @@ def build_run(cfg: TrainConfig) -> NeuralCoTraining:
         train_episode_steps=cfg.env.train_episode_steps or None,
     )  # fmt: skip
     return NeuralCoTraining(make_env, views, spec, config)
-
-
-def _masked_highway(
-    env_id: str, config: dict[str, Any], view: str, views: tuple[str, ...], fraction: float, mask_seed: int
-) -> Any:
-    from dospcot.envs.highway import make_masked_highway
-
-    return make_masked_highway(env_id, view, views, fraction, mask_seed, config)
 
 
 class _StepBar(BaseCallback):

@@ -24,6 +24,8 @@ from pathlib import Path
 from typing import Any, Literal
 
 from dospcot.cotraining import CoTrainingConfig
+from dospcot.envs.fast_highway import FastHighwayEnv
+from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, check_highway_config, highway_view_names
 
 GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
 AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn")
@@ -234,8 +236,6 @@ class TrainConfig:
         """The views the task offers."""
         if self.task == "grid":
             return GRID_VIEWS
-        from dospcot.envs.highway import highway_view_names
-
         return highway_view_names(self.highway.env_id)
 
     @property
@@ -249,11 +249,7 @@ class TrainConfig:
 
 
 def _check_highway_task(highway: HighwayConfig) -> None:
-    from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, check_highway_config
-
     if highway.env_id == FAST_HIGHWAY_ID:
-        from dospcot.envs.fast_highway import FastHighwayEnv
-
         check = FastHighwayEnv.check_overrides
     elif highway.env_id in HIGHWAY_ENV_IDS:
         check = partial(check_highway_config, highway.env_id)

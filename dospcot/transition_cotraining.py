@@ -36,7 +36,6 @@ from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
 from dospcot.cotraining import Pool, SelfPacedCoTrainer
-from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.neural_cotraining import (
     NeuralConfig,
     NeuralCoTraining,
@@ -194,10 +193,8 @@ class TransitionCoTraining(NeuralCoTraining):
         envs = [make_env(v, spec.views, fraction, spec.seed * 1000 + k) for k, v in enumerate(spec.views)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
         self.store = TransitionStore(self.shapes)
-        self.masks: list[RewardMaskWrapper] = []
         self.agents = []
         for k, (kind, view, env) in enumerate(zip(spec.agents, spec.views, envs, strict=True)):
-            self.masks.append(_find(env, RewardMaskWrapper))
             env = SensorStoreWrapper(env, self.store)
             self.agents.append(make_agent(env, k, kind, view, spec, config, buffer_kwargs))
         self.n_actions = int(self.agents[0].action_space.n)
@@ -273,24 +270,6 @@ class TransitionCoTraining(NeuralCoTraining):
 
     def reference_returns(self) -> dict[str, float]:
         return {"max_return": float(self.config.max_episode_steps), "random_return": self.random_return}
-
-    def state_dict(self) -> dict[str, Any]:
-        state = super().state_dict()
-        state["mask_rng"] = [mask._reveal_rng.bit_generator.state for mask in self.masks]
-        return state
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        super().load_state_dict(state)
-        for mask, rng_state in zip(self.masks, state["mask_rng"], strict=True):
-            mask._reveal_rng.bit_generator.state = rng_state
-
-
-def _find(env: gym.Env, cls: type) -> Any:
-    while not isinstance(env, cls):
-        if not isinstance(env, gym.Wrapper):
-            raise ValueError(f"the task's env has no {cls.__name__}")
-        env = env.env
-    return env
 
 
 def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> DummyVecEnv:

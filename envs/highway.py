@@ -19,6 +19,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from dospcot.envs.fast_highway import VIEW_NAMES, FastHighwayEnv
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.sensors import SensorViewWrapper
 
@@ -81,8 +82,6 @@ def check_views(env_id: str, views: Sequence[str]) -> None:
 def highway_view_names(env_id: str) -> tuple[str, ...]:
     """The views of a highway task: our fast env lacks ``ttc``."""
     if env_id == FAST_HIGHWAY_ID:
-        from dospcot.envs.fast_highway import VIEW_NAMES
-
         return VIEW_NAMES
     return tuple(HIGHWAY_VIEW_TYPES)
 
@@ -125,8 +124,6 @@ class HighwayEnvSensors(gym.Wrapper, gym.utils.RecordConstructorArgs):
 def make_highway(env_id: str = "highway-fast-v0", config: Mapping[str, Any] | None = None) -> gym.Env:
     """A sensor env: highway-env's ``env_id`` (checked ``config`` applied) or our fast env."""
     if env_id == FAST_HIGHWAY_ID:
-        from dospcot.envs.fast_highway import FastHighwayEnv
-
         return FastHighwayEnv(**dict(config or {}))
     cfg = check_highway_config(env_id, config or {})
     return HighwayEnvSensors(gym.make(env_id, config=cfg, render_mode=None))

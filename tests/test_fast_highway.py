@@ -278,7 +278,7 @@ def test_bad_arguments_raise_value_errors() -> None:
         FastHighwayConfig(policy_frequency=10)
     with pytest.raises(ValueError, match="actions"):
         FastHighwayVec(2).step(np.array([0, 5]))
-    assert FastHighwayEnv(duration=5).config == FastHighwayConfig(duration=5)
+    assert FastHighwayEnv(lanes_count=4).config == FastHighwayConfig(lanes_count=4)
 
 
 def test_views_and_spaces_match_highway_fast_v0() -> None:
