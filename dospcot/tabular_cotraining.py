@@ -148,6 +148,7 @@ class TabularCoTraining:
         ] * np.ones((n_runs, n_s, n_a))
         self.pace = np.zeros(n_runs)
         self.active = np.ones(n_runs, dtype=bool)
+        self.env_steps = 0  # agent steps collected so far, summed over slots
         self.groups = self._make_groups()
         self.policy_metrics = metrics.GreedyPolicyMetrics(mdp, config.discount)
 
@@ -212,22 +213,35 @@ class TabularCoTraining:
         steps = np.zeros(n_slots, dtype=np.int64)
         episodes = np.zeros(n_slots, dtype=np.int64)
         action = np.zeros(n_slots, dtype=np.int64)
+        # Flat views of the (runs, S, A) and (S, A) tables: one index per step instead of three.
+        n_keys = mdp.n_states * mdp.n_actions
+        next_state, terminal, true_reward = (
+            x.reshape(-1) for x in (mdp.next_state, mdp.terminal, mdp.reward)
+        )
+        labelled, table_reward, table_weight = (
+            x.reshape(-1) for x in (self.labelled, self.table_reward, self.table_weight)
+        )
+        visited, stored_next, stored_terminal, label_value = (
+            x.reshape(-1) for x in (self.visited, self.stored_next, self.stored_terminal, self.label_value)
+        )
         idx = np.flatnonzero(running)
         action[idx] = agents.act(idx, state[idx], eps[idx])
         while idx.size:
-            run, s, a = self.slot_run[idx], state[idx], action[idx]
-            s2, terminated = mdp.next_state[s, a], mdp.terminal[s, a]
-            revealed = self.labelled[run, s, a]
+            self.env_steps += idx.size
+            s, a = state[idx], action[idx]
+            sa = s * mdp.n_actions + a
+            key = self.slot_run[idx] * n_keys + sa
+            s2, terminated = next_state[sa], terminal[sa]
+            revealed = labelled[key]
             # The mask: a learner sees the true reward only where the key is labelled.
-            observed_reward = np.where(revealed, mdp.reward[s, a], 0.0)
-            reward = np.where(revealed, observed_reward, self.table_reward[run, s, a])
-            weight = np.where(revealed, 1.0, self.table_weight[run, s, a])
-            self.visited[run, s, a] = True
-            self.stored_next[run, s, a] = s2
-            self.stored_terminal[run, s, a] = terminated
-            self.label_value[run, s, a] = np.where(revealed, observed_reward, self.label_value[run, s, a])
-            next_action = agents.act(idx, s2, eps[idx])
-            agents.update(idx, s, a, reward, weight, s2, terminated, next_action, eps[idx])
+            observed_reward = np.where(revealed, true_reward[sa], 0.0)
+            reward = np.where(revealed, observed_reward, table_reward[key])
+            weight = np.where(revealed, 1.0, table_weight[key])
+            visited[key] = True
+            stored_next[key] = s2
+            stored_terminal[key] = terminated
+            label_value[key] = np.where(revealed, observed_reward, label_value[key])
+            next_action = agents.act_and_update(idx, s, a, reward, weight, s2, terminated, eps[idx])
             steps[idx] += 1
             ended = terminated | (steps[idx] >= mdp.max_episode_steps)
             episodes[idx] += ended

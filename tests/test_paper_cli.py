@@ -110,4 +110,5 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert "Shared transition store vs the raw arrays: memory per million steps" in text
     assert "One co-training step, 100,000 vs 10,000 stored steps: growth against n log n" in text
     assert "FastHighwayVec vs highway-env's highway-fast-v0: env steps per second" in text
+    assert "Tabular agents, vectorised vs a per-step Python loop: agent steps per second" in text
     assert "| ratio | target | met |" in text

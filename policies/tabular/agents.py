@@ -85,7 +85,7 @@ class TabularAgents:
     def n_slots(self) -> int:
         return int(self.q.shape[0])
 
-    def _draw(self, slots: np.ndarray) -> np.ndarray:
+    def draw(self, slots: np.ndarray) -> np.ndarray:
         """Two uniforms for each slot in ``slots`` (B_sub,) from its own stream: (B_sub, 2)."""
         exhausted = slots[self._cursor[slots] >= _BLOCK]
         for i in exhausted:
@@ -97,8 +97,10 @@ class TabularAgents:
 
     def act(self, slots: np.ndarray, states: np.ndarray, eps: np.ndarray) -> np.ndarray:
         """Epsilon-greedy actions (random tie-breaking) of ``slots`` in ``states``; eps per slot."""
-        u = self._draw(slots)
-        rows = self.q[slots, states]
+        return self._choose(self.q[slots, states], self.draw(slots), eps)
+
+    def _choose(self, rows: np.ndarray, u: np.ndarray, eps: np.ndarray) -> np.ndarray:
+        """Epsilon-greedy actions for Q rows (B_sub, A) from uniforms ``u`` (B_sub, 2)."""
         ties = rows == rows.max(axis=1, keepdims=True)
         n_ties = ties.sum(axis=1)
         pick = np.minimum((u[:, 1] * n_ties).astype(np.int64), n_ties - 1)
@@ -107,15 +109,29 @@ class TabularAgents:
         random_action = np.minimum((u[:, 1] * n_actions).astype(np.int64), n_actions - 1)
         return np.where(u[:, 0] < eps, random_action, greedy)
 
-    def bootstrap(
-        self, slots: np.ndarray, next_states: np.ndarray, next_actions: np.ndarray, eps: np.ndarray
-    ):
-        """The bootstrap value of each slot's kind: max (Q), Q(s', a') (SARSA), expectation (ESARSA)."""
-        rows = self.q[slots, next_states]
+    def _bootstrap(
+        self, slots: np.ndarray, rows: np.ndarray, next_actions: np.ndarray, eps: np.ndarray
+    ) -> np.ndarray:
+        """The bootstrap value of each slot's kind from its Q(s', .) row: max (Q), Q(s', a') (SARSA),
+        expectation (ESARSA)."""
         sarsa = rows[np.arange(len(slots)), next_actions]
         expected = expected_value(rows, eps)
         kind = self.kind[slots]
         return np.where(kind == _Q, rows.max(axis=1), np.where(kind == _SARSA, sarsa, expected))
+
+    def _learn(
+        self,
+        slots: np.ndarray,
+        states: np.ndarray,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        weights: np.ndarray,
+        terminated: np.ndarray,
+        value: np.ndarray,
+    ) -> None:
+        target = rewards + self.discount * (~terminated) * value
+        current = self.q[slots, states, actions]
+        self.q[slots, states, actions] = current + self.learning_rate * weights * (target - current)
 
     def update(
         self,
@@ -133,11 +149,34 @@ class TabularAgents:
 
         Truncated (time-limit) transitions bootstrap as usual; only ``terminated`` ones do not.
         """
-        target = rewards + self.discount * (~terminated) * self.bootstrap(
-            slots, next_states, next_actions, eps
+        value = self._bootstrap(slots, self.q[slots, next_states], next_actions, eps)
+        self._learn(slots, states, actions, rewards, weights, terminated, value)
+
+    def act_and_update(
+        self,
+        slots: np.ndarray,
+        states: np.ndarray,
+        actions: np.ndarray,
+        rewards: np.ndarray,
+        weights: np.ndarray,
+        next_states: np.ndarray,
+        terminated: np.ndarray,
+        eps: np.ndarray,
+    ) -> np.ndarray:
+        """``a' = act(slots, next_states, eps)`` then ``update(..., a', eps)``, reading the rows
+        Q(s', .) once (the online step of the collection loop); returns a'."""
+        rows = self.q[slots, next_states]
+        next_actions = self._choose(rows, self.draw(slots), eps)
+        self._learn(
+            slots,
+            states,
+            actions,
+            rewards,
+            weights,
+            terminated,
+            self._bootstrap(slots, rows, next_actions, eps),
         )
-        current = self.q[slots, states, actions]
-        self.q[slots, states, actions] = current + self.learning_rate * weights * (target - current)
+        return next_actions
 
     def sweep(
         self,
