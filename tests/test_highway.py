@@ -2,6 +2,7 @@
 
 import json
 import pickle
+from functools import partial
 
 import gymnasium as gym
 import numpy as np
@@ -15,6 +16,7 @@ from dospcot.envs.highway import make_masked_highway
 from dospcot.reward_classes import QuantileRewardClasses
 from dospcot.train import build_run, evaluate
 from dospcot.train_config import ConfigError, load_config
+from dospcot.transition_cotraining import TransitionCoTraining
 
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
 
@@ -139,6 +141,36 @@ def test_a_resumed_highway_run_continues_exactly():
     for a, b in zip(resumed.agents, straight.agents, strict=True):
         for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
             assert np.array_equal(p.detach().numpy(), q.detach().numpy())
+
+
+class _ScrambledHiddenReward(gym.Wrapper):
+    """Replaces the hidden reward of every masked step (the truth only metrics may read) with 1 - r."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if not info["reward_observed"]:
+            info = dict(info, hidden_reward=1.0 - info["hidden_reward"])
+        return obs, reward, terminated, truncated, info
+
+
+def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_identical():
+    cfg = load_config("fasthighway-dospcot", TINY)
+    # SB3 seeds the global generators when an agent is built: build and run one run at a time.
+    plain = build_run(cfg)
+    plain.run()
+    make = partial(make_masked_highway, cfg.highway.env_id, config=cfg.highway.config)
+    scrambled = TransitionCoTraining(
+        lambda *args: _ScrambledHiddenReward(make(*args)), plain.spec, plain.config
+    )
+    scrambled.run()
+    n = len(plain.store)
+    assert (plain.table.weight[:n][~plain.store.labelled[:n]] > 0).any()  # pseudo-rewards were used
+    assert not np.array_equal(plain.store.hidden_reward[:n], scrambled.store.hidden_reward[:n])
+    for a, b in zip(plain.agents, scrambled.agents, strict=True):
+        for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
+            assert np.array_equal(p.detach().numpy(), q.detach().numpy())
+    assert np.array_equal(plain.table.reward, scrambled.table.reward)
+    assert np.array_equal(plain.table.weight, scrambled.table.weight)
 
 
 @pytest.mark.parametrize(
