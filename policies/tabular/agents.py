@@ -129,6 +129,7 @@ class TabularAgents:
         terminated: np.ndarray,
         value: np.ndarray,
     ) -> None:
+        """Q(s, a) += lr * w * (r + discount * value - Q(s, a)), with no bootstrap after termination."""
         target = rewards + self.discount * (~terminated) * value
         current = self.q[slots, states, actions]
         self.q[slots, states, actions] = current + self.learning_rate * weights * (target - current)
@@ -167,15 +168,8 @@ class TabularAgents:
         Q(s', .) once (the online step of the collection loop); returns a'."""
         rows = self.q[slots, next_states]
         next_actions = self._choose(rows, self.draw(slots), eps)
-        self._learn(
-            slots,
-            states,
-            actions,
-            rewards,
-            weights,
-            terminated,
-            self._bootstrap(slots, rows, next_actions, eps),
-        )
+        value = self._bootstrap(slots, rows, next_actions, eps)
+        self._learn(slots, states, actions, rewards, weights, terminated, value)
         return next_actions
 
     def sweep(
