@@ -108,9 +108,14 @@ def highway_tables(runs: list[TrialRun]) -> list[str]:
         for r in m
     ]
     first = runs[0].summary
+    episodes = load_config(str(runs[0].run_dir / "config.toml")).highway.eval_episodes
+    # Each seed's evaluation episodes start from its own traffic, so the random floor differs by seed.
+    random = {r.trial.seed: r.summary["random_return"] for r in runs}
     lines = [
-        f"Evaluation: 10 greedy episodes of at most {first['max_return']:.0f} steps per agent (reward per "
-        f"step in [0, 1]); a uniformly random policy returns {first['random_return']:.1f}.",
+        f"Evaluation: {episodes} greedy episodes of at most {first['max_return']:.0f} steps per agent "
+        f"(reward per step in [0, 1]); a uniformly random policy returns "
+        f"{sum(random.values()) / len(random):.1f} on average over the seeds "
+        f"({min(random.values()):.1f} to {max(random.values()):.1f}).",
         "",
         "| method | preset | " + " | ".join(HIGHWAY_COLUMNS.values()) + " | share of oracle return |",
         "|---|---|" + "---|" * (len(HIGHWAY_COLUMNS) + 1),
