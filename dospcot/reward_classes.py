@@ -9,21 +9,30 @@ from __future__ import annotations
 import numpy as np
 
 
-class RewardClasses:
-    """The reward values each of ``n_runs`` runs has seen in its labels.
+class _ClassValues:
+    """A reward value per class and run: ``values`` (B, K), NaN where a run has no such class."""
 
-    :param n_runs: number of independent runs.
-    :param max_classes: K, the most distinct values a run may see.
-    """
-
-    def __init__(self, n_runs: int, max_classes: int) -> None:
-        self.values = np.full((n_runs, max_classes), np.nan)
+    def __init__(self, n_runs: int, n_classes: int) -> None:
+        self.values = np.full((n_runs, n_classes), np.nan)
         """(B, K) the value of each class, NaN where the run has no such class yet."""
 
     @property
     def mask(self) -> np.ndarray:
         """(B, K) bool, the classes each run has."""
         return ~np.isnan(self.values)
+
+    def decode(self, classes: np.ndarray) -> np.ndarray:
+        """Reward value of each class index (B, N); NaN for -1."""
+        values = np.take_along_axis(self.values, np.clip(classes, 0, None), axis=1)
+        return np.where(classes >= 0, values, np.nan)
+
+
+class RewardClasses(_ClassValues):
+    """The reward values each of ``n_runs`` runs has seen in its labels.
+
+    :param n_runs: number of independent runs.
+    :param n_classes: K, the most distinct values a run may see (a config's ``max_classes``).
+    """
 
     def observe(self, run: int, rewards: np.ndarray) -> None:
         """Add the values of ``rewards`` (labels of run ``run``) not seen before, in the order given."""
@@ -44,13 +53,8 @@ class RewardClasses:
         match = rewards[..., None] == self.values[:, None, :]
         return np.where(match.any(-1), match.argmax(-1), -1)
 
-    def decode(self, classes: np.ndarray) -> np.ndarray:
-        """Reward value of each class index (B, N); NaN for -1."""
-        values = np.take_along_axis(self.values, np.clip(classes, 0, None), axis=1)
-        return np.where(classes >= 0, values, np.nan)
 
-
-class QuantileRewardClasses:
+class QuantileRewardClasses(_ClassValues):
     """K quantile bins of a continuous reward, for one run (DESIGN.md section 2).
 
     The bin edges are the labelled rewards' quantiles at 1/K, ..., (K-1)/K; a bin's value is the
@@ -65,15 +69,9 @@ class QuantileRewardClasses:
     def __init__(self, n_classes: int) -> None:
         if n_classes < 1:
             raise ValueError(f"need at least one reward class, got {n_classes}")
-        self.values = np.full((1, n_classes), np.nan)
-        """(1, K) the value (bin mean) of each class, NaN where the run has no such class."""
+        super().__init__(1, n_classes)  # values (1, K): each class's bin mean, NaN where it has none
         self.edges = np.zeros(0)
         """(k - 1,) the inner bin edges: class c holds rewards in [edges[c - 1], edges[c])."""
-
-    @property
-    def mask(self) -> np.ndarray:
-        """(1, K) bool, the classes the run has."""
-        return ~np.isnan(self.values)
 
     def fit(self, rewards: np.ndarray) -> None:
         """Set the bins from every labelled reward so far, (n,) float."""
@@ -95,8 +93,3 @@ class QuantileRewardClasses:
         if not self.mask.any():
             return np.full(np.shape(rewards), -1)
         return np.searchsorted(self.edges, rewards, side="right")
-
-    def decode(self, classes: np.ndarray) -> np.ndarray:
-        """The value (bin mean) of each class index, (1, N); NaN for -1."""
-        values = np.take_along_axis(self.values, np.clip(classes, 0, None), axis=1)
-        return np.where(classes >= 0, values, np.nan)
