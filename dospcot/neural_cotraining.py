@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import io
 import random
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -133,7 +133,7 @@ class NeuralRunSpec(RunSpec):
             raise ValueError(f"unknown agent kind {kind!r}; allowed: {sorted(AGENT_TARGETS)}")
 
 
-def view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
+def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
     """View j's round (run 0 of ``result``): coverage of U, accuracy of what it admitted, mean lambda
     and classifier loss. ``correct`` (N,) says where its predicted class matches the hidden truth."""
     taken = result.view_weight[j, 0] > 0
@@ -143,6 +143,21 @@ def view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.
         "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
         "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
         "classifier_loss": float(result.classifier_loss[j, 0]),
+    }
+
+
+def round_stats(
+    result: RoundResult, unlabelled: np.ndarray, correct: np.ndarray, view_correct: Sequence[np.ndarray]
+) -> dict[str, Any]:
+    """Run 0's round for the metrics: pace, coverage of U (N,) bool, accuracy of the admitted
+    pseudo-rewards and each view's figures. ``correct`` (N,) and ``view_correct[j]`` (N,) say where
+    the consensus and view j's prediction match the hidden truth (metrics only)."""
+    admitted = result.pseudo_weight[0] > 0
+    return {
+        "pace": float(result.pace[0]),
+        "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
+        "pseudo_accuracy": float(correct[admitted].mean()) if admitted.any() else float("nan"),
+        "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(view_correct)],
     }
 
 
@@ -293,19 +308,10 @@ class NeuralCoTraining:
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
         keys = store.ids()
         self.table.set(np.arange(len(keys)), pseudo[keys], result.pseudo_weight[0][keys])
-        truth = store.hidden_reward  # metrics only
-        u, admitted = unlabelled[0], result.pseudo_weight[0] > 0
-        per_view = [
-            view_stats(result, j, u, self.classes.decode(result.view_class[j])[0] == truth)
-            for j in range(len(self.spec.views))
-        ]
         self.stopped = bool(result.stopped[0])
-        return {
-            "pace": float(result.pace[0]),
-            "coverage": float(admitted[u].mean()) if u.any() else 0.0,
-            "pseudo_accuracy": float((pseudo == truth)[admitted].mean()) if admitted.any() else float("nan"),
-            "views": per_view,
-        }
+        truth = store.hidden_reward  # metrics only
+        view_correct = [self.classes.decode(view_class)[0] == truth for view_class in result.view_class]
+        return round_stats(result, unlabelled[0], pseudo == truth, view_correct)
 
     def state_dict(self) -> dict[str, Any]:
         """Everything the next rounds depend on, picklable: agents (SB3 zips as bytes), their replay

@@ -42,7 +42,7 @@ from dospcot.neural_cotraining import (
     NeuralRunSpec,
     make_agent,
     relabelling_kwargs,
-    view_stats,
+    round_stats,
 )
 from dospcot.policies import RewardTable
 from dospcot.reward_classes import QuantileRewardClasses
@@ -221,21 +221,11 @@ class TransitionCoTraining(NeuralCoTraining):
             Pool(features, labelled[None], label_class[None], unlabelled[None], self.classes.mask)
         )
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
-        admitted = result.pseudo_weight[0] > 0
         self.table.set(np.arange(n), pseudo, result.pseudo_weight[0])
-        truth = self.classes.encode(store.hidden_reward[:n][None])[0]  # metrics only: the true bin
-        per_view = [
-            view_stats(result, j, unlabelled, result.view_class[j, 0] == truth)
-            for j in range(len(self.spec.views))
-        ]
         self.stopped = bool(result.stopped[0])
-        accurate = result.pseudo_class[0] == truth
-        return {
-            "pace": float(result.pace[0]),
-            "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
-            "pseudo_accuracy": float(accurate[admitted].mean()) if admitted.any() else float("nan"),
-            "views": per_view,
-        }
+        truth = self.classes.encode(store.hidden_reward[:n][None])[0]  # metrics only: the true bin
+        view_correct = [view_class[0] == truth for view_class in result.view_class]
+        return round_stats(result, unlabelled, result.pseudo_class[0] == truth, view_correct)
 
     def _returns(self, policy: Any, env: DummyVecEnv) -> tuple[np.ndarray, np.ndarray]:
         env.seed(EVAL_SEED)
