@@ -105,20 +105,22 @@ class HighwayEnvSensors(gym.Wrapper, gym.utils.RecordConstructorArgs):
             for name, config in HIGHWAY_VIEW_TYPES.items()
         }
 
-    def view_space(self, name: str) -> gym.spaces.Box:
-        """The ``Box`` of a view."""
+    def _sensor(self, name: str) -> Any:
         if name not in self._sensors:
             raise ValueError(f"unknown view {name!r}; allowed: {', '.join(self._sensors)}")
+        return self._sensors[name]
+
+    def view_space(self, name: str) -> gym.spaces.Box:
+        """The ``Box`` of a view."""
+        sensor = self._sensor(name)
         if name == "ttc":  # its space() observes, which needs a road: the shape is known up front
-            cfg = self.env.unwrapped.config
-            horizon = int(self._sensors[name].horizon * cfg["policy_frequency"])
+            horizon = int(sensor.horizon * self.env.unwrapped.config["policy_frequency"])
             return gym.spaces.Box(0.0, 1.0, (3, 3, horizon), np.float32)
-        return self._sensors[name].space()
+        return sensor.space()
 
     def observe(self, name: str) -> np.ndarray:
         """The view ``name`` of the current state, float32 of ``view_space(name).shape``."""
-        self.view_space(name)
-        return np.asarray(self._sensors[name].observe(), dtype=np.float32)
+        return np.asarray(self._sensor(name).observe(), dtype=np.float32)
 
 
 def make_highway(env_id: str = "highway-fast-v0", config: Mapping[str, Any] | None = None) -> gym.Env:
