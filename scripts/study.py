@@ -96,17 +96,41 @@ HIGHWAY_COLUMNS = {
 }
 
 
+def _by_method(runs: list[TrialRun]) -> dict[tuple[str, tuple], list[TrialRun]]:
+    """The sweep cells in the order of :data:`METHODS`."""
+    order = list(METHODS)
+    return dict(sorted(cells(runs).items(), key=lambda item: order.index(item[0][0])))
+
+
+def _over_seeds(members: list[TrialRun], key: str, view: str | None = None) -> str:
+    """A metric over the seeds of a cell, of the run mean or (``view``) of one view's agent."""
+    return str(
+        SeedSummary.of([(r.summary["per_view"][view] if view else r.summary["mean"])[key] for r in members])
+    )
+
+
+def _per_view_rows(grouped: dict[tuple[str, tuple], list[TrialRun]], keys: list[str]) -> list[str]:
+    """One table row per method and view: ``keys`` over seeds."""
+    return [
+        f"| {METHODS.get(name, name)} | {view} | "
+        + " | ".join(_over_seeds(members, k, view) for k in keys)
+        + " |"
+        for (name, _), members in grouped.items()
+        for view in members[0].summary["views"]
+    ]
+
+
 def highway_tables(runs: list[TrialRun]) -> list[str]:
     """Per method: return, success and pseudo-reward quality over seeds, and the share of the oracle's
     mean return; then per view."""
-    order = list(METHODS)
-    grouped = dict(sorted(cells(runs).items(), key=lambda item: order.index(item[0][0])))
+    grouped = _by_method(runs)
     oracle = [
         r.summary["mean"]["greedy_return"]
         for (n, _), m in grouped.items()
         if n.endswith("-oracle")
         for r in m
     ]
+    oracle_mean = max(SeedSummary.of(oracle).mean, 1e-12)
     first = runs[0].summary
     episodes = load_config(str(runs[0].run_dir / "config.toml")).highway.eval_episodes
     # Each seed's evaluation episodes start from its own traffic, so the random floor differs by seed.
@@ -121,34 +145,24 @@ def highway_tables(runs: list[TrialRun]) -> list[str]:
         "|---|---|" + "---|" * (len(HIGHWAY_COLUMNS) + 1),
     ]
     for (name, _), members in grouped.items():
-        stats = [str(SeedSummary.of([r.summary["mean"][key] for r in members])) for key in HIGHWAY_COLUMNS]
-        share = SeedSummary.of([r.summary["mean"]["greedy_return"] for r in members]).mean / max(
-            SeedSummary.of(oracle).mean, 1e-12
-        )
+        stats = [_over_seeds(members, key) for key in HIGHWAY_COLUMNS]
+        share = SeedSummary.of([r.summary["mean"]["greedy_return"] for r in members]).mean / oracle_mean
         lines.append(f"| {METHODS.get(name, name)} | `{name}` | " + " | ".join(stats) + f" | {share:.1%} |")
     lines += ["", "Per view (greedy return, no-crash episodes):", "", "| method | view | return | no crash |"]
     lines.append("|---|---|---|---|")
-    for (name, _), members in grouped.items():
-        for view in members[0].summary["views"]:
-            stats = [
-                str(SeedSummary.of([r.summary["per_view"][view][k] for r in members]))
-                for k in ("greedy_return", "success")
-            ]
-            lines.append(f"| {METHODS.get(name, name)} | {view} | " + " | ".join(stats) + " |")
-    return lines
+    return lines + _per_view_rows(grouped, ["greedy_return", "success"])
 
 
 def grid16_tables(runs: list[TrialRun]) -> list[str]:
     """Per method: every column over seeds; then per method and view."""
-    order = list(METHODS)
-    grouped = dict(sorted(cells(runs).items(), key=lambda item: order.index(item[0][0])))
+    grouped = _by_method(runs)
     lines = [
         "",
         "| method | preset | " + " | ".join(COLUMNS.values()) + " |",
         "|---|---|" + "---|" * len(COLUMNS),
     ]
     for (name, _), members in grouped.items():
-        stats = [str(SeedSummary.of([r.summary["mean"][key] for r in members])) for key in COLUMNS]
+        stats = [_over_seeds(members, key) for key in COLUMNS]
         lines.append(f"| {METHODS.get(name, name)} | `{name}` | " + " | ".join(stats) + " |")
     lines += [
         "",
@@ -157,14 +171,7 @@ def grid16_tables(runs: list[TrialRun]) -> list[str]:
         "| method | view | normalised score | success | optimal-action agreement |",
         "|---|---|---|---|---|",
     ]
-    for (name, _), members in grouped.items():
-        for view in members[0].summary["views"]:
-            stats = [
-                str(SeedSummary.of([r.summary["per_view"][view][key] for r in members]))
-                for key in list(COLUMNS)[:3]
-            ]
-            lines.append(f"| {METHODS.get(name, name)} | {view} | " + " | ".join(stats) + " |")
-    return lines
+    return lines + _per_view_rows(grouped, list(COLUMNS)[:3])
 
 
 def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
@@ -182,14 +189,7 @@ def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
             "|---|" + "---|" * len(fractions),
         ]
         for name in names:
-            stats = [
-                str(
-                    SeedSummary.of(
-                        [r.summary["mean"][key] for r in grouped.get((name, ((FRACTION, f),)), [])]
-                    )
-                )
-                for f in fractions
-            ]
+            stats = [_over_seeds(grouped.get((name, ((FRACTION, f),)), []), key) for f in fractions]
             lines.append(f"| {METHODS.get(name, name)} | " + " | ".join(stats) + " |")
     return lines
 
