@@ -253,6 +253,11 @@ def target_check(rows: list[dict]) -> dict:
     }
 
 
+def _cell(row: dict) -> str:
+    """A table row's figure over seeds, as text: mean [95% interval]."""
+    return str(SeedSummary(*[row[k] for k in ("mean", "low", "high", "iqm", "n")]))
+
+
 def _table_md(rows: list[dict], table: str, metric: str, with_gamma: bool) -> list[str]:
     sel = [r for r in rows if r["table"] == table and r["metric"] == metric]
     lines = []
@@ -268,25 +273,18 @@ def _table_md(rows: list[dict], table: str, metric: str, with_gamma: bool) -> li
         for agents, method in seen:
             group = [r for r in sel if r["agents"] == agents and r["method"] == method]
             if group[0]["gamma"] is None:
-                cells = [
-                    str(SeedSummary(*[group[0][k] for k in ("mean", "low", "high", "iqm", "n")])),
-                    "(no γ)",
-                    "",
-                ]
+                cells = [_cell(group[0]), "(no γ)", ""]
                 paper = ""
             else:
-                cells = [
-                    str(SeedSummary(*[r[k] for k in ("mean", "low", "high", "iqm", "n")])) for r in group
-                ]
+                cells = [_cell(r) for r in group]
                 refs = [r["paper"] for r in group]
                 paper = " / ".join(f"{x:.4f}" for x in refs) if refs[0] is not None else ""
             lines.append(f"| {agents} | {method} | " + " | ".join(cells) + f" | {paper} |")
     else:
         lines += ["| agents | method | ours | paper |", "|---|---|---|---|"]
         for r in sel:
-            cell = SeedSummary(*[r[k] for k in ("mean", "low", "high", "iqm", "n")])
             paper = f"{r['paper']:.4f}" if r["paper"] is not None else ""
-            lines.append(f"| {r['agents']} | {r['method']} | {cell} | {paper} |")
+            lines.append(f"| {r['agents']} | {r['method']} | {_cell(r)} | {paper} |")
     return lines
 
 
