@@ -14,7 +14,7 @@ import statistics
 import tempfile
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from datetime import UTC, datetime
 from functools import partial
 from pathlib import Path
@@ -30,7 +30,7 @@ from dospcot.neural_cotraining import NeuralCoTraining
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.tabular import AGENT_KINDS, expected_value
 from dospcot.sweep import SweepSpec, run_sweep
-from dospcot.tabular_cotraining import TabularCoTraining
+from dospcot.tabular_cotraining import TabularConfig, TabularCoTraining
 from dospcot.train import agent_kwargs, build_run, build_task
 from dospcot.train_config import TrainConfig, load_config
 
@@ -182,7 +182,7 @@ class PerStepTabularCoTraining(TabularCoTraining):
 
 
 def _collection_steps_per_second(
-    cls: type[TabularCoTraining], seeds: list[int], rounds: int, episodes: int
+    cls: type[TabularCoTraining], seeds: list[int], config: TabularConfig
 ) -> float:
     """Agent steps per second of the collection phase (acting and online TD updates, summed over
     agents) over a paper-protocol run of ``seeds``; co-training and replay sweeps are not timed."""
@@ -195,23 +195,25 @@ def _collection_steps_per_second(
             super()._collect(progress)
             self.collect_seconds += time.perf_counter() - start
 
-    config = replace(paper.protocol_config("paper-text", 0.1, episodes), rounds=rounds)
-    trainer = Timed(paper.cliffwalking_mdp(0.1), paper.protocol_specs(seeds), config)
+    trainer = Timed(paper.cliffwalking_mdp(config.label_fraction), paper.protocol_specs(seeds), config)
     trainer.run()
     return trainer.env_steps / trainer.collect_seconds
 
 
 def bench_tabular(quick: bool, repeats: int) -> Row:
     """The paper protocol's agents: vectorised over every run at once against a per-step Python loop."""
-    seeds, rounds, episodes = ([0, 1], 2, 10) if quick else (list(range(10)), paper.ROUNDS, 500)
+    seeds = [0, 1] if quick else list(range(10))
+    quick_settings = ["tabular.rounds=2", "tabular.episodes_per_round=10"] if quick else []
+    config = load_config("paper-text", quick_settings).tabular
     ours, peer = _alternating(
         repeats,
-        lambda _: _collection_steps_per_second(TabularCoTraining, seeds, rounds, episodes),
-        lambda _: _collection_steps_per_second(PerStepTabularCoTraining, seeds[:1], rounds, episodes),
+        lambda _: _collection_steps_per_second(TabularCoTraining, seeds, config),
+        lambda _: _collection_steps_per_second(PerStepTabularCoTraining, seeds[:1], config),
     )
     return Row(
         "Tabular agents, vectorised vs a per-step Python loop: agent steps per second",
-        f"paper protocol (CliffWalking, {rounds} rounds x {episodes} episodes, `paper-text`); ours: "
+        f"paper protocol (CliffWalking, {config.rounds} rounds x {config.episodes_per_round} episodes, "
+        "`paper-text`); ours: "
         f"seeds {seeds[0]}-{seeds[-1]} in one batch ({len(paper.protocol_specs(seeds))} runs), the loop: "
         f"seed {seeds[0]} ({len(paper.protocol_specs(seeds[:1]))} runs)",
         Measurement.of(ours, "steps/s"),

@@ -1,9 +1,15 @@
-"""``dospcot reproduce-paper``: the seed paper's CliffWalking protocol, with real reward masking.
+"""The seed paper's CliffWalking protocol with real reward masking: its runs and its tables.
 
 Table 1: each agent alone; Tables 2 and 3: homogeneous pairs at gamma 0.3, 0.5, 0.8 after 1 and 5
 rounds; Table 4: Expected SARSA paired with Expected SARSA, SARSA and Q at gamma 0.3. Beside every
 co-training cell stand the baselines of the same agent kind at the same round (oracle, masked-zero,
 labels-only, self-training with each view) and the paper's printed figure.
+
+A paper run is one seed of the protocol (a :class:`~dospcot.train_config.PaperConfig`, presets
+``paper-text`` and ``paper-published-code``): its 26 tabular runs train in one vectorised batch and
+write an ordinary run folder. ``dospcot reproduce-paper`` is a ``dospcot sweep`` of such a preset
+over seeds (its local backend batches each worker's seeds, :func:`train_protocol_at`) followed by
+``dospcot report``, which renders these tables for a sweep of paper runs.
 
 The 1-round and 5-round tables come from the same runs, read after their first and fifth round.
 A pair's figure for a seed is the mean of its two agents.
@@ -11,33 +17,35 @@ A pair's figure for a seed is the mean of its two agents.
 
 from __future__ import annotations
 
-import csv
-import json
-import multiprocessing
-import os
-import platform
-import queue
 import time
 from collections import defaultdict
-from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
-from dataclasses import asdict
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
-from tqdm import tqdm
 
 from dospcot import metrics
 from dospcot.envs import CLIFF_VIEWS, TabularMDP, make_masked_cliffwalking
 from dospcot.metrics import SeedSummary
-from dospcot.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
+from dospcot.run_folder import (
+    CONFIG_FILE,
+    METRICS_FILE,
+    SUMMARY_FILE,
+    write_csv,
+    write_json,
+    write_run_info,
+    write_toml,
+)
+from dospcot.tabular_cotraining import TabularCoTraining, TabularRunSpec
+from dospcot.train_config import PaperConfig
 
 KINDS: tuple[str, ...] = ("q", "sarsa", "esarsa")
 KIND_NAMES = {"q": "Q", "sarsa": "SARSA", "esarsa": "ESARSA"}
 GAMMAS: tuple[float, ...] = (0.3, 0.5, 0.8)
 PAIR_VIEWS = ("coords", "patch")
 HETERO_PAIRS = (("esarsa", "esarsa"), ("esarsa", "sarsa"), ("esarsa", "q"))
-ROUNDS = 5
 BASELINES: tuple[tuple[str, str, str], ...] = (
     ("oracle", "oracle", "coords"),
     ("masked-zero", "masked-zero", "coords"),
@@ -47,26 +55,10 @@ BASELINES: tuple[tuple[str, str, str], ...] = (
 )
 """(row label, method, view) of the single-agent rows."""
 
-PRESETS: dict[str, dict[str, float]] = {
-    "paper-text": {"learning_rate": 0.8, "discount": 0.95},
-    "published-code": {"learning_rate": 0.5, "discount": 1.0},
-}
-"""The hyperparameters the paper's text states, and those its published code used. Both: 500
+PRESETS: dict[str, str] = {"paper-text": "paper-text", "published-code": "paper-published-code"}
+"""``reproduce-paper --preset`` -> the config preset: the hyperparameters the paper's text states
+(learning rate 0.8, discount 0.95), or those its published code used (0.5, 1.0). Both: 5 rounds of 500
 episodes of at most 100 steps, exploration 0.1."""
-
-
-def protocol_config(preset: str, label_fraction: float, episodes: int = 500) -> TabularConfig:
-    """The tabular config of a preset: 5 rounds of ``episodes`` episodes (100 steps at most), eps 0.1."""
-    if preset not in PRESETS:
-        raise ValueError(f"unknown preset {preset!r}; allowed: {sorted(PRESETS)}")
-    return TabularConfig(
-        rounds=ROUNDS,
-        episodes_per_round=episodes,
-        eps_start=0.1,
-        eps_end=0.1,
-        label_fraction=label_fraction,
-        **PRESETS[preset],
-    )
 
 
 def protocol_specs(seeds: Sequence[int]) -> list[TabularRunSpec]:
@@ -89,53 +81,67 @@ def cliffwalking_mdp(label_fraction: float = 0.1) -> TabularMDP:
     return TabularMDP.from_env(env, CLIFF_VIEWS, max_episode_steps=100)
 
 
-def _train(
-    config: TabularConfig, specs: list[TabularRunSpec], progress: Callable[[int], None] | None = None
-) -> list[dict]:
-    trainer = TabularCoTraining(
-        cliffwalking_mdp(config.label_fraction), specs, config, metrics.paper_reference_policy()
-    )
-    return trainer.run(progress=progress).records
+def episodes_per_seed(cfg: PaperConfig) -> int:
+    """Episodes one seed of the protocol plays, summed over its agents (the unit of its progress)."""
+    agents = sum(len(spec.agents) for spec in protocol_specs([0]))
+    return cfg.tabular.rounds * cfg.tabular.episodes_per_round * agents
 
 
-def _train_chunk(args: tuple[TabularConfig, list[TabularRunSpec], object]) -> list[dict]:
-    import torch
+def train_protocol_at(
+    cfg: PaperConfig,
+    run_dirs: Mapping[int, Path],
+    *,
+    commands: Mapping[int, str] | None = None,
+    progress: Callable[[int], None] | None = None,
+) -> None:
+    """Train the protocol for every seed of ``run_dirs`` in one vectorised batch; write each seed's run
+    folder: ``config.toml``, ``metrics.csv`` (one row per run, round and agent), ``run_info.json`` and,
+    last, ``summary.json``.
 
-    torch.set_num_threads(1)
-    config, specs, progress_queue = args
-    return _train(config, specs, progress_queue.put)
+    Runs are independent, so a seed's folder is the same whichever seeds shared its batch (bar the
+    timing in ``run_info.json``, where the batch's wall time is split evenly over its seeds).
 
-
-def train_protocol(
-    config: TabularConfig, seeds: Sequence[int], workers: int = 2, show_progress: bool = True
-) -> list[dict]:
-    """Train every run of the protocol, seeds split over ``workers`` processes; returns the records.
-
-    Runs are independent, so the split does not change any result.
+    :param commands: per seed, the command that reruns its folder alone (for ``run_info.json``).
+    :param progress: called with the number of episodes just finished, summed over agents.
     """
-    seeds = list(seeds)
-    chunks = [seeds[i::workers] for i in range(workers) if seeds[i::workers]]
-    total_agents = sum(len(s.agents) for s in protocol_specs([0])) * len(seeds)
-    total = config.rounds * config.episodes_per_round * total_agents
-    bar = tqdm(total=total, unit="ep", desc="reproduce-paper", disable=not show_progress, mininterval=1.0)
-    if len(chunks) == 1:
-        records = _train(config, protocol_specs(chunks[0]), bar.update)
-        bar.close()
-        return records
-    ctx = multiprocessing.get_context("spawn")
-    with ctx.Manager() as manager, ProcessPoolExecutor(len(chunks), mp_context=ctx) as pool:
-        progress_queue = manager.Queue()
-        futures = [pool.submit(_train_chunk, (config, protocol_specs(c), progress_queue)) for c in chunks]
-        while not all(f.done() for f in futures):
-            try:
-                bar.update(progress_queue.get(timeout=0.2))
-            except queue.Empty:
-                pass
-        records = [rec for f in futures for rec in f.result()]
-        while not progress_queue.empty():  # reports sent after the last poll
-            bar.update(progress_queue.get())
-    bar.close()
-    return records
+    seeds = sorted(run_dirs)
+    started = time.perf_counter()
+    trainer = TabularCoTraining(
+        cliffwalking_mdp(cfg.tabular.label_fraction),
+        protocol_specs(seeds),
+        cfg.tabular,
+        metrics.paper_reference_policy(),
+    )
+    records = trainer.run(progress=progress).records
+    wall = time.perf_counter() - started
+    for seed in seeds:
+        run_dir = run_dirs[seed]
+        mine = [record for record in records if record["seed"] == seed]
+        write_toml(run_dir / CONFIG_FILE, replace(cfg, seed=seed).to_dict())
+        write_csv(run_dir / METRICS_FILE, mine)
+        write_run_info(run_dir, (commands or {}).get(seed, ""), wall / len(seeds), batch_seeds=seeds)
+        # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
+        write_json(run_dir / SUMMARY_FILE, seed_summary(mine, cfg.tabular.rounds))
+
+
+def seed_summary(records: Sequence[Mapping[str, Any]], rounds: int) -> dict[str, Any]:
+    """One seed's ``summary.json``: the target's ingredients (optimal-action agreement after the last
+    round) for this seed alone."""
+    agreement = per_seed(records, "agreement")
+    last = max(record["round"] for record in records)
+    target = {
+        "dospcot_agreement": ("cotrain", "esarsa-esarsa", "-".join(PAIR_VIEWS), 0.3),
+        "oracle_agreement": ("oracle", "esarsa", "coords", 0.3),
+        "masked_zero_agreement": ("masked-zero", "esarsa", "coords", 0.3),
+        "labels_only_agreement": ("labels-only", "esarsa", "coords", 0.3),
+    }
+    return {
+        "task": "paper",
+        "seed": int(records[0]["seed"]),
+        "runs": len(protocol_specs([0])),
+        "rounds": rounds,
+        "mean": {name: agreement[(*key, last)][0] for name, key in target.items()},
+    }
 
 
 def summarise(values: Sequence[float]) -> SeedSummary:
@@ -143,7 +149,7 @@ def summarise(values: Sequence[float]) -> SeedSummary:
     return SeedSummary.of(values, iqm_min_n=10)
 
 
-def per_seed(records: list[dict], metric: str) -> dict[tuple, list[float]]:
+def per_seed(records: Sequence[Mapping[str, Any]], metric: str) -> dict[tuple, list[float]]:
     """Per-seed values of ``metric`` keyed by (method, agents, views, gamma, round); pairs averaged."""
     by_run: dict[tuple, list[float]] = defaultdict(list)
     for rec in records:
@@ -162,8 +168,11 @@ METRICS = (
 )
 
 
-def build_tables(records: list[dict], paper: dict) -> list[dict]:
-    """Long-format rows: one per table, row, gamma column and metric (the content of tables.csv)."""
+def build_tables(records: Sequence[Mapping[str, Any]], paper: dict, last_round: int) -> list[dict]:
+    """Long-format rows: one per table, row, gamma column and metric (the rows of ``report.csv``).
+
+    Tables 1, 3 and 4 read the runs after ``last_round`` (the paper's: 5), Table 2 after round 1.
+    """
     names = [m for m, _ in METRICS] + ["pseudo_accuracy", "coverage"]
     values = {m: per_seed(records, m) for m in names}
     rows: list[dict] = []
@@ -198,11 +207,11 @@ def build_tables(records: list[dict], paper: dict) -> list[dict]:
             add_baselines(
                 "1",
                 kind,
-                ROUNDS,
+                last_round,
                 metric,
                 ref=paper["table1_baseline"][KIND_NAMES[kind]] if on_paper else None,
             )
-        for table, rnd, paper_key in (("2", 1, "table2_one_round"), ("3", ROUNDS, "table3_five_rounds")):
+        for table, rnd, paper_key in (("2", 1, "table2_one_round"), ("3", last_round, "table3_five_rounds")):
             for kind in KINDS:
                 for gamma in GAMMAS:
                     pair_name = f"{KIND_NAMES[kind]}-{KIND_NAMES[kind]}"
@@ -215,9 +224,9 @@ def build_tables(records: list[dict], paper: dict) -> list[dict]:
                 if on_paper
                 else None
             )
-            add_pair("4", a, b, 0.3, ROUNDS, metric, ref)
+            add_pair("4", a, b, 0.3, last_round, metric, ref)
     for metric in ("pseudo_accuracy", "coverage"):
-        for rnd in (1, ROUNDS):
+        for rnd in sorted({1, last_round}):
             for kind in KINDS:
                 for gamma in GAMMAS:
                     add_pair("pseudo", kind, kind, gamma, rnd, metric)
@@ -226,7 +235,7 @@ def build_tables(records: list[dict], paper: dict) -> list[dict]:
 
 
 def target_check(rows: list[dict]) -> dict:
-    """Issue target: ESARSA-ESARSA DOSPCoT (gamma 0.3, 5 rounds) reaches >= 95% of the oracle's
+    """Issue target: ESARSA-ESARSA DOSPCoT (gamma 0.3, last round) reaches >= 95% of the oracle's
     optimal-action agreement and beats masked-zero and labels-only with non-overlapping intervals."""
 
     def find(agents: str, method: str, gamma: float | None) -> dict:
@@ -288,23 +297,24 @@ def _table_md(rows: list[dict], table: str, metric: str, with_gamma: bool) -> li
     return lines
 
 
-def render_markdown(rows: list[dict], header: dict, target: dict) -> str:
-    """tables.md: the four tables for each metric, the pseudo-reward table and the target line."""
+def render_tables(
+    rows: list[dict], target: dict, cfg: PaperConfig, seeds: Sequence[int], level: int = 2
+) -> list[str]:
+    """One cell's markdown: its settings, the target line, the four tables for each metric and the
+    pseudo-reward tables, under headings of ``level``."""
+    tab, h = cfg.tabular, "#" * level
+    last = max(r["round"] for r in rows)
+    explore = f"{tab.eps_start}" if tab.eps_start == tab.eps_end else f"{tab.eps_start} to {tab.eps_end}"
     out = [
-        "# Seed paper reproduction: masked CliffWalking-v1",
-        "",
-        f"Command: `{header['command']}`  ",
-        f"Preset: `{header['preset']}` (learning rate {header['learning_rate']}, discount "
-        f"{header['discount']}, exploration {header['eps']}, {header['rounds']} rounds of "
-        f"{header['episodes_per_round']} episodes of at most 100 steps), label fraction "
-        f"{header['label_fraction']}, seeds {header['seeds']}.  ",
-        f"Machine: {header['machine']}; wall time {header['wall_time_s']:.1f} s.",
+        f"Config: `{cfg.name}` (learning rate {tab.learning_rate}, discount {tab.discount}, exploration "
+        f"{explore}, {tab.rounds} rounds of {tab.episodes_per_round} episodes of at most 100 steps), "
+        f"label fraction {tab.label_fraction}, seeds {', '.join(map(str, seeds))}.",
         "",
         "Each cell: mean over seeds [95% bootstrap interval]. A pair's figure is the mean of its two "
         "agents. Baseline rows are single agents of the pair's kind, read at the same round; they do "
         "not depend on γ. The paper's figures come from runs whose rewards were never masked.",
         "",
-        f"**Target** (ESARSA-ESARSA, γ 0.3, 5 rounds, optimal-action agreement): "
+        f"**Target** (ESARSA-ESARSA, γ 0.3, {last} rounds, optimal-action agreement): "
         f"{target['dospcot_agreement']:.3f} = {100 * target['ratio_to_oracle']:.1f}% of the oracle's "
         f"{target['oracle_agreement']:.3f} (needs ≥ 95%: "
         f"{'met' if target['meets_95pct_of_oracle'] else 'NOT met'}); interval above masked-zero: "
@@ -313,23 +323,23 @@ def render_markdown(rows: list[dict], header: dict, target: dict) -> str:
         "",
     ]
     titles = {
-        "1": "Table 1: each agent alone, after 5 rounds",
+        "1": f"Table 1: each agent alone, after {last} rounds",
         "2": "Table 2: homogeneous pairs after 1 round",
-        "3": "Table 3: homogeneous pairs after 5 rounds",
-        "4": "Table 4: Expected SARSA with other agents, γ = 0.3, after 5 rounds",
+        "3": f"Table 3: homogeneous pairs after {last} rounds",
+        "4": f"Table 4: Expected SARSA with other agents, γ = 0.3, after {last} rounds",
     }
     for metric, description in METRICS:
-        out += [f"## {description}", ""]
+        out += [f"{h} {description}", ""]
         for table, title in titles.items():
-            out += [f"### {title}", ""]
+            out += [f"{h}# {title}", ""]
             out += _table_md(rows, table, metric, with_gamma=table in ("2", "3"))
             out.append("")
     for metric, description in (
         ("pseudo_accuracy", "Pseudo-reward accuracy (admitted unlabelled keys)"),
         ("coverage", "Coverage (admitted share of the unlabelled pool)"),
     ):
-        for rnd in (1, ROUNDS):
-            out += [f"## {description}, round {rnd}", ""]
+        for rnd in sorted({1, last}):
+            out += [f"{h} {description}, round {rnd}", ""]
             sub = [
                 dict(r, table=f"p{rnd}")
                 for r in rows
@@ -337,61 +347,4 @@ def render_markdown(rows: list[dict], header: dict, target: dict) -> str:
             ]
             out += _table_md(sub, f"p{rnd}", metric, with_gamma=True)
             out.append("")
-    return "\n".join(out)
-
-
-def machine_description() -> str:
-    """CPU, core count and Python version, for the tables' header."""
-    cpu = platform.processor() or platform.machine()
-    return f"{cpu}, {os.cpu_count()} cores, Python {platform.python_version()}"
-
-
-def reproduce_paper(
-    preset: str = "paper-text",
-    label_fraction: float = 0.1,
-    seeds: Sequence[int] = tuple(range(10)),
-    episodes: int = 500,
-    workers: int = 2,
-    out_dir: Path = Path("runs/paper"),
-    command: str = "dospcot reproduce-paper",
-    show_progress: bool = True,
-) -> Path:
-    """Run the protocol, write ``tables.md``, ``tables.csv``, ``metrics.csv``, ``config.json`` and
-    ``summary.json`` under ``out_dir/<stamp>/``; return that folder."""
-    config = protocol_config(preset, label_fraction, episodes)
-    start = time.perf_counter()
-    records = train_protocol(config, seeds, workers=workers, show_progress=show_progress)
-    wall = time.perf_counter() - start
-    run_dir = out_dir / time.strftime("%Y%m%d-%H%M%S")
-    run_dir.mkdir(parents=True, exist_ok=True)
-    rows = build_tables(records, metrics.paper_tables())
-    target = target_check(rows)
-    header = {
-        "command": command,
-        "preset": preset,
-        "label_fraction": label_fraction,
-        "seeds": list(seeds),
-        "learning_rate": config.learning_rate,
-        "discount": config.discount,
-        "eps": config.eps_start,
-        "rounds": config.rounds,
-        "episodes_per_round": config.episodes_per_round,
-        "machine": machine_description(),
-        "wall_time_s": wall,
-        "workers": workers,
-    }
-    (run_dir / "tables.md").write_text(render_markdown(rows, header, target))
-    _write_csv(run_dir / "tables.csv", rows)
-    _write_csv(run_dir / "metrics.csv", records)
-    (run_dir / "config.json").write_text(
-        json.dumps({**header, "config": asdict(config)}, indent=1, default=str)
-    )
-    (run_dir / "summary.json").write_text(json.dumps({"target": target, "wall_time_s": wall}, indent=1))
-    return run_dir
-
-
-def _write_csv(path: Path, rows: list[dict]) -> None:
-    with path.open("w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    return out

@@ -11,6 +11,12 @@ the interquartile mean (IQM, as rliable). It writes into the sweep folder (or ``
 - ``pseudo_accuracy.png``: pseudo-reward accuracy against round, likewise (co-training cells only);
 - ``score_vs_<key>.png``: the normalised score and success against each numeric grid key (the label
   fraction study), one line per config and remaining grid values.
+
+A sweep of paper-protocol runs (``task = "paper"``, as ``dospcot reproduce-paper`` makes) gets the seed
+paper's tables instead (:mod:`dospcot.paper`), per cell: ``report.md`` (the target line, Tables 1-4
+for paper accuracy, optimal-action agreement and greedy return, pseudo-reward accuracy and coverage),
+``report.csv`` (long format: one row per table, row, gamma column and metric) and
+``paper_agreement.png`` (optimal-action agreement against round, per agent kind and method).
 """
 
 from __future__ import annotations
@@ -25,10 +31,12 @@ from typing import Any
 
 import numpy as np
 
+from dospcot import metrics, paper
 from dospcot.metrics import SeedSummary
 from dospcot.plots import Band, plot_bands
-from dospcot.run_folder import METRICS_FILE, SUMMARY_FILE, write_csv, write_text
+from dospcot.run_folder import CONFIG_FILE, METRICS_FILE, SUMMARY_FILE, write_csv, write_text
 from dospcot.sweep import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
+from dospcot.train_config import load_config
 
 METRICS = {
     "normalised_score": "normalised score",
@@ -115,13 +123,19 @@ def short_key(key: str) -> str:
     return key.rsplit(".", 1)[-1]
 
 
-def render_markdown(spec: SweepSpec, runs: Sequence[TrialRun], rows: Sequence[dict[str, Any]]) -> str:
-    """``report.md``: a header naming the sweep, then one table per metric."""
+def _sweep_line(spec: SweepSpec, runs: Sequence[TrialRun]) -> str:
     total = len(spec.configs) * math.prod(len(v) for v in spec.grid.values()) * len(spec.seeds)
     grid = ", ".join(f"{k} = {', '.join(v)}" for k, v in spec.grid.items()) or "none"
-    lines = [
+    return (
         f"Configs: {', '.join(spec.configs)}; grid: {grid}; seeds: {', '.join(map(str, spec.seeds))} "
-        f"({len(runs)} of {total} trials finished).",
+        f"({len(runs)} of {total} trials finished)."
+    )
+
+
+def render_markdown(spec: SweepSpec, runs: Sequence[TrialRun], rows: Sequence[dict[str, Any]]) -> str:
+    """``report.md``: a header naming the sweep, then one table per metric."""
+    lines = [
+        _sweep_line(spec, runs),
         "Each cell: over seeds, each seed's mean over its agents at the last round; mean "
         "[95% bootstrap interval] and IQM (interquartile mean).",
     ]
@@ -170,6 +184,8 @@ def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
     spec, runs = load_runs(sweep_dir)
     out_dir = out_dir or sweep_dir
     out_dir.mkdir(parents=True, exist_ok=True)
+    if runs[0].summary.get("task") == "paper":  # a sweep holds one kind of config (SweepSpec.trials)
+        return _write_paper_report(spec, runs, out_dir)
     rows = aggregate(runs)
     written = [out_dir / "report.md", out_dir / "report.csv"]
     write_text(written[0], render_markdown(spec, runs, rows))
@@ -225,3 +241,64 @@ def _plot_against(key: str, spec: SweepSpec, grouped: dict, out_dir: Path) -> Pa
     xlabel = short_key(key).replace("_", " ")
     plot_bands(panels, xlabel, "mean over seeds", path, log_x=log_x, markers=True, share_y=False)
     return path
+
+
+def paper_tables(runs: Sequence[TrialRun], level: int = 2) -> tuple[list[str], list[dict[str, Any]]]:
+    """The seed paper's tables over the seeds of each cell of a sweep of paper-protocol runs: the
+    markdown lines (headings from ``level``; a heading per cell when there are several) and the long
+    rows of ``report.csv``."""
+    grouped = cells(runs)
+    lines: list[str] = []
+    rows: list[dict[str, Any]] = []
+    for (name, params), members in grouped.items():
+        cfg = load_config(str(members[0].run_dir / CONFIG_FILE))
+        records = [row for run in members for row in run.curves]
+        table = paper.build_tables(records, metrics.paper_tables(), cfg.tabular.rounds)
+        seeds = [run.trial.seed for run in members]
+        if len(grouped) > 1:
+            lines += [f"{'#' * level} {_cell_title(name, params)}", ""]
+        lines += paper.render_tables(table, paper.target_check(table), cfg, seeds, level + (len(grouped) > 1))
+        rows += [{"config": name, **dict(params), **row} for row in table]
+    return lines, rows
+
+
+def _cell_title(name: str, params: tuple[tuple[str, str], ...]) -> str:
+    return ", ".join([name, *(f"{short_key(k)}={v}" for k, v in params)])
+
+
+def _write_paper_report(spec: SweepSpec, runs: Sequence[TrialRun], out_dir: Path) -> list[Path]:
+    info = [json.loads((run.run_dir / "run_info.json").read_text()) for run in runs]
+    lines, rows = paper_tables(runs)
+    header = [
+        "# Seed paper reproduction: masked CliffWalking-v1",
+        "",
+        _sweep_line(spec, runs) + "  ",
+        f"Training: {sum(i['wall_time_s'] for i in info):.1f} s of wall time summed over trials (a batch of "
+        f"seeds trained together splits its time evenly), on {info[0]['machine']}, Python "
+        f"{info[0]['python']}.",
+        "",
+    ]
+    written = [out_dir / "report.md", out_dir / "report.csv"]
+    write_text(written[0], "\n".join(header + lines))
+    write_csv(written[1], rows)
+    for index, ((name, params), members) in enumerate(cells(runs).items()):
+        path = out_dir / ("paper_agreement.png" if index == 0 else f"paper_agreement_{index}.png")
+        _plot_paper_agreement([row for run in members for row in run.curves], _cell_title(name, params), path)
+        written.append(path)
+    return written
+
+
+def _plot_paper_agreement(records: list[dict[str, Any]], title: str, path: Path) -> None:
+    """Optimal-action agreement against round, one panel per agent kind: its baselines and its
+    DOSPCoT pair at gamma 0.3 (each a band over seeds)."""
+    values = paper.per_seed(records, "agreement")
+    rounds = sorted({int(record["round"]) for record in records})
+    panels: dict[str, list[Band]] = {}
+    for kind in paper.KINDS:
+        lines = {label: (method, kind, view, 0.3) for label, method, view in paper.BASELINES}
+        lines["DOSPCoT (γ 0.3)"] = ("cotrain", f"{kind}-{kind}", "-".join(paper.PAIR_VIEWS), 0.3)
+        panels[f"{title}: {paper.KIND_NAMES[kind]}"] = [
+            _band(label, {r: SeedSummary.of(values[(*key, r)]) for r in rounds})
+            for label, key in lines.items()
+        ]
+    plot_bands(panels, "round", "optimal-action agreement", path, markers=True)

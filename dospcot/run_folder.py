@@ -12,6 +12,7 @@ import io
 import json
 import os
 import pickle
+import platform
 import tempfile
 import time
 from collections.abc import Callable, Sequence
@@ -19,7 +20,11 @@ from functools import partial
 from pathlib import Path
 from typing import IO, Any
 
+import stable_baselines3
 import tomli_w
+import torch
+
+import dospcot
 
 CONFIG_FILE = "config.toml"
 METRICS_FILE = "metrics.csv"
@@ -73,6 +78,18 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
     writer.writeheader()
     writer.writerows(rows)
     write_text(path, text.getvalue())
+
+
+def write_run_info(run_dir: Path, command: str, wall_time_s: float, **extra: Any) -> None:
+    """``run_info.json``: the command, the wall time (s) and what ran it (versions, machine). Kept out
+    of ``summary.json`` so that a resumed run's summary equals the uninterrupted run's."""
+    write_json(
+        run_dir / "run_info.json",
+        {"command": command, "wall_time_s": round(wall_time_s, 2), **extra, "dospcot": dospcot.__version__,
+         "torch": torch.__version__, "stable_baselines3": stable_baselines3.__version__,
+         "python": platform.python_version(),
+         "machine": f"{platform.machine()} {platform.system()}, {torch.get_num_threads()} torch threads"},
+    )  # fmt: skip
 
 
 def new_run_dir(root: Path, name: str) -> Path:

@@ -15,6 +15,11 @@ killed part-way resumes from its last finished round's checkpoint, or starts aga
 Backends: ``local`` runs the trials in a pool of ``workers`` processes; ``ray`` runs the same trials as
 Ray Tune trials (the ``ray`` extra), one CPU each, on a local Ray instance or on a cluster by address.
 On a cluster every node must see the sweep folder (a shared filesystem), since trials write there.
+
+Paper-protocol configs (``task = "paper"``) vectorise over seeds: the local backend trains one cell's
+unfinished seeds in ``workers`` batches, one batch per process, and each seed still writes its own
+trial folder (the same folder it would write alone). The ray backend runs each seed as its own trial.
+A sweep runs paper-protocol configs or train configs, not both: ``dospcot report`` tables them apart.
 """
 
 from __future__ import annotations
@@ -23,9 +28,10 @@ import json
 import multiprocessing
 import re
 import shutil
-from collections.abc import Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Sequence
+from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
+from functools import partial
 from itertools import product
 from pathlib import Path
 from typing import Any, Literal
@@ -33,7 +39,7 @@ from typing import Any, Literal
 from tqdm.auto import tqdm
 
 from dospcot.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
-from dospcot.train_config import ConfigError, load_config
+from dospcot.train_config import ConfigError, PaperConfig, load_config
 
 SWEEP_FILE = "sweep.json"
 TRIAL_FILE = "trial.json"
@@ -80,16 +86,23 @@ class SweepSpec:
         :raises ConfigError: a combination the config rejects (naming the key).
         """
         keys = list(self.grid)
-        trials = []
+        trials, kinds = [], set()
         for config in self.configs:
             for values in product(*self.grid.values()):
                 params = dict(zip(keys, values, strict=True))
                 for seed in self.seeds:
                     trial = Trial(config, "", params, seed, self.overrides)
-                    trials.append(replace(trial, name=load_config(config, trial.overrides()).name))
+                    cfg = load_config(config, trial.overrides())
+                    trials.append(replace(trial, name=cfg.name))
+                    kinds.add(type(cfg))
         ids = [t.trial_id for t in trials]
         if len(set(ids)) != len(ids):
             raise SweepError("two trials share a folder name: give each config its own `name`")
+        if len(kinds) > 1:
+            raise SweepError(
+                'a sweep runs paper-protocol configs (task = "paper") or train configs, not both: '
+                "sweep them apart"
+            )
         return trials
 
 
@@ -208,6 +221,18 @@ def is_finished(sweep_dir: Path, trial: Trial) -> bool:
     return (trial_dir(sweep_dir, trial) / SUMMARY_FILE).is_file()
 
 
+def _command(trial: Trial) -> str:
+    return f"dospcot train {trial.config} " + " ".join(f"--set {o}" for o in trial.overrides())
+
+
+def _fresh_trial_dir(sweep_dir: Path, trial: Trial) -> Path:
+    run_dir = trial_dir(sweep_dir, trial)
+    shutil.rmtree(run_dir, ignore_errors=True)
+    run_dir.mkdir(parents=True)
+    write_json(run_dir / TRIAL_FILE, asdict(trial) | {"trial_id": trial.trial_id})
+    return run_dir
+
+
 def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
     """Run (or finish) one trial in its folder; return its ``summary.json``."""
     import torch
@@ -217,18 +242,52 @@ def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
     # One thread per trial: the pool's processes share the cores, and more threads oversubscribe them.
     torch.set_num_threads(1)
     run_dir = trial_dir(sweep_dir, trial)
-    command = f"dospcot train {trial.config} " + " ".join(f"--set {o}" for o in trial.overrides())
     if not (run_dir / SUMMARY_FILE).is_file():
         if (run_dir / CONFIG_FILE).is_file():
-            resume(run_dir, show_progress=False, command=command)
+            resume(run_dir, show_progress=False, command=_command(trial))
         else:
-            shutil.rmtree(run_dir, ignore_errors=True)
-            run_dir.mkdir(parents=True)
-            write_json(run_dir / TRIAL_FILE, asdict(trial) | {"trial_id": trial.trial_id})
-            train_at(
-                run_dir, load_config(trial.config, trial.overrides()), show_progress=False, command=command
-            )
+            cfg = load_config(trial.config, trial.overrides())
+            train_at(_fresh_trial_dir(sweep_dir, trial), cfg, show_progress=False, command=_command(trial))
     return json.loads((run_dir / SUMMARY_FILE).read_text())
+
+
+def plan_jobs(trials: Sequence[Trial], workers: int) -> list[list[Trial]]:
+    """The local backend's jobs, one process each: every train trial alone; a paper-protocol cell's
+    trials (one config and grid values, over seeds) split into ``workers`` batches, since its runs
+    vectorise over seeds and a batch of seeds costs little more than one."""
+    jobs: list[list[Trial]] = []
+    cells: dict[tuple[str, tuple[tuple[str, str], ...]], list[Trial]] = {}
+    for trial in trials:
+        if isinstance(load_config(trial.config, trial.overrides()), PaperConfig):
+            cells.setdefault((trial.config, tuple(trial.params.items())), []).append(trial)
+        else:
+            jobs.append([trial])
+    for members in cells.values():
+        jobs += [members[i::workers] for i in range(min(workers, len(members)))]
+    return jobs
+
+
+def run_job(sweep_dir: Path, trials: list[Trial], progress: Callable[[float], None] | None = None) -> None:
+    """Run one job of :func:`plan_jobs`: a trial, or a batch of one paper cell's seeds trained together.
+
+    :param progress: called with the share of a trial just done (a batch reports as it trains).
+    """
+    if len(trials) == 1:
+        run_trial(sweep_dir, trials[0])
+        return
+    import torch
+
+    from dospcot.paper import episodes_per_seed, train_protocol_at
+
+    torch.set_num_threads(1)
+    cfg = load_config(trials[0].config, trials[0].overrides())
+    episodes = episodes_per_seed(cfg)
+    train_protocol_at(
+        cfg,
+        {trial.seed: _fresh_trial_dir(sweep_dir, trial) for trial in trials},
+        commands={trial.seed: _command(trial) for trial in trials},
+        progress=None if progress is None else lambda done: progress(done / episodes),
+    )
 
 
 @dataclass
@@ -268,7 +327,7 @@ def run_sweep(
     todo = [t for t in trials if not is_finished(sweep_dir, t)]
     skipped = [t for t in trials if t not in todo]
     if backend == "local":
-        failed = _run_local(sweep_dir, todo, workers, show_progress)
+        failed = _run_local(sweep_dir, plan_jobs(todo, workers), workers, show_progress)
     elif backend == "ray":
         failed = _run_ray(sweep_dir, todo, workers, ray_address)
     else:
@@ -276,22 +335,50 @@ def run_sweep(
     return SweepResult(sweep_dir, trials, skipped, todo, failed)
 
 
-def _run_local(sweep_dir: Path, trials: list[Trial], workers: int, show_progress: bool) -> dict[str, str]:
+def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_progress: bool) -> dict[str, str]:
     failed: dict[str, str] = {}
-    if not trials:
+    if not jobs:
         return failed
     # spawn, not fork: a forked child inherits torch's thread pools and locks from the parent.
     context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(min(workers, len(trials)), mp_context=context) as pool:
-        futures = {pool.submit(run_trial, sweep_dir, trial): trial for trial in trials}
-        bar = tqdm(as_completed(futures), total=len(trials), unit="trial", disable=not show_progress)
-        for future in bar:
-            trial = futures[future]
-            error = future.exception()
-            if error is not None:
-                failed[trial.trial_id] = f"{type(error).__name__}: {error}"
-            bar.set_postfix(failed=len(failed))
+    total = sum(len(job) for job in jobs)
+    with (
+        context.Manager() as manager,
+        ProcessPoolExecutor(min(workers, len(jobs)), mp_context=context) as pool,
+        tqdm(
+            total=total,
+            unit="trial",
+            disable=not show_progress,
+            dynamic_ncols=True,
+            bar_format="{l_bar}{bar}| {n:.1f}/{total} trials [{elapsed}<{remaining}{postfix}]",
+        ) as bar,
+    ):
+        reports = manager.Queue()  # (job index, share of a trial done) from the workers
+        futures = {
+            pool.submit(run_job, sweep_dir, job, partial(_report_progress, reports, index)): index
+            for index, job in enumerate(jobs)
+        }
+        shown = [0.0] * len(jobs)
+        pending = set(futures)
+        while pending:
+            done, pending = wait(pending, timeout=0.5, return_when=FIRST_COMPLETED)
+            while not reports.empty():
+                index, share = reports.get()
+                shown[index] = min(shown[index] + share, len(jobs[index]))
+            for future in done:
+                index = futures[future]
+                shown[index] = len(jobs[index])  # the rest, and all of a trial that reports nothing
+                error = future.exception()
+                if error is not None:
+                    for trial in jobs[index]:
+                        failed[trial.trial_id] = f"{type(error).__name__}: {error}"
+            bar.n = sum(shown)
+            bar.set_postfix(failed=len(failed))  # refreshes the bar
     return failed
+
+
+def _report_progress(reports: Any, index: int, share: float) -> None:
+    reports.put((index, share))
 
 
 def _ray_trial(config: dict[str, Any], sweep_dir: str) -> None:

@@ -20,7 +20,6 @@ finished round and ends with the same ``summary.json`` as an uninterrupted run.
 from __future__ import annotations
 
 import math
-import platform
 import shutil
 import time
 from functools import partial
@@ -29,17 +28,16 @@ from typing import Any
 
 import numpy as np
 import stable_baselines3
-import torch as th
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
 from tqdm.auto import tqdm
 
-import dospcot
 from dospcot import metrics
 from dospcot.classifier import save_classifier
 from dospcot.envs import GridLayout, GridWorld, TabularMDP, grid_views, make_masked_highway
 from dospcot.envs.views import View
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
+from dospcot.paper import episodes_per_seed, train_protocol_at
 from dospcot.plots import plot_learning_curves
 from dospcot.run_folder import (
     CHECKPOINT_FILE,
@@ -54,9 +52,10 @@ from dospcot.run_folder import (
     write_checkpoint,
     write_csv,
     write_json,
+    write_run_info,
     write_toml,
 )
-from dospcot.train_config import TrainConfig, load_config
+from dospcot.train_config import PaperConfig, TrainConfig, load_config
 from dospcot.transition_cotraining import TransitionConfig, TransitionCoTraining
 
 ROUND_SCALARS = (
@@ -126,24 +125,44 @@ class _StepBar(BaseCallback):
 
 
 def train(
-    cfg: TrainConfig, runs_root: Path = Path("runs"), *, show_progress: bool = True, command: str = ""
+    cfg: TrainConfig | PaperConfig,
+    runs_root: Path = Path("runs"),
+    *,
+    show_progress: bool = True,
+    command: str = "",
 ) -> Path:
     """Train ``cfg`` in a new folder ``runs_root/<name>/<stamp>/``; return that folder."""
     return train_at(new_run_dir(runs_root, cfg.name), cfg, show_progress=show_progress, command=command)
 
 
-def train_at(run_dir: Path, cfg: TrainConfig, *, show_progress: bool = True, command: str = "") -> Path:
+def train_at(
+    run_dir: Path, cfg: TrainConfig | PaperConfig, *, show_progress: bool = True, command: str = ""
+) -> Path:
     """Train ``cfg`` in ``run_dir`` (created if missing, as ``dospcot sweep`` names its trials)."""
     run_dir.mkdir(parents=True, exist_ok=True)
     write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
+    if isinstance(cfg, PaperConfig):
+        return _train_paper(run_dir, cfg, show_progress, command)
     return _train_in(run_dir, cfg, None, show_progress, command)
+
+
+def _train_paper(run_dir: Path, cfg: PaperConfig, show_progress: bool, command: str) -> Path:
+    """One seed of the paper protocol, in one go: its tabular runs take seconds and keep no checkpoint."""
+    with tqdm(
+        total=episodes_per_seed(cfg), unit="ep", desc=f"{cfg.name} seed {cfg.seed}",
+        disable=not show_progress, mininterval=1.0, dynamic_ncols=True,
+    ) as bar:  # fmt: skip
+        train_protocol_at(cfg, {cfg.seed: run_dir}, commands={cfg.seed: command}, progress=bar.update)
+    return run_dir
 
 
 def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> Path:
     """Continue a killed run from the checkpoint of its last finished round, or from the start if it
-    finished none."""
+    finished none (a paper-protocol run always starts again: it keeps no checkpoint)."""
     cfg = _run_config(run_dir)
     remove_stale_temporaries(run_dir)
+    if isinstance(cfg, PaperConfig):
+        return _train_paper(run_dir, cfg, show_progress, command)
     if not (run_dir / CHECKPOINT_FILE).is_file():
         # Killed in its first round: only the config is worth keeping, and old events would repeat.
         shutil.rmtree(run_dir / "tb", ignore_errors=True)
@@ -151,7 +170,7 @@ def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> P
     return _train_in(run_dir, cfg, read_checkpoint(run_dir), show_progress, command)
 
 
-def _run_config(run_dir: Path) -> TrainConfig:
+def _run_config(run_dir: Path) -> TrainConfig | PaperConfig:
     config_path = run_dir / CONFIG_FILE
     if not config_path.is_file():
         raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
@@ -197,13 +216,7 @@ def _train_in(
     for agent in run.agents:
         agent.logger.close()
     plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
-    write_json(
-        run_dir / "run_info.json",
-        {"command": command, "wall_time_s": round(elapsed + time.perf_counter() - started, 2),
-         "sessions": sessions, "dospcot": dospcot.__version__, "torch": th.__version__,
-         "stable_baselines3": stable_baselines3.__version__, "python": platform.python_version(),
-         "machine": f"{platform.machine()} {platform.system()}, {th.get_num_threads()} torch threads"},
-    )  # fmt: skip
+    write_run_info(run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions)
     # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
     write_json(run_dir / SUMMARY_FILE, summarise(records, run))
     return run_dir
@@ -254,6 +267,10 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
     :return: per view and averaged: greedy return, success, normalised score and agreement.
     """
     cfg = _run_config(run_dir)
+    if isinstance(cfg, PaperConfig):
+        raise RunFolderError(
+            f"{run_dir} is a paper-protocol run: it keeps no agents (its figures are in {METRICS_FILE})"
+        )
     agents = [_load_agent(run_dir / f"agent_{v}.zip") for v in cfg.views]
     if cfg.task == "highway":  # greedy evaluation episodes on the task, as during training
         run = build_run(cfg)

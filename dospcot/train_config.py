@@ -2,7 +2,9 @@
 
 A config is a TOML table read with the stdlib's :mod:`tomllib`. Its keys mirror
 :class:`TrainConfig`; sections (``[env]``, ``[training]``, ``[dqn]``, ``[cotraining]``,
-``[cotraining.classifier]``) mirror its nested dataclasses. Every key is checked against the
+``[cotraining.classifier]``) mirror its nested dataclasses. A config with ``task = "paper"`` is a
+:class:`PaperConfig` instead (one seed of the seed paper's tabular protocol, its ``[tabular]`` section
+a :class:`~dospcot.tabular_cotraining.TabularConfig`). Every key is checked against the
 dataclass fields and their type hints before anything is built, so a typo or a wrong type stops the
 run with one line (:class:`ConfigError`) naming the key and what is allowed.
 
@@ -26,6 +28,7 @@ from typing import Any, Literal
 from dospcot.cotraining import CoTrainingConfig
 from dospcot.envs.fast_highway import FastHighwayEnv
 from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, check_highway_config, highway_view_names
+from dospcot.tabular_cotraining import TabularConfig
 
 GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
 AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn")
@@ -187,7 +190,8 @@ class TrainConfig:
     :param views: one view per agent, from ``coords``, ``patch``, ``rays``.
     :param agents: the agent kind of each view (``esarsa_dqn`` or ``dqn``); empty: ``esarsa_dqn``
         for every view.
-    :param task: ``grid`` (the ``[env]`` section) or ``highway`` (the ``[highway]`` section).
+    :param task: ``grid`` (the ``[env]`` section) or ``highway`` (the ``[highway]`` section); a config
+        with ``task = "paper"`` is a :class:`PaperConfig`.
     """
 
     name: str = "run"
@@ -203,10 +207,7 @@ class TrainConfig:
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
 
     def __post_init__(self) -> None:
-        if not self.name or "/" in self.name or self.name.startswith("."):
-            raise ConfigError(f"name: must be a plain folder name, got {self.name!r}")
-        if self.seed < 0:
-            raise ConfigError(f"seed: must be >= 0, got {self.seed}")
+        _check_name_and_seed(self.name, self.seed)
         allowed = ", ".join(self.view_names)
         if not self.views:
             raise ConfigError(f"views: need at least one view; allowed: {allowed}")
@@ -246,6 +247,39 @@ class TrainConfig:
     def to_dict(self) -> dict[str, Any]:
         """The config as plain TOML-ready values (tuples become lists)."""
         return _plain(dataclasses.asdict(self))
+
+
+@dataclass(frozen=True)
+class PaperConfig:
+    """One seed of the seed paper's protocol on masked CliffWalking (``task = "paper"``).
+
+    The protocol fixes its runs (:func:`dospcot.paper.protocol_specs`: 26 tabular runs, 37 agents, per
+    seed: every agent kind alone under each baseline, homogeneous pairs at three gammas, Expected SARSA
+    with the other kinds); a config sets the seed and the hyperparameters every run shares.
+
+    :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
+    :param seed: draws the labelled keys, the exploration streams and the classifiers.
+    :param tabular: the hyperparameters every run of the protocol shares.
+    """
+
+    name: str = "paper"
+    seed: int = 0
+    task: Literal["paper"] = "paper"
+    tabular: TabularConfig = field(default_factory=TabularConfig)
+
+    def __post_init__(self) -> None:
+        _check_name_and_seed(self.name, self.seed)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The config as plain TOML-ready values."""
+        return _plain(dataclasses.asdict(self))
+
+
+def _check_name_and_seed(name: str, seed: int) -> None:
+    if not name or "/" in name or name.startswith("."):
+        raise ConfigError(f"name: must be a plain folder name, got {name!r}")
+    if seed < 0:
+        raise ConfigError(f"seed: must be >= 0, got {seed}")
 
 
 def _check_highway_task(highway: HighwayConfig) -> None:
@@ -333,8 +367,9 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return merged
 
 
-def load_config(config: str, overrides: Sequence[str] = ()) -> TrainConfig:
-    """Read a preset or a TOML file, apply ``--set`` overrides and validate the result."""
+def load_config(config: str, overrides: Sequence[str] = ()) -> TrainConfig | PaperConfig:
+    """Read a preset or a TOML file, apply ``--set`` overrides and validate the result: a
+    :class:`PaperConfig` where ``task = "paper"``, else a :class:`TrainConfig`."""
     data = read_config_data(config)
     for override in overrides:
         path, value = parse_override(override)
@@ -344,7 +379,7 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> TrainConfig:
             if not isinstance(table, dict):
                 raise ConfigError(f"--set {override}: {part!r} is not a section")
         table[path[-1]] = value
-    return from_mapping(TrainConfig, data)
+    return from_mapping(PaperConfig if data.get("task") == "paper" else TrainConfig, data)
 
 
 def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:

@@ -4,6 +4,8 @@
     python scripts/study.py grid16 --docs           # 6 grid16 presets x seeds 0-4
     python scripts/study.py fasthighway --docs      # 4 fasthighway presets x seeds 0-4
     python scripts/study.py highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
+    python scripts/study.py paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
+    python scripts/study.py paper-published-code --docs   # the same with its published code's settings
 
 A study is one or more sweeps in ``runs/sweeps/``: rerunning the command runs only the trials not yet
 finished, then rebuilds the tables from every finished run folder (``--render-only`` trains nothing).
@@ -11,7 +13,8 @@ The grid16 study reads four of its six methods from the label-fraction sweep (th
 its presets exactly) and trains the oracle and labels-only in ``runs/sweeps/grid16-baselines/``.
 With ``--docs`` the tables go to ``docs/<study>.md`` and into README.md between the study's
 ``<!-- <study>-table:start -->`` and ``<!-- <study>-table:end -->`` markers, and the label-fraction
-plot to ``docs/label-fraction.png``. No number is typed by hand.
+plot to ``docs/label-fraction.png``; for the paper studies the README gets an excerpt (paper accuracy
+and Table 3 of optimal-action agreement) and the docs page every table. No number is typed by hand.
 """
 
 from __future__ import annotations
@@ -19,18 +22,21 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import re
 import shlex
 import shutil
 import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from datetime import UTC, datetime
+from functools import partial
 from pathlib import Path
 
 from readme_block import replace_readme_block
 
 from dospcot.metrics import SeedSummary
-from dospcot.report import TrialRun, cells, load_runs, write_report
+from dospcot.paper import PRESETS
+from dospcot.report import TrialRun, cells, load_runs, paper_tables, write_report
 from dospcot.sweep import SweepSpec, run_sweep
 from dospcot.train_config import load_config
 
@@ -75,6 +81,8 @@ def header(runs: list[TrialRun], command: str, sweep_dirs: list[Path]) -> list[s
         f"{seeds[0]}-{seeds[-1]}; {compute / 60:.0f} CPU-minutes of training (one torch thread per run).",
         "Each cell: mean over seeds [95% bootstrap interval] of the run's mean over its agents, last round.",
     ]
+    if first.summary.get("task") == "paper":  # its tables explain their cells themselves
+        return lines[:1]
     if "optimal_return" not in first.summary:
         return lines
     horizon = load_config(str(first.run_dir / "config.toml")).env.episode_steps
@@ -194,6 +202,44 @@ def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
     return lines
 
 
+def _section(text: str, heading: str) -> str:
+    """The markdown from ``heading`` to the next heading of the same or a higher level."""
+    level = heading.split(" ")[0]
+    start = text.index(heading)
+    rest = text[start + len(heading) :]
+    match = re.search(rf"^#{{1,{len(level)}}} ", rest, flags=re.MULTILINE)
+    return (heading + (rest[: match.start()] if match else rest)).strip()
+
+
+def _demote(markdown: str, levels: int = 2) -> str:
+    """Push every heading ``levels`` deeper, so the tables nest under the README's own headings."""
+    return re.sub(r"^(#+) ", lambda m: "#" * (len(m.group(1)) + levels) + " ", markdown, flags=re.MULTILINE)
+
+
+def _with_agreement_plot(plot: str, runs: list[TrialRun]) -> list[str]:
+    """The paper tables, after the plot of optimal-action agreement against round."""
+    return [
+        "",
+        f"![optimal-action agreement against round, per agent kind and method]({plot})",
+        "",
+        *paper_tables(runs)[0],
+    ]
+
+
+def paper_readme(table: str) -> str:
+    """The README's excerpt of the paper tables: the header and target line, every paper-accuracy
+    table, and Table 3 of optimal-action agreement."""
+    agreement = _section(table, "## Optimal-action agreement")
+    return "\n\n".join(
+        [
+            table.split("\n## ")[0].strip(),
+            _demote(_section(table, "## Paper accuracy")),
+            "#### Optimal-action agreement, Table 3 (after 5 rounds)",
+            _section(agreement, "### Table 3").split("\n", 1)[1].strip(),
+        ]
+    )
+
+
 @dataclass(frozen=True)
 class Sweep:
     """One sweep of a study: its folder's name under --runs-dir, its configs and its grid."""
@@ -210,6 +256,10 @@ class Study:
     title: str
     keep: Callable[[TrialRun], bool] = lambda run: True
     seeds: int = 5
+    readme: Callable[[str], str] | None = lambda table: table
+    """The README block from the study's table text; ``None``: the study has no README block."""
+    plot: tuple[str, str] | None = None
+    """A plot of the report that goes into ``docs/``: (its name in the sweep folder, its name there)."""
 
 
 LABEL_FRACTION = Sweep(
@@ -226,7 +276,12 @@ STUDIES = {
         "The 16 x 16 grid study",
         keep=lambda run: run.trial.params.get(FRACTION, "0.05") == "0.05",
     ),
-    "label-fraction": Study((LABEL_FRACTION,), label_fraction_tables, "Score against label fraction"),
+    "label-fraction": Study(
+        (LABEL_FRACTION,),
+        label_fraction_tables,
+        "Score against label fraction",
+        plot=("score_vs_label_fraction.png", "label-fraction.png"),
+    ),
     **{
         base: Study(
             (
@@ -245,6 +300,18 @@ STUDIES = {
             ("fasthighway", "our fast highway env", 5),
         )
     },
+    # The seed paper's protocol: a sweep of one paper preset over seeds; `dospcot report` tables it.
+    **{
+        preset: Study(
+            (Sweep(preset, (preset,), {}),),
+            partial(_with_agreement_plot, f"docs/{preset}-agreement.png"),
+            f"Seed paper reproduction: masked CliffWalking-v1 (`{preset}`)",
+            seeds=10,
+            readme=paper_readme if preset == "paper-text" else None,
+            plot=("paper_agreement.png", f"{preset}-agreement.png"),
+        )
+        for preset in PRESETS.values()
+    },
 }
 
 
@@ -253,7 +320,9 @@ def main() -> None:
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     parser.add_argument("study", choices=list(STUDIES))
-    parser.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's, 5; highway 3)")
+    parser.add_argument(
+        "--seeds", type=int, help="seeds 0..N-1 (default: the study's, 5; highway 3, paper 10)"
+    )
     parser.add_argument("--workers", type=int, default=2, help="trials at once (default 2)")
     parser.add_argument("--backend", choices=["local", "ray"], default="local")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
@@ -284,10 +353,12 @@ def main() -> None:
     if args.docs:
         docs_table = table.replace("](docs/", "](")  # the docs page sits beside the plot
         (ROOT / "docs" / f"{args.study}.md").write_text(f"# {study.title}\n\n{docs_table}")
-        plot = next((p for p in written if p.name == "score_vs_label_fraction.png"), None)
+        plot = next((p for p in written if study.plot and p.name == study.plot[0]), None)
         if plot is not None:
-            shutil.copyfile(plot, ROOT / "docs" / "label-fraction.png")
-        replace_readme_block(f"<!-- {args.study}-table:start -->", f"<!-- {args.study}-table:end -->", table)
+            shutil.copyfile(plot, ROOT / "docs" / study.plot[1])
+        if study.readme is not None:
+            markers = (f"<!-- {args.study}-table:start -->", f"<!-- {args.study}-table:end -->")
+            replace_readme_block(*markers, study.readme(table))
 
 
 if __name__ == "__main__":

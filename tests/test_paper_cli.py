@@ -1,15 +1,24 @@
-"""The reproduce-paper protocol, its tables, and the command line."""
+"""The reproduce-paper protocol, its tables, its sweep and report, and the command line."""
 
 import csv
 import json
 import subprocess
 import sys
 
+import numpy as np
 import pytest
 
 from dospcot.cli import main
 from dospcot.metrics import SeedSummary
-from dospcot.paper import build_tables, protocol_config, protocol_specs, summarise, train_protocol
+from dospcot.paper import PRESETS, protocol_specs, summarise, train_protocol_at
+from dospcot.report import write_report
+from dospcot.run_folder import RunFolderError
+from dospcot.sweep import SweepError, SweepSpec, Trial, plan_jobs, run_sweep
+from dospcot.train import evaluate, train
+from dospcot.train_config import ConfigError, load_config
+
+# Five episodes a round and short classifier fits: every file and figure of the protocol in seconds.
+QUICK = ["tabular.episodes_per_round=5", "tabular.cotraining.classifier.epochs=10"]
 
 
 def test_protocol_has_every_run_of_the_four_tables():
@@ -19,9 +28,18 @@ def test_protocol_has_every_run_of_the_four_tables():
     for kind in ("q", "sarsa", "esarsa"):
         assert {((kind, kind), g) for g in (0.3, 0.5, 0.8)} <= pairs
     assert {(("esarsa", "sarsa"), 0.3), (("esarsa", "q"), 0.3)} <= pairs
-    assert protocol_config("published-code", 0.1).learning_rate == 0.5
-    with pytest.raises(ValueError, match="unknown preset 'paper'"):
-        protocol_config("paper", 0.1)
+
+
+def test_paper_presets_hold_the_papers_hyperparameters():
+    text, code = (load_config(PRESETS[name]).tabular for name in ("paper-text", "published-code"))
+    assert (text.learning_rate, text.discount, code.learning_rate, code.discount) == (0.8, 0.95, 0.5, 1.0)
+    for cfg in (text, code):
+        assert (cfg.rounds, cfg.episodes_per_round, cfg.eps_start, cfg.eps_end) == (5, 500, 0.1, 0.1)
+        assert cfg.label_fraction == 0.1
+    with pytest.raises(ConfigError, match="unknown key 'views'; allowed: name, seed, task, tabular"):
+        load_config("paper-text", ['views=["patch"]'])
+    with pytest.raises(ConfigError, match=r"tabular: label_fraction must lie in \(0, 1\]"):
+        load_config("paper-text", ["tabular.label_fraction=0"])
 
 
 def test_summary_cell_by_hand():
@@ -31,42 +49,87 @@ def test_summary_cell_by_hand():
     assert str(SeedSummary(-13.0, -15.0, -13.0, float("nan"), 3)) == "-13.0 [-15.0, -13.0]"
 
 
-def test_worker_split_does_not_change_results():
-    config = protocol_config("paper-text", 0.1, episodes=5)
-    one = train_protocol(config, [0, 1], workers=1, show_progress=False)
-    two = train_protocol(config, [0, 1], workers=2, show_progress=False)
-    key = lambda r: (r["seed"], r["method"], r["agents"], r["views"], r["gamma"], r["round"], r["agent"])  # noqa: E731
-    assert json.dumps(sorted(one, key=key)) == json.dumps(sorted(two, key=key))
-    rows = build_tables(one, json.loads(_paper_tables()))
-    assert {r["table"] for r in rows} == {"1", "2", "3", "4", "pseudo"}
+def test_a_seeds_folder_is_the_same_trained_alone_or_in_a_batch(tmp_path):
+    cfg = load_config("paper-text", QUICK)
+    train_protocol_at(cfg, {0: tmp_path / "b0", 1: tmp_path / "b1"})
+    for seed in (0, 1):
+        train_protocol_at(cfg, {seed: tmp_path / f"a{seed}"})
+        for name in ("config.toml", "metrics.csv", "summary.json"):
+            assert (tmp_path / f"a{seed}" / name).read_bytes() == (tmp_path / f"b{seed}" / name).read_bytes()
+    assert load_config(str(tmp_path / "b1" / "config.toml")).seed == 1
+    info = json.loads((tmp_path / "b1" / "run_info.json").read_text())
+    assert info["batch_seeds"] == [0, 1]
 
 
-def _paper_tables():
-    from importlib import resources
-
-    return resources.files("dospcot").joinpath("data/paper_tables.json").read_text()
-
-
-def test_cli_reproduce_paper_writes_tables(tmp_path, capsys):
-    code = main(
-        [
-            "reproduce-paper",
-            "--seeds",
-            "0,1",
-            "--episodes",
-            "5",
-            "--workers",
-            "1",
-            "--out",
-            str(tmp_path),
-            "--no-progress",
+def test_the_local_backend_batches_a_paper_cells_seeds_over_its_workers():
+    def trials(config, seeds, params=None):
+        return [
+            Trial(config, "x", params or {}, seed, tuple(QUICK) if "paper" in config else ())
+            for seed in seeds
         ]
+
+    paper = trials("paper-text", range(5))
+    other = trials("paper-text", range(2), {"tabular.label_fraction": "0.2"})
+    assert plan_jobs([*paper, *other], workers=2) == [paper[0::2], paper[1::2], other[:1], other[1:]]
+    tiny = trials("tiny", range(3))
+    assert plan_jobs(tiny, workers=2) == [[t] for t in tiny]
+    with pytest.raises(SweepError, match=r"paper-protocol configs .* or train configs, not both"):
+        SweepSpec(("paper-text", "tiny"), {}, (0,)).trials()
+
+
+def test_report_of_a_paper_sweep_gives_the_hand_computed_figures(tmp_path):
+    spec = SweepSpec(("paper-text",), {}, (0, 1, 2), tuple(QUICK))
+    assert not run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False).failed
+    paths = write_report(tmp_path / "sweep")
+    assert [p.name for p in paths] == ["report.md", "report.csv", "paper_agreement.png"]
+    # By hand from the trials' metrics.csv: per seed the mean of the ESARSA pair's two agents at
+    # gamma 0.3 after round 5, then the mean over seeds.
+    per_seed = []
+    for seed in (0, 1, 2):
+        with (tmp_path / "sweep" / "trials" / "paper-text" / f"seed={seed}" / "metrics.csv").open() as f:
+            rows = [
+                r for r in csv.DictReader(f)
+                if (r["method"], r["agents"], r["gamma"], r["round"])
+                == ("cotrain", "esarsa-esarsa", "0.3", "5")
+            ]  # fmt: skip
+        assert len(rows) == 2
+        per_seed.append(np.mean([float(r["agreement"]) for r in rows]))
+    with (tmp_path / "sweep" / "report.csv").open() as f:
+        cell = next(
+            r for r in csv.DictReader(f)
+            if (r["table"], r["agents"], r["method"], r["gamma"], r["metric"])
+            == ("3", "ESARSA-ESARSA", "DOSPCoT", "0.3", "agreement")
+        )  # fmt: skip
+    assert float(cell["mean"]) == pytest.approx(np.mean(per_seed)) and cell["n"] == "3"
+    assert cell["paper"] == "" and cell["config"] == "paper-text"
+    text = paths[0].read_text()
+    assert (
+        f"**Target** (ESARSA-ESARSA, γ 0.3, 5 rounds, optimal-action agreement): {np.mean(per_seed):.3f}"
+        in text
     )
-    assert code == 0
-    (run_dir,) = tmp_path.iterdir()
-    for name in ("tables.md", "tables.csv", "metrics.csv", "config.json", "summary.json"):
-        assert (run_dir / name).stat().st_size > 0
-    with (run_dir / "tables.csv").open() as f:
+    assert "3 of 3 trials finished" in text and "### Table 4" in text
+
+
+def test_train_runs_one_seed_of_the_protocol_and_evaluate_refuses_it(tmp_path):
+    run_dir = train(load_config("paper-text", [*QUICK, "seed=4"]), tmp_path, show_progress=False)
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert summary["task"] == "paper" and summary["seed"] == 4 and summary["runs"] == 26
+    with (run_dir / "metrics.csv").open() as f:
+        assert len(list(csv.DictReader(f))) == 37 * 5  # every agent, every round
+    with pytest.raises(RunFolderError, match="is a paper-protocol run: it keeps no agents"):
+        evaluate(run_dir)
+
+
+def test_cli_reproduce_paper_is_a_sweep_and_its_report(tmp_path, capsys):
+    args = ["reproduce-paper", "--seeds", "0,1", "--episodes", "5", "--set", QUICK[1]]
+    assert main([*args, "--workers", "1", "--out", str(tmp_path), "--no-progress"]) == 0
+    (sweep_dir,) = tmp_path.iterdir()
+    out = capsys.readouterr().out
+    assert "Target (ESARSA-ESARSA" in out and "wall time" in out
+    spec = json.loads((sweep_dir / "sweep.json").read_text())
+    assert spec["configs"] == ["paper-text"] and spec["seeds"] == [0, 1]
+    assert spec["overrides"] == ["tabular.episodes_per_round=5", QUICK[1]]
+    with (sweep_dir / "report.csv").open() as f:
         rows = list(csv.DictReader(f))
     cell = next(
         r
@@ -77,8 +140,9 @@ def test_cli_reproduce_paper_writes_tables(tmp_path, capsys):
         and r["metric"] == "paper_accuracy"
     )
     assert cell["paper"] == "0.9792" and cell["n"] == "2"
-    assert "wall time" in capsys.readouterr().out
-    assert "**Target**" in (run_dir / "tables.md").read_text()
+    # A second report of the same folder renders the same tables.
+    before = (sweep_dir / "report.md").read_bytes()
+    assert main(["report", str(sweep_dir)]) == 0 and (sweep_dir / "report.md").read_bytes() == before
 
 
 @pytest.mark.parametrize(
