@@ -252,6 +252,13 @@ def _train(args: argparse.Namespace, command: str) -> int:
         run_dir = train(cfg, args.runs_dir, show_progress=not args.no_progress, command=command)
     summary = json.loads((run_dir / "summary.json").read_text())
     mean = summary["mean"]
+    if summary.get("task") == "paper":
+        print(
+            f"{run_dir}: ESARSA-ESARSA DOSPCoT agreement {mean['dospcot_agreement']:.3f}, oracle "
+            f"{mean['oracle_agreement']:.3f} (seed {summary['seed']}, {summary['runs']} runs, round "
+            f"{summary['rounds']}; every run in metrics.csv)"
+        )
+        return 0
     print(
         f"{run_dir}: normalised score {mean['normalised_score']:.3f}, agreement {mean['agreement']:.3f}, "
         f"success {mean['success']:.2f} (mean over {summary['m']} agent(s), round {summary['rounds']})"

@@ -12,9 +12,7 @@ from dospcot.cli import main
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS, protocol_specs, summarise, train_protocol_at
 from dospcot.report import write_report
-from dospcot.run_folder import RunFolderError
 from dospcot.sweep import SweepError, SweepSpec, Trial, plan_jobs, run_sweep
-from dospcot.train import evaluate, train
 from dospcot.train_config import ConfigError, load_config
 
 # Five episodes a round and short classifier fits: every file and figure of the protocol in seconds.
@@ -110,14 +108,17 @@ def test_report_of_a_paper_sweep_gives_the_hand_computed_figures(tmp_path):
     assert "3 of 3 trials finished" in text and "### Table 4" in text
 
 
-def test_train_runs_one_seed_of_the_protocol_and_evaluate_refuses_it(tmp_path):
-    run_dir = train(load_config("paper-text", [*QUICK, "seed=4"]), tmp_path, show_progress=False)
+def test_train_runs_one_seed_of_the_protocol_and_evaluate_refuses_it(tmp_path, capsys):
+    sets = [item for setting in [*QUICK, "seed=4"] for item in ("--set", setting)]
+    assert main(["train", "paper-text", *sets, "--runs-dir", str(tmp_path), "--no-progress"]) == 0
+    (run_dir,) = (tmp_path / "paper-text").iterdir()
+    assert "ESARSA-ESARSA DOSPCoT agreement" in capsys.readouterr().out
     summary = json.loads((run_dir / "summary.json").read_text())
     assert summary["task"] == "paper" and summary["seed"] == 4 and summary["runs"] == 26
     with (run_dir / "metrics.csv").open() as f:
         assert len(list(csv.DictReader(f))) == 37 * 5  # every agent, every round
-    with pytest.raises(RunFolderError, match="is a paper-protocol run: it keeps no agents"):
-        evaluate(run_dir)
+    assert main(["evaluate", str(run_dir)]) == 2
+    assert "is a paper-protocol run: it keeps no agents" in capsys.readouterr().err
 
 
 def test_cli_reproduce_paper_is_a_sweep_and_its_report(tmp_path, capsys):
