@@ -95,8 +95,9 @@ def train_protocol_at(
     progress: Callable[[int], None] | None = None,
 ) -> None:
     """Train the protocol for every seed of ``run_dirs`` in one vectorised batch; write each seed's run
-    folder: ``config.toml``, ``metrics.csv`` (one row per run, round and agent), ``run_info.json`` and,
-    last, ``summary.json``.
+    folder: ``config.toml`` (first, so a killed batch leaves folders ``dospcot train --resume`` takes),
+    then ``metrics.csv`` (one row per run, round and agent), ``run_info.json`` and, last,
+    ``summary.json``.
 
     Runs are independent, so a seed's folder is the same whichever seeds shared its batch (bar the
     timing in ``run_info.json``, where the batch's wall time is split evenly over its seeds).
@@ -105,6 +106,8 @@ def train_protocol_at(
     :param progress: called with the number of episodes just finished, summed over agents.
     """
     seeds = sorted(run_dirs)
+    for seed in seeds:
+        write_toml(run_dirs[seed] / CONFIG_FILE, replace(cfg, seed=seed).to_dict())
     started = time.perf_counter()
     trainer = TabularCoTraining(
         cliffwalking_mdp(cfg.tabular.label_fraction),
@@ -117,7 +120,6 @@ def train_protocol_at(
     for seed in seeds:
         run_dir = run_dirs[seed]
         mine = [record for record in records if record["seed"] == seed]
-        write_toml(run_dir / CONFIG_FILE, replace(cfg, seed=seed).to_dict())
         write_csv(run_dir / METRICS_FILE, mine)
         write_run_info(run_dir, (commands or {}).get(seed, ""), wall / len(seeds), batch_seeds=seeds)
         # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
@@ -126,9 +128,8 @@ def train_protocol_at(
 
 def seed_summary(records: Sequence[Mapping[str, Any]], rounds: int) -> dict[str, Any]:
     """One seed's ``summary.json``: the target's ingredients (optimal-action agreement after the last
-    round) for this seed alone."""
+    round, ``rounds``; every run has a record every round) for this seed alone."""
     agreement = per_seed(records, "agreement")
-    last = max(record["round"] for record in records)
     target = {
         "dospcot_agreement": ("cotrain", "esarsa-esarsa", "-".join(PAIR_VIEWS), 0.3),
         "oracle_agreement": ("oracle", "esarsa", "coords", 0.3),
@@ -140,7 +141,7 @@ def seed_summary(records: Sequence[Mapping[str, Any]], rounds: int) -> dict[str,
         "seed": int(records[0]["seed"]),
         "runs": len(protocol_specs([0])),
         "rounds": rounds,
-        "mean": {name: agreement[(*key, last)][0] for name, key in target.items()},
+        "mean": {name: agreement[(*key, rounds)][0] for name, key in target.items()},
     }
 
 
@@ -303,7 +304,7 @@ def render_tables(
     """One cell's markdown: its settings, the target line, the four tables for each metric and the
     pseudo-reward tables, under headings of ``level``."""
     tab, h = cfg.tabular, "#" * level
-    last = max(r["round"] for r in rows)
+    last = tab.rounds
     explore = f"{tab.eps_start}" if tab.eps_start == tab.eps_end else f"{tab.eps_start} to {tab.eps_end}"
     out = [
         f"Config: `{cfg.name}` (learning rate {tab.learning_rate}, discount {tab.discount}, exploration "

@@ -140,9 +140,9 @@ def train_at(
 ) -> Path:
     """Train ``cfg`` in ``run_dir`` (created if missing, as ``dospcot sweep`` names its trials)."""
     run_dir.mkdir(parents=True, exist_ok=True)
-    write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
-    if isinstance(cfg, PaperConfig):
+    if isinstance(cfg, PaperConfig):  # writes its own config.toml, as a batch of seeds does
         return _train_paper(run_dir, cfg, show_progress, command)
+    write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
     return _train_in(run_dir, cfg, None, show_progress, command)
 
 
