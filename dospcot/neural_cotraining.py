@@ -15,6 +15,10 @@ agents write every step into the run's :class:`TransitionStore`, whose pool is d
 5. **Age**: the pace (admitted share of U) sets every agent's exploration rate via ``set_pace``.
    Baselines, which have no pace, follow the share of rounds done, a plain linear schedule.
 
+Agents (``spec.agents``): ExpectedSarsaDQN with its Expected-SARSA target (``esarsa_dqn``) or DQN's max
+target (``dqn``), or a Q-table over the view's observations (``tabular``,
+:class:`~dospcot.policies.TabularExpectedSarsa`); any mix works, since all three are SB3 ``DQN`` models.
+
 Baselines: ``oracle`` (every key labelled), ``masked-zero`` (masked rewards read as 0 with weight 1)
 and ``labels-only`` (masked steps weigh 0). The hidden reward reaches only the metrics.
 """
@@ -39,13 +43,14 @@ from dospcot.envs.masking import RewardMaskWrapper, check_label_fraction
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import View, ViewObservationWrapper
 from dospcot.key_pool import key_features
-from dospcot.policies import ExpectedSarsaDQN, RewardTable
+from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.reward_classes import RewardClasses
 from dospcot.run_spec import RunSpec
 
 VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
-AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q"}
-"""Agent kinds: ExpectedSarsaDQN with its Expected-SARSA target, or with DQN's max target."""
+AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
+"""Agent kinds and their TD target: ExpectedSarsaDQN with its Expected-SARSA target or DQN's max target,
+and the tabular Expected-SARSA agent."""
 
 
 class TransitionStore:
@@ -178,14 +183,27 @@ def make_agent(
     spec: RunSpec,
     config: NeuralConfig,
     buffer_kwargs: dict[str, Any],
+    observations: np.ndarray | None = None,
 ) -> ExpectedSarsaDQN:
-    """Agent ``k`` of a run, at pace 0, on ``env`` checked for non-finite values."""
+    """Agent ``k`` of a run, at pace 0, on ``env`` checked for non-finite values.
+
+    :param observations: (S, d) the view of every state, which a ``tabular`` agent's table is built
+        over; None for a task whose observations are not known in advance.
+    """
     env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
-    agent = ExpectedSarsaDQN(
-        "MlpPolicy", env, target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k,
-        exploration_initial_eps=config.eps_start, exploration_final_eps=config.eps_end,
-        replay_buffer_kwargs=buffer_kwargs, **config.dqn,
+    common = dict(
+        target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k, exploration_initial_eps=config.eps_start,
+        exploration_final_eps=config.eps_end, replay_buffer_kwargs=buffer_kwargs,
     )  # fmt: skip
+    if kind == "tabular":
+        if observations is None:
+            raise ValueError(
+                "agent kind 'tabular' needs a discrete task whose observations are known in advance "
+                "(a grid world); use esarsa_dqn or dqn"
+            )
+        agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **config.tabular)
+    else:
+        agent = ExpectedSarsaDQN("MlpPolicy", env, **common, **config.dqn)
     agent.set_pace(0.0)
     return agent
 
@@ -201,7 +219,9 @@ class NeuralConfig:
     :param train_episode_steps: the episode length limit while training (None: ``max_episode_steps``).
         Short training episodes with exploring starts scatter the agents over the map.
     :param eps_start: exploration at pace 0; ``eps_end``: at pace 1.
-    :param dqn: further keyword arguments of every agent (SB3 DQN's).
+    :param dqn: further keyword arguments of every neural agent (SB3 DQN's).
+    :param tabular: further keyword arguments of every ``tabular`` agent
+        (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
     :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
     """
 
@@ -213,6 +233,7 @@ class NeuralConfig:
     eps_start: float = 1.0
     eps_end: float = 0.05
     dqn: dict[str, Any] = field(default_factory=dict)
+    tabular: dict[str, Any] = field(default_factory=dict)
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
 
     def __post_init__(self) -> None:
@@ -257,7 +278,8 @@ class NeuralCoTraining:
             env = gym.wrappers.TimeLimit(make_env(), limit)
             env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=spec.seed)
             env = ViewObservationWrapper(StoreWrapper(env, self.store), views[view])
-            self.agents.append(make_agent(env, k, kind, view, spec, config, buffer_kwargs))
+            agent = make_agent(env, k, kind, view, spec, config, buffer_kwargs, self.mdp.views[view])
+            self.agents.append(agent)
         self.trainer: SelfPacedCoTrainer | None = None
         self.classes = RewardClasses(1, config.cotraining.max_classes)
         if spec.method == "cotrain":
@@ -346,7 +368,7 @@ class NeuralCoTraining:
         self.table.__dict__.update(state["table"])
         self.classes, self.trainer = state["classes"], state["trainer"]
         for k, agent in enumerate(self.agents):
-            loaded = ExpectedSarsaDQN.load(io.BytesIO(state["agents"][k]), env=agent.get_env())
+            loaded = type(agent).load(io.BytesIO(state["agents"][k]), env=agent.get_env())
             loaded.replay_buffer = state["buffers"][k]
             loaded.replay_buffer.reward_table = agent.replay_buffer.reward_table
             loaded.action_space.np_random.bit_generator.state = state["action_space_rng"][k]

@@ -7,7 +7,8 @@ A run writes ``runs/<name>/<stamp>/`` (DESIGN.md section 5):
   scalars per round (pace, eps, lambda, coverage, pseudo-reward accuracy, classifier loss, greedy
   return, agreement, ...), against the agent's env steps;
 - ``metrics.csv``: one row per round and view; ``summary.json``: the last round, per view and averaged;
-- ``agent_<view>.zip`` (loads with plain ``stable_baselines3.DQN.load``), ``classifier_<view>.pt``
+- ``agent_<view>.zip`` (loads with plain ``stable_baselines3.DQN.load``; a ``tabular`` agent's where
+  dospcot is importable), ``classifier_<view>.pt``
   (:func:`dospcot.classifier.load_classifier`) and ``reward_classes.json`` (class index -> reward);
 - ``learning_curves.png``; ``run_info.json`` (command, versions, wall time);
 - ``summary.json`` is written last: a folder that has it holds a finished run;
@@ -19,6 +20,7 @@ finished round and ends with the same ``summary.json`` as an uninterrupted run.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import shutil
 import time
@@ -78,12 +80,20 @@ def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], G
 
 
 def agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
-    """The SB3 ``DQN`` arguments of every agent of a config."""
-    dqn = cfg.dqn.sb3_kwargs()
+    """The SB3 ``DQN`` arguments of every neural agent of a config."""
+    return _capped_buffer(cfg.dqn.sb3_kwargs(), cfg)
+
+
+def tabular_agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
+    """The :class:`~dospcot.policies.TabularExpectedSarsa` arguments of every tabular agent of a config."""
+    return _capped_buffer(dataclasses.asdict(cfg.tabular_agent), cfg)
+
+
+def _capped_buffer(kwargs: dict[str, Any], cfg: TrainConfig) -> dict[str, Any]:
     # Steps beyond a run's total never enter the buffer: capping it changes nothing but memory and
     # the size of every checkpoint.
-    dqn["buffer_size"] = min(dqn["buffer_size"], cfg.training.rounds * cfg.training.steps_per_round)
-    return dqn
+    kwargs["buffer_size"] = min(kwargs["buffer_size"], cfg.training.rounds * cfg.training.steps_per_round)
+    return kwargs
 
 
 def build_run(cfg: TrainConfig) -> NeuralCoTraining:
@@ -93,7 +103,7 @@ def build_run(cfg: TrainConfig) -> NeuralCoTraining:
     common = dict(
         rounds=training.rounds, steps_per_round=training.steps_per_round,
         label_fraction=training.label_fraction, eps_start=training.eps_start, eps_end=training.eps_end,
-        dqn=agent_kwargs(cfg), cotraining=cfg.cotraining,
+        dqn=agent_kwargs(cfg), tabular=tabular_agent_kwargs(cfg), cotraining=cfg.cotraining,
     )  # fmt: skip
     spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
     if cfg.task == "highway":

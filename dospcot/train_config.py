@@ -1,12 +1,12 @@
 """The configuration of ``dospcot train``: TOML presets, ``--set`` overrides and validation.
 
 A config is a TOML table read with the stdlib's :mod:`tomllib`. Its keys mirror
-:class:`TrainConfig`; sections (``[env]``, ``[training]``, ``[dqn]``, ``[cotraining]``,
-``[cotraining.classifier]``) mirror its nested dataclasses. A config with ``task = "paper"`` is a
-:class:`PaperConfig` instead (one seed of the seed paper's tabular protocol, its ``[tabular]`` section
-a :class:`~dospcot.tabular_cotraining.TabularConfig`). Every key is checked against the
-dataclass fields and their type hints before anything is built, so a typo or a wrong type stops the
-run with one line (:class:`ConfigError`) naming the key and what is allowed.
+:class:`TrainConfig`; sections (``[env]``, ``[training]``, ``[dqn]``, ``[tabular_agent]``,
+``[cotraining]``, ``[cotraining.classifier]``) mirror its nested dataclasses. A config with
+``task = "paper"`` is a :class:`PaperConfig` instead (one seed of the seed paper's tabular protocol,
+its ``[tabular]`` section a :class:`~dospcot.tabular_cotraining.TabularConfig`). Every key is checked
+against the dataclass fields and their type hints before anything is built, so a typo or a wrong type
+stops the run with one line (:class:`ConfigError`) naming the key and what is allowed.
 
 Presets ship in ``dospcot/presets/*.toml``; a name without ``.toml`` is looked up there, anything
 else is read as a path. A config may start from another with ``extends = "<preset or path>"``: its
@@ -31,7 +31,7 @@ from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, check_highway
 from dospcot.tabular_cotraining import TabularConfig
 
 GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
-AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn")
+AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
 
 
 class ConfigError(ValueError):
@@ -180,6 +180,40 @@ class DQNConfig:
 
 
 @dataclass(frozen=True)
+class TabularAgentConfig:
+    """Keyword arguments of every ``tabular`` agent (:class:`dospcot.policies.TabularExpectedSarsa`):
+    a Q-table over the view's observations, updated by replayed Expected-SARSA steps.
+
+    :param learning_rate: the step size alpha in (0, 1].
+    :param gamma: the discount.
+    :param batch_size: replayed samples per update.
+    :param train_freq: env steps between updates.
+    :param gradient_steps: updates each time.
+    :param learning_starts: env steps before the first update.
+    :param buffer_size: replay capacity, in steps.
+    """
+
+    learning_rate: float = 0.5
+    gamma: float = 0.97
+    batch_size: int = 32
+    train_freq: int = 1
+    gradient_steps: int = 1
+    learning_starts: int = 0
+    buffer_size: int = 100_000
+
+    def __post_init__(self) -> None:
+        if not 0 < self.learning_rate <= 1 or not 0 < self.gamma <= 1:
+            raise ValueError(
+                f"learning_rate and gamma must lie in (0, 1], got {self.learning_rate}, {self.gamma}"
+            )
+        for name in ("batch_size", "train_freq", "gradient_steps", "buffer_size"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.learning_starts < 0:
+            raise ValueError(f"learning_starts must be >= 0, got {self.learning_starts}")
+
+
+@dataclass(frozen=True)
 class TrainConfig:
     """One ``dospcot train`` run.
 
@@ -188,8 +222,10 @@ class TrainConfig:
     :param method: ``oracle``, ``masked-zero``, ``labels-only`` or ``cotrain`` (DOSPCoT; one view is
         self-training).
     :param views: one view per agent, from ``coords``, ``patch``, ``rays``.
-    :param agents: the agent kind of each view (``esarsa_dqn`` or ``dqn``); empty: ``esarsa_dqn``
-        for every view.
+    :param agents: the agent kind of each view (``esarsa_dqn``, ``dqn`` or, on a grid, ``tabular``);
+        empty: ``agent`` for every view.
+    :param agent: the agent kind of every view when ``agents`` is empty (``--set agent=tabular``
+        switches a preset's agents whatever its number of views).
     :param task: ``grid`` (the ``[env]`` section) or ``highway`` (the ``[highway]`` section); a config
         with ``task = "paper"`` is a :class:`PaperConfig`.
     """
@@ -199,11 +235,13 @@ class TrainConfig:
     method: Literal["oracle", "masked-zero", "labels-only", "cotrain"] = "cotrain"
     views: tuple[str, ...] = ("coords", "patch")
     agents: tuple[str, ...] = ()
+    agent: str = "esarsa_dqn"
     task: Literal["grid", "highway"] = "grid"
     env: EnvConfig = field(default_factory=EnvConfig)
     highway: HighwayConfig = field(default_factory=HighwayConfig)
     training: TrainingConfig = field(default_factory=TrainingConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
+    tabular_agent: TabularAgentConfig = field(default_factory=TabularAgentConfig)
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
 
     def __post_init__(self) -> None:
@@ -220,11 +258,19 @@ class TrainConfig:
             raise ConfigError(
                 f"agents: need one agent kind per view ({len(self.views)}), got {len(self.agents)}"
             )
-        for kind in self.agents:
-            if kind not in AGENT_KINDS:
-                raise ConfigError(f"agents: unknown agent kind {kind!r}; allowed: {', '.join(AGENT_KINDS)}")
+        allowed_kinds = ", ".join(AGENT_KINDS)
+        for key, kinds in (("agents", self.agents), ("agent", (self.agent,))):
+            unknown = [kind for kind in kinds if kind not in AGENT_KINDS]
+            if unknown:
+                raise ConfigError(f"{key}: unknown agent kind {unknown[0]!r}; allowed: {allowed_kinds}")
 
         if self.task == "highway":
+            if "tabular" in self.agent_kinds:
+                key = "agents" if self.agents else "agent"
+                raise ConfigError(
+                    f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
+                    f"{self.highway.env_id}: esarsa_dqn, dqn"
+                )
             _check_highway_task(self.highway)
 
     @property
@@ -242,7 +288,7 @@ class TrainConfig:
     @property
     def agent_kinds(self) -> tuple[str, ...]:
         """The agent kind of each view."""
-        return self.agents or ("esarsa_dqn",) * len(self.views)
+        return self.agents or (self.agent,) * len(self.views)
 
     def to_dict(self) -> dict[str, Any]:
         """The config as plain TOML-ready values (tuples become lists)."""

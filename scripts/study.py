@@ -2,6 +2,7 @@
 
     python scripts/study.py label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~1 h)
     python scripts/study.py grid16 --docs           # 6 grid16 presets x seeds 0-4
+    python scripts/study.py grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
     python scripts/study.py fasthighway --docs      # 4 fasthighway presets x seeds 0-4
     python scripts/study.py highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
     python scripts/study.py paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
@@ -67,6 +68,7 @@ COLUMNS = {
     "coverage": "coverage",
 }
 FRACTION = "training.label_fraction"
+GRID16_PRESETS = tuple(name for name in METHODS if name.startswith("grid16-"))
 
 
 def header(runs: list[TrialRun], command: str, sweep_dirs: list[Path]) -> list[str]:
@@ -275,6 +277,12 @@ STUDIES = {
         grid16_tables,
         "The 16 x 16 grid study",
         keep=lambda run: run.trial.params.get(FRACTION, "0.05") == "0.05",
+    ),
+    # The same six presets with a Q-table over each agent's view in place of every ExpectedSarsaDQN.
+    "grid16-tabular": Study(
+        (Sweep("grid16-tabular", GRID16_PRESETS, {"agent": ("tabular",)}),),
+        grid16_tables,
+        "The 16 x 16 grid study with tabular agents",
     ),
     "label-fraction": Study(
         (LABEL_FRACTION,),

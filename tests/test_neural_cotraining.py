@@ -1,5 +1,7 @@
 """Neural co-training on a small masked grid world: rounds, views, counters, leakage."""
 
+import json
+import pickle
 from dataclasses import replace
 from functools import partial
 
@@ -55,9 +57,10 @@ def _permuted_grid(seed: int) -> GridWorld:
     return env
 
 
-def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical():
+@pytest.mark.parametrize("kinds", [("esarsa_dqn", "dqn"), ("tabular", "tabular")])
+def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical(kinds):
     assert not np.array_equal(_permuted_grid(3).reward, GridWorld(LAYOUT).reward)
-    spec = NeuralRunSpec("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed=3)
+    spec = NeuralRunSpec("cotrain", kinds, ("coords", "patch"), seed=3)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
     a = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG)
     a.run()
@@ -67,6 +70,26 @@ def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical():
         for p, q in zip(agent_a.policy.parameters(), agent_b.policy.parameters(), strict=True):
             assert th.equal(p, q)
     assert np.array_equal(a.table.reward, b.table.reward) and np.array_equal(a.table.weight, b.table.weight)
+
+
+def test_a_mix_of_tabular_and_neural_agents_cotrains_and_resumes_from_its_state():
+    spec = NeuralRunSpec("cotrain", ("tabular", "esarsa_dqn", "dqn"), ("coords", "patch", "rays"), seed=2)
+    build = partial(NeuralCoTraining, partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG)
+    full = build()
+    records = full.run()
+    assert [r["env_steps"] for r in records] == [300] * 3 + [600] * 3
+    assert all(r["eps"] == pytest.approx(1.0 + (0.05 - 1.0) * r["pace"]) for r in records)
+    assert full.agents[0].q_table.shape == (4, 36)  # one row per cell: coords tell every cell apart
+    first = build()
+    first.run_round()
+    state = pickle.dumps(first.state_dict())
+    resumed = build()
+    resumed.load_state_dict(pickle.loads(state))
+    assert json.dumps(resumed.run_round()) == json.dumps(records[3:])
+    for agent_full, agent_resumed in zip(full.agents, resumed.agents, strict=True):
+        assert type(agent_resumed) is type(agent_full)
+        for p, q in zip(agent_full.policy.parameters(), agent_resumed.policy.parameters(), strict=True):
+            assert th.equal(p, q)
 
 
 def test_bad_specs_raise():

@@ -19,9 +19,9 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from dospcot.classifier import load_classifier
 from dospcot.cli import main
-from dospcot.envs import GridWorld
+from dospcot.envs import GridWorld, TabularMDP
 from dospcot.run_folder import RunFolderError, read_checkpoint
-from dospcot.train import ROUND_SCALARS, evaluate
+from dospcot.train import ROUND_SCALARS, build_task, evaluate
 from dospcot.train_config import load_config, preset_names
 
 ISSUE_PRESETS = [
@@ -74,7 +74,12 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
         ),
         ("views=[]", "views: need at least one view; allowed: coords, patch, rays"),
         ("method=ppo", "method: 'ppo' is not allowed; allowed: oracle, masked-zero, labels-only, cotrain"),
-        ('agents=["a2c", "dqn"]', "agents: unknown agent kind 'a2c'; allowed: esarsa_dqn, dqn"),
+        ('agents=["a2c", "dqn"]', "agents: unknown agent kind 'a2c'; allowed: esarsa_dqn, dqn, tabular"),
+        ("agent=sarsa", "agent: unknown agent kind 'sarsa'; allowed: esarsa_dqn, dqn, tabular"),
+        (
+            "tabular_agent.learning_rate=1.5",
+            "tabular_agent: learning_rate and gamma must lie in (0, 1], got 1.5, 0.97",
+        ),
     ],
 )
 def test_bad_config_stops_before_training_with_one_line(tmp_path, capsys, override, message):
@@ -82,6 +87,18 @@ def test_bad_config_stops_before_training_with_one_line(tmp_path, capsys, overri
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     assert not (tmp_path / "tiny").exists()  # nothing was trained or written
+
+
+def test_on_the_grid16_map_every_view_tells_every_cell_apart():
+    make_env, views, _ = build_task(load_config("grid16"))
+    mdp = TabularMDP.from_env(make_env(), views, 64)
+    assert {v: len(np.unique(mdp.views[v], axis=0)) for v in views} == {v: 256 for v in views}
+
+
+def test_tabular_agents_on_a_highway_stop_with_one_line(capsys):
+    assert main(["train", "highway-dospcot", "--set", "agent=tabular"]) == 2
+    message = "agent: 'tabular' needs a discrete task (task = \"grid\"); allowed on highway-fast-v0: "
+    assert capsys.readouterr().err.endswith(f"{message}esarsa_dqn, dqn\n")
 
 
 def test_unknown_preset_and_bad_resume_folder_fail_with_one_line(tmp_path, capsys):
@@ -115,8 +132,9 @@ def test_tiny_run_writes_every_file_for_one_two_and_three_views(tmp_path, views)
         assert {"rollout/exploration_rate", "train/loss"} <= set(tags)  # SB3's own scalars
 
 
-def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(tmp_path, capsys):
-    run_dir = _train(tmp_path)
+@pytest.mark.parametrize("agent", ["esarsa_dqn", "tabular"])
+def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(tmp_path, capsys, agent):
+    run_dir = _train(tmp_path, f"agent={agent}")
     capsys.readouterr()
     assert main(["evaluate", str(run_dir)]) == 0
     assert "wrote" in capsys.readouterr().out
