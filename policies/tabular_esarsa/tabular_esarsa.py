@@ -121,7 +121,8 @@ class TabularExpectedSarsa(ExpectedSarsaDQN):
         errors = []
         for _ in range(gradient_steps):
             data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
-            weights = data.weights.flatten()
+            weights = getattr(data, "weights", None)  # SB3's own buffers carry none: every sample counts
+            weights = th.ones_like(data.rewards).flatten() if weights is None else weights.flatten()
             if not weights.any():
                 continue  # nothing labelled in this batch: no update
             discounts = data.discounts.flatten() if data.discounts is not None else self.gamma
