@@ -267,9 +267,10 @@ class TrainConfig:
         if self.task == "highway":
             if "tabular" in self.agent_kinds:
                 key = "agents" if self.agents else "agent"
+                neural = ", ".join(kind for kind in AGENT_KINDS if kind != "tabular")
                 raise ConfigError(
                     f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
-                    f"{self.highway.env_id}: esarsa_dqn, dqn"
+                    f"{self.highway.env_id}: {neural}"
                 )
             _check_highway_task(self.highway)
 
