@@ -11,7 +11,9 @@ agents write every step into the run's :class:`TransitionStore`, whose pool is d
    :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
 3. **Pseudo-reward**: each admitted key's consensus reward and weight go into the reward table, for
    every stored step of that key.
-4. **Policy update**: happens inside the next round's ``learn()`` (replay relabels at sample time).
+4. **Policy update**: every agent takes ``update_steps`` gradient steps on its replay buffer, which
+   now reads this round's pseudo-rewards, so they shape the policy evaluated at the end of the round
+   (and the next round's ``learn()`` goes on relabelling at sample time).
 5. **Age**: the pace (admitted share of U) sets every agent's exploration rate via ``set_pace``.
    Baselines, which have no pace, follow the share of rounds done, a plain linear schedule.
 
@@ -219,6 +221,8 @@ class NeuralConfig:
     :param train_episode_steps: the episode length limit while training (None: ``max_episode_steps``).
         Short training episodes with exploring starts scatter the agents over the map.
     :param eps_start: exploration at pace 0; ``eps_end``: at pace 1.
+    :param update_steps: gradient steps of every agent at the end of each round, on the reward table
+        the round just wrote (the policy update, :meth:`ExpectedSarsaDQN.update`); 0: none.
     :param dqn: further keyword arguments of every neural agent (SB3 DQN's).
     :param tabular: further keyword arguments of every ``tabular`` agent
         (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
@@ -232,6 +236,7 @@ class NeuralConfig:
     train_episode_steps: int | None = None
     eps_start: float = 1.0
     eps_end: float = 0.05
+    update_steps: int = 0
     dqn: dict[str, Any] = field(default_factory=dict)
     tabular: dict[str, Any] = field(default_factory=dict)
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
@@ -242,6 +247,8 @@ class NeuralConfig:
             raise ValueError(
                 f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
             )
+        if self.update_steps < 0:
+            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
 
 
 class NeuralCoTraining:
@@ -311,6 +318,8 @@ class NeuralCoTraining:
             agent._last_obs = None  # SB3 resets the env when learn() finds no last observation
             agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
         stats = self._cotrain() if self.trainer is not None else {}  # 2-3. co-train, pseudo-rewards
+        for agent in self.agents:  # 4. policy update on the rewards and weights just written
+            agent.update(self.config.update_steps)
         pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
         for agent in self.agents:
             agent.set_pace(min(pace, 1.0))

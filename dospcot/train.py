@@ -76,7 +76,7 @@ def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], G
         GridWorld, layout, step_cost=env.step_cost, lava_penalty=env.lava_penalty,
         goal_reward=env.goal_reward, exploring_starts=env.exploring_starts,
     )  # fmt: skip
-    return make_env, grid_views(layout, env.patch_size), layout
+    return make_env, grid_views(layout, env.patch_size, env.compass), layout
 
 
 def agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
@@ -103,7 +103,7 @@ def build_run(cfg: TrainConfig) -> NeuralCoTraining:
     common = dict(
         rounds=training.rounds, steps_per_round=training.steps_per_round,
         label_fraction=training.label_fraction, eps_start=training.eps_start, eps_end=training.eps_end,
-        dqn=agent_kwargs(cfg), tabular=tabular_agent_kwargs(cfg), cotraining=cfg.cotraining,
+        update_steps=training.update_steps, dqn=agent_kwargs(cfg), tabular=tabular_agent_kwargs(cfg), cotraining=cfg.cotraining,
     )  # fmt: skip
     spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
     if cfg.task == "highway":

@@ -56,6 +56,7 @@ class EnvConfig:
         with exploring starts, short episodes scattered over the map reach the goal far more often
         than long ones.
     :param patch_size: side k of the ``patch`` view (odd).
+    :param compass: the ``patch`` and ``rays`` views also read the goal's offset (a goal compass).
     """
 
     size: int = 16
@@ -69,6 +70,7 @@ class EnvConfig:
     max_episode_steps: int = 0
     train_episode_steps: int = 0
     patch_size: int = 5
+    compass: bool = False
 
     def __post_init__(self) -> None:
         if not 4 <= self.size <= 256:
@@ -124,6 +126,9 @@ class TrainingConfig:
     :param label_fraction: share of (s, a) keys whose reward is revealed, in (0, 1].
     :param eps_start: exploration at pace 0.
     :param eps_end: exploration at pace 1.
+    :param update_steps: gradient steps each agent takes at the end of every round, after the
+        co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
+        update), so the last round's pseudo-rewards are learned too; 0: none.
     """
 
     rounds: int = 5
@@ -131,12 +136,15 @@ class TrainingConfig:
     label_fraction: float = 0.05
     eps_start: float = 1.0
     eps_end: float = 0.05
+    update_steps: int = 0
 
     def __post_init__(self) -> None:
         if self.rounds < 1 or self.steps_per_round < 1:
             raise ValueError(
                 f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
             )
+        if self.update_steps < 0:
+            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
         if not 0 < self.label_fraction <= 1:
             raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
         for name in ("eps_start", "eps_end"):
@@ -161,10 +169,11 @@ class DQNConfig:
     gradient_steps: int = 1
     target_update_interval: int = 500
     max_grad_norm: float = 10.0
+    n_steps: int = 1
     net_arch: tuple[int, ...] = (128, 128)
 
     def __post_init__(self) -> None:
-        for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval"):
+        for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1:

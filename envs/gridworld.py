@@ -14,6 +14,11 @@ Views (DESIGN.md section 1):
 - ``patch``: the k x k egocentric terrain patch, one-hot over (free, wall, lava, goal, off-grid);
 - ``rays``: along the 8 compass directions, the distance to the nearest lava, wall (or edge) and
   goal, divided by N (1.0 where there is none); 24 values.
+
+With ``compass=True`` the two egocentric views, ``patch`` and ``rays``, also read the goal's offset
+(d_row, d_column) / (N - 1), as a goal compass would: a local sensor alone tells a cell from its
+neighbourhood, so an agent that reads only it must learn the whole map by heart to find the goal,
+which a neural network does unreliably on maps it was not tuned on.
 """
 
 from __future__ import annotations
@@ -238,8 +243,9 @@ class GridWorld(gym.Env):
         return "\n".join("".join(row) for row in rows)
 
 
-def grid_views(layout: GridLayout, patch_size: int = 5) -> dict[str, View]:
-    """The ``coords``, ``patch`` and ``rays`` views of a layout, by name."""
+def grid_views(layout: GridLayout, patch_size: int = 5, compass: bool = False) -> dict[str, View]:
+    """The ``coords``, ``patch`` and ``rays`` views of a layout, by name (``compass``: see the module
+    docstring)."""
     if patch_size < 1 or patch_size % 2 == 0:
         raise ValueError(f"patch_size must be odd and positive, got {patch_size}")
     n = layout.size
@@ -247,23 +253,25 @@ def grid_views(layout: GridLayout, patch_size: int = 5) -> dict[str, View]:
     scale = max(n - 1, 1)
     half = patch_size // 2
     padded = np.pad(layout.terrain, half, constant_values=OFF_GRID)
-    rays = _ray_table(layout)
+    states = np.arange(n * n)
+    rows, cols = np.divmod(states, n)
+    coords_table = np.stack([rows, cols, goal_r - rows, goal_c - cols], axis=1).astype(np.float32) / scale
+    windows = np.stack([padded[r : r + patch_size, c : c + patch_size] for r, c in zip(rows, cols, strict=True)])
+    patch_table = np.eye(N_TERRAIN, dtype=np.float32)[windows].reshape(n * n, -1)
+    rays_table = _ray_table(layout)
+    if compass:
+        patch_table = np.concatenate([patch_table, coords_table[:, 2:]], axis=1)
+        rays_table = np.concatenate([rays_table, coords_table[:, 2:]], axis=1)
 
-    def coords(state: int) -> np.ndarray:
-        r, c = divmod(int(state), n)
-        return np.array([r, c, goal_r - r, goal_c - c], dtype=np.float32) / scale
+    def view(name: str, table: np.ndarray, low: float) -> View:
+        space = gym.spaces.Box(low, 1.0, (table.shape[1],), np.float32)
+        return View(name, space, lambda state: table[int(state)])
 
-    def patch(state: int) -> np.ndarray:
-        r, c = divmod(int(state), n)
-        window = padded[r : r + patch_size, c : c + patch_size]
-        return np.eye(N_TERRAIN, dtype=np.float32)[window].reshape(-1)
-
+    low = -1.0 if compass else 0.0
     return {
-        "coords": View("coords", gym.spaces.Box(-1.0, 1.0, (4,), np.float32), coords),
-        "patch": View(
-            "patch", gym.spaces.Box(0.0, 1.0, (patch_size * patch_size * N_TERRAIN,), np.float32), patch
-        ),
-        "rays": View("rays", gym.spaces.Box(0.0, 1.0, (24,), np.float32), lambda s: rays[int(s)]),
+        "coords": view("coords", coords_table, -1.0),
+        "patch": view("patch", patch_table, low),
+        "rays": view("rays", rays_table, low),
     }
 
 
@@ -293,11 +301,12 @@ def make_masked_gridworld(
     mask_seed: int = 0,
     max_episode_steps: int | None = None,
     patch_size: int = 5,
+    compass: bool = False,
     **grid_kwargs: Any,
 ) -> gym.Env:
     """A :class:`GridWorld` with a step limit (default 4 N), state-action masking and views in ``info``."""
     base = GridWorld(**grid_kwargs)
-    selected = select_views(grid_views(base.layout, patch_size), views)
+    selected = select_views(grid_views(base.layout, patch_size, compass), views)
     env = gym.wrappers.TimeLimit(base, max_episode_steps or 4 * base.layout.size)
     env = RewardMaskWrapper(env, label_fraction, mode="state-action", mask_seed=mask_seed)
     return MultiViewWrapper(env, selected)

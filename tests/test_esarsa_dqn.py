@@ -218,3 +218,112 @@ def test_learns_cliffwalking_to_the_optimal_return():
     model.learn(20_000)
     mean_return, _ = evaluate_policy(model, onehot_cliff(), n_eval_episodes=1, deterministic=True, warn=False)
     assert mean_return == -13.0
+
+
+def _linear_agent(**kwargs) -> ExpectedSarsaDQN:
+    """An agent whose Q-network is one linear layer over CliffWalking's one-hot states, so Q(s, a) is
+    the weight ``W[a, s]`` (biases zeroed)."""
+    model = ExpectedSarsaDQN("MlpPolicy", onehot_cliff(), policy_kwargs={"net_arch": []}, seed=0, **kwargs)
+    with th.no_grad():
+        for net in (model.q_net, model.q_net_target):
+            net.q_net[0].weight.zero_()
+            net.q_net[0].bias.zero_()
+        model.q_net.q_net[0].weight[:, 1] = th.tensor([1.0, 2.0, 2.0, 0.0])  # online: tied greedy 1, 2
+        model.q_net_target.q_net[0].weight[:, 1] = th.tensor([0.5, 1.0, 3.0, -1.0])  # target: greedy 2
+        model.q_net.q_net[0].weight[:, 0] = th.tensor([4.0, 5.0, 6.0, 7.0])
+    model.exploration_rate = 0.2
+    return model
+
+
+@pytest.mark.parametrize(
+    ("greedy", "expected"),
+    [
+        # eps .2: every action .05 of target's values (sum 3.5); the greedy .8 on argmax.
+        ("online", 0.05 * 3.5 + 0.4 * 1.0 + 0.4 * 3.0),  # online ties 1 and 2 split the .8
+        ("target", 0.05 * 3.5 + 0.8 * 3.0),  # the target net's own greedy action 2
+    ],
+)
+def test_speed_path_target_by_hand(greedy, expected):
+    model = _linear_agent(greedy=greedy)
+    s, s_next = th.eye(48)[[0]], th.eye(48)[[1]]
+    current, next_value = model._current_and_next_value(s, s_next)
+    assert next_value.item() == pytest.approx(expected)
+    assert current.tolist() == [[4.0, 5.0, 6.0, 7.0]] and current.requires_grad
+    assert not next_value.requires_grad
+    with pytest.raises(ValueError, match="greedy must be one of"):
+        ExpectedSarsaDQN("MlpPolicy", onehot_cliff(), greedy="double")
+
+
+def _window_buffer(table=None, n_steps=3, gamma=0.5, size=10):
+    return RelabellingReplayBuffer(
+        size, gym.spaces.Box(-100, 100, (2,)), gym.spaces.Discrete(3), device="cpu",
+        reward_table=table, n_steps=n_steps, gamma=gamma,
+    )  # fmt: skip
+
+
+def _add_step(buffer, k, reward, observed=True, done=False, truncated=False):
+    """Step k: obs (k, 0) -> next obs (k + 1, 0), store id k."""
+    info = {"reward_observed": observed, "store_id": k, "TimeLimit.truncated": truncated}
+    buffer.add(
+        np.array([[k, 0.0]]), np.array([[k + 1, 0.0]]), np.array([1]), np.array([reward]),
+        np.array([done]), [info],
+    )  # fmt: skip
+
+
+def _windows(buffer, indices):
+    samples = buffer._get_samples(np.array(indices))
+    return {
+        name: getattr(samples, name).flatten().tolist()
+        for name in ("rewards", "discounts", "dones", "weights")
+    } | {"next": samples.next_observations[:, 0].tolist()}
+
+
+def test_n_step_windows_relabelled_by_hand():
+    table = RewardTable()
+    buffer = _window_buffer(table)
+    _add_step(buffer, 0, -1.0)
+    _add_step(buffer, 1, -2.0)
+    _add_step(buffer, 2, 0.0, observed=False)  # unlabelled: weight 0 until the table labels it
+    _add_step(buffer, 3, -4.0, done=True)  # the episode ends here
+    _add_step(buffer, 4, -8.0, done=True, truncated=True)  # cut by a time limit: bootstraps
+    _add_step(buffer, 5, -16.0)
+    _add_step(buffer, 6, -32.0)  # the newest step: no successor stored yet
+    got = _windows(buffer, [0, 1, 2, 3, 4, 5, 6])
+    # From 0: steps 0, 1, cut before the weight-0 step 2, bootstrapping from its state (2). From 2:
+    # steps 2, 3 (weight 0: it drives nothing). From 3: the terminal step alone. From 4: the
+    # truncated step alone, not done. From 5: 5 and the newest, 6.
+    assert got["rewards"] == [-1 + 0.5 * -2, -2.0, 0.5 * -4, -4.0, -8.0, -16 + 0.5 * -32, -32.0]
+    assert got["discounts"] == [0.25, 0.5, 0.25, 0.5, 0.5, 0.25, 0.5]
+    assert got["next"] == [2.0, 2.0, 4.0, 4.0, 5.0, 7.0, 7.0]
+    assert got["dones"] == [0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0]
+    assert got["weights"] == [1.0, 1.0, 0.0, 1.0, 1.0, 1.0, 1.0]
+    # The co-trainer labels step 2 (reward -3, weight .5): the windows through it grow, weighing .5.
+    table.set(np.array([2]), np.array([-3.0]), np.array([0.5]))
+    got = _windows(buffer, [0, 1, 2])
+    assert got["rewards"] == [-1 + 0.5 * -2 + 0.25 * -3, -2 + 0.5 * -3 + 0.25 * -4, -3 + 0.5 * -4]
+    assert got["discounts"] == [0.125, 0.125, 0.25]
+    assert got["next"] == [3.0, 4.0, 4.0]
+    assert got["dones"] == [0.0, 1.0, 1.0]
+    assert got["weights"] == [0.5, 0.5, 0.5]
+
+
+def test_n_step_windows_stop_at_the_oldest_step_of_a_full_buffer():
+    buffer = _window_buffer(size=4)
+    for k in range(6):  # positions 0, 1 now hold steps 4, 5; position 2 the oldest step, 2
+        _add_step(buffer, k, -float(k))
+    got = _windows(buffer, [3, 0, 1])
+    # From step 3 (position 3): 3, 4, 5, not on into the overwritten position 2. From 5: the newest.
+    assert got["rewards"] == [-3 + 0.5 * -4 + 0.25 * -5, -4 + 0.5 * -5, -5.0]
+    assert got["next"] == [6.0, 6.0, 6.0]
+
+
+def test_n_steps_reach_the_buffer_and_plain_dqn_reads_the_zip(tmp_path, recwarn):
+    model = ExpectedSarsaDQN("MlpPolicy", onehot_cliff(), n_steps=3, gamma=0.9, learning_starts=10, seed=0)
+    assert (model.n_steps, model.replay_buffer.n_steps, model.replay_buffer.gamma) == (3, 3, 0.9)
+    assert not [w for w in recwarn if "n_steps" in str(w.message)]  # SB3 would warn it ignores them
+    model.learn(60)
+    model.save(tmp_path / "agent.zip")
+    assert ExpectedSarsaDQN.load(tmp_path / "agent.zip").replay_buffer.n_steps == 3
+    assert DQN.load(tmp_path / "agent.zip").n_steps == 3
+    with pytest.raises(ValueError, match="n_steps must be a positive integer"):
+        _window_buffer(n_steps=0)

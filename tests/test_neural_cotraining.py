@@ -157,3 +157,34 @@ def test_finite_check_names_a_nan_observation_at_reset_and_at_a_step():
         NonFiniteError, match=r"env cartpole returned a non-finite observation \(nan\) at env step 1"
     ):
         env.step(0)
+
+
+def _last_round_q(kind: str, update_steps: int, shift: float) -> tuple[float, int]:
+    """Q(s, a) after one round of a run whose co-trainer's pseudo-reward for one admitted key
+    (the first) is shifted by ``shift``; returns it and the key."""
+    spec = NeuralRunSpec("cotrain", (kind,), ("coords",), seed=0)
+    # A fast learner, so that the shifted key's few replayed samples move its value visibly.
+    config = replace(CONFIG, rounds=1, update_steps=update_steps, dqn={**CONFIG.dqn, "learning_rate": 0.01})
+    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, config)
+    table_set, picked = run.table.set, []
+
+    def shifted_set(ids, reward, weight):
+        keys = run.store.ids()[ids]
+        admitted = np.flatnonzero((np.asarray(weight) > 0) & ~run.store.labelled[keys])
+        picked.append(int(keys[admitted[0]]))
+        table_set(ids, np.where(keys == picked[0], np.asarray(reward) + shift, reward), weight)
+
+    run.table.set = shifted_set
+    run.run_round()
+    state, action = divmod(picked[0], run.mdp.n_actions)
+    with th.no_grad():
+        q = run.agents[0].q_net(th.as_tensor(run.mdp.views["coords"][[state]]))
+    return float(q[0, action]), picked[0]
+
+
+@pytest.mark.parametrize("kind", ["tabular", "esarsa_dqn"])
+def test_the_policy_update_learns_the_last_rounds_pseudo_rewards(kind):
+    # Without the update phase the round's pseudo-rewards reach no agent before it is evaluated.
+    assert _last_round_q(kind, 0, -50.0) == _last_round_q(kind, 0, 0.0)
+    (moved, key), (plain, same_key) = _last_round_q(kind, 300, -50.0), _last_round_q(kind, 300, 0.0)
+    assert key == same_key and moved < plain - 1.0

@@ -80,6 +80,9 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
             "tabular_agent.learning_rate=1.5",
             "tabular_agent: learning_rate and gamma must lie in (0, 1], got 1.5, 0.97",
         ),
+        ("training.update_steps=-1", "training: update_steps must be >= 0, got -1"),
+        ("dqn.n_steps=0", "dqn: n_steps must be >= 1, got 0"),
+        ("env.compass=2", "env.compass: expected true or false, got 2"),
     ],
 )
 def test_bad_config_stops_before_training_with_one_line(tmp_path, capsys, override, message):

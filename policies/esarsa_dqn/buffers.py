@@ -96,8 +96,17 @@ class RelabellingReplayBuffer(ReplayBuffer):
     (``masked_reward="ignore"``, the labels-only rule) or its stored reward, 0.0, counts with
     weight 1 (``masked_reward="zero"``, the masked-zero baseline).
 
+    With ``n_steps`` > 1 a sample is a window of up to n consecutive steps of one env, every reward in
+    it relabelled at sample time: its reward is ``sum_k gamma^k r_k`` over the window, its next
+    observation the window's last, its discount ``gamma^len``. A window ends at the first step that
+    ends an episode (terminated or truncated; included) and before the first later step whose weight
+    is 0 (an unlabelled step's reward is unknown, so the window bootstraps from that step's state). A
+    sample weighs the least weight in its window, so a sample whose first step weighs 0 drives nothing.
+
     :param reward_table: the co-trainer's table, or None.
     :param masked_reward: ``"ignore"`` or ``"zero"``.
+    :param n_steps: the longest window, in steps (1: one-step samples, ``discounts`` None).
+    :param gamma: the discount inside a window (the agent's).
     Other parameters: as SB3's ``ReplayBuffer``.
     """
 
@@ -112,6 +121,8 @@ class RelabellingReplayBuffer(ReplayBuffer):
         handle_timeout_termination: bool = True,
         reward_table: RewardTable | None = None,
         masked_reward: Literal["ignore", "zero"] = "ignore",
+        n_steps: int = 1,
+        gamma: float = 0.99,
     ) -> None:
         super().__init__(
             buffer_size,
@@ -124,6 +135,13 @@ class RelabellingReplayBuffer(ReplayBuffer):
         )
         if masked_reward not in ("ignore", "zero"):
             raise ValueError(f"masked_reward must be 'ignore' or 'zero', got {masked_reward!r}")
+        if int(n_steps) != n_steps or n_steps < 1:
+            raise ValueError(f"n_steps must be a positive integer, got {n_steps}")
+        if n_steps > 1 and optimize_memory_usage:
+            raise ValueError("n-step windows need optimize_memory_usage=False (they read next_observations)")
+        if not 0 < gamma <= 1:
+            raise ValueError(f"gamma must lie in (0, 1], got {gamma}")
+        self.n_steps, self.gamma = int(n_steps), float(gamma)
         self.reward_table = reward_table
         self.masked_reward = masked_reward
         self.store_ids = np.full((self.buffer_size, self.n_envs), -1, dtype=np.int64)
@@ -139,26 +157,29 @@ class RelabellingReplayBuffer(ReplayBuffer):
         infos: list[dict[str, Any]],
     ) -> None:
         reward = np.asarray(reward)
-        if not np.all(np.isfinite(reward)):
+        if not np.isfinite(reward).all():
             raise ValueError(f"reward must be finite, got {reward} at buffer position {self.pos}")
-        self.observed[self.pos] = [info.get("reward_observed", True) for info in infos]
-        self.store_ids[self.pos] = [info.get("store_id", -1) for info in infos]
+        for i, info in enumerate(infos):
+            self.observed[self.pos, i] = info.get("reward_observed", True)
+            self.store_ids[self.pos, i] = info.get("store_id", -1)
         super().add(obs, next_obs, action, reward, done, infos)
 
     def relabel(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Current (reward, weight) of the stored transitions ``(batch_inds, env_indices)``."""
-        reward = self.rewards[batch_inds, env_indices].astype(np.float32)
+        """Current (reward, weight) of the stored transitions ``(batch_inds, env_indices)`` (arrays of
+        one shape, or broadcasting to one)."""
+        reward = self.rewards[batch_inds, env_indices]
         observed = self.observed[batch_inds, env_indices]
-        unobserved_weight = 1.0 if self.masked_reward == "zero" else 0.0
-        weight = np.where(observed, 1.0, unobserved_weight).astype(np.float32)
+        if self.masked_reward == "zero":
+            weight = np.ones(observed.shape, dtype=np.float32)
+        else:
+            weight = observed.astype(np.float32)
         table = self.reward_table
-        if table is not None:
+        if table is not None and len(table):
             ids = self.store_ids[batch_inds, env_indices]
             known = ~observed & (ids >= 0) & (ids < len(table))
             safe = np.where(known, ids, 0)
-            if len(table):
-                reward = np.where(known, table.reward[safe], reward)
-                weight = np.where(known, table.weight[safe], weight)
+            reward = np.where(known, table.reward[safe], reward)
+            weight = np.where(known, table.weight[safe], weight)
         return reward, weight
 
     def _get_samples(
@@ -166,12 +187,50 @@ class RelabellingReplayBuffer(ReplayBuffer):
     ) -> WeightedReplayBufferSamples:
         # Same draws, in the same order, as ReplayBuffer._get_samples, so seeds match stock DQN.
         env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))  # noqa: NPY002
+        if self.n_steps > 1:
+            return self._window_samples(batch_inds, env_indices, env)
         if self.optimize_memory_usage:
             next_obs = self.observations[(batch_inds + 1) % self.buffer_size, env_indices, :]
         else:
             next_obs = self.next_observations[batch_inds, env_indices, :]
         reward, weight = self.relabel(batch_inds, env_indices)
         dones = self.dones[batch_inds, env_indices] * (1 - self.timeouts[batch_inds, env_indices])
+        return self._samples(batch_inds, env_indices, next_obs, dones, reward, None, weight, env)
+
+    def _window_samples(
+        self, batch_inds: np.ndarray, env_indices: np.ndarray, env: VecNormalize | None
+    ) -> WeightedReplayBufferSamples:
+        """n-step samples (see the class docstring); all arrays (batch, n_steps) until the sums."""
+        steps = np.arange(self.n_steps)
+        window = (batch_inds[:, None] + steps) % self.buffer_size
+        envs = env_indices[:, None]
+        reward, weight = self.relabel(window, envs)
+        # The newest step has no successor in the buffer yet: a window must end there.
+        newest = (self.pos - 1) % self.buffer_size
+        ends = (self.dones[window, envs] > 0) | (self.timeouts[window, envs] > 0) | (window == newest)
+        cut_before = np.zeros_like(ends)
+        cut_before[:, 1:] = ends[:, :-1] | (weight[:, 1:] == 0)
+        inside = np.cumprod(~cut_before, axis=1).astype(bool)
+        length = inside.sum(axis=1)
+        discounted = np.where(inside, reward * self.gamma**steps, 0.0).sum(axis=1)
+        weight = np.where(inside, weight, 1.0).min(axis=1)
+        last = window[np.arange(len(window)), length - 1]
+        next_obs = self.next_observations[last, env_indices, :]
+        dones = self.dones[last, env_indices] * (1 - self.timeouts[last, env_indices])
+        discounts = (self.gamma**length).astype(np.float32)
+        return self._samples(batch_inds, env_indices, next_obs, dones, discounted, discounts, weight, env)
+
+    def _samples(
+        self,
+        batch_inds: np.ndarray,
+        env_indices: np.ndarray,
+        next_obs: np.ndarray,
+        dones: np.ndarray,
+        reward: np.ndarray,
+        discounts: np.ndarray | None,
+        weight: np.ndarray,
+        env: VecNormalize | None,
+    ) -> WeightedReplayBufferSamples:
         return WeightedReplayBufferSamples(
             observations=self.to_torch(
                 self._normalize_obs(self.observations[batch_inds, env_indices, :], env)
@@ -179,7 +238,9 @@ class RelabellingReplayBuffer(ReplayBuffer):
             actions=self.to_torch(self.actions[batch_inds, env_indices, :]),
             next_observations=self.to_torch(self._normalize_obs(next_obs, env)),
             dones=self.to_torch(dones.reshape(-1, 1)),
-            rewards=self.to_torch(self._normalize_reward(reward.reshape(-1, 1), env)),
-            discounts=None,
-            weights=self.to_torch(weight.reshape(-1, 1)),
+            rewards=self.to_torch(
+                self._normalize_reward(reward.reshape(-1, 1).astype(np.float32, copy=False), env)
+            ),
+            discounts=None if discounts is None else self.to_torch(discounts.reshape(-1, 1)),
+            weights=self.to_torch(weight.reshape(-1, 1).astype(np.float32, copy=False)),
         )

@@ -26,11 +26,14 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.utils import polyak_update
 
 from dospcot.policies.esarsa_dqn.buffers import RelabellingReplayBuffer
 
 Target = Literal["expected_sarsa", "q"]
 TARGETS: tuple[str, ...] = ("expected_sarsa", "q")
+Greedy = Literal["target", "online"]
+GREEDY: tuple[str, ...] = ("target", "online")
 
 
 def epsilon_greedy_expectation(online_q: th.Tensor, target_q: th.Tensor, eps: float) -> th.Tensor:
@@ -46,10 +49,17 @@ def epsilon_greedy_expectation(online_q: th.Tensor, target_q: th.Tensor, eps: fl
     return eps * target_q.mean(dim=1) + (1.0 - eps) * greedy
 
 
-def weighted_huber_loss(current: th.Tensor, target: th.Tensor, weights: th.Tensor) -> th.Tensor:
-    """``sum_i w_i huber(current_i, target_i) / sum_i w_i`` (0 when every weight is 0)."""
+def weighted_huber_loss(
+    current: th.Tensor, target: th.Tensor, weights: th.Tensor, total: float | None = None
+) -> th.Tensor:
+    """``sum_i w_i huber(current_i, target_i) / sum_i w_i`` (0 when every weight is 0).
+
+    :param current: (batch, 1) estimates; ``target``: (batch, 1); ``weights``: (batch, 1) in [0, 1].
+    :param total: ``sum_i w_i`` when the caller has it already.
+    """
     per_sample = F.smooth_l1_loss(current, target, reduction="none")
-    return (weights * per_sample).sum() / weights.sum().clamp(min=1e-12)
+    total = float(weights.sum()) if total is None else total
+    return th.dot(per_sample.view(-1), weights.view(-1)) / max(total, 1e-12)
 
 
 def _check_eps(name: str, value: float) -> float:
@@ -81,11 +91,14 @@ class ExpectedSarsaDQN(DQN):
         env: Any,
         *,
         target: Target = "expected_sarsa",
+        greedy: Greedy = "target",
         exploration_horizon: int | None = None,
         **kwargs: Any,
     ) -> None:
         if target not in TARGETS:
             raise ValueError(f"target must be one of {TARGETS}, got {target!r}")
+        if greedy not in GREEDY:
+            raise ValueError(f"greedy must be one of {GREEDY}, got {greedy!r}")
         action_space = getattr(env, "action_space", None)
         if action_space is not None and not isinstance(action_space, spaces.Discrete):
             raise ValueError(f"ExpectedSarsaDQN needs a Discrete action space, got {action_space}")
@@ -96,6 +109,7 @@ class ExpectedSarsaDQN(DQN):
             raise ValueError(f"exploration_horizon must be a positive step count, got {exploration_horizon}")
         kwargs.setdefault("replay_buffer_class", RelabellingReplayBuffer)
         self.target = target
+        self.greedy = greedy
         self.exploration_horizon = exploration_horizon
         self.pace: float | None = None
         super().__init__(policy, env, **kwargs)
@@ -121,10 +135,19 @@ class ExpectedSarsaDQN(DQN):
             self.exploration_horizon = int(total_timesteps)
         return super()._setup_learn(total_timesteps, *args, **kwargs)
 
-    def _on_step(self) -> None:
-        super()._on_step()  # target-network updates as DQN; its eps would restart every learn()
-        self.exploration_rate = self._scheduled_eps()
-        self.logger.record("rollout/exploration_rate", self.exploration_rate)
+    def _setup_model(self) -> None:
+        n_steps = self.n_steps
+        if n_steps > 1 and issubclass(self.replay_buffer_class, RelabellingReplayBuffer):
+            # SB3 sets n-step returns up for its own buffer only (and warns otherwise): pass them on.
+            self.replay_buffer_kwargs = {**self.replay_buffer_kwargs, "n_steps": n_steps, "gamma": self.gamma}
+            self.n_steps = 1
+        super()._setup_model()
+        self.n_steps = n_steps
+        # DQN's _on_step reads eps from this schedule, which would restart at every learn().
+        self.exploration_schedule = self._exploration_schedule
+
+    def _exploration_schedule(self, _progress_remaining: float) -> float:
+        return self._scheduled_eps()
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         self.policy.set_training_mode(True)
@@ -132,23 +155,18 @@ class ExpectedSarsaDQN(DQN):
         losses = []
         for _ in range(gradient_steps):
             data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
-            discounts = data.discounts if data.discounts is not None else self.gamma
             weights = getattr(data, "weights", None)
             if weights is None:
                 weights = th.ones_like(data.rewards)
-            elif not weights.any():
+            total = float(weights.sum())
+            if total == 0.0:
                 continue  # nothing labelled in this batch: no update
+            current_q, next_value = self._current_and_next_value(data.observations, data.next_observations)
             with th.no_grad():
-                next_q_target = self.q_net_target(data.next_observations)
-                if self.target == "q":
-                    next_value = next_q_target.max(dim=1).values
-                else:
-                    # The online net picks the greedy action; no gradient flows through this forward.
-                    next_online = self.q_net(data.next_observations)
-                    next_value = epsilon_greedy_expectation(next_online, next_q_target, self.exploration_rate)
-            target_q = data.rewards + (1 - data.dones) * discounts * next_value.reshape(-1, 1)
-            current_q = th.gather(self.q_net(data.observations), dim=1, index=data.actions.long())
-            loss = weighted_huber_loss(current_q, target_q, weights)
+                discounts = data.discounts if data.discounts is not None else self.gamma
+                target_q = data.rewards + (1 - data.dones) * discounts * next_value.reshape(-1, 1)
+            current_q = th.gather(current_q, dim=1, index=data.actions.long())
+            loss = weighted_huber_loss(current_q, target_q, weights, total)
             losses.append(loss.item())
             self.policy.optimizer.zero_grad()
             loss.backward()
@@ -159,6 +177,49 @@ class ExpectedSarsaDQN(DQN):
         if losses:
             self.logger.record("train/loss", float(np.mean(losses)))
 
+    def update(self, gradient_steps: int) -> None:
+        """``gradient_steps`` of :meth:`train` on the replay buffer as it reads now, without acting: the
+        co-trainer's policy-update phase, which fits the agent to the reward table a round just wrote.
+
+        The target network is synced as often as during ``learn()``: every
+        ``target_update_interval * gradient_steps / train_freq`` gradient steps (and after the last).
+        """
+        if gradient_steps < 0:
+            raise ValueError(f"gradient_steps must be >= 0, got {gradient_steps}")
+        if gradient_steps == 0 or self.replay_buffer is None or self.replay_buffer.size() == 0:
+            return
+        per_env_step = self.gradient_steps / self.train_freq.frequency
+        between_syncs = max(1, round(self.target_update_interval * per_env_step))
+        done = 0
+        while done < gradient_steps:
+            chunk = min(between_syncs, gradient_steps - done)
+            self.train(chunk, self.batch_size)
+            polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), self.tau)
+            polyak_update(self.batch_norm_stats, self.batch_norm_stats_target, 1.0)
+            done += chunk
+
+    def _current_and_next_value(self, obs: th.Tensor, next_obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
+        """(batch, A) online values at s, with gradient, and (batch,) the bootstrap value at s'."""
+        with th.no_grad():
+            next_q_target = self.q_net_target(next_obs)
+        if self.target == "q":
+            return self.q_net(obs), next_q_target.max(dim=1).values
+        if self.greedy == "target":
+            # Around the target net's own greedy action the greedy mass lands on its max, ties or not.
+            greedy_value = next_q_target.max(dim=1).values
+            expected = th.lerp(greedy_value, next_q_target.mean(dim=1), self.exploration_rate)
+            return self.q_net(obs), expected
+        # One online forward over s and s' together; only the s half carries a gradient.
+        both = self.q_net(th.cat([obs, next_obs]))
+        current_q, next_online = both[: len(obs)], both[len(obs) :].detach()
+        return current_q, epsilon_greedy_expectation(next_online, next_q_target, self.exploration_rate)
+
     def _excluded_save_params(self) -> list[str]:
         # The buffer class lives in dospcot: keep it out of the zip so plain DQN.load works anywhere.
-        return [*super()._excluded_save_params(), "replay_buffer_class", "replay_buffer_kwargs"]
+        # The schedule is a bound method of this model; _setup_model binds it again on load.
+        return [
+            *super()._excluded_save_params(),
+            "replay_buffer_class",
+            "replay_buffer_kwargs",
+            "exploration_schedule",
+        ]
