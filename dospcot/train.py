@@ -103,7 +103,8 @@ def build_run(cfg: TrainConfig) -> NeuralCoTraining:
     common = dict(
         rounds=training.rounds, steps_per_round=training.steps_per_round,
         label_fraction=training.label_fraction, eps_start=training.eps_start, eps_end=training.eps_end,
-        update_steps=training.update_steps, dqn=agent_kwargs(cfg), tabular=tabular_agent_kwargs(cfg), cotraining=cfg.cotraining,
+        update_steps=training.update_steps, dqn=agent_kwargs(cfg), tabular=tabular_agent_kwargs(cfg),
+        cotraining=cfg.cotraining,
     )  # fmt: skip
     spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
     if cfg.task == "highway":

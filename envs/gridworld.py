@@ -256,7 +256,9 @@ def grid_views(layout: GridLayout, patch_size: int = 5, compass: bool = False) -
     states = np.arange(n * n)
     rows, cols = np.divmod(states, n)
     coords_table = np.stack([rows, cols, goal_r - rows, goal_c - cols], axis=1).astype(np.float32) / scale
-    windows = np.stack([padded[r : r + patch_size, c : c + patch_size] for r, c in zip(rows, cols, strict=True)])
+    windows = np.stack(
+        [padded[r : r + patch_size, c : c + patch_size] for r, c in zip(rows, cols, strict=True)]
+    )
     patch_table = np.eye(N_TERRAIN, dtype=np.float32)[windows].reshape(n * n, -1)
     rays_table = _ray_table(layout)
     if compass:
