@@ -1,7 +1,9 @@
 """The README's neural studies, each one command: a ``dospcot sweep`` and its ``dospcot report``.
 
     python scripts/study.py label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~1 h)
-    python scripts/study.py grid16 --docs           # 6 grid16 presets x seeds 0-4
+    python scripts/study.py grid16 --docs           # 6 grid16 presets x seeds 0-9
+    python scripts/study.py grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
+    python scripts/study.py grid32 --docs           # 4 grid32 presets x seeds 0-4
     python scripts/study.py grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
     python scripts/study.py fasthighway --docs      # 4 fasthighway presets x seeds 0-4
     python scripts/study.py highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
@@ -10,8 +12,9 @@
 
 A study is one or more sweeps in ``runs/sweeps/``: rerunning the command runs only the trials not yet
 finished, then rebuilds the tables from every finished run folder (``--render-only`` trains nothing).
-The grid16 study reads four of its six methods from the label-fraction sweep (their 0.05 trials are
-its presets exactly) and trains the oracle and labels-only in ``runs/sweeps/grid16-baselines/``.
+The grid tables lead with success (the share of seeds x agents whose greedy policy reaches the goal
+from the map's start) and optimal-action agreement; the normalised score follows, with its caveat in
+each table's header (a policy that never reaches the goal but avoids lava scores high).
 With ``--docs`` the tables go to ``docs/<study>.md`` and into README.md between the study's
 ``<!-- <study>-table:start -->`` and ``<!-- <study>-table:end -->`` markers, and the label-fraction
 plot to ``docs/label-fraction.png``; for the paper studies the README gets an excerpt (paper accuracy
@@ -42,13 +45,16 @@ from dospcot.sweep import SweepSpec, run_sweep
 from dospcot.train_config import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
+GRID_METHODS = {
+    "oracle": "oracle (all rewards)",
+    "masked-zero": "masked-zero",
+    "labels-only": "labels-only",
+    "self-training": "self-training (m = 1, patch)",
+    "dospcot": "DOSPCoT (m = 2, patch + rays)",
+    "m3": "m = 3 (patch + rays + coords)",
+}
 METHODS = {
-    "grid16-oracle": "oracle (all rewards)",
-    "grid16-masked-zero": "masked-zero",
-    "grid16-labels-only": "labels-only",
-    "grid16-self-training": "self-training (m = 1, patch)",
-    "grid16-dospcot": "DOSPCoT (m = 2, patch + rays)",
-    "grid16-m3": "m = 3 (patch + rays + coords)",
+    **{f"{grid}-{method}": label for grid in ("grid16", "grid32") for method, label in GRID_METHODS.items()},
     **{
         f"{base}-{method}": label
         for base in ("highway", "fasthighway")
@@ -61,14 +67,17 @@ METHODS = {
     },
 }
 COLUMNS = {
-    "normalised_score": "normalised score",
     "success": "success",
     "agreement": "optimal-action agreement",
+    "normalised_score": "normalised score",
     "pseudo_accuracy": "pseudo-reward accuracy",
     "coverage": "coverage",
 }
 FRACTION = "training.label_fraction"
 GRID16_PRESETS = tuple(name for name in METHODS if name.startswith("grid16-"))
+UNSEEN_LAYOUTS = ("101", "202", "303")
+"""Layout seeds of the grid16-layouts study, fixed before any run on them: no preset was tuned there."""
+LAYOUT = "env.layout_seed"
 
 
 def header(runs: list[TrialRun], command: str, sweep_dirs: list[Path]) -> list[str]:
@@ -85,8 +94,8 @@ def header(runs: list[TrialRun], command: str, sweep_dirs: list[Path]) -> list[s
     ]
     if first.summary.get("task") == "paper":  # its tables explain their cells themselves
         return lines[:1]
-    if "optimal_return" not in first.summary:
-        return lines
+    if len({r.summary.get("optimal_return") for r in runs}) > 1 or "optimal_return" not in first.summary:
+        return lines  # several maps, or no exact optimum
     horizon = load_config(str(first.run_dir / "config.toml")).env.episode_steps
     optimum, random = first.summary["optimal_return"], first.summary["random_return"]
     timeout = (-horizon - random) / (optimum - random)  # every step costs 1: no lava, no goal
@@ -184,14 +193,31 @@ def grid16_tables(runs: list[TrialRun]) -> list[str]:
     for (name, params), members in grouped.items():
         stats = [_over_seeds(members, key) for key in COLUMNS]
         lines.append(f"| {labels[name, params]} | `{name}` | " + " | ".join(stats) + " |")
+    per_view = list(COLUMNS)[:3]
     lines += [
         "",
         "Per view (the same runs; each cell over seeds):",
         "",
-        "| method | view | normalised score | success | optimal-action agreement |",
-        "|---|---|---|---|---|",
+        "| method | view | " + " | ".join(COLUMNS[key] for key in per_view) + " |",
+        "|---|---|" + "---|" * len(per_view),
     ]
-    return lines + _per_view_rows(grouped, list(COLUMNS)[:3])
+    return lines + _per_view_rows(grouped, per_view)
+
+
+def layout_tables(runs: list[TrialRun]) -> list[str]:
+    """Per layout and method: success, agreement and score over seeds (each cell over seeds x agents
+    for success: the run's mean over its agents)."""
+    grouped = _by_method(runs)
+    lines = [
+        "",
+        "| layout seed | method | preset | " + " | ".join(list(COLUMNS.values())[:3]) + " |",
+        "|---|---|---|" + "---|" * 3,
+    ]
+    by_layout = sorted(grouped.items(), key=lambda item: int(dict(item[0][1])[LAYOUT]))
+    for (name, params), members in by_layout:
+        stats = [_over_seeds(members, key) for key in list(COLUMNS)[:3]]
+        lines.append(f"| {dict(params)[LAYOUT]} | {METHODS[name]} | `{name}` | " + " | ".join(stats) + " |")
+    return lines
 
 
 def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
@@ -266,7 +292,6 @@ class Study:
     sweeps: tuple[Sweep, ...]
     tables: Callable[[list[TrialRun]], list[str]]
     title: str
-    keep: Callable[[TrialRun], bool] = lambda run: True
     seeds: int = 5
     readme: Callable[[str], str] | None = lambda table: table
     """The README block from the study's table text; ``None``: the study has no README block."""
@@ -280,13 +305,31 @@ LABEL_FRACTION = Sweep(
     {FRACTION: ("0.01", "0.02", "0.05", "0.1", "0.25", "1.0")},
 )
 STUDIES = {
-    # The grid16 presets' own label fraction is 0.05: four of its six methods are the label-fraction
-    # sweep's 0.05 trials (the same configs and seeds), so they are read from there, not trained twice.
     "grid16": Study(
-        (Sweep("grid16-baselines", ("grid16-oracle", "grid16-labels-only"), {}), LABEL_FRACTION),
+        (Sweep("grid16", GRID16_PRESETS, {}),), grid16_tables, "The 16 x 16 grid study", seeds=10
+    ),
+    # The presets on maps nobody tuned them on.
+    "grid16-layouts": Study(
+        (
+            Sweep(
+                "grid16-layouts",
+                ("grid16-oracle", "grid16-self-training", "grid16-dospcot"),
+                {LAYOUT: UNSEEN_LAYOUTS},
+            ),
+        ),
+        layout_tables,
+        "The 16 x 16 grid presets on three unseen layouts",
+    ),
+    "grid32": Study(
+        (
+            Sweep(
+                "grid32",
+                tuple(f"grid32-{m}" for m in ("oracle", "masked-zero", "self-training", "dospcot")),
+                {},
+            ),
+        ),
         grid16_tables,
-        "The 16 x 16 grid study",
-        keep=lambda run: run.trial.params.get(FRACTION, "0.05") == "0.05",
+        "The 32 x 32 grid study",
     ),
     # The same six presets with a Q-table over each agent's view in place of every ExpectedSarsaDQN.
     "grid16-tabular": Study(
@@ -369,7 +412,7 @@ def main() -> None:
             if result.failed:
                 sys.exit(f"{len(result.failed)} trials failed: {', '.join(result.failed)}")
         written += write_report(sweep_dir)
-        runs += [run for run in load_runs(sweep_dir)[1] if study.keep(run)]
+        runs += load_runs(sweep_dir)[1]
         sweep_dirs.append(sweep_dir)
     options = [a for a in sys.argv[2:] if a != "--render-only"]
     command = shlex.join(["python", "scripts/study.py", args.study, *options])
