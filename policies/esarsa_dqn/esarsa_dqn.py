@@ -2,12 +2,21 @@
 co-trainer's pace, and self-paced weights from a relabelling replay buffer.
 
 TD target: ``r + discount * (1 - done) * sum_a pi_eps(a | s') Q_target(s', a)``, where pi_eps is
-epsilon-greedy around the **online** network's greedy action at s' (the greedy mass split across
-tied maxima), and eps is the agent's current exploration rate. Choosing the greedy action with the
-online net, as Double DQN does, keeps the target from chasing the target net's own overestimates;
-at eps = 0 the target is therefore the Double-DQN target, which equals SB3's max target whenever
-the two nets agree on the greedy action (for example right after a target update). ``target="q"``
-gives SB3's max target exactly, for ablations.
+epsilon-greedy around a greedy action at s' and eps is the agent's current exploration rate.
+
+Which network picks the greedy action (``greedy``) is a trade of speed against bias:
+
+- ``"target"`` (default): the target network's own greedy action, so the expectation is
+  ``eps * mean_a Q_target(s', a) + (1 - eps) * max_a Q_target(s', a)`` and needs only the target
+  forward pass DQN makes anyway: ExpectedSarsaDQN runs at DQN's speed. At eps = 0 it is DQN's max
+  target, with its overestimation.
+- ``"online"``: the online network's greedy action (the greedy mass split across tied maxima), as
+  Double DQN does, which keeps the target from chasing the target net's own overestimates; at
+  eps = 0 it is the Double-DQN target. It costs an online forward over s' as well: one forward over
+  s and s' together, the s' half detached, which is a forward and backward twice as wide.
+
+``target="q"`` gives SB3's max target exactly, for ablations. With ``n_steps`` > 1 the relabelling
+buffer returns n-step windows and their discounts (:class:`RelabellingReplayBuffer`).
 
 The loss is the weighted mean of the per-sample Huber loss, ``sum_i w_i l_i / sum_i w_i``; weight-0
 samples drive nothing.
@@ -75,6 +84,8 @@ class ExpectedSarsaDQN(DQN):
     :param policy: ``"MlpPolicy"``, ``"CnnPolicy"``, ``"MultiInputPolicy"`` or a ``DQNPolicy`` class.
     :param env: the environment (discrete actions only).
     :param target: ``"expected_sarsa"`` (default) or ``"q"`` (SB3's max target).
+    :param greedy: which network picks pi_eps's greedy action, ``"target"`` (default) or ``"online"``
+        (see the module docstring).
     :param exploration_horizon: env steps over which eps decays from ``exploration_initial_eps`` to
         ``exploration_final_eps`` (within ``exploration_fraction`` of them) when no co-trainer sets a
         pace. Counted in total steps, so the schedule continues across ``learn()`` calls; None takes
