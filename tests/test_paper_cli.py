@@ -169,7 +169,7 @@ def test_bench_quick_writes_every_row(tmp_path):
     out = tmp_path / "BENCHMARKS.md"
     assert main(["bench", "--quick", "--repeats", "3", "--out", str(out)]) == 0
     text = out.read_text()
-    assert text.count("ExpectedSarsaDQN (target=") == 3 and "median of 3 repetitions" in text
+    assert text.count("ExpectedSarsaDQN (target=") == 4 and "median of 3 repetitions" in text
     assert "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time" in text
     assert "`dospcot sweep` local backend, 2 workers vs 1: throughput" in text
     assert "Shared transition store vs the raw arrays: memory per million steps" in text
