@@ -96,15 +96,19 @@ def header(runs: list[TrialRun], command: str, sweep_dirs: list[Path]) -> list[s
         return lines[:1]
     if len({r.summary.get("optimal_return") for r in runs}) > 1 or "optimal_return" not in first.summary:
         return lines  # several maps, or no exact optimum
-    horizon = load_config(str(first.run_dir / "config.toml")).env.episode_steps
-    optimum, random = first.summary["optimal_return"], first.summary["random_return"]
+    return [*lines, f"The map's {_score_floor(first)}."]
+
+
+def _score_floor(run: TrialRun) -> str:
+    """The map's optimal and random returns, and what a lava-free timeout scores there."""
+    horizon = load_config(str(run.run_dir / "config.toml")).env.episode_steps
+    optimum, random = run.summary["optimal_return"], run.summary["random_return"]
     timeout = (-horizon - random) / (optimum - random)  # every step costs 1: no lava, no goal
-    return [
-        *lines,
-        f"The map's optimal return is {optimum:.0f} and the random policy's {random:.0f}, so a greedy "
+    return (
+        f"optimal return is {optimum:.0f} and the random policy's {random:.0f}, so a greedy "
         f"policy that avoids lava but never reaches the goal ({-horizon} over {horizon} steps) scores "
-        f"{timeout:.3f}.",
-    ]
+        f"{timeout:.3f}"
+    )
 
 
 HIGHWAY_COLUMNS = {
@@ -208,12 +212,14 @@ def layout_tables(runs: list[TrialRun]) -> list[str]:
     """Per layout and method: success, agreement and score over seeds (each cell over seeds x agents
     for success: the run's mean over its agents)."""
     grouped = _by_method(runs)
-    lines = [
+    by_layout = sorted(grouped.items(), key=lambda item: int(dict(item[0][1])[LAYOUT]))
+    floors = {dict(params)[LAYOUT]: _score_floor(members[0]) for (_, params), members in by_layout}
+    lines = [f"Layout {layout}: the map's {floor}." for layout, floor in floors.items()]
+    lines += [
         "",
         "| layout seed | method | preset | " + " | ".join(list(COLUMNS.values())[:3]) + " |",
         "|---|---|---|" + "---|" * 3,
     ]
-    by_layout = sorted(grouped.items(), key=lambda item: int(dict(item[0][1])[LAYOUT]))
     for (name, params), members in by_layout:
         stats = [_over_seeds(members, key) for key in list(COLUMNS)[:3]]
         lines.append(f"| {dict(params)[LAYOUT]} | {METHODS[name]} | `{name}` | " + " | ".join(stats) + " |")
