@@ -200,6 +200,7 @@ class TabularAgentConfig:
     :param gradient_steps: updates each time.
     :param learning_starts: env steps before the first update.
     :param buffer_size: replay capacity, in steps.
+    :param n_steps: the longest n-step window a replayed sample spans (1: one-step updates).
     """
 
     learning_rate: float = 0.5
@@ -209,13 +210,14 @@ class TabularAgentConfig:
     gradient_steps: int = 1
     learning_starts: int = 0
     buffer_size: int = 100_000
+    n_steps: int = 1
 
     def __post_init__(self) -> None:
         if not 0 < self.learning_rate <= 1 or not 0 < self.gamma <= 1:
             raise ValueError(
                 f"learning_rate and gamma must lie in (0, 1], got {self.learning_rate}, {self.gamma}"
             )
-        for name in ("batch_size", "train_freq", "gradient_steps", "buffer_size"):
+        for name in ("batch_size", "train_freq", "gradient_steps", "buffer_size", "n_steps"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
         if self.learning_starts < 0:

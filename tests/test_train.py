@@ -92,6 +92,7 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
         ),
         ("training.update_steps=-1", "training: update_steps must be >= 0, got -1"),
         ("dqn.n_steps=0", "dqn: n_steps must be >= 1, got 0"),
+        ("tabular_agent.n_steps=0", "tabular_agent: n_steps must be >= 1, got 0"),
         ("env.compass=2", "env.compass: expected true or false, got 2"),
     ],
 )
