@@ -23,12 +23,13 @@ import gymnasium as gym
 import numpy as np
 import torch
 from stable_baselines3 import DQN
+from tqdm.auto import tqdm
 
 from dospcot import paper
 from dospcot.envs import CLIFF_VIEWS, StateActionMask, ViewObservationWrapper
 from dospcot.neural_cotraining import NeuralCoTraining
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.policies.tabular import AGENT_KINDS, expected_value
+from dospcot.policies.tabular import TABULAR_KINDS, expected_value
 from dospcot.sweep import SweepSpec, run_sweep
 from dospcot.tabular_cotraining import TabularConfig, TabularCoTraining
 from dospcot.train import agent_kwargs, build_run, build_task
@@ -149,7 +150,7 @@ class PerStepTabularCoTraining(TabularCoTraining):
 
     def _collect_agent(self, slot: int, run: int, eps: float, progress: Callable[[int], None] | None) -> None:
         mdp, agents = self.mdp, self.agents
-        q, kind, me = agents.q[slot], AGENT_KINDS[agents.kind[slot]], np.array([slot])
+        q, kind, me = agents.q[slot], TABULAR_KINDS[agents.kind[slot]], np.array([slot])
 
         def act(state: int) -> int:
             explore, pick = agents.draw(me)[0]
@@ -511,6 +512,11 @@ def render(rows: list[Row], command: str, repeats: int) -> str:
 def run_benchmarks(out: Path, quick: bool, repeats: int, command: str) -> list[Row]:
     """Run every benchmark and write ``out`` (on one torch thread, as ``dospcot train`` runs)."""
     torch.set_num_threads(1)
-    rows = [bench(quick, repeats) for bench in BENCHMARKS.values()]
+    rows = []
+    with tqdm(BENCHMARKS.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
+        for name, bench in bar:
+            bar.set_postfix_str(name)
+            rows.append(bench(quick, repeats))
+    out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(render(rows, command, repeats))
     return rows

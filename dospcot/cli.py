@@ -10,6 +10,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import NoReturn
 
+QUICK_BENCH_OUT = Path("runs/bench-quick.md")
+"""Where ``dospcot bench --quick`` writes its smoke-test figures."""
+
 
 def parse_seeds(text: str) -> list[int]:
     """``"10"`` -> seeds 0..9; ``"3,5,7"`` -> those seeds."""
@@ -22,8 +25,12 @@ def parse_seeds(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(
             f"--seeds takes a count (10) or a list (0,3,7), got {text!r}"
         ) from None
-    if not seeds or any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
-        raise argparse.ArgumentTypeError(f"--seeds needs at least one distinct seed >= 0, got {text!r}")
+    if not seeds:
+        raise argparse.ArgumentTypeError(
+            f"--seeds {text} gives no seed: give a count >= 1 (10) or a list of seeds (0,3,7)"
+        )
+    if any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"--seeds takes distinct seeds >= 0, got {text!r}")
     return seeds
 
 
@@ -196,7 +203,9 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="short runs: a smoke test, not a measurement")
     bench.add_argument("--repeats", type=positive_int, default=3, help="repetitions per figure (default 3)")
     bench.add_argument(
-        "--out", type=Path, default=Path("BENCHMARKS.md"), help="output file (default BENCHMARKS.md)"
+        "--out",
+        type=Path,
+        help=f"output file (default BENCHMARKS.md; with --quick {QUICK_BENCH_OUT}, never BENCHMARKS.md)",
     )
     return parser
 
@@ -222,6 +231,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.command == "bench":
         from dospcot.bench import run_benchmarks
 
+        if args.out is None:
+            args.out = QUICK_BENCH_OUT if args.quick else Path("BENCHMARKS.md")
+        elif args.quick and args.out.name == "BENCHMARKS.md":
+            print(
+                "dospcot bench: error: --quick figures are a smoke test and never go into BENCHMARKS.md; "
+                f"leave out --out (they go to {QUICK_BENCH_OUT}) or name another file",
+                file=sys.stderr,
+            )
+            return 2
         rows = run_benchmarks(args.out, args.quick, args.repeats, command)
         for row in rows:
             print(

@@ -1,4 +1,4 @@
-"""Self-paced multi-view co-training of reward classifiers: one round of DESIGN.md section 2.
+"""Self-paced multi-view co-training of reward classifiers: one round of docs/design.md section 2.
 
 This file holds steps 2 (select, fit, score per view, serially), 3 (the Eq. 9 pseudo-reward) and 5
 (ageing and stopping) for any number of views m and any agent kind: it sees only a pool of samples

@@ -1,4 +1,4 @@
-"""Metrics of DESIGN.md section 4: policy quality against the exact optimum, pseudo-reward quality
+"""Metrics of docs/design.md section 4: policy quality against the exact optimum, pseudo-reward quality
 against the hidden truth, and summaries over seeds.
 
 These functions are the only readers of the hidden reward; nothing they return is fed back to a
@@ -24,7 +24,7 @@ def paper_reference_policy() -> np.ndarray:
     return np.array(json.loads(text)["greedy_action"], dtype=np.int64)
 
 
-def paper_tables() -> dict:
+def published_paper_tables() -> dict:
     """The numbers printed in the seed paper (for side-by-side comparison only)."""
     return json.loads(resources.files("dospcot").joinpath("data/paper_tables.json").read_text())
 
@@ -76,7 +76,7 @@ def normalised_score(ret: np.ndarray, random_return: float, oracle_return: float
 
 
 class GreedyPolicyMetrics:
-    """Exact metrics of greedy policies on a deterministic task (DESIGN.md section 4), with the optimum
+    """Exact metrics of greedy policies on a deterministic task (docs/design.md section 4), with the optimum
     and the random policy's return computed once.
 
     :param mdp: the task.

@@ -2,15 +2,16 @@
 
 Each agent reads its own view as its observation and keeps its own relabelling replay buffer; all
 agents write every step into the run's :class:`TransitionStore`, whose pool is deduplicated by
-(s, a) key. One round, top to bottom, in :meth:`NeuralCoTraining.run_round`:
+(s, a) key; the reward table is indexed by key too. One round, top to bottom, in
+:meth:`NeuralCoTraining.run_round`:
 
 1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
    rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
    time, so the last round's pseudo-rewards drive this round's updates.
 2. **Co-train** (method ``"cotrain"``): the store's labelled keys and unlabelled pool U go to the
    :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
-3. **Pseudo-reward**: each admitted key's consensus reward and weight go into the reward table, for
-   every stored step of that key.
+3. **Pseudo-reward**: each admitted key's consensus reward and weight go into the reward table, so
+   every stored step of that key, and every later one, reads them.
 4. **Policy update**: every agent takes ``update_steps`` gradient steps on its replay buffer, which
    now reads this round's pseudo-rewards, so they shape the policy evaluated at the end of the round
    (and the next round's ``learn()`` goes on relabelling at sample time).
@@ -56,7 +57,10 @@ and the tabular Expected-SARSA agent."""
 
 
 class TransitionStore:
-    """Every step the agents of one run took, each with a store id; the pool is keyed by (s, a).
+    """What the agents of one run have seen, by (s, a) key: the pool of the co-trainer.
+
+    A key's id is ``s * A + a``; the reward table is indexed by it too, so a step of a key admitted
+    in an earlier round reads its pseudo-reward at once, before the next co-training.
 
     :param n_states: S.
     :param n_actions: A.
@@ -65,8 +69,6 @@ class TransitionStore:
     def __init__(self, n_states: int, n_actions: int) -> None:
         self.n_actions = n_actions
         n_keys = n_states * n_actions
-        self.key_of_id = np.zeros(0, dtype=np.int64)
-        self._n = 0
         self.visited = np.zeros(n_keys, dtype=bool)
         self.next_state = np.zeros(n_keys, dtype=np.int64)
         self.labelled = np.zeros(n_keys, dtype=bool)
@@ -74,33 +76,22 @@ class TransitionStore:
         self.hidden_reward = np.zeros(n_keys)
         """The true reward of each seen key: metrics only, never the learners."""
 
-    def __len__(self) -> int:
-        return self._n
-
-    def ids(self) -> np.ndarray:
-        """(len,) the key of every store id."""
-        return self.key_of_id[: self._n]
-
     def add(
         self, state: int, action: int, next_state: int, observed: bool, reward: float, hidden: float
     ) -> int:
-        """Record one step; return its store id."""
-        if self._n == self.key_of_id.size:
-            self.key_of_id = np.concatenate([self.key_of_id, np.zeros(max(1024, self._n), np.int64)])
+        """Record one step; return its key."""
         key = state * self.n_actions + action
-        self.key_of_id[self._n] = key
         self.visited[key] = True
         self.next_state[key] = next_state
         self.hidden_reward[key] = hidden
         if observed:
             self.labelled[key] = True
             self.label_value[key] = reward
-        self._n += 1
-        return self._n - 1
+        return key
 
 
 class StoreWrapper(gym.Wrapper):
-    """Write every step into a :class:`TransitionStore` and put its id in ``info["store_id"]``.
+    """Write every step into a :class:`TransitionStore` and put its key in ``info["store_id"]``.
 
     Sits above :class:`~dospcot.envs.RewardMaskWrapper`, whose ``info`` says whether the reward was
     observed; the hidden reward it passes on is stored for the metrics only.
@@ -306,7 +297,7 @@ class NeuralCoTraining:
         return records
 
     def run_round(self, callback: MaybeCallback = None) -> list[dict]:
-        """One round of DESIGN.md section 2; returns its records.
+        """One round of docs/design.md section 2; returns its records.
 
         :param callback: passed to every agent's ``learn()`` (SB3 callbacks, e.g. a progress bar).
         """
@@ -337,8 +328,7 @@ class NeuralCoTraining:
         ]
         result = self.trainer.step(Pool(features, labelled, label_class, unlabelled, self.classes.mask))
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
-        keys = store.ids()
-        self.table.set(np.arange(len(keys)), pseudo[keys], result.pseudo_weight[0][keys])
+        self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight[0])  # by key
         self.stopped = bool(result.stopped[0])
         truth = store.hidden_reward  # metrics only
         view_correct = [self.classes.decode(view_class)[0] == truth for view_class in result.view_class]

@@ -145,7 +145,7 @@ def seed_summary(records: Sequence[Mapping[str, Any]], rounds: int) -> dict[str,
     }
 
 
-def summarise(values: Sequence[float]) -> SeedSummary:
+def cell_summary(values: Sequence[float]) -> SeedSummary:
     """Mean, 95% bootstrap interval and (for >= 10 values) IQM of per-seed values."""
     return SeedSummary.of(values, iqm_min_n=10)
 
@@ -162,7 +162,7 @@ def per_seed(records: Sequence[Mapping[str, Any]], metric: str) -> dict[tuple, l
     return out
 
 
-METRICS = (
+PAPER_METRICS = (
     ("paper_accuracy", "Paper accuracy (share of the 48 states matching the paper's reference policy)"),
     ("agreement", "Optimal-action agreement (reachable non-terminal states, value iteration)"),
     ("greedy_return", "Greedy return (true reward, one episode of at most 100 steps; optimum -13)"),
@@ -174,12 +174,12 @@ def build_tables(records: Sequence[Mapping[str, Any]], paper: dict, last_round: 
 
     Tables 1, 3 and 4 read the runs after ``last_round`` (the paper's: 5), Table 2 after round 1.
     """
-    names = [m for m, _ in METRICS] + ["pseudo_accuracy", "coverage"]
+    names = [m for m, _ in PAPER_METRICS] + ["pseudo_accuracy", "coverage"]
     values = {m: per_seed(records, m) for m in names}
     rows: list[dict] = []
 
     def add(table: str, agents: str, method: str, gamma: float | None, rnd: int, metric: str, key, ref=None):
-        cell = summarise(values[metric].get(key, []))
+        cell = cell_summary(values[metric].get(key, []))
         rows.append(
             {"table": table, "agents": agents, "method": method, "gamma": gamma, "round": rnd,
              "metric": metric, **asdict(cell), "paper": ref}
@@ -202,7 +202,7 @@ def build_tables(records: Sequence[Mapping[str, Any]], paper: dict, last_round: 
         for label, method, view in baselines:
             add(table, KIND_NAMES[kind], label, None, rnd, metric, (method, kind, view, 0.3, rnd), ref)
 
-    for metric in (m for m, _ in METRICS):
+    for metric in (m for m, _ in PAPER_METRICS):
         on_paper = metric == "paper_accuracy"
         for kind in KINDS:
             add_baselines(
@@ -329,7 +329,7 @@ def render_tables(
         "3": f"Table 3: homogeneous pairs after {last} rounds",
         "4": f"Table 4: Expected SARSA with other agents, γ = 0.3, after {last} rounds",
     }
-    for metric, description in METRICS:
+    for metric, description in PAPER_METRICS:
         out += [f"{h} {description}", ""]
         for table, title in titles.items():
             out += [f"{h}# {title}", ""]

@@ -38,7 +38,7 @@ from dospcot.run_folder import CONFIG_FILE, METRICS_FILE, SUMMARY_FILE, write_cs
 from dospcot.sweep import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
 from dospcot.train_config import load_config
 
-METRICS = {
+REPORT_METRICS = {
     "normalised_score": "normalised score",
     "success": "success",
     "agreement": "optimal-action agreement",
@@ -104,7 +104,9 @@ def cells(runs: Sequence[TrialRun]) -> dict[tuple[str, tuple[tuple[str, str], ..
     return grouped
 
 
-def aggregate(runs: Sequence[TrialRun], metrics: Sequence[str] = tuple(METRICS)) -> list[dict[str, Any]]:
+def aggregate(
+    runs: Sequence[TrialRun], metrics: Sequence[str] = tuple(REPORT_METRICS)
+) -> list[dict[str, Any]]:
     """One row per cell and metric: config, grid values, metric, n, mean, ci_low, ci_high, iqm, seeds."""
     rows = []
     for (name, params), members in cells(runs).items():
@@ -140,7 +142,7 @@ def render_markdown(spec: SweepSpec, runs: Sequence[TrialRun], rows: Sequence[di
         "[95% bootstrap interval] and IQM (interquartile mean).",
     ]
     keys = list(spec.grid)
-    for metric, title in METRICS.items():
+    for metric, title in REPORT_METRICS.items():
         lines += [
             "",
             f"### {title}",
@@ -203,7 +205,7 @@ def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
                 panels.setdefault(config, []).append(band.labelled(label))
         if panels:
             xlabel = "env steps per agent" if x_key == "env_steps" else "round"
-            plot_bands(panels, xlabel, METRICS[metric], out_dir / name)
+            plot_bands(panels, xlabel, REPORT_METRICS[metric], out_dir / name)
             written.append(out_dir / name)
     for key in spec.grid:
         path = _plot_against(key, spec, grouped, out_dir)
@@ -233,7 +235,7 @@ def _plot_against(key: str, spec: SweepSpec, grouped: dict, out_dir: Path) -> Pa
             if stat.n:
                 lines.setdefault(label, {})[float(dict(params)[key])] = stat
         if lines:
-            panels[METRICS[metric]] = [_band(label, points) for label, points in lines.items()]
+            panels[REPORT_METRICS[metric]] = [_band(label, points) for label, points in lines.items()]
     if not panels:
         return None
     log_x = min(values) > 0 and max(values) / min(values) >= 20
@@ -243,7 +245,7 @@ def _plot_against(key: str, spec: SweepSpec, grouped: dict, out_dir: Path) -> Pa
     return path
 
 
-def paper_tables(runs: Sequence[TrialRun], level: int = 2) -> tuple[list[str], list[dict[str, Any]]]:
+def paper_report_tables(runs: Sequence[TrialRun], level: int = 2) -> tuple[list[str], list[dict[str, Any]]]:
     """The seed paper's tables over the seeds of each cell of a sweep of paper-protocol runs: the
     markdown lines (headings from ``level``; a heading per cell when there are several) and the long
     rows of ``report.csv``."""
@@ -253,7 +255,7 @@ def paper_tables(runs: Sequence[TrialRun], level: int = 2) -> tuple[list[str], l
     for (name, params), members in grouped.items():
         cfg = load_config(str(members[0].run_dir / CONFIG_FILE))
         records = [row for run in members for row in run.curves]
-        table = paper.build_tables(records, metrics.paper_tables(), cfg.tabular.rounds)
+        table = paper.build_tables(records, metrics.published_paper_tables(), cfg.tabular.rounds)
         seeds = [run.trial.seed for run in members]
         if len(grouped) > 1:
             lines += [f"{'#' * level} {_cell_title(name, params)}", ""]
@@ -268,7 +270,7 @@ def _cell_title(name: str, params: tuple[tuple[str, str], ...]) -> str:
 
 def _write_paper_report(spec: SweepSpec, runs: Sequence[TrialRun], out_dir: Path) -> list[Path]:
     info = [json.loads((run.run_dir / "run_info.json").read_text()) for run in runs]
-    lines, rows = paper_tables(runs)
+    lines, rows = paper_report_tables(runs)
     header = [
         "# Seed paper reproduction: masked CliffWalking-v1",
         "",

@@ -55,7 +55,7 @@ class RewardClasses(_ClassValues):
 
 
 class QuantileRewardClasses(_ClassValues):
-    """K quantile bins of a continuous reward, for one run (DESIGN.md section 2).
+    """K quantile bins of a continuous reward, for one run (docs/design.md section 2).
 
     The bin edges are the labelled rewards' quantiles at 1/K, ..., (K-1)/K; a bin's value is the
     mean of the labelled rewards inside it. :meth:`fit` recomputes both from all labels so far, so the

@@ -1,4 +1,4 @@
-"""The files of a run folder (DESIGN.md section 5), each written atomically.
+"""The files of a run folder (docs/design.md section 5), each written atomically.
 
 Every file is written to a temporary name in the same folder and renamed over its target with
 :func:`os.replace`, so a run killed at any moment leaves each file either whole and old or whole and
@@ -102,6 +102,8 @@ def new_run_dir(root: Path, name: str) -> Path:
             return run_dir
         except FileExistsError:
             continue
+        except OSError as err:  # root is a file, or cannot be created
+            raise RunFolderError(f"cannot make a run folder under {root}: {err.strerror}") from None
     raise RunFolderError(f"cannot make a new run folder under {root / name}")
 
 

@@ -1,4 +1,4 @@
-"""SPaMCo's closed-form sample selection with co-regularisation (DESIGN.md section 2, step 2a).
+"""SPaMCo's closed-form sample selection with co-regularisation (docs/design.md section 2, step 3).
 
 For one view j, over a batch of B independent runs and a pool of N samples:
 

@@ -204,7 +204,10 @@ def open_sweep(sweep_dir: Path, spec: SweepSpec | None) -> SweepSpec:
         return stored
     if spec is None:
         raise SweepError(f"{sweep_dir} is not a sweep folder: it has no {SWEEP_FILE}")
-    sweep_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        sweep_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:  # a file on the way, or a folder that cannot be created
+        raise SweepError(f"cannot make the sweep folder {sweep_dir}: {err.strerror}") from None
     write_json(path, spec.to_dict())
     return spec
 

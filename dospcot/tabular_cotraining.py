@@ -4,7 +4,7 @@ A *run* is one method with one seed: m agents (one per view) sharing a transitio
 co-training, m reward classifiers. Many runs step in lock step; nothing crosses between them, so a
 run's result is the same alone or in a batch (a test checks this).
 
-One round, top to bottom (DESIGN.md section 2), in :meth:`TabularCoTraining.run`:
+One round, top to bottom (docs/design.md section 2), in :meth:`TabularCoTraining.run`:
 
 1. **Collect**: every agent plays ``episodes_per_round`` epsilon-greedy episodes and learns online
    from each step with the reward and weight of its run's current reward table: the true reward
@@ -43,7 +43,7 @@ from dospcot.run_spec import RunSpec
 
 
 class TabularRunSpec(RunSpec):
-    """A tabular run; agent kinds from :data:`dospcot.policies.tabular.AGENT_KINDS`."""
+    """A tabular run; agent kinds from :data:`dospcot.policies.tabular.TABULAR_KINDS`."""
 
     def check_agent(self, kind: str) -> None:
         check_agent_kind(kind)

@@ -1,6 +1,6 @@
 """``dospcot train`` and ``dospcot evaluate``: one neural run of a config, with its run folder.
 
-A run writes ``runs/<name>/<stamp>/`` (DESIGN.md section 5):
+A run writes ``runs/<name>/<stamp>/`` (docs/design.md section 5):
 
 - ``config.toml``: the resolved config (rerun it with ``dospcot train runs/<name>/<stamp>/config.toml``);
 - ``tb/agent_<view>/``: TensorBoard events, SB3's ``rollout/`` and ``train/`` scalars plus ``dospcot/``
@@ -14,12 +14,15 @@ A run writes ``runs/<name>/<stamp>/`` (DESIGN.md section 5):
 - ``summary.json`` is written last: a folder that has it holds a finished run;
 - ``checkpoint.pkl``: the state after the last finished round, for ``dospcot train --resume``.
 
-Every file is rewritten atomically at the end of every round, so a killed run resumes from its last
-finished round and ends with the same ``summary.json`` as an uninterrupted run.
+``metrics.csv``, the agents, the classifiers and the checkpoint are rewritten at the end of every
+round, the plot, ``run_info.json`` and ``summary.json`` when the run finishes; every file atomically,
+so a killed run resumes from its last finished round and ends with the same ``summary.json`` as an
+uninterrupted run. ``dospcot evaluate`` adds ``evaluation.json``.
 """
 
 from __future__ import annotations
 
+import csv
 import dataclasses
 import math
 import shutil
@@ -32,6 +35,7 @@ import numpy as np
 import stable_baselines3
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.logger import configure
+from torch.utils.tensorboard import SummaryWriter
 from tqdm.auto import tqdm
 
 from dospcot import metrics
@@ -171,6 +175,11 @@ def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> P
     """Continue a killed run from the checkpoint of its last finished round, or from the start if it
     finished none (a paper-protocol run always starts again: it keeps no checkpoint)."""
     cfg = _run_config(run_dir)
+    if (run_dir / SUMMARY_FILE).is_file():  # resuming it would train past its last round
+        raise RunFolderError(
+            f"{run_dir} is a finished run (it has {SUMMARY_FILE}): nothing to resume; to train its "
+            f"config again: dospcot train {run_dir / CONFIG_FILE}"
+        )
     remove_stale_temporaries(run_dir)
     if isinstance(cfg, PaperConfig):
         return _train_paper(run_dir, cfg, show_progress, command)
@@ -199,7 +208,12 @@ def _train_in(
         run.load_state_dict(state["run"])
         records, elapsed, sessions = state["records"], state["elapsed_s"], state["sessions"] + 1
     for agent, view in zip(run.agents, cfg.views, strict=True):
-        agent.set_logger(configure(str(run_dir / "tb" / f"agent_{view}"), ["tensorboard"]))
+        folder = str(run_dir / "tb" / f"agent_{view}")
+        if state is not None:
+            # The killed session logged part of the round resumed now: TensorBoard drops every event
+            # from this step on in the files before this marker, so each step appears once.
+            SummaryWriter(folder, purge_step=agent.num_timesteps).close()
+        agent.set_logger(configure(folder, ["tensorboard"]))
     per_round = cfg.training.steps_per_round * len(run.agents)
     bar = tqdm(
         total=cfg.training.rounds * per_round, initial=run.round * per_round, unit="step",
@@ -229,7 +243,7 @@ def _train_in(
     plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
     write_run_info(run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions)
     # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
-    write_json(run_dir / SUMMARY_FILE, summarise(records, run))
+    write_json(run_dir / SUMMARY_FILE, run_summary(records, run))
     return run_dir
 
 
@@ -253,7 +267,7 @@ def _write_round_files(run_dir: Path, run: NeuralCoTraining, cfg: TrainConfig, r
         write_json(run_dir / "reward_classes.json", {"rewards": [float(v) for v in rewards]})
 
 
-def summarise(records: list[dict], run: NeuralCoTraining) -> dict[str, Any]:
+def run_summary(records: list[dict], run: NeuralCoTraining) -> dict[str, Any]:
     """The last round's metrics per view and averaged over the views (no timings: a resumed run
     ends with the summary of the uninterrupted one)."""
     last = [r for r in records if r["round"] == run.round]
@@ -282,7 +296,7 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
         raise RunFolderError(
             f"{run_dir} is a paper-protocol run: it keeps no agents (its figures are in {METRICS_FILE})"
         )
-    agents = [_load_agent(run_dir / f"agent_{v}.zip") for v in cfg.views]
+    agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
     if cfg.task == "highway":  # greedy evaluation episodes on the task, as during training
         run = build_run(cfg)
         run.agents = agents
@@ -299,9 +313,16 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
     return result
 
 
-def _load_agent(path: Path) -> stable_baselines3.DQN:
+def _load_agent(run_dir: Path, name: str) -> stable_baselines3.DQN:
+    path = run_dir / name
     if not path.is_file():
-        raise RunFolderError(f"{path} does not exist: the run finished no round")
+        if not (run_dir / METRICS_FILE).is_file():
+            raise RunFolderError(f"{path} does not exist: the run finished no round")
+        with (run_dir / METRICS_FILE).open() as rows:
+            rounds = max(int(row["round"]) for row in csv.DictReader(rows))
+        raise RunFolderError(
+            f"{path} is missing, though the run finished {rounds} round(s): the folder is incomplete"
+        )
     try:
         return stable_baselines3.DQN.load(path, device="cpu")
     except Exception as err:  # zipfile, pickle and torch raise many types for a damaged file

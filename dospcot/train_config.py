@@ -27,11 +27,11 @@ from typing import Any, Literal
 
 from dospcot.cotraining import CoTrainingConfig
 from dospcot.envs.fast_highway import FastHighwayEnv
-from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, check_highway_config, highway_view_names
+from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, highway_view_names, try_highway_config
 from dospcot.tabular_cotraining import TabularConfig
 
 GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
-AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
+RUN_AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
 
 
 class ConfigError(ValueError):
@@ -56,7 +56,8 @@ class EnvConfig:
         with exploring starts, short episodes scattered over the map reach the goal far more often
         than long ones.
     :param patch_size: side k of the ``patch`` view (odd).
-    :param compass: the ``patch`` and ``rays`` views also read the goal's offset (a goal compass).
+    :param compass: the ``patch`` and ``rays`` views also read the goal's offset (a goal compass),
+        one-hot per axis.
     """
 
     size: int = 16
@@ -176,10 +177,16 @@ class DQNConfig:
         for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.learning_starts < 0:
+            raise ValueError(f"learning_starts must be >= 0, got {self.learning_starts}")
         if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1:
             raise ValueError(f"gamma and tau must lie in (0, 1], got {self.gamma}, {self.tau}")
-        if self.learning_rate <= 0 or any(width < 1 for width in self.net_arch):
-            raise ValueError("learning_rate must be > 0 and every net_arch width >= 1")
+        if self.learning_rate <= 0:
+            raise ValueError(f"learning_rate must be > 0, got {self.learning_rate}")
+        if not self.net_arch or any(width < 1 for width in self.net_arch):
+            raise ValueError(
+                f"net_arch needs one or more hidden layer widths, each >= 1, got {list(self.net_arch)}"
+            )
 
     def sb3_kwargs(self) -> dict[str, Any]:
         """The SB3 ``DQN`` keyword arguments."""
@@ -269,16 +276,16 @@ class TrainConfig:
             raise ConfigError(
                 f"agents: need one agent kind per view ({len(self.views)}), got {len(self.agents)}"
             )
-        allowed_kinds = ", ".join(AGENT_KINDS)
+        allowed_kinds = ", ".join(RUN_AGENT_KINDS)
         for key, kinds in (("agents", self.agents), ("agent", (self.agent,))):
-            unknown = [kind for kind in kinds if kind not in AGENT_KINDS]
+            unknown = [kind for kind in kinds if kind not in RUN_AGENT_KINDS]
             if unknown:
                 raise ConfigError(f"{key}: unknown agent kind {unknown[0]!r}; allowed: {allowed_kinds}")
 
         if self.task == "highway":
             if "tabular" in self.agent_kinds:
                 key = "agents" if self.agents else "agent"
-                neural = ", ".join(kind for kind in AGENT_KINDS if kind != "tabular")
+                neural = ", ".join(kind for kind in RUN_AGENT_KINDS if kind != "tabular")
                 raise ConfigError(
                     f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
                     f"{self.highway.env_id}: {neural}"
@@ -344,7 +351,7 @@ def _check_highway_task(highway: HighwayConfig) -> None:
     if highway.env_id == FAST_HIGHWAY_ID:
         check = FastHighwayEnv.check_overrides
     elif highway.env_id in HIGHWAY_ENV_IDS:
-        check = partial(check_highway_config, highway.env_id)
+        check = partial(try_highway_config, highway.env_id)
     else:
         allowed = ", ".join((*HIGHWAY_ENV_IDS, FAST_HIGHWAY_ID))
         raise ConfigError(f"highway.env_id: unknown task {highway.env_id!r}; allowed: {allowed}")
@@ -431,13 +438,25 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> TrainConfig | Pap
     data = read_config_data(config)
     for override in overrides:
         path, value = parse_override(override)
+        if path == ["extends"]:
+            raise ConfigError(
+                f"--set {override}: extends is read with the file, before any --set; write a .toml "
+                f'holding extends = "{value}" and your keys, and pass its path as CONFIG'
+            )
         table = data
         for part in path[:-1]:
             table = table.setdefault(part, {})
             if not isinstance(table, dict):
                 raise ConfigError(f"--set {override}: {part!r} is not a section")
         table[path[-1]] = value
-    return from_mapping(PaperConfig if data.get("task") == "paper" else TrainConfig, data)
+    task = data.get("task", "grid")
+    unread = {"grid": "highway", "highway": "env"}.get(task)
+    if unread in data:  # it would be accepted and change nothing
+        raise ConfigError(
+            f'{unread}: a task = "{task}" run does not read the [{unread}] section; its task is set in '
+            f"[{'env' if task == 'grid' else 'highway'}]"
+        )
+    return from_mapping(PaperConfig if task == "paper" else TrainConfig, data)
 
 
 def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:

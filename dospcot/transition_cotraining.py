@@ -1,7 +1,7 @@
 """DOSPCoT with neural agents on a continuous task (highway driving): one run, m sensor views.
 
 The discrete co-trainer (:mod:`dospcot.neural_cotraining`) pools (s, a) keys; here a state is a
-sensor reading that never repeats exactly, so every stored step is one pool sample (DESIGN.md
+sensor reading that never repeats exactly, so every stored step is one pool sample (docs/design.md
 section 2). The round is the same, top to bottom in :meth:`TransitionCoTraining._cotrain` and the
 base class's ``run_round``:
 

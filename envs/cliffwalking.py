@@ -3,7 +3,7 @@
 Gymnasium's ``CliffWalking-v1``: a 4 x 12 grid, start at (3, 0), goal at (3, 11), cliff along row
 3 between them. Each step costs -1; stepping into the cliff costs -100 and returns to the start.
 
-Views (DESIGN.md section 1):
+Views (docs/design.md section 1):
 
 - ``coords``: (row, column), each scaled to [0, 1];
 - ``patch``: the 3 x 3 egocentric terrain patch, one-hot over (free, cliff, goal, off-grid), 36 values;

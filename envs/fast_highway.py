@@ -561,6 +561,9 @@ class FastHighwayEnv(gym.Env):
         self.action_space = gym.spaces.Discrete(5)
         self.vec = FastHighwayVec(1, config)
         self._started = False
+        self._seen: dict[str, np.ndarray] = {}
+        """The views of the current state computed so far: a sensor wrapper asks again for the one
+        ``step`` returned."""
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -570,7 +573,8 @@ class FastHighwayEnv(gym.Env):
         self.vec.rng = self.np_random
         obs = self.vec.reset()[0]
         self._started = True
-        return obs, self._info(self.vec._rewards(), None)
+        self._seen = {"kinematics": obs}
+        return obs.copy(), self._info(self.vec._rewards(), None)
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply a meta-action (0 LANE_LEFT, 1 IDLE, 2 LANE_RIGHT, 3 FASTER, 4 SLOWER) for one policy step."""
@@ -579,8 +583,9 @@ class FastHighwayEnv(gym.Env):
         if not self.action_space.contains(action):
             raise ValueError(f"action must be an int in [0, 5), got {action!r}")
         obs, reward, terminated, truncated = self.vec._advance(np.array([int(action)]))
+        self._seen = {"kinematics": obs[0]}
         info = self._info(self.vec.reward_components, action)
-        return obs[0], float(reward[0]), bool(terminated[0]), bool(truncated[0]), info
+        return obs[0].copy(), float(reward[0]), bool(terminated[0]), bool(truncated[0]), info
 
     def _info(self, terms: dict[str, np.ndarray], action: Any) -> dict[str, Any]:
         return {
@@ -605,5 +610,8 @@ class FastHighwayEnv(gym.Env):
         return view_space(name)
 
     def observe(self, name: str) -> np.ndarray:
-        """One view of the current state, of shape ``view_space(name).shape`` (float32)."""
-        return self.vec.observe(name)[0]
+        """One view of the current state, of shape ``view_space(name).shape`` (float32), computed once
+        per state."""
+        if name not in self._seen:
+            self._seen[name] = self.vec.observe(name)[0]
+        return self._seen[name].copy()

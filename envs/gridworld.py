@@ -8,7 +8,7 @@ Dynamics: actions 0 up, 1 right, 2 down, 3 left. A move into a wall or off the g
 Every step costs ``step_cost``; entering lava costs ``lava_penalty`` and returns to the start (the
 episode goes on, as CliffWalking's cliff); entering the goal pays ``goal_reward`` and ends the episode.
 
-Views (DESIGN.md section 1):
+Views (docs/design.md section 1):
 
 - ``coords``: (row, column) and the goal's offset (d_row, d_column), divided by N - 1; 4 values;
 - ``patch``: the k x k egocentric terrain patch, one-hot over (free, wall, lava, goal, off-grid);
@@ -16,9 +16,11 @@ Views (DESIGN.md section 1):
   goal, divided by N (1.0 where there is none); 24 values.
 
 With ``compass=True`` the two egocentric views, ``patch`` and ``rays``, also read the goal's offset
-(d_row, d_column) / (N - 1), as a goal compass would: a local sensor alone tells a cell from its
+(d_row, d_column), as a goal compass would: a local sensor alone tells a cell from its
 neighbourhood, so an agent that reads only it must learn the whole map by heart to find the goal,
-which a neural network does unreliably on maps it was not tuned on.
+which a neural network does unreliably on maps it was not tuned on. Each offset is one-hot over its
+2N - 1 values (4N - 2 more inputs): as two scaled numbers, neighbouring cells differ by 1 / (N - 1)
+in two of the inputs, and a small MLP's values blur across them (greedy loops between neighbours).
 """
 
 from __future__ import annotations
@@ -262,18 +264,19 @@ def grid_views(layout: GridLayout, patch_size: int = 5, compass: bool = False) -
     patch_table = np.eye(N_TERRAIN, dtype=np.float32)[windows].reshape(n * n, -1)
     rays_table = _ray_table(layout)
     if compass:
-        patch_table = np.concatenate([patch_table, coords_table[:, 2:]], axis=1)
-        rays_table = np.concatenate([rays_table, coords_table[:, 2:]], axis=1)
+        offsets = np.eye(2 * n - 1, dtype=np.float32)
+        heading = np.concatenate([offsets[goal_r - rows + n - 1], offsets[goal_c - cols + n - 1]], axis=1)
+        patch_table = np.concatenate([patch_table, heading], axis=1)
+        rays_table = np.concatenate([rays_table, heading], axis=1)
 
     def view(name: str, table: np.ndarray, low: float) -> View:
         space = gym.spaces.Box(low, 1.0, (table.shape[1],), np.float32)
         return View(name, space, lambda state: table[int(state)])
 
-    low = -1.0 if compass else 0.0
     return {
         "coords": view("coords", coords_table, -1.0),
-        "patch": view("patch", patch_table, low),
-        "rays": view("rays", rays_table, low),
+        "patch": view("patch", patch_table, 0.0),
+        "rays": view("rays", rays_table, 0.0),
     }
 
 

@@ -6,7 +6,7 @@ Two sensors read the same simulated state every step, through highway-env's own 
 - ``occupancy``: ``OccupancyGrid`` (4 x 11 x 11: presence, vx, vy, on-road around the ego);
 - ``ttc``: ``TimeToCollision`` (3 x 3 x 10: collision times per lane and speed), highway-env only.
 
-Rewards are masked per transition (DESIGN.md section 1): each step is revealed with probability
+Rewards are masked per transition (docs/design.md section 1): each step is revealed with probability
 ``label_fraction``, from a generator seeded by ``mask_seed``. Nothing here renders: the envs run
 headless.
 """
@@ -57,13 +57,47 @@ def check_highway_config(env_id: str, config: Mapping[str, Any]) -> dict[str, An
     if env_id not in HIGHWAY_ENV_IDS:
         raise ValueError(f"unsupported highway-env task {env_id!r}; allowed: {', '.join(HIGHWAY_ENV_IDS)}")
     _import_highway_env()
-    allowed = sorted(set(_default_config(env_id)) - set(_OWNED_KEYS))
-    for key in config:
+    defaults = _default_config(env_id)
+    allowed = sorted(set(defaults) - set(_OWNED_KEYS))
+    for key, value in config.items():
         if key in _OWNED_KEYS:
             raise ValueError(f"highway config key {key!r} is set by dospcot ({_OWNED_KEYS[key]})")
         if key not in allowed:
             raise ValueError(f"{env_id} has no config key {key!r}; allowed: {', '.join(allowed)}")
+        _check_type(key, value, defaults[key])
     return dict(config)
+
+
+def try_highway_config(env_id: str, config: Mapping[str, Any]) -> None:
+    """Raise ``ValueError`` if highway-env's ``env_id`` cannot reset and step with ``config``: values of
+    the right type may still be out of range (``lanes_count = 0``), which highway-env finds only then."""
+    check_highway_config(env_id, config)
+    if not config:
+        return
+    try:
+        env = gym.make(env_id, config=dict(config))
+        env.reset(seed=0)
+        env.step(env.action_space.sample())
+        env.close()
+    except Exception as err:  # highway-env raises whatever its maths hits
+        reason = str(err).splitlines()[0] if str(err) else ""
+        raise ValueError(f"{env_id} cannot run with {dict(config)}: {type(err).__name__}: {reason}") from None
+
+
+def _check_type(key: str, value: Any, default: Any) -> None:
+    """``value`` must have the type of highway-env's default (any number where that is a number)."""
+    if default is None:
+        return
+    if isinstance(default, bool):
+        kind, ok = "true or false", isinstance(value, bool)
+    elif isinstance(default, int | float):  # an int default may stand for a number (vehicles_density = 1)
+        kind, ok = "a number", not isinstance(value, bool) and isinstance(value, int | float)
+    elif isinstance(default, list | tuple):
+        kind, ok = "a list", isinstance(value, list | tuple)
+    else:
+        kind, ok = f"a {type(default).__name__}", isinstance(value, type(default))
+    if not ok:
+        raise ValueError(f"{key} must be {kind} (highway-env's default is {default!r}), got {value!r}")
 
 
 def _default_config(env_id: str) -> dict[str, Any]:

@@ -1,6 +1,6 @@
 """Reward masking: the true reward of a transition reaches the learner only when it is labelled.
 
-Two modes (DESIGN.md section 1):
+Two modes (docs/design.md section 1):
 
 - ``"state-action"``: a fixed, seeded subset of the (s, a) keys of a discrete env, of share
   ``label_fraction``, is labelled; the subset is drawn once from ``mask_seed`` and stays the same
@@ -8,8 +8,9 @@ Two modes (DESIGN.md section 1):
 - ``"transition"``: each step is revealed with probability ``label_fraction``, from a generator
   seeded by ``mask_seed`` (and re-seeded from ``mask_seed`` and the seed of every seeded reset).
 
-A masked step returns reward 0.0 with ``info["reward_observed"] = False``. The true reward is kept
-in ``info["hidden_reward"]`` for metrics only.
+A masked step returns reward 0.0 with ``info["reward_observed"] = False``, and loses the reward's
+parts an env reports in ``info`` (:data:`REWARD_INFO_KEYS`). The true reward is kept in
+``info["hidden_reward"]`` for metrics only.
 """
 
 from __future__ import annotations
@@ -21,6 +22,9 @@ import numpy as np
 
 MaskMode = Literal["state-action", "transition"]
 MASK_MODES: tuple[str, ...] = ("state-action", "transition")
+REWARD_INFO_KEYS: tuple[str, ...] = ("rewards",)
+"""``info`` keys in which an env reports its reward's parts (highway-env and our fast highway do):
+a masked step drops them."""
 
 
 def check_label_fraction(label_fraction: float) -> float:
@@ -114,4 +118,7 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         else:
             observed = bool(self._reveal_rng.random() < self.label_fraction)
         info = dict(info, reward_observed=observed, hidden_reward=float(reward))
+        if not observed:
+            for key in REWARD_INFO_KEYS:  # the reward's parts would give the hidden reward away
+                info.pop(key, None)
         return obs, float(reward) if observed else 0.0, terminated, truncated, info

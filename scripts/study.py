@@ -40,7 +40,7 @@ from readme_block import replace_readme_block
 
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS
-from dospcot.report import TrialRun, cells, load_runs, paper_tables, write_report
+from dospcot.report import TrialRun, cells, load_runs, paper_report_tables, write_report
 from dospcot.sweep import SweepSpec, run_sweep
 from dospcot.train_config import load_config
 
@@ -266,7 +266,7 @@ def _with_agreement_plot(plot: str, runs: list[TrialRun]) -> list[str]:
         "",
         f"![optimal-action agreement against round, per agent kind and method]({plot})",
         "",
-        *paper_tables(runs)[0],
+        *paper_report_tables(runs)[0],
     ]
 
 

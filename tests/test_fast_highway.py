@@ -298,3 +298,23 @@ def test_views_and_spaces_match_highway_fast_v0() -> None:
         assert fast.observe(name).shape == (3, *space.shape)
         assert fast.observe(name).dtype == np.float32
     assert view_space("occupancy").shape == (4, 11, 11)
+
+
+def test_a_sensor_step_computes_each_view_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    from dospcot.envs import fast_highway
+    from dospcot.envs.highway import make_masked_highway
+
+    calls = {name: 0 for name in VIEW_NAMES}
+    for name, fn in list(fast_highway._VIEW_FUNCTIONS.items()):
+
+        def counted(*args, _name=name, _fn=fn):
+            calls[_name] += 1
+            return _fn(*args)
+
+        monkeypatch.setitem(fast_highway._VIEW_FUNCTIONS, name, counted)
+    env = make_masked_highway("dospcot/FastHighway-v0", "kinematics", VIEW_NAMES)
+    env.reset(seed=0)
+    for _ in range(5):
+        *_, info = env.step(IDLE)
+    assert calls == {name: 6 for name in VIEW_NAMES}  # the reset and five steps, each view once
+    np.testing.assert_array_equal(env.unwrapped.observe("kinematics"), info["views"]["kinematics"])

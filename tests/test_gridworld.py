@@ -93,6 +93,13 @@ def test_views_by_hand():
     assert rays[0].tolist() == pytest.approx([1.0, 1.0, 1.0])  # up: no lava, edge after 4 cells -> 4/4
     assert rays[1].tolist() == pytest.approx([0.5, 1.0, 0.75])  # up-right: lava at 2, goal at 3, edge at 4
     assert rays[4][1] == pytest.approx(0.25)  # down: the edge right below
+    # The compass: the goal's offset (d_row, d_column), each one-hot over its 2N - 1 = 7 values.
+    compass = grid_views(layout, patch_size=3, compass=True)
+    heading = np.zeros(14)
+    heading[[-3 + 3, 7 + 3 + 3]] = 1.0  # from (3, 0) the goal (0, 3) is 3 rows up, 3 columns right
+    assert compass["patch"].fn(12).tolist() == [*views["patch"].fn(12), *heading]
+    assert compass["rays"].fn(12).tolist() == [*views["rays"].fn(12), *heading]
+    assert compass["patch"].space.shape == (45 + 14,) and compass["rays"].space.shape == (24 + 14,)
 
 
 def test_masked_gridworld_has_views_and_hides_rewards():

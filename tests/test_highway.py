@@ -65,6 +65,8 @@ def test_transition_masking_reveals_about_the_label_fraction_and_keeps_the_truth
         observed.append(info["reward_observed"])
         assert reward == (info["hidden_reward"] if info["reward_observed"] else 0.0)
         assert set(info["views"]) == {"kinematics", "occupancy"}
+        # The reward's parts go only with a revealed reward: they would give a masked one away.
+        assert ("rewards" in info) == info["reward_observed"]
         if terminated or truncated:
             env.reset()
     assert 0.18 < np.mean(observed) < 0.32
@@ -187,6 +189,15 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_id
             "views: the highway-fast-v0 has no view 'lidar'; allowed: kinematics, occupancy, ttc",
         ),
         ("highway.reward_classes=0", "reward_classes and eval_episodes must be >= 1"),
+        (
+            'highway.config={vehicles_count="many"}',
+            "highway.config: vehicles_count must be a number (highway-env's default is 20), got 'many'",
+        ),
+        (
+            "highway.config={lanes_count=0}",
+            "highway.config: highway-fast-v0 cannot run with {'lanes_count': 0}: ValueError: ",
+        ),
+        ("env.size=8", 'env: a task = "highway" run does not read the [env] section'),
     ],
 )
 def test_bad_highway_configs_fail_with_one_line(tmp_path, capsys, override, message):

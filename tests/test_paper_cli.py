@@ -10,7 +10,7 @@ import pytest
 
 from dospcot.cli import main
 from dospcot.metrics import SeedSummary
-from dospcot.paper import PRESETS, protocol_specs, summarise, train_protocol_at
+from dospcot.paper import PRESETS, cell_summary, protocol_specs, train_protocol_at
 from dospcot.report import write_report
 from dospcot.sweep import SweepError, SweepSpec, Trial, plan_jobs, run_sweep
 from dospcot.train_config import ConfigError, load_config
@@ -41,7 +41,7 @@ def test_paper_presets_hold_the_papers_hyperparameters():
 
 
 def test_summary_cell_by_hand():
-    cell = summarise([1.0, 2.0, 3.0, float("nan")])
+    cell = cell_summary([1.0, 2.0, 3.0, float("nan")])
     assert cell.mean == 2.0 and cell.n == 3 and cell.low <= 2.0 <= cell.high
     assert str(SeedSummary(0.5, 0.25, 0.75, float("nan"), 3)) == "0.500 [0.250, 0.750]"
     assert str(SeedSummary(-13.0, -15.0, -13.0, float("nan"), 3)) == "-13.0 [-15.0, -13.0]"
@@ -163,6 +163,14 @@ def test_cli_bad_arguments_exit_nonzero_with_a_message(args, message):
     assert out.returncode != 0
     assert message in out.stderr
     assert out.stderr.count("\n") == 1  # one line, no usage block and no traceback
+
+
+def test_bench_quick_never_writes_benchmarks_md(tmp_path, capsys):
+    out = tmp_path / "BENCHMARKS.md"
+    assert main(["bench", "--quick", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "--quick figures are a smoke test and never go into BENCHMARKS.md" in err
+    assert err.count("\n") == 1 and not out.exists()
 
 
 def test_bench_quick_writes_every_row(tmp_path):

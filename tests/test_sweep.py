@@ -168,6 +168,8 @@ def test_report_on_synthetic_summaries_gives_hand_checked_figures(tmp_path):
         (["sweep", "tiny", "--grid", "training.rounds"], "--grid takes key=v1,v2"),
         (["sweep", "tiny", "--grid", "training.nokey=1,2"], "unknown key 'training.nokey'"),
         (["sweep", "tiny", "--backend", "dask"], "invalid choice: 'dask'"),
+        (["sweep", "tiny", "--seeds", "0"], "--seeds 0 gives no seed: give a count >= 1 (10)"),
+        (["sweep", "tiny", "--seeds", "1,1"], "--seeds takes distinct seeds >= 0, got '1,1'"),
         (["sweep", "--resume", "/nonexistent"], "is not a sweep folder"),
         (["report", "/nonexistent"], "is not a sweep folder"),
     ],

@@ -16,6 +16,8 @@ import numpy as np
 import pytest
 from stable_baselines3 import DQN
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
+from tensorboard.compat.proto.event_pb2 import SessionLog
 
 from dospcot.classifier import load_classifier
 from dospcot.cli import main
@@ -94,6 +96,11 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
         ("dqn.n_steps=0", "dqn: n_steps must be >= 1, got 0"),
         ("tabular_agent.n_steps=0", "tabular_agent: n_steps must be >= 1, got 0"),
         ("env.compass=2", "env.compass: expected true or false, got 2"),
+        ("dqn.net_arch=[0]", "dqn: net_arch needs one or more hidden layer widths, each >= 1, got [0]"),
+        ("dqn.net_arch=[]", "dqn: net_arch needs one or more hidden layer widths, each >= 1, got []"),
+        ("dqn.learning_rate=0", "dqn: learning_rate must be > 0, got 0.0"),
+        ("dqn.learning_starts=-1", "dqn: learning_starts must be >= 0, got -1"),
+        ("extends=grid16", "--set extends=grid16: extends is read with the file, before any --set"),
     ],
 )
 def test_bad_config_stops_before_training_with_one_line(tmp_path, capsys, override, message):
@@ -101,6 +108,20 @@ def test_bad_config_stops_before_training_with_one_line(tmp_path, capsys, overri
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
     assert not (tmp_path / "tiny").exists()  # nothing was trained or written
+
+
+@pytest.mark.parametrize(
+    "command",
+    [["train", "tiny", "--runs-dir"], ["sweep", "tiny", "--runs-dir"], ["reproduce-paper", "--out"]],
+)
+def test_a_runs_folder_that_cannot_be_made_fails_with_one_line(tmp_path, capsys, command):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("")
+    for where, reason in ((blocker, "Not a directory"), (Path("/proc/dospcot-runs"), "No such file")):
+        assert main([*command, str(where), "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and str(where) in err and reason in err
+    assert blocker.read_text() == ""
 
 
 def test_on_the_grid16_map_every_view_tells_every_cell_apart():
@@ -166,11 +187,17 @@ def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
     (run_dir / "checkpoint.pkl").write_bytes(data[: len(data) // 2])
     with pytest.raises(RunFolderError, match="corrupt or truncated"):
         read_checkpoint(run_dir)
+    (run_dir / "summary.json").unlink()  # a killed run's folder: a finished one is not resumed
     assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
     assert "checkpoint.pkl is corrupt or truncated" in capsys.readouterr().err
     (run_dir / "agent_patch.zip").write_bytes(b"not a zip")
     assert main(["evaluate", str(run_dir)]) == 2
     assert "agent_patch.zip is not a readable SB3 agent" in capsys.readouterr().err
+    (run_dir / "agent_patch.zip").unlink()
+    assert main(["evaluate", str(run_dir)]) == 2
+    err = capsys.readouterr().err
+    assert "agent_patch.zip is missing, though the run finished 2 round(s)" in err
+    assert err.count("\n") == 1
     clf_path = next(run_dir.glob("classifier_*.pt"))
     for damaged in (clf_path.read_bytes()[:100], b"", b"\x80\x04not a torch file"):
         clf_path.write_bytes(damaged)
@@ -178,7 +205,7 @@ def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
             load_classifier(clf_path)
 
 
-def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tmp_path):
+def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tmp_path, capsys):
     overrides = ["--set", "training.rounds=3", "--set", "training.steps_per_round=800", "--no-progress"]
     full = _train(tmp_path / "full", "training.rounds=3", "training.steps_per_round=800")
     cmd = [
@@ -208,6 +235,26 @@ def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tm
     assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
     assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
     assert json.loads((killed / "run_info.json").read_text())["sessions"] == 2
+    # TensorBoard shows the killed round's scalars once: the resumed session marks its first step
+    # (TensorBoard's purge_step), and readers drop the killed session's events from there.
+    for folder in (killed / "tb").iterdir():
+        marks = [
+            event.step
+            for path in sorted(folder.iterdir())
+            for event in EventFileLoader(str(path)).Load()
+            if event.session_log.status == SessionLog.START
+        ]
+        assert marks == [800], folder.name
+        events = EventAccumulator(str(folder))
+        events.Reload()
+        for tag in events.Tags()["scalars"]:
+            steps = [e.step for e in events.Scalars(tag)]
+            assert steps == sorted(set(steps)), (folder.name, tag)
+    # Resuming a finished run changes nothing and says so.
+    before = {p.relative_to(killed): p.read_bytes() for p in killed.rglob("*") if p.is_file()}
+    assert main(["train", "--resume", str(killed), "--no-progress"]) == 2
+    assert "is a finished run (it has summary.json): nothing to resume" in capsys.readouterr().err
+    assert {p.relative_to(killed): p.read_bytes() for p in killed.rglob("*") if p.is_file()} == before
 
 
 def test_exploring_starts_draw_free_cells_from_the_seed_and_lava_returns_to_the_map_start():

@@ -17,17 +17,17 @@ from collections.abc import Sequence
 
 import numpy as np
 
-AGENT_KINDS: tuple[str, ...] = ("q", "sarsa", "esarsa")
+TABULAR_KINDS: tuple[str, ...] = ("q", "sarsa", "esarsa")
 _Q, _SARSA, _ESARSA = range(3)
 # Uniforms are drawn per slot in blocks of this many steps, for speed; changing it changes results.
 _BLOCK = 4096
 
 
 def check_agent_kind(kind: str) -> int:
-    """Index of ``kind`` in :data:`AGENT_KINDS`; ``ValueError`` naming the allowed kinds otherwise."""
-    if kind not in AGENT_KINDS:
-        raise ValueError(f"unknown tabular agent kind {kind!r}; allowed: {AGENT_KINDS}")
-    return AGENT_KINDS.index(kind)
+    """Index of ``kind`` in :data:`TABULAR_KINDS`; ``ValueError`` naming the allowed kinds otherwise."""
+    if kind not in TABULAR_KINDS:
+        raise ValueError(f"unknown tabular agent kind {kind!r}; allowed: {TABULAR_KINDS}")
+    return TABULAR_KINDS.index(kind)
 
 
 def epsilon_greedy_probs(q: np.ndarray, eps: np.ndarray) -> np.ndarray:
@@ -50,7 +50,7 @@ def expected_value(q: np.ndarray, eps: np.ndarray) -> np.ndarray:
 class TabularAgents:
     """B independent tabular learners.
 
-    :param kinds: the kind of each slot, from :data:`AGENT_KINDS`.
+    :param kinds: the kind of each slot, from :data:`TABULAR_KINDS`.
     :param n_states: S.
     :param n_actions: A.
     :param learning_rate: step size alpha.

@@ -1,0 +1,79 @@
+"""The co-training core on its own: reward classes, the key pool's features, one SelfPacedCoTrainer
+round after another, each against figures worked out by hand."""
+
+import numpy as np
+import pytest
+
+from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
+from dospcot.key_pool import key_features
+from dospcot.reward_classes import RewardClasses
+
+
+def test_reward_classes_keep_the_order_of_first_appearance_and_round_trip():
+    classes = RewardClasses(n_runs=2, n_classes=3)
+    classes.observe(0, np.array([-1.0, -100.0, -1.0]))
+    classes.observe(1, np.array([0.0]))
+    classes.observe(0, np.array([0.0, -100.0]))  # a new value takes the next free class
+    assert classes.values[0].tolist() == [-1.0, -100.0, 0.0]
+    assert classes.values[1, 0] == 0.0 and np.isnan(classes.values[1, 1:]).all()
+    assert classes.mask.tolist() == [[True, True, True], [True, False, False]]
+    rewards = np.array([[-100.0, 0.0, -1.0, 5.0], [0.0, 0.0, -1.0, 0.0]])
+    encoded = classes.encode(rewards)
+    assert encoded.tolist() == [[1, 2, 0, -1], [0, 0, -1, 0]]  # -1: a value the run has not seen
+    decoded = classes.decode(encoded)
+    assert decoded[0, :3].tolist() == [-100.0, 0.0, -1.0] and np.isnan(decoded[0, 3])
+    with pytest.raises(ValueError, match="run 1 saw more than 3 distinct reward values; raise max_classes"):
+        classes.observe(1, np.array([1.0, 2.0, 3.0]))
+
+
+def test_key_features_by_hand():
+    views = np.array([[1.0, 0.0], [0.0, 2.0], [3.0, 3.0]], dtype=np.float32)  # 3 states, d = 2
+    next_state = np.array([[1, 0, 2, 2, 0, 1]])  # 3 states x 2 actions, one run
+    visited = np.array([[True, False, True, False, False, True]])
+    x = key_features(views, next_state, visited, n_actions=2)
+    assert x.shape == (1, 6, 2 * 2 + 2) and x.dtype == np.float32
+    # Key k = s * A + a: view of s, one-hot a, view of the stored s' (zeros while unseen).
+    assert x[0, 0].tolist() == [1, 0, 1, 0, 0, 2]  # s0, a0 -> s1
+    assert x[0, 1].tolist() == [1, 0, 0, 1, 0, 0]  # s0, a1, unseen
+    assert x[0, 2].tolist() == [0, 2, 1, 0, 3, 3]  # s1, a0 -> s2
+    assert x[0, 5].tolist() == [3, 3, 0, 1, 0, 2]  # s2, a1 -> s1
+
+
+def _separable_pool(n_views: int) -> tuple[Pool, np.ndarray]:
+    """40 samples of two classes (20 each) that every view tells apart; 2 labels per class."""
+    truth = np.repeat([0, 1], 20)
+    labelled = np.zeros(40, dtype=bool)
+    labelled[[0, 1, 20, 21]] = True
+    onehot = np.eye(2)[truth]
+    features = [np.concatenate([onehot, np.full((40, j), 0.5)], axis=1)[None] for j in range(n_views)]
+    pool = Pool(
+        features,
+        labelled[None],
+        np.where(labelled, truth, -1)[None],
+        ~labelled[None],
+        np.array([[True, True]]),
+    )
+    return pool, truth
+
+
+@pytest.mark.parametrize("n_views", [1, 2])
+def test_the_self_paced_schedule_admits_per_class_quotas_then_everything(n_views):
+    pool, truth = _separable_pool(n_views)
+    config = CoTrainingConfig(
+        max_classes=2, add_fraction_start=0.5, add_fraction_step=0.5, stop_when_fully_admitted=True
+    )
+    trainer = SelfPacedCoTrainer([f.shape[2] for f in pool.features], 1, config, [0])
+    first = trainer.step(pool)
+    # add_num = 0.5 * |U| = 18; each class holds half the labels, so 9 of each are admitted.
+    admitted = first.pseudo_weight[0] > 0
+    assert admitted.sum() == 18 and admitted[truth == 0].sum() == admitted[truth == 1].sum() == 9
+    assert not admitted[pool.labelled[0]].any() and (first.pseudo_class[0][pool.labelled[0]] == -1).all()
+    assert (first.pseudo_class[0][admitted] == truth[admitted]).all()
+    assert (first.pseudo_class[0][~admitted] == -1).all()
+    assert first.pace[0] == pytest.approx(0.5) and first.changed[0] == 1.0 and not first.stopped[0]
+    assert first.view_weight.shape == (n_views, 1, 40) and first.threshold.shape == (n_views, 1, 2)
+    second = trainer.step(pool)
+    # add_num = 1.0 * |U|: all 36 unlabelled samples, each with its true class; the rule stops.
+    assert second.pace[0] == 1.0 and second.stopped[0]
+    assert (second.pseudo_class[0][~pool.labelled[0]] == truth[~pool.labelled[0]]).all()
+    assert second.changed[0] == pytest.approx(18 / 36)  # the 18 newly admitted samples changed
