@@ -233,7 +233,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.out is None:
             args.out = QUICK_BENCH_OUT if args.quick else Path("BENCHMARKS.md")
-        elif args.quick and args.out.name == "BENCHMARKS.md":
+        elif args.quick and args.out.resolve() == Path("BENCHMARKS.md").resolve():
             print(
                 "dospcot bench: error: --quick figures are a smoke test and never go into BENCHMARKS.md; "
                 f"leave out --out (they go to {QUICK_BENCH_OUT}) or name another file",

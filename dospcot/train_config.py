@@ -310,8 +310,11 @@ class TrainConfig:
         return self.agents or (self.agent,) * len(self.views)
 
     def to_dict(self) -> dict[str, Any]:
-        """The config as plain TOML-ready values (tuples become lists)."""
-        return _plain(dataclasses.asdict(self))
+        """The config as plain TOML-ready values (tuples become lists), without the section of the
+        other task, which this run does not read."""
+        data = _plain(dataclasses.asdict(self))
+        del data["highway" if self.task == "grid" else "env"]
+        return data
 
 
 @dataclass(frozen=True)

@@ -36,7 +36,7 @@ from datetime import UTC, datetime
 from functools import partial
 from pathlib import Path
 
-from readme_block import replace_readme_block
+from readme_block import check_readme_block, replace_readme_block
 
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS
@@ -405,6 +405,12 @@ def main() -> None:
     parser.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
     args = parser.parse_args()
     study = STUDIES[args.study]
+    markers = (f"<!-- {args.study}-table:start -->", f"<!-- {args.study}-table:end -->")
+    if args.docs and study.readme is not None:
+        try:  # before hours of training, not after
+            check_readme_block(*markers)
+        except ValueError as err:
+            sys.exit(f"study.py: {err}")
     args.seeds = args.seeds or study.seeds
     # Another --seeds or --set is another sweep: it gets its own folder.
     default = (args.seeds, args.overrides) == (study.seeds, [])
@@ -431,7 +437,6 @@ def main() -> None:
         if plot is not None:
             shutil.copyfile(plot, ROOT / "docs" / study.plot[1])
         if study.readme is not None:
-            markers = (f"<!-- {args.study}-table:start -->", f"<!-- {args.study}-table:end -->")
             replace_readme_block(*markers, study.readme(table))
 
 

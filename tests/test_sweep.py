@@ -67,6 +67,7 @@ def test_local_sweep_runs_every_trial_once_and_reruns_nothing(tmp_path):
         open_sweep(tmp_path / "sweep", SweepSpec(("tiny",), GRID, (0, 1, 2)))
 
 
+@pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`
 def test_ray_backend_runs_the_same_trials_to_the_same_summaries(tmp_path):
     ray = pytest.importorskip("ray", reason="the `ray` extra is not installed (pip install 'dospcot[ray]')")
     spec = SweepSpec(("tiny",), GRID, (0, 1))
