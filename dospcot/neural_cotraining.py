@@ -1,59 +1,34 @@
-"""DOSPCoT with neural agents (ExpectedSarsaDQN) on a masked discrete task: one run, m views.
+"""The grid adapter: DOSPCoT on a deterministic discrete task (a grid world), m views.
 
-Each agent reads its own view as its observation and keeps its own relabelling replay buffer; all
-agents write every step into the run's :class:`TransitionStore`, whose pool is deduplicated by
-(s, a) key; the reward table is indexed by key too. One round, top to bottom, in
-:meth:`NeuralCoTraining.run_round`:
+The round itself is :class:`~dospcot.cotraining_round.CoTrainingRun`'s; this adapter supplies what
+a discrete task does differently (docs/design.md section 3):
 
-1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
-   rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
-   time, so the last round's pseudo-rewards drive this round's updates.
-2. **Co-train** (method ``"cotrain"``): the store's labelled keys and unlabelled pool U go to the
-   :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
-3. **Pseudo-reward**: each admitted key's consensus reward and weight go into the reward table, so
-   every stored step of that key, and every later one, reads them.
-4. **Policy update**: every agent takes ``update_steps`` gradient steps on its replay buffer, which
-   now reads this round's pseudo-rewards, so they shape the policy evaluated at the end of the round
-   (and the next round's ``learn()`` goes on relabelling at sample time).
-5. **Age**: the pace (admitted share of U) sets every agent's exploration rate via ``set_pace``.
-   Baselines, which have no pace, follow the share of rounds done, a plain linear schedule.
-
-Agents (``spec.agents``): ExpectedSarsaDQN with its Expected-SARSA target (``esarsa_dqn``) or DQN's max
-target (``dqn``), or a Q-table over the view's observations (``tabular``,
-:class:`~dospcot.policies.TabularExpectedSarsa`); any mix works, since all three are SB3 ``DQN`` models.
-
-Baselines: ``oracle`` (every key labelled), ``masked-zero`` (masked rewards read as 0 with weight 1)
-and ``labels-only`` (masked steps weigh 0). The hidden reward reaches only the metrics.
+- **the store** pools (s, a) keys: a key's id is ``s * A + a``, so the reward table is indexed by
+  key, and a step of a key admitted in an earlier round reads its pseudo-reward at once;
+- **the pool**: every seen key, its classifier input under view j being (view j of s, one-hot a,
+  view j of the stored s') (:func:`~dospcot.key_pool.key_features`); classes are the distinct
+  labelled reward values;
+- **the evaluator**: value iteration gives the exact optimum, and each agent's greedy action in every
+  state (read through its own view) is measured against it.
 """
 
 from __future__ import annotations
 
-import io
-import random
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-import torch as th
-from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot import metrics
-from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
-from dospcot.envs.finite_check import FiniteCheckWrapper
-from dospcot.envs.masking import RewardMaskWrapper, check_label_fraction
+from dospcot.cotraining import Pool
+from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
+from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import View, ViewObservationWrapper
 from dospcot.key_pool import key_features
-from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
+from dospcot.policies import ExpectedSarsaDQN
 from dospcot.reward_classes import RewardClasses
-from dospcot.run_spec import RunSpec
-
-VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
-AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
-"""Agent kinds and their TD target: ExpectedSarsaDQN with its Expected-SARSA target or DQN's max target,
-and the tabular Expected-SARSA agent."""
 
 
 class TransitionStore:
@@ -123,127 +98,12 @@ class StoreWrapper(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-class NeuralRunSpec(RunSpec):
-    """A neural run; agent kinds from :data:`AGENT_TARGETS`."""
-
-    def check_agent(self, kind: str) -> None:
-        if kind not in AGENT_TARGETS:
-            raise ValueError(f"unknown agent kind {kind!r}; allowed: {sorted(AGENT_TARGETS)}")
+MakeEnv = Callable[[], gym.Env]
+"""Builds a fresh copy of a discrete task (a toy-text env with ``P`` and ``s``)."""
 
 
-def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
-    """View j's round (run 0 of ``result``): coverage of U, accuracy of what it admitted, mean lambda
-    and classifier loss. ``correct`` (N,) says where its predicted class matches the hidden truth."""
-    taken = result.view_weight[j, 0] > 0
-    lam = result.threshold[j, 0]
-    return {
-        "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
-        "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
-        "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
-        "classifier_loss": float(result.classifier_loss[j, 0]),
-    }
-
-
-def round_stats(
-    result: RoundResult, unlabelled: np.ndarray, correct: np.ndarray, view_correct: Sequence[np.ndarray]
-) -> dict[str, Any]:
-    """Run 0's round for the metrics: pace, coverage of U (N,) bool, accuracy of the admitted
-    pseudo-rewards and each view's figures. ``correct`` (N,) and ``view_correct[j]`` (N,) say where
-    the consensus and view j's prediction match the hidden truth (metrics only)."""
-    admitted = result.pseudo_weight[0] > 0
-    return {
-        "pace": float(result.pace[0]),
-        "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
-        "pseudo_accuracy": float(correct[admitted].mean()) if admitted.any() else float("nan"),
-        "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(view_correct)],
-    }
-
-
-def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
-    """The relabelling replay buffer's arguments for a method: co-training reads the reward table,
-    masked-zero counts masked rewards as 0, the rest weigh masked steps 0."""
-    return {
-        "reward_table": table if method == "cotrain" else None,
-        "masked_reward": "zero" if method == "masked-zero" else "ignore",
-    }
-
-
-def make_agent(
-    env: gym.Env,
-    k: int,
-    kind: str,
-    view: str,
-    spec: RunSpec,
-    config: NeuralConfig,
-    buffer_kwargs: dict[str, Any],
-    observations: np.ndarray | None = None,
-) -> ExpectedSarsaDQN:
-    """Agent ``k`` of a run, at pace 0, on ``env`` checked for non-finite values.
-
-    :param observations: (S, d) the view of every state, which a ``tabular`` agent's table is built
-        over; None for a task whose observations are not known in advance.
-    """
-    env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
-    common = dict(
-        target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k, exploration_initial_eps=config.eps_start,
-        exploration_final_eps=config.eps_end, replay_buffer_kwargs=buffer_kwargs,
-    )  # fmt: skip
-    if kind == "tabular":
-        if observations is None:
-            raise ValueError(
-                "agent kind 'tabular' needs a discrete task whose observations are known in advance "
-                "(a grid world); use esarsa_dqn or dqn"
-            )
-        agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **config.tabular)
-    else:
-        agent = ExpectedSarsaDQN("MlpPolicy", env, **common, **config.dqn)
-    agent.set_pace(0.0)
-    return agent
-
-
-@dataclass(frozen=True)
-class NeuralConfig:
-    """Hyperparameters of a neural run.
-
-    :param rounds: co-training rounds.
-    :param steps_per_round: env steps each agent takes per round.
-    :param label_fraction: share of labelled (s, a) keys.
-    :param max_episode_steps: the episode length limit of the evaluation (greedy rollouts).
-    :param train_episode_steps: the episode length limit while training (None: ``max_episode_steps``).
-        Short training episodes with exploring starts scatter the agents over the map.
-    :param eps_start: exploration at pace 0; ``eps_end``: at pace 1.
-    :param update_steps: gradient steps of every agent at the end of each round, on the reward table
-        the round just wrote (the policy update, :meth:`ExpectedSarsaDQN.update`); 0: none.
-    :param dqn: further keyword arguments of every neural agent (SB3 DQN's).
-    :param tabular: further keyword arguments of every ``tabular`` agent
-        (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
-    :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
-    """
-
-    rounds: int = 5
-    steps_per_round: int = 5_000
-    label_fraction: float = 0.05
-    max_episode_steps: int = 64
-    train_episode_steps: int | None = None
-    eps_start: float = 1.0
-    eps_end: float = 0.05
-    update_steps: int = 0
-    dqn: dict[str, Any] = field(default_factory=dict)
-    tabular: dict[str, Any] = field(default_factory=dict)
-    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
-
-    def __post_init__(self) -> None:
-        check_label_fraction(self.label_fraction)
-        if self.rounds < 1 or self.steps_per_round < 1:
-            raise ValueError(
-                f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
-            )
-        if self.update_steps < 0:
-            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
-
-
-class NeuralCoTraining:
-    """One neural run on a deterministic discrete task.
+class GridTask:
+    """The grid adapter of a run (:class:`~dospcot.cotraining_round.CoTrainingTask`).
 
     :param make_env: builds a fresh copy of the task (a toy-text env with ``P`` and ``s``).
     :param views: every view the task offers, by name.
@@ -252,179 +112,86 @@ class NeuralCoTraining:
     """
 
     def __init__(
-        self,
-        make_env: Callable[[], gym.Env],
-        views: dict[str, View],
-        spec: NeuralRunSpec,
-        config: NeuralConfig,
+        self, make_env: MakeEnv, views: dict[str, View], spec: NeuralRunSpec, config: NeuralConfig
     ) -> None:
         missing = sorted(set(spec.views) - set(views))
         if missing:
             raise ValueError(f"unknown view(s) {missing}; this task has {sorted(views)}")
-        self.spec, self.config, self.views = spec, config, views
-        probe = make_env()
+        self.make_env, self.views, self.spec, self.config = make_env, views, spec, config
         self.mdp = TabularMDP.from_env(
-            probe, {name: views[name] for name in spec.views}, config.max_episode_steps
+            make_env(), {name: views[name] for name in spec.views}, config.max_episode_steps
         )
         self.store = TransitionStore(self.mdp.n_states, self.mdp.n_actions)
-        self.table = RewardTable()
-        fraction = 1.0 if spec.method == "oracle" else config.label_fraction
-        buffer_kwargs = relabelling_kwargs(spec.method, self.table)
-        self.agents: list[ExpectedSarsaDQN] = []
-        for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True)):
-            limit = config.train_episode_steps or config.max_episode_steps
-            env = gym.wrappers.TimeLimit(make_env(), limit)
-            env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=spec.seed)
-            env = ViewObservationWrapper(StoreWrapper(env, self.store), views[view])
-            agent = make_agent(env, k, kind, view, spec, config, buffer_kwargs, self.mdp.views[view])
-            self.agents.append(agent)
-        self.trainer: SelfPacedCoTrainer | None = None
         self.classes = RewardClasses(1, config.cotraining.max_classes)
-        if spec.method == "cotrain":
-            dims = [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in spec.views]
-            cfg = replace(config.cotraining, gamma=spec.gamma)
-            self.trainer = SelfPacedCoTrainer(dims, 1, cfg, [spec.seed])
-        self.round = 0
-        self.stopped = False
-        """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
         self.policy_metrics = metrics.GreedyPolicyMetrics(self.mdp, discount=1.0)
 
-    def run(self) -> list[dict]:
-        """All rounds, or until the stopping rule fires; returns one record per round and agent."""
-        records: list[dict] = []
-        while self.round < self.config.rounds and not self.stopped:
-            records += self.run_round()
-        return records
+    def agent_env(self, k: int, view: str) -> gym.Env:
+        fraction = 1.0 if self.spec.method == "oracle" else self.config.label_fraction
+        env = gym.wrappers.TimeLimit(
+            self.make_env(), self.config.train_episode_steps or self.config.max_episode_steps
+        )
+        env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=self.spec.seed)
+        return ViewObservationWrapper(StoreWrapper(env, self.store), self.views[view])
 
-    def run_round(self, callback: MaybeCallback = None) -> list[dict]:
-        """One round of docs/design.md section 2; returns its records.
+    def observations(self, view: str) -> np.ndarray:
+        return self.mdp.views[view]
 
-        :param callback: passed to every agent's ``learn()`` (SB3 callbacks, e.g. a progress bar).
-        """
-        self.round += 1
-        for k, agent in enumerate(self.agents):  # 1. collect and learn, with last round's rewards and weights
-            # Every round starts from fresh episodes with seeded resets, so a run resumed from the
-            # checkpoint of the last round continues exactly as the uninterrupted run would.
-            agent.get_env().seed(self.spec.seed * 1000 + k + 7919 * self.round)
-            agent._last_obs = None  # SB3 resets the env when learn() finds no last observation
-            agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
-        stats = self._cotrain() if self.trainer is not None else {}  # 2-3. co-train, pseudo-rewards
-        for agent in self.agents:  # 4. policy update on the rewards and weights just written
-            agent.update(self.config.update_steps)
-        pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
-        for agent in self.agents:
-            agent.set_pace(min(pace, 1.0))
-        return self._records(stats)
+    def feature_dims(self) -> list[int]:
+        return [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in self.spec.views]
 
-    def _cotrain(self) -> dict:
-        store, n_actions = self.store, self.mdp.n_actions
+    def pool(self) -> Pool:
+        store = self.store
         labelled = (store.visited & store.labelled)[None]
         unlabelled = (store.visited & ~store.labelled)[None]
         self.classes.observe(0, np.unique(store.label_value[labelled[0]]))
         label_class = np.where(labelled, self.classes.encode(store.label_value[None]), -1)
         features = [
-            key_features(self.mdp.views[v], store.next_state[None], store.visited[None], n_actions)
+            key_features(self.mdp.views[v], store.next_state[None], store.visited[None], self.mdp.n_actions)
             for v in self.spec.views
         ]
-        result = self.trainer.step(Pool(features, labelled, label_class, unlabelled, self.classes.mask))
-        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
-        self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight[0])  # by key
-        self.stopped = bool(result.stopped[0])
-        truth = store.hidden_reward  # metrics only
-        view_correct = [self.classes.decode(view_class)[0] == truth for view_class in result.view_class]
-        return round_stats(result, unlabelled[0], pseudo == truth, view_correct)
+        return Pool(features, labelled, label_class, unlabelled, self.classes.mask)
 
-    def state_dict(self) -> dict[str, Any]:
-        """Everything the next rounds depend on, picklable: agents (SB3 zips as bytes), their replay
-        buffers, the store, the reward table, the co-trainer and the global and action-space RNGs.
+    def correct(self, classes: np.ndarray) -> np.ndarray:
+        return self.classes.decode(classes)[0] == self.store.hidden_reward
 
-        The envs hold no state across rounds (each round starts from seeded resets). The dict refers
-        to live objects: pickle it at once (as ``dospcot train`` does), do not keep it.
-        """
-        zips = []
-        for agent in self.agents:
-            blob = io.BytesIO()
-            agent.save(blob)
-            zips.append(blob.getvalue())
-        return {
-            "round": self.round,
-            "stopped": self.stopped,
-            "agents": zips,
-            "buffers": [agent.replay_buffer for agent in self.agents],
-            "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
-            "store": self.store.__dict__,
-            "table": self.table.__dict__,
-            "classes": self.classes,
-            "trainer": self.trainer,
-            # SB3 draws exploration and replay batches from the legacy global generators.
-            "rng": {"python": random.getstate(), "numpy": np.random.get_state(), "torch": th.get_rng_state()},  # noqa: NPY002
-        }
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
-        self.round, self.stopped = state["round"], state["stopped"]
-        self.store.__dict__.update(state["store"])  # the StoreWrappers keep pointing at self.store
-        self.table.__dict__.update(state["table"])
-        self.classes, self.trainer = state["classes"], state["trainer"]
-        for k, agent in enumerate(self.agents):
-            loaded = type(agent).load(io.BytesIO(state["agents"][k]), env=agent.get_env())
-            loaded.replay_buffer = state["buffers"][k]
-            loaded.replay_buffer.reward_table = agent.replay_buffer.reward_table
-            loaded.action_space.np_random.bit_generator.state = state["action_space_rng"][k]
-            self.agents[k] = loaded
-        # Loading re-seeds the global generators (SB3's _setup_model): restore them last.
-        random.setstate(state["rng"]["python"])
-        np.random.set_state(state["rng"]["numpy"])  # noqa: NPY002
-        th.set_rng_state(state["rng"]["torch"])
-
-    def greedy_actions(self) -> np.ndarray:
+    def greedy_actions(self, agents: Sequence[ExpectedSarsaDQN]) -> np.ndarray:
         """(m, S) each agent's greedy action in every state, read through its own view."""
         return np.stack(
             [
                 agent.predict(self.mdp.views[v], deterministic=True)[0]
-                for agent, v in zip(self.agents, self.spec.views, strict=True)
+                for agent, v in zip(agents, self.spec.views, strict=True)
             ]
         )
 
-    def evaluate_policies(self) -> dict[str, np.ndarray]:
+    def evaluate(self, agents: Sequence[ExpectedSarsaDQN]) -> dict[str, np.ndarray]:
         """Each agent's greedy policy against the exact optimum: (m,) arrays ``greedy_return``,
         ``success``, ``normalised_score`` and ``agreement``."""
-        return self.policy_metrics(self.greedy_actions())
+        return self.policy_metrics(self.greedy_actions(agents))
 
     def reference_returns(self) -> dict[str, float]:
-        """The returns the normalised score is measured between."""
         return {
             "optimal_return": self.policy_metrics.optimal_return,
             "random_return": self.policy_metrics.random_return,
         }
 
-    def _records(self, stats: dict) -> list[dict]:
-        policy = self.evaluate_policies()
-        rows = []
-        for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
-            round_view = stats["views"][k] if stats else {}
-            rows.append(
-                {
-                    "method": self.spec.method,
-                    "agents": "-".join(self.spec.agents),
-                    "views": "-".join(self.spec.views),
-                    "m": len(self.spec.agents),
-                    "gamma": self.spec.gamma,
-                    "seed": self.spec.seed,
-                    "round": self.round,
-                    "agent": k,
-                    "kind": kind,
-                    "view": view,
-                    "env_steps": int(self.agents[k].num_timesteps),
-                    "agreement": float(policy["agreement"][k]),
-                    "greedy_return": float(policy["greedy_return"][k]),
-                    "success": float(policy["success"][k]),
-                    "normalised_score": float(policy["normalised_score"][k]),
-                    "eps": float(self.agents[k].exploration_rate),
-                    "pace": stats.get("pace", float("nan")),
-                    "coverage": stats.get("coverage", float("nan")),
-                    "pseudo_accuracy": stats.get("pseudo_accuracy", float("nan")),
-                    **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
-                }
-            )
-        return rows
+
+class NeuralCoTraining(CoTrainingRun):
+    """One run on a deterministic discrete task: :class:`CoTrainingRun` with the :class:`GridTask`
+    adapter, whose parameters it takes."""
+
+    def __init__(
+        self, make_env: MakeEnv, views: dict[str, View], spec: NeuralRunSpec, config: NeuralConfig
+    ) -> None:
+        super().__init__(GridTask(make_env, views, spec, config), spec, config, config.cotraining.max_classes)
+
+    @property
+    def mdp(self) -> TabularMDP:
+        """The task's exact MDP (metrics only)."""
+        return self.task.mdp
+
+    def greedy_actions(self) -> np.ndarray:
+        """(m, S) each agent's greedy action in every state, read through its own view."""
+        return self.task.greedy_actions(self.agents)
+
+
+__all__ = ["GridTask", "NeuralCoTraining", "NeuralConfig", "NeuralRunSpec", "StoreWrapper", "TransitionStore"]

@@ -27,10 +27,12 @@ import dataclasses
 import math
 import shutil
 import time
+from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import Any
 
+import gymnasium as gym
 import numpy as np
 import stable_baselines3
 from stable_baselines3.common.callbacks import BaseCallback
@@ -40,6 +42,7 @@ from tqdm.auto import tqdm
 
 from dospcot import metrics
 from dospcot.classifier import save_classifier
+from dospcot.cotraining_round import CoTrainingRun
 from dospcot.envs import GridLayout, GridWorld, TabularMDP, grid_views, make_masked_highway
 from dospcot.envs.views import View
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
@@ -62,7 +65,7 @@ from dospcot.run_folder import (
     write_toml,
 )
 from dospcot.train_config import PaperConfig, TrainConfig, load_config
-from dospcot.transition_cotraining import TransitionConfig, TransitionCoTraining
+from dospcot.transition_cotraining import SensorTask, TransitionConfig, TransitionCoTraining
 
 ROUND_SCALARS = (
     "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
@@ -100,31 +103,41 @@ def _capped_buffer(kwargs: dict[str, Any], cfg: TrainConfig) -> dict[str, Any]:
     return kwargs
 
 
-def build_run(cfg: TrainConfig) -> NeuralCoTraining:
-    """The co-trainer of a config, before its first round: the discrete one on a grid, the
-    transition one (:class:`~dospcot.transition_cotraining.TransitionCoTraining`) on a highway."""
+def _highway_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
+    highway = cfg.highway
+    config = TransitionConfig(
+        **_common_kwargs(cfg), max_episode_steps=highway.episode_steps,
+        reward_classes=highway.reward_classes, eval_episodes=highway.eval_episodes,
+    )  # fmt: skip
+    return partial(make_masked_highway, highway.env_id, config=highway.config), _spec(cfg), config
+
+
+def _common_kwargs(cfg: TrainConfig) -> dict[str, Any]:
     training = cfg.training
-    common = dict(
+    return dict(
         rounds=training.rounds, steps_per_round=training.steps_per_round,
         label_fraction=training.label_fraction, eps_start=training.eps_start, eps_end=training.eps_end,
         update_steps=training.update_steps, dqn=agent_kwargs(cfg), tabular=tabular_agent_kwargs(cfg),
         cotraining=cfg.cotraining,
     )  # fmt: skip
-    spec = NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
+
+
+def _spec(cfg: TrainConfig) -> NeuralRunSpec:
+    return NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
+
+
+def build_run(cfg: TrainConfig) -> CoTrainingRun:
+    """The co-trainer of a config, before its first round: the grid adapter's on a grid
+    (:class:`~dospcot.neural_cotraining.NeuralCoTraining`), the sensor adapter's on a highway
+    (:class:`~dospcot.transition_cotraining.TransitionCoTraining`)."""
     if cfg.task == "highway":
-        highway = cfg.highway
-        config = TransitionConfig(
-            **common, max_episode_steps=highway.episode_steps, reward_classes=highway.reward_classes,
-            eval_episodes=highway.eval_episodes,
-        )  # fmt: skip
-        make_env = partial(make_masked_highway, highway.env_id, config=highway.config)
-        return TransitionCoTraining(make_env, spec, config)
+        return TransitionCoTraining(*_highway_parts(cfg))
     make_env, views, _ = build_task(cfg)
     config = NeuralConfig(
-        **common, max_episode_steps=cfg.env.episode_steps,
+        **_common_kwargs(cfg), max_episode_steps=cfg.env.episode_steps,
         train_episode_steps=cfg.env.train_episode_steps or None,
     )  # fmt: skip
-    return NeuralCoTraining(make_env, views, spec, config)
+    return NeuralCoTraining(make_env, views, _spec(cfg), config)
 
 
 class _StepBar(BaseCallback):
@@ -247,7 +260,7 @@ def _train_in(
     return run_dir
 
 
-def _log_round(run: NeuralCoTraining, rows: list[dict]) -> None:
+def _log_round(run: CoTrainingRun, rows: list[dict]) -> None:
     for agent, row in zip(run.agents, rows, strict=True):
         for key in ROUND_SCALARS:
             if math.isfinite(row[key]):
@@ -256,7 +269,7 @@ def _log_round(run: NeuralCoTraining, rows: list[dict]) -> None:
         agent.logger.dump(step=agent.num_timesteps)
 
 
-def _write_round_files(run_dir: Path, run: NeuralCoTraining, cfg: TrainConfig, records: list[dict]) -> None:
+def _write_round_files(run_dir: Path, run: CoTrainingRun, cfg: TrainConfig, records: list[dict]) -> None:
     write_csv(run_dir / METRICS_FILE, records)
     for agent, view in zip(run.agents, cfg.views, strict=True):
         atomic_write(run_dir / f"agent_{view}.zip", agent.save)
@@ -267,7 +280,7 @@ def _write_round_files(run_dir: Path, run: NeuralCoTraining, cfg: TrainConfig, r
         write_json(run_dir / "reward_classes.json", {"rewards": [float(v) for v in rewards]})
 
 
-def run_summary(records: list[dict], run: NeuralCoTraining) -> dict[str, Any]:
+def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:
     """The last round's metrics per view and averaged over the views (no timings: a resumed run
     ends with the summary of the uninterrupted one)."""
     last = [r for r in records if r["round"] == run.round]
@@ -298,9 +311,7 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
         )
     agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
     if cfg.task == "highway":  # greedy evaluation episodes on the task, as during training
-        run = build_run(cfg)
-        run.agents = agents
-        policy = run.evaluate_policies()
+        policy = SensorTask(*_highway_parts(cfg)).evaluate(agents)
     else:
         make_env, views, _ = build_task(cfg)
         mdp = TabularMDP.from_env(make_env(), {v: views[v] for v in cfg.views}, cfg.env.episode_steps)

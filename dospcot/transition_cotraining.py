@@ -1,20 +1,15 @@
-"""DOSPCoT with neural agents on a continuous task (highway driving): one run, m sensor views.
+"""The sensor adapter: DOSPCoT on a continuous task (highway driving), m sensor views.
 
-The discrete co-trainer (:mod:`dospcot.neural_cotraining`) pools (s, a) keys; here a state is a
-sensor reading that never repeats exactly, so every stored step is one pool sample (docs/design.md
-section 2). The round is the same, top to bottom in :meth:`TransitionCoTraining._cotrain` and the
-base class's ``run_round``:
+The round itself is :class:`~dospcot.cotraining_round.CoTrainingRun`'s; this adapter supplies what
+a continuous task does differently (docs/design.md section 3):
 
-1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps on its own copy of the
-   task; each step is revealed with probability ``label_fraction`` (transition-mode masking) and
-   enters the :class:`TransitionStore` with every view of s and s'.
-2. **Co-train**: the continuous reward is binned into K quantile classes of the labels
-   (:class:`~dospcot.reward_classes.QuantileRewardClasses`); labelled steps and the unlabelled pool U
-   (every masked step) go to the :class:`~dospcot.cotraining.SelfPacedCoTrainer`, whose classifier of
-   view j reads (view j of s, one-hot action, view j of s').
-3. **Pseudo-reward**: an admitted step's reward is the mean of its consensus bin, weighed by its
-   self-paced weight, in the shared reward table.
-4-5. As in the discrete co-trainer: replay relabels at sample time; the pace sets exploration.
+- **the store**: a state is a sensor reading that never repeats exactly, so every stored step is one
+  pool sample, with every view of s and s' (:class:`TransitionStore`; each reading stored once);
+- **the pool**: every step, its classifier input under view j being (view j of s, one-hot action,
+  view j of s'); the continuous reward is binned into K quantile classes of the labels
+  (:class:`~dospcot.reward_classes.QuantileRewardClasses`), and an admitted step's reward is the mean
+  of its consensus bin;
+- **the evaluator**: greedy evaluation episodes (below).
 
 Policies are measured by greedy evaluation episodes on unmasked copies of the task: the mean true
 return, the share of episodes that last their whole duration (no crash) and the normalised score
@@ -25,8 +20,8 @@ normalised reward is at most 1). There is no exact optimum, so no optimal-action
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, replace
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import gymnasium as gym
@@ -35,16 +30,9 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from dospcot.cotraining import Pool, SelfPacedCoTrainer
-from dospcot.neural_cotraining import (
-    NeuralConfig,
-    NeuralCoTraining,
-    NeuralRunSpec,
-    make_agent,
-    relabelling_kwargs,
-    round_stats,
-)
-from dospcot.policies import RewardTable
+from dospcot.cotraining import Pool
+from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
+from dospcot.policies import ExpectedSarsaDQN
 from dospcot.reward_classes import QuantileRewardClasses
 
 EVAL_SEED = 1_000_003
@@ -173,8 +161,8 @@ class _RandomPolicy:
         return self.rng.integers(self.n, size=len(obs)), None
 
 
-class TransitionCoTraining(NeuralCoTraining):
-    """One neural run on a continuous sensor task.
+class SensorTask:
+    """The sensor adapter of a run (:class:`~dospcot.cotraining_round.CoTrainingTask`).
 
     :param make_env: ``make_env(view, views, label_fraction, mask_seed)`` builds a masked sensor env
         observing ``view`` and recording ``views`` (:func:`dospcot.envs.highway.make_masked_highway`).
@@ -188,44 +176,37 @@ class TransitionCoTraining(NeuralCoTraining):
     ) -> None:
         self.spec, self.config = spec, config
         fraction = 1.0 if spec.method == "oracle" else config.label_fraction
-        self.table = RewardTable()
-        buffer_kwargs = relabelling_kwargs(spec.method, self.table)
         envs = [make_env(v, spec.views, fraction, spec.seed * 1000 + k) for k, v in enumerate(spec.views)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
         self.store = TransitionStore(self.shapes)
-        self.agents = []
-        for k, (kind, view, env) in enumerate(zip(spec.agents, spec.views, envs, strict=True)):
-            env = SensorStoreWrapper(env, self.store)
-            self.agents.append(make_agent(env, k, kind, view, spec, config, buffer_kwargs))
-        self.n_actions = int(self.agents[0].action_space.n)
-        self.trainer: SelfPacedCoTrainer | None = None
+        self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
+        self.n_actions = int(envs[0].action_space.n)
         self.classes = QuantileRewardClasses(config.reward_classes)
-        if spec.method == "cotrain":
-            dims = [2 * int(np.prod(self.shapes[v])) + self.n_actions for v in spec.views]
-            cfg = replace(config.cotraining, gamma=spec.gamma, max_classes=config.reward_classes)
-            self.trainer = SelfPacedCoTrainer(dims, 1, cfg, [spec.seed])
-        self.round = 0
-        self.stopped = False
         self.eval_envs = [_eval_env(make_env, v, config.max_episode_steps) for v in spec.views]
-        returns = self._returns(_RandomPolicy(self.agents[0].action_space, spec.seed), self.eval_envs[0])[0]
+        returns = self._returns(_RandomPolicy(envs[0].action_space, spec.seed), self.eval_envs[0])[0]
         self.random_return = float(np.mean(returns))
 
-    def _cotrain(self) -> dict:
+    def agent_env(self, k: int, view: str) -> gym.Env:
+        return self._envs[k]
+
+    def observations(self, view: str) -> None:
+        return None  # a sensor reading never repeats exactly: no table of states
+
+    def feature_dims(self) -> list[int]:
+        return [2 * int(np.prod(self.shapes[v])) + self.n_actions for v in self.spec.views]
+
+    def pool(self) -> Pool:
         store = self.store
         n = len(store)
         labelled, unlabelled = store.labelled[:n], ~store.labelled[:n]
         self.classes.fit(store.label_value[:n][labelled])
         label_class = np.where(labelled, self.classes.encode(store.label_value[:n][None])[0], -1)
         features = [store.features(v, self.n_actions)[None] for v in self.spec.views]
-        result = self.trainer.step(
-            Pool(features, labelled[None], label_class[None], unlabelled[None], self.classes.mask)
-        )
-        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
-        self.table.set(np.arange(n), pseudo, result.pseudo_weight[0])
-        self.stopped = bool(result.stopped[0])
-        truth = self.classes.encode(store.hidden_reward[:n][None])[0]  # metrics only: the true bin
-        view_correct = [view_class[0] == truth for view_class in result.view_class]
-        return round_stats(result, unlabelled, result.pseudo_class[0] == truth, view_correct)
+        return Pool(features, labelled[None], label_class[None], unlabelled[None], self.classes.mask)
+
+    def correct(self, classes: np.ndarray) -> np.ndarray:
+        n = len(self.store)
+        return classes[0] == self.classes.encode(self.store.hidden_reward[:n][None])[0]  # the true bin
 
     def _returns(self, policy: Any, env: DummyVecEnv) -> tuple[np.ndarray, np.ndarray]:
         env.seed(EVAL_SEED)
@@ -238,7 +219,7 @@ class TransitionCoTraining(NeuralCoTraining):
         )
         return np.asarray(returns, dtype=np.float64), np.asarray(lengths)
 
-    def evaluate_policies(self) -> dict[str, np.ndarray]:
+    def evaluate(self, agents: Sequence[ExpectedSarsaDQN]) -> dict[str, np.ndarray]:
         """Greedy evaluation episodes of every agent: (m,) ``greedy_return`` (mean true return),
         ``success`` (share of episodes without a crash), ``normalised_score``; ``agreement`` is NaN."""
         r_max = float(self.config.max_episode_steps)
@@ -248,7 +229,7 @@ class TransitionCoTraining(NeuralCoTraining):
             "normalised_score": [],
             "agreement": [],
         }
-        for agent, env in zip(self.agents, self.eval_envs, strict=True):
+        for agent, env in zip(agents, self.eval_envs, strict=True):
             returns, lengths = self._returns(agent, env)
             out["greedy_return"].append(float(returns.mean()))
             out["success"].append(float((lengths >= self.config.max_episode_steps).mean()))
@@ -262,6 +243,16 @@ class TransitionCoTraining(NeuralCoTraining):
         return {"max_return": float(self.config.max_episode_steps), "random_return": self.random_return}
 
 
+class TransitionCoTraining(CoTrainingRun):
+    """One run on a continuous sensor task: :class:`CoTrainingRun` with the :class:`SensorTask`
+    adapter, whose parameters it takes."""
+
+    def __init__(
+        self, make_env: Callable[..., gym.Env], spec: NeuralRunSpec, config: TransitionConfig
+    ) -> None:
+        super().__init__(SensorTask(make_env, spec, config), spec, config, config.reward_classes)
+
+
 def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> DummyVecEnv:
     """An unmasked copy of the task observing ``view`` (the hidden reward is the reward)."""
 
@@ -271,4 +262,4 @@ def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> Du
     return DummyVecEnv([build])
 
 
-__all__ = ["SensorStoreWrapper", "TransitionCoTraining", "TransitionConfig", "TransitionStore"]
+__all__ = ["SensorStoreWrapper", "SensorTask", "TransitionCoTraining", "TransitionConfig", "TransitionStore"]

@@ -1,0 +1,370 @@
+"""One round of DOSPCoT with SB3 agents, for any task: the round is here once, a task adapter supplies
+the rest (docs/design.md section 2).
+
+A run has one agent per view; each reads its own view as its observation and keeps its own
+relabelling replay buffer, and all of them write every step into the task's store. One round, top
+to bottom, in :meth:`CoTrainingRun.run_round`:
+
+1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
+   rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
+   time, so what earlier rounds admitted drives this round's updates.
+2. **Co-train** (method ``"cotrain"``): the task turns its store into a :class:`Pool` (labelled
+   samples and the unlabelled pool U, each view's classifier inputs), which goes to the
+   :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
+3. **Pseudo-reward**: each admitted sample's consensus reward and weight go into the reward table,
+   whose ids are the pool's samples, so every stored step of a sample reads them.
+4. **Policy update**: every agent takes ``update_steps`` gradient steps on its replay buffer, which
+   now reads this round's pseudo-rewards, so they shape the policy evaluated at the end of the round.
+5. **Age**: the pace (admitted share of U) sets every agent's exploration rate via ``set_pace``.
+   Baselines, which have no pace, follow the share of rounds done, a plain linear schedule.
+6. **Record**: the task measures every agent's greedy policy.
+
+What a task supplies (:class:`CoTrainingTask`): each agent's env (masked, writing the store), its
+reward classes, the pool, whether a predicted class is right (metrics only) and the evaluator. The
+grid adapter (:mod:`dospcot.neural_cotraining`) pools (s, a) keys and measures against the exact
+optimum; the sensor adapter (:mod:`dospcot.transition_cotraining`) pools every step and runs
+evaluation episodes.
+
+Agents (``spec.agents``): ExpectedSarsaDQN with its Expected-SARSA target (``esarsa_dqn``) or DQN's max
+target (``dqn``), or a Q-table over the view's observations (``tabular``,
+:class:`~dospcot.policies.TabularExpectedSarsa`); any mix works, since all three are SB3 ``DQN`` models.
+
+Baselines: ``oracle`` (every reward revealed), ``masked-zero`` (masked rewards read as 0 with weight
+1) and ``labels-only`` (masked steps weigh 0). The hidden reward reaches only the metrics.
+"""
+
+from __future__ import annotations
+
+import io
+import random
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+from typing import Any, Protocol
+
+import gymnasium as gym
+import numpy as np
+import torch as th
+from stable_baselines3.common.type_aliases import MaybeCallback
+
+from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.envs.finite_check import FiniteCheckWrapper
+from dospcot.envs.masking import check_label_fraction
+from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
+from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
+from dospcot.run_spec import RunSpec
+
+VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
+AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
+"""Agent kinds and their TD target: ExpectedSarsaDQN with its Expected-SARSA target or DQN's max target,
+and the tabular Expected-SARSA agent."""
+
+
+class NeuralRunSpec(RunSpec):
+    """A run of SB3 agents; agent kinds from :data:`AGENT_TARGETS`."""
+
+    def check_agent(self, kind: str) -> None:
+        if kind not in AGENT_TARGETS:
+            raise ValueError(f"unknown agent kind {kind!r}; allowed: {sorted(AGENT_TARGETS)}")
+
+
+@dataclass(frozen=True)
+class NeuralConfig:
+    """Hyperparameters of a run.
+
+    :param rounds: co-training rounds.
+    :param steps_per_round: env steps each agent takes per round.
+    :param label_fraction: share of labelled (s, a) keys, or of revealed steps.
+    :param max_episode_steps: the episode length limit of the evaluation (greedy rollouts).
+    :param train_episode_steps: the episode length limit while training (None: ``max_episode_steps``).
+        Short training episodes with exploring starts scatter the agents over the map.
+    :param eps_start: exploration at pace 0; ``eps_end``: at pace 1.
+    :param update_steps: gradient steps of every agent at the end of each round, on the reward table
+        the round just wrote (the policy update, :meth:`ExpectedSarsaDQN.update`); 0: none.
+    :param dqn: further keyword arguments of every neural agent (SB3 DQN's).
+    :param tabular: further keyword arguments of every ``tabular`` agent
+        (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
+    :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
+    """
+
+    rounds: int = 5
+    steps_per_round: int = 5_000
+    label_fraction: float = 0.05
+    max_episode_steps: int = 64
+    train_episode_steps: int | None = None
+    eps_start: float = 1.0
+    eps_end: float = 0.05
+    update_steps: int = 0
+    dqn: dict[str, Any] = field(default_factory=dict)
+    tabular: dict[str, Any] = field(default_factory=dict)
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+
+    def __post_init__(self) -> None:
+        check_label_fraction(self.label_fraction)
+        if self.rounds < 1 or self.steps_per_round < 1:
+            raise ValueError(
+                f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
+            )
+        if self.update_steps < 0:
+            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
+
+
+class CoTrainingTask(Protocol):
+    """What a task adapter supplies to :class:`CoTrainingRun`."""
+
+    store: Any
+    """Every step the agents took, in the form the pool is built from (``__dict__`` is checkpointed)."""
+    classes: RewardClasses | QuantileRewardClasses
+    """The reward classes of the run's labels (one run)."""
+
+    def agent_env(self, k: int, view: str) -> gym.Env:
+        """Agent ``k``'s env: masked, observing ``view``, writing every step into the store with its
+        pool sample in ``info["store_id"]``."""
+
+    def observations(self, view: str) -> np.ndarray | None:
+        """(S, d) the view of every state, for a ``tabular`` agent; None where states are not known."""
+
+    def feature_dims(self) -> list[int]:
+        """Each view's classifier input width."""
+
+    def pool(self) -> Pool:
+        """This round's pool (one run), after the classes have seen every label so far."""
+
+    def correct(self, classes: np.ndarray) -> np.ndarray:
+        """(N,) whether each pool sample's class in ``classes`` (1, N) is its true one (metrics only)."""
+
+    def evaluate(self, agents: Sequence[ExpectedSarsaDQN]) -> dict[str, np.ndarray]:
+        """Each agent's greedy policy: (m,) ``greedy_return``, ``success``, ``normalised_score``,
+        ``agreement``."""
+
+    def reference_returns(self) -> dict[str, float]:
+        """The returns the normalised score is measured between."""
+
+
+def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
+    """View j's round (run 0 of ``result``): coverage of U, accuracy of what it admitted, mean lambda
+    and classifier loss. ``correct`` (N,) says where its predicted class matches the hidden truth."""
+    taken = result.view_weight[j, 0] > 0
+    lam = result.threshold[j, 0]
+    return {
+        "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
+        "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
+        "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
+        "classifier_loss": float(result.classifier_loss[j, 0]),
+    }
+
+
+def round_stats(
+    result: RoundResult, unlabelled: np.ndarray, correct: np.ndarray, view_correct: Sequence[np.ndarray]
+) -> dict[str, Any]:
+    """Run 0's round for the metrics: pace, coverage of U (N,) bool, accuracy of the admitted
+    pseudo-rewards and each view's figures. ``correct`` (N,) and ``view_correct[j]`` (N,) say where
+    the consensus and view j's prediction match the hidden truth (metrics only)."""
+    admitted = result.pseudo_weight[0] > 0
+    return {
+        "pace": float(result.pace[0]),
+        "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
+        "pseudo_accuracy": float(correct[admitted].mean()) if admitted.any() else float("nan"),
+        "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(view_correct)],
+    }
+
+
+def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
+    """The relabelling replay buffer's arguments for a method: co-training reads the reward table,
+    masked-zero counts masked rewards as 0, the rest weigh masked steps 0."""
+    return {
+        "reward_table": table if method == "cotrain" else None,
+        "masked_reward": "zero" if method == "masked-zero" else "ignore",
+    }
+
+
+def make_agent(
+    env: gym.Env,
+    k: int,
+    kind: str,
+    view: str,
+    spec: RunSpec,
+    config: NeuralConfig,
+    buffer_kwargs: dict[str, Any],
+    observations: np.ndarray | None = None,
+) -> ExpectedSarsaDQN:
+    """Agent ``k`` of a run, at pace 0, on ``env`` checked for non-finite values.
+
+    :param observations: (S, d) the view of every state, which a ``tabular`` agent's table is built
+        over; None for a task whose observations are not known in advance.
+    """
+    env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
+    common = dict(
+        target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k, exploration_initial_eps=config.eps_start,
+        exploration_final_eps=config.eps_end, replay_buffer_kwargs=buffer_kwargs,
+    )  # fmt: skip
+    if kind == "tabular":
+        if observations is None:
+            raise ValueError(
+                "agent kind 'tabular' needs a discrete task whose observations are known in advance "
+                "(a grid world); use esarsa_dqn or dqn"
+            )
+        agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **config.tabular)
+    else:
+        agent = ExpectedSarsaDQN("MlpPolicy", env, **common, **config.dqn)
+    agent.set_pace(0.0)
+    return agent
+
+
+class CoTrainingRun:
+    """One run of SB3 agents on a masked task, round by round.
+
+    :param task: the task adapter (store, pool, evaluator).
+    :param spec: the run.
+    :param config: its hyperparameters.
+    :param n_classes: the most reward classes a run may hold (the classifiers' outputs).
+    """
+
+    def __init__(
+        self, task: CoTrainingTask, spec: NeuralRunSpec, config: NeuralConfig, n_classes: int
+    ) -> None:
+        self.task, self.spec, self.config = task, spec, config
+        self.table = RewardTable()
+        buffer_kwargs = relabelling_kwargs(spec.method, self.table)
+        self.agents: list[ExpectedSarsaDQN] = [
+            make_agent(
+                task.agent_env(k, view), k, kind, view, spec, config, buffer_kwargs, task.observations(view)
+            )
+            for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True))
+        ]
+        self.trainer: SelfPacedCoTrainer | None = None
+        if spec.method == "cotrain":
+            cfg = replace(config.cotraining, gamma=spec.gamma, max_classes=n_classes)
+            self.trainer = SelfPacedCoTrainer(task.feature_dims(), 1, cfg, [spec.seed])
+        self.round = 0
+        self.stopped = False
+        """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
+
+    @property
+    def store(self) -> Any:
+        """The task's store."""
+        return self.task.store
+
+    @property
+    def classes(self) -> RewardClasses | QuantileRewardClasses:
+        """The task's reward classes."""
+        return self.task.classes
+
+    def run(self) -> list[dict]:
+        """All rounds, or until the stopping rule fires; returns one record per round and agent."""
+        records: list[dict] = []
+        while self.round < self.config.rounds and not self.stopped:
+            records += self.run_round()
+        return records
+
+    def run_round(self, callback: MaybeCallback = None) -> list[dict]:
+        """One round (docs/design.md section 2); returns its records.
+
+        :param callback: passed to every agent's ``learn()`` (SB3 callbacks, e.g. a progress bar).
+        """
+        self.round += 1
+        for k, agent in enumerate(self.agents):  # 1. collect and learn, with last round's rewards and weights
+            # Every round starts from fresh episodes with seeded resets, so a run resumed from the
+            # checkpoint of the last round continues exactly as the uninterrupted run would.
+            agent.get_env().seed(self.spec.seed * 1000 + k + 7919 * self.round)
+            agent._last_obs = None  # SB3 resets the env when learn() finds no last observation
+            agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
+        stats = self._cotrain() if self.trainer is not None else {}  # 2-3. co-train, pseudo-rewards
+        for agent in self.agents:  # 4. policy update on the rewards and weights just written
+            agent.update(self.config.update_steps)
+        pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
+        for agent in self.agents:
+            agent.set_pace(min(pace, 1.0))
+        return self._records(stats)  # 6. record
+
+    def _cotrain(self) -> dict:
+        pool = self.task.pool()
+        result = self.trainer.step(pool)
+        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
+        self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight[0])
+        self.stopped = bool(result.stopped[0])
+        correct = self.task.correct(result.pseudo_class)  # metrics only
+        view_correct = [self.task.correct(view_class) for view_class in result.view_class]
+        return round_stats(result, pool.unlabelled[0], correct, view_correct)
+
+    def evaluate_policies(self) -> dict[str, np.ndarray]:
+        """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,
+        ``normalised_score`` and ``agreement``."""
+        return self.task.evaluate(self.agents)
+
+    def reference_returns(self) -> dict[str, float]:
+        """The returns the normalised score is measured between."""
+        return self.task.reference_returns()
+
+    def state_dict(self) -> dict[str, Any]:
+        """Everything the next rounds depend on, picklable: agents (SB3 zips as bytes), their replay
+        buffers, the store, the reward table, the co-trainer and the global and action-space RNGs.
+
+        The envs hold no state across rounds (each round starts from seeded resets). The dict refers
+        to live objects: pickle it at once (as ``dospcot train`` does), do not keep it.
+        """
+        zips = []
+        for agent in self.agents:
+            blob = io.BytesIO()
+            agent.save(blob)
+            zips.append(blob.getvalue())
+        return {
+            "round": self.round,
+            "stopped": self.stopped,
+            "agents": zips,
+            "buffers": [agent.replay_buffer for agent in self.agents],
+            "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
+            "store": self.store.__dict__,
+            "table": self.table.__dict__,
+            "classes": self.classes,
+            "trainer": self.trainer,
+            # SB3 draws exploration and replay batches from the legacy global generators.
+            "rng": {"python": random.getstate(), "numpy": np.random.get_state(), "torch": th.get_rng_state()},  # noqa: NPY002
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
+        self.round, self.stopped = state["round"], state["stopped"]
+        self.store.__dict__.update(state["store"])  # the store wrappers keep pointing at the store
+        self.table.__dict__.update(state["table"])
+        self.task.classes, self.trainer = state["classes"], state["trainer"]
+        for k, agent in enumerate(self.agents):
+            loaded = type(agent).load(io.BytesIO(state["agents"][k]), env=agent.get_env())
+            loaded.replay_buffer = state["buffers"][k]
+            loaded.replay_buffer.reward_table = agent.replay_buffer.reward_table
+            loaded.action_space.np_random.bit_generator.state = state["action_space_rng"][k]
+            self.agents[k] = loaded
+        # Loading re-seeds the global generators (SB3's _setup_model): restore them last.
+        random.setstate(state["rng"]["python"])
+        np.random.set_state(state["rng"]["numpy"])  # noqa: NPY002
+        th.set_rng_state(state["rng"]["torch"])
+
+    def _records(self, stats: dict) -> list[dict]:
+        policy = self.evaluate_policies()
+        rows = []
+        for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
+            round_view = stats["views"][k] if stats else {}
+            rows.append(
+                {
+                    "method": self.spec.method,
+                    "agents": "-".join(self.spec.agents),
+                    "views": "-".join(self.spec.views),
+                    "m": len(self.spec.agents),
+                    "gamma": self.spec.gamma,
+                    "seed": self.spec.seed,
+                    "round": self.round,
+                    "agent": k,
+                    "kind": kind,
+                    "view": view,
+                    "env_steps": int(self.agents[k].num_timesteps),
+                    "agreement": float(policy["agreement"][k]),
+                    "greedy_return": float(policy["greedy_return"][k]),
+                    "success": float(policy["success"][k]),
+                    "normalised_score": float(policy["normalised_score"][k]),
+                    "eps": float(self.agents[k].exploration_rate),
+                    "pace": stats.get("pace", float("nan")),
+                    "coverage": stats.get("coverage", float("nan")),
+                    "pseudo_accuracy": stats.get("pseudo_accuracy", float("nan")),
+                    **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
+                }
+            )
+        return rows
