@@ -48,7 +48,6 @@ from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
 from dospcot.envs.finite_check import FiniteCheckWrapper
-from dospcot.envs.masking import check_label_fraction
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
 from dospcot.run_spec import RunSpec
@@ -68,44 +67,59 @@ class NeuralRunSpec(RunSpec):
 
 
 @dataclass(frozen=True)
-class NeuralConfig:
-    """Hyperparameters of a run.
+class TrainingConfig:
+    """The rounds of one run: the ``[training]`` section of a config, and the first fields of
+    :class:`NeuralConfig`.
 
     :param rounds: co-training rounds.
     :param steps_per_round: env steps each agent takes per round.
-    :param label_fraction: share of labelled (s, a) keys, or of revealed steps.
-    :param max_episode_steps: the episode length limit of the evaluation (greedy rollouts).
-    :param train_episode_steps: the episode length limit while training (None: ``max_episode_steps``).
-        Short training episodes with exploring starts scatter the agents over the map.
-    :param eps_start: exploration at pace 0; ``eps_end``: at pace 1.
-    :param update_steps: gradient steps of every agent at the end of each round, on the reward table
-        the round just wrote (the policy update, :meth:`ExpectedSarsaDQN.update`); 0: none.
-    :param dqn: further keyword arguments of every neural agent (SB3 DQN's).
-    :param tabular: further keyword arguments of every ``tabular`` agent
-        (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
-    :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
+    :param label_fraction: share of (s, a) keys whose reward is revealed, in (0, 1].
+    :param eps_start: exploration at pace 0.
+    :param eps_end: exploration at pace 1.
+    :param update_steps: gradient steps each agent takes at the end of every round, after the
+        co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
+        update), so the last round's pseudo-rewards are learned too; 0: none.
     """
 
     rounds: int = 5
     steps_per_round: int = 5_000
     label_fraction: float = 0.05
-    max_episode_steps: int = 64
-    train_episode_steps: int | None = None
     eps_start: float = 1.0
     eps_end: float = 0.05
     update_steps: int = 0
-    dqn: dict[str, Any] = field(default_factory=dict)
-    tabular: dict[str, Any] = field(default_factory=dict)
-    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
 
     def __post_init__(self) -> None:
-        check_label_fraction(self.label_fraction)
         if self.rounds < 1 or self.steps_per_round < 1:
             raise ValueError(
                 f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
             )
         if self.update_steps < 0:
             raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
+        if not 0 < self.label_fraction <= 1:
+            raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
+        for name in ("eps_start", "eps_end"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+
+
+@dataclass(frozen=True)
+class NeuralConfig(TrainingConfig):
+    """Hyperparameters of a run: :class:`TrainingConfig`'s, and
+
+    :param max_episode_steps: the episode length limit of the evaluation (greedy rollouts).
+    :param train_episode_steps: the episode length limit while training (0: ``max_episode_steps``).
+        Short training episodes with exploring starts scatter the agents over the map.
+    :param dqn: further keyword arguments of every neural agent (SB3 DQN's).
+    :param tabular: further keyword arguments of every ``tabular`` agent
+        (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
+    :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
+    """
+
+    max_episode_steps: int = 64
+    train_episode_steps: int = 0
+    dqn: dict[str, Any] = field(default_factory=dict)
+    tabular: dict[str, Any] = field(default_factory=dict)
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
 
 
 class CoTrainingTask(Protocol):

@@ -113,13 +113,10 @@ def _highway_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunS
 
 
 def _common_kwargs(cfg: TrainConfig) -> dict[str, Any]:
-    training = cfg.training
-    return dict(
-        rounds=training.rounds, steps_per_round=training.steps_per_round,
-        label_fraction=training.label_fraction, eps_start=training.eps_start, eps_end=training.eps_end,
-        update_steps=training.update_steps, dqn=agent_kwargs(cfg), tabular=tabular_agent_kwargs(cfg),
-        cotraining=cfg.cotraining,
-    )  # fmt: skip
+    return {
+        **{f.name: getattr(cfg.training, f.name) for f in dataclasses.fields(cfg.training)},
+        "dqn": agent_kwargs(cfg), "tabular": tabular_agent_kwargs(cfg), "cotraining": cfg.cotraining,
+    }  # fmt: skip
 
 
 def _spec(cfg: TrainConfig) -> NeuralRunSpec:
@@ -135,7 +132,7 @@ def build_run(cfg: TrainConfig) -> CoTrainingRun:
     make_env, views, _ = build_task(cfg)
     config = NeuralConfig(
         **_common_kwargs(cfg), max_episode_steps=cfg.env.episode_steps,
-        train_episode_steps=cfg.env.train_episode_steps or None,
+        train_episode_steps=cfg.env.train_episode_steps,
     )  # fmt: skip
     return NeuralCoTraining(make_env, views, _spec(cfg), config)
 

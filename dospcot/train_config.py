@@ -26,6 +26,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from dospcot.cotraining import CoTrainingConfig
+from dospcot.cotraining_round import TrainingConfig
 from dospcot.envs.fast_highway import FastHighwayEnv
 from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, highway_view_names, try_highway_config
 from dospcot.tabular_cotraining import TabularConfig
@@ -116,41 +117,6 @@ class HighwayConfig:
                 "episode_steps, reward_classes and eval_episodes must be >= 1, got "
                 f"{self.episode_steps}, {self.reward_classes}, {self.eval_episodes}"
             )
-
-
-@dataclass(frozen=True)
-class TrainingConfig:
-    """The rounds of one run (:class:`dospcot.neural_cotraining.NeuralConfig`).
-
-    :param rounds: co-training rounds.
-    :param steps_per_round: env steps each agent takes per round.
-    :param label_fraction: share of (s, a) keys whose reward is revealed, in (0, 1].
-    :param eps_start: exploration at pace 0.
-    :param eps_end: exploration at pace 1.
-    :param update_steps: gradient steps each agent takes at the end of every round, after the
-        co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
-        update), so the last round's pseudo-rewards are learned too; 0: none.
-    """
-
-    rounds: int = 5
-    steps_per_round: int = 5_000
-    label_fraction: float = 0.05
-    eps_start: float = 1.0
-    eps_end: float = 0.05
-    update_steps: int = 0
-
-    def __post_init__(self) -> None:
-        if self.rounds < 1 or self.steps_per_round < 1:
-            raise ValueError(
-                f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
-            )
-        if self.update_steps < 0:
-            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
-        if not 0 < self.label_fraction <= 1:
-            raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
-        for name in ("eps_start", "eps_end"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
 
 
 @dataclass(frozen=True)
