@@ -367,7 +367,7 @@ def _filled_run(n: int, seed: int) -> NeuralCoTraining:
 
 
 def _store_bytes(run: NeuralCoTraining) -> int:
-    """Bytes the shared store and the reward table hold, spare capacity included."""
+    """Bytes the shared store and the reward table hold."""
     arrays = [*vars(run.store).values(), run.table._reward, run.table._weight]
     return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
 
@@ -474,12 +474,12 @@ NOTES = [
     "- The highway row steps 64 of our envs at once in numpy (`dospcot.envs.FastHighwayVec`; ended envs "
     "reset inside `step`) and one highway-fast-v0 env in its Python simulator, both with uniformly random "
     "meta-actions and their default Kinematics observation; the ratio counts env steps of all 64 envs.",
-    "- The store rows fill a `grid16-dospcot` co-trainer's shared store with random steps. The store "
-    "keeps one (s, a) key id per step and per-key arrays (the pool is deduplicated by key, and each "
-    "view's features are computed per key when the classifiers need them), and the reward table keeps "
-    "a float32 reward and weight per step; spare capacity from growth by doubling counts. The peer is "
-    "the raw arrays a store of observations would hold. The scaling row times `_cotrain()` (classes, "
-    "features, select, fit, score, Eq. 9, relabelling every stored step) at each size; the peer "
+    "- The store rows fill a `grid16-dospcot` co-trainer's shared store with random steps. On a grid the "
+    "store keeps per-key arrays only (the pool is deduplicated by (s, a) key, each view's features are "
+    "computed per key when the classifiers need them, and the reward table is indexed by key), so its "
+    "size does not grow with the steps; the steps themselves live in the agents' SB3 replay buffers. "
+    "The peer is the raw arrays a store of observations would hold. The scaling row times `_cotrain()` "
+    "(classes, features, select, fit, score, Eq. 9, writing the table) at each size; the peer "
     "column is the n log n growth over the same sizes, so a ratio at most 1 means no faster growth.",
 ]
 

@@ -31,7 +31,7 @@ from dospcot.policies import ExpectedSarsaDQN
 from dospcot.reward_classes import RewardClasses
 
 
-class TransitionStore:
+class KeyStore:
     """What the agents of one run have seen, by (s, a) key: the pool of the co-trainer.
 
     A key's id is ``s * A + a``; the reward table is indexed by it too, so a step of a key admitted
@@ -66,13 +66,13 @@ class TransitionStore:
 
 
 class StoreWrapper(gym.Wrapper):
-    """Write every step into a :class:`TransitionStore` and put its key in ``info["store_id"]``.
+    """Write every step into a :class:`KeyStore` and put its key in ``info["store_id"]``.
 
     Sits above :class:`~dospcot.envs.RewardMaskWrapper`, whose ``info`` says whether the reward was
     observed; the hidden reward it passes on is stored for the metrics only.
     """
 
-    def __init__(self, env: gym.Env, store: TransitionStore) -> None:
+    def __init__(self, env: gym.Env, store: KeyStore) -> None:
         super().__init__(env)
         self.store = store
         self._state = 0
@@ -121,7 +121,7 @@ class GridTask:
         self.mdp = TabularMDP.from_env(
             make_env(), {name: views[name] for name in spec.views}, config.max_episode_steps
         )
-        self.store = TransitionStore(self.mdp.n_states, self.mdp.n_actions)
+        self.store = KeyStore(self.mdp.n_states, self.mdp.n_actions)
         self.classes = RewardClasses(1, config.cotraining.max_classes)
         self.policy_metrics = metrics.GreedyPolicyMetrics(self.mdp, discount=1.0)
 
@@ -194,4 +194,4 @@ class NeuralCoTraining(CoTrainingRun):
         return self.task.greedy_actions(self.agents)
 
 
-__all__ = ["GridTask", "NeuralCoTraining", "NeuralConfig", "NeuralRunSpec", "StoreWrapper", "TransitionStore"]
+__all__ = ["GridTask", "KeyStore", "NeuralCoTraining", "NeuralConfig", "NeuralRunSpec", "StoreWrapper"]

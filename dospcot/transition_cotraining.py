@@ -4,7 +4,7 @@ The round itself is :class:`~dospcot.cotraining_round.CoTrainingRun`'s; this ada
 a continuous task does differently (docs/design.md section 3):
 
 - **the store**: a state is a sensor reading that never repeats exactly, so every stored step is one
-  pool sample, with every view of s and s' (:class:`TransitionStore`; each reading stored once);
+  pool sample, with every view of s and s' (:class:`StepStore`; each reading stored once);
 - **the pool**: every step, its classifier input under view j being (view j of s, one-hot action,
   view j of s'); the continuous reward is binned into K quantile classes of the labels
   (:class:`~dospcot.reward_classes.QuantileRewardClasses`), and an admitted step's reward is the mean
@@ -39,7 +39,7 @@ EVAL_SEED = 1_000_003
 """Evaluation episodes start from seeds ``EVAL_SEED + i``, apart from every training seed."""
 
 
-class TransitionStore:
+class StepStore:
     """Every step the agents of one run took, one pool sample each, with every view of s and s'.
 
     A state reading is stored once as a *row*: a step refers to the row of its s (the reset's or the
@@ -105,10 +105,10 @@ def _grow(array: np.ndarray, extra: int) -> np.ndarray:
 
 
 class SensorStoreWrapper(gym.Wrapper):
-    """Write every step, with every view of s and s' (``info["views"]``), into a :class:`TransitionStore`
+    """Write every step, with every view of s and s' (``info["views"]``), into a :class:`StepStore`
     and put its id in ``info["store_id"]``. Sits above :class:`~dospcot.envs.RewardMaskWrapper`."""
 
-    def __init__(self, env: gym.Env, store: TransitionStore) -> None:
+    def __init__(self, env: gym.Env, store: StepStore) -> None:
         super().__init__(env)
         self.store = store
         self._row = -1
@@ -178,7 +178,7 @@ class SensorTask:
         fraction = 1.0 if spec.method == "oracle" else config.label_fraction
         envs = [make_env(v, spec.views, fraction, spec.seed * 1000 + k) for k, v in enumerate(spec.views)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
-        self.store = TransitionStore(self.shapes)
+        self.store = StepStore(self.shapes)
         self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
         self.n_actions = int(envs[0].action_space.n)
         self.classes = QuantileRewardClasses(config.reward_classes)
@@ -262,4 +262,4 @@ def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> Du
     return DummyVecEnv([build])
 
 
-__all__ = ["SensorStoreWrapper", "SensorTask", "TransitionCoTraining", "TransitionConfig", "TransitionStore"]
+__all__ = ["SensorStoreWrapper", "SensorTask", "StepStore", "TransitionCoTraining", "TransitionConfig"]
