@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import tomli_w
 from stable_baselines3 import DQN
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
@@ -24,7 +25,7 @@ from dospcot.cli import main
 from dospcot.envs import GridWorld, TabularMDP
 from dospcot.run_folder import RunFolderError, read_checkpoint
 from dospcot.train import ROUND_SCALARS, build_task, evaluate
-from dospcot.train_config import load_config, preset_names
+from dospcot.train_config import ConfigError, load_config, preset_names
 
 ISSUE_PRESETS = [
     "grid16-dospcot", "grid16-oracle", "grid16-masked-zero", "grid16-labels-only", "grid16-self-training",
@@ -122,6 +123,16 @@ def test_a_runs_folder_that_cannot_be_made_fails_with_one_line(tmp_path, capsys,
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and str(where) in err and reason in err
     assert blocker.read_text() == ""
+
+
+def test_a_section_of_the_other_task_is_refused_unless_it_says_nothing(tmp_path):
+    cfg = load_config("tiny")
+    assert "highway" not in cfg.to_dict()  # a run folder's config.toml holds its own task's section
+    both = tmp_path / "both.toml"  # as config.toml files held both sections before
+    both.write_text(tomli_w.dumps({**cfg.to_dict(), "highway": {"episode_steps": 30}}))
+    assert load_config(str(both)) == cfg
+    with pytest.raises(ConfigError, match=r'highway: a task = "grid" run does not read the \[highway\]'):
+        load_config("tiny", ["highway.episode_steps=3"])
 
 
 def test_on_the_grid16_map_every_view_tells_every_cell_apart():
