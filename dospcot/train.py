@@ -40,12 +40,11 @@ from stable_baselines3.common.logger import configure
 from torch.utils.tensorboard import SummaryWriter
 from tqdm.auto import tqdm
 
-from dospcot import metrics
 from dospcot.classifier import save_classifier
 from dospcot.cotraining_round import CoTrainingRun
-from dospcot.envs import GridLayout, GridWorld, TabularMDP, grid_views, make_masked_highway
+from dospcot.envs import GridLayout, GridWorld, grid_views, make_masked_highway
 from dospcot.envs.views import View
-from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
+from dospcot.neural_cotraining import GridTask, MakeEnv, NeuralConfig, NeuralCoTraining, NeuralRunSpec
 from dospcot.paper import episodes_per_seed, train_protocol_at
 from dospcot.plots import plot_learning_curves
 from dospcot.run_folder import (
@@ -112,9 +111,18 @@ def _highway_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunS
     return partial(make_masked_highway, highway.env_id, config=highway.config), _spec(cfg), config
 
 
+def _grid_parts(cfg: TrainConfig) -> tuple[MakeEnv, dict[str, View], NeuralRunSpec, NeuralConfig]:
+    make_env, views, _ = build_task(cfg)
+    config = NeuralConfig(
+        **_common_kwargs(cfg), max_episode_steps=cfg.env.episode_steps,
+        train_episode_steps=cfg.env.train_episode_steps,
+    )  # fmt: skip
+    return make_env, views, _spec(cfg), config
+
+
 def _common_kwargs(cfg: TrainConfig) -> dict[str, Any]:
     return {
-        **{f.name: getattr(cfg.training, f.name) for f in dataclasses.fields(cfg.training)},
+        **dataclasses.asdict(cfg.training),
         "dqn": agent_kwargs(cfg), "tabular": tabular_agent_kwargs(cfg), "cotraining": cfg.cotraining,
     }  # fmt: skip
 
@@ -129,12 +137,7 @@ def build_run(cfg: TrainConfig) -> CoTrainingRun:
     (:class:`~dospcot.transition_cotraining.TransitionCoTraining`)."""
     if cfg.task == "highway":
         return TransitionCoTraining(*_highway_parts(cfg))
-    make_env, views, _ = build_task(cfg)
-    config = NeuralConfig(
-        **_common_kwargs(cfg), max_episode_steps=cfg.env.episode_steps,
-        train_episode_steps=cfg.env.train_episode_steps,
-    )  # fmt: skip
-    return NeuralCoTraining(make_env, views, _spec(cfg), config)
+    return NeuralCoTraining(*_grid_parts(cfg))
 
 
 class _StepBar(BaseCallback):
@@ -307,14 +310,9 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
             f"{run_dir} is a paper-protocol run: it keeps no agents (its figures are in {METRICS_FILE})"
         )
     agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
-    if cfg.task == "highway":  # greedy evaluation episodes on the task, as during training
-        policy = SensorTask(*_highway_parts(cfg)).evaluate(agents)
-    else:
-        make_env, views, _ = build_task(cfg)
-        mdp = TabularMDP.from_env(make_env(), {v: views[v] for v in cfg.views}, cfg.env.episode_steps)
-        pairs = zip(agents, cfg.views, strict=True)
-        greedy = np.stack([agent.predict(mdp.views[v], deterministic=True)[0] for agent, v in pairs])
-        policy = metrics.GreedyPolicyMetrics(mdp, discount=1.0)(greedy)
+    # The task adapter's evaluator, as during training: no training run, no fresh agents.
+    task = SensorTask(*_highway_parts(cfg)) if cfg.task == "highway" else GridTask(*_grid_parts(cfg))
+    policy = task.evaluate(agents)
     per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
     result = {"per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()}}
     write_json(run_dir / "evaluation.json", result)
