@@ -19,7 +19,7 @@ import torch
 
 from dospcot.classifier import BatchedRewardClassifier, ClassifierConfig
 from dospcot.consensus import consensus_labels
-from dospcot.selection import WEIGHTINGS, Weighting, spamco_select
+from dospcot.selection import QUOTAS, WEIGHTINGS, Quota, Weighting, spamco_select
 
 
 @dataclass(frozen=True)
@@ -33,6 +33,9 @@ class CoTrainingConfig:
         capped at 1: per-class quotas ``ceil(share_c * add_num)`` keep a class from taking more than
         its share, so only an add_num beyond |U| lets every class's candidates in, and U be fully
         admitted.
+    :param quota: how add_num splits over the classes: ``"label-share"`` (SPaMCo: in proportion to
+        the labels) or ``"candidates"`` (each class the same share of the samples predicted as it;
+        :mod:`dospcot.selection`).
     :param tol: stop once under this share of pseudo-labels changed in a round (0 disables).
     :param stop_when_fully_admitted: stop once every unlabelled sample is admitted.
     :param max_classes: the most distinct reward values a run may see.
@@ -43,6 +46,7 @@ class CoTrainingConfig:
     weighting: Weighting = "hard"
     add_fraction_start: float = 0.2
     add_fraction_step: float = 0.4
+    quota: Quota = "label-share"
     tol: float = 0.0
     stop_when_fully_admitted: bool = False
     max_classes: int = 16
@@ -53,6 +57,8 @@ class CoTrainingConfig:
             raise ValueError(f"gamma must be >= 0, got {self.gamma}")
         if self.weighting not in WEIGHTINGS:
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
+        if self.quota not in QUOTAS:
+            raise ValueError(f"quota must be one of {QUOTAS}, got {self.quota!r}")
         if self.add_fraction_start <= 0:
             raise ValueError(f"add_fraction_start must be > 0, got {self.add_fraction_start}")
         if self.add_fraction_step < 0:
@@ -165,7 +171,15 @@ class SelfPacedCoTrainer:
             else:
                 boost, consensus = np.zeros((n_runs, n_samples)), np.full((n_runs, n_samples), -1)
             sel = spamco_select(
-                scores[j], pool.unlabelled, share, add_num, boost, consensus, cfg.gamma, cfg.weighting
+                scores[j],
+                pool.unlabelled,
+                share,
+                add_num,
+                boost,
+                consensus,
+                cfg.gamma,
+                cfg.weighting,
+                cfg.quota,
             )
             weights[j], view_class[j], threshold[j] = sel.weight, sel.predicted, sel.threshold
             # g_j learns its admitted samples under the current consensus (Eq. 9 with the new v_j).

@@ -6,9 +6,17 @@ For one view j, over a batch of B independent runs and a pool of N samples:
    agree on, Eq. 9 over them) is raised by ``gamma * mean_k v_k`` over the other views k, so a sample
    the others chose is easier to admit.
 2. Each sample is predicted as the class of its highest (boosted) score.
-3. Per class c, the ``n_c = ceil(share_c * add_num)`` highest-scoring unlabelled samples predicted as
-   c are admitted, where ``share_c`` is c's share among the labels; the threshold ``lambda_c`` is the
-   n_c-th score (ties broken by pool order, so exactly n_c are admitted when enough exist).
+3. Per class c, the n_c highest-scoring unlabelled samples predicted as c are admitted; the threshold
+   ``lambda_c`` is the n_c-th score (ties broken by pool order, so exactly n_c are admitted when
+   enough exist). The quota (``quota``):
+
+   - ``"label-share"`` (SPaMCo): ``n_c = ceil(share_c * add_num)``, where ``share_c`` is c's share
+     among the labels. A rare class whose few labels understate its share is starved: with 40
+     labels, a class holding 10% of U may show 2 labels (5%), and then half its candidates wait
+     until add_num reaches twice |U|.
+   - ``"candidates"``: ``n_c = ceil(add_num / |U| * N_c)``, where N_c counts the samples predicted as
+     c: every class admits the same share of its own candidates, and all of them once add_num
+     reaches |U|, whatever the labels' proportions.
 4. Weights: ``"hard"`` gives 1 to admitted samples; ``"soft"`` gives the ramp
    ``clip((score - lambda_c) / gamma, 0, 1)`` to admitted samples.
 """
@@ -22,6 +30,8 @@ import numpy as np
 
 Weighting = Literal["hard", "soft"]
 WEIGHTINGS: tuple[str, ...] = ("hard", "soft")
+Quota = Literal["label-share", "candidates"]
+QUOTAS: tuple[str, ...] = ("label-share", "candidates")
 
 
 @dataclass(frozen=True)
@@ -59,6 +69,7 @@ def spamco_select(
     consensus: np.ndarray,
     gamma: float,
     weighting: Weighting = "hard",
+    quota: Quota = "label-share",
 ) -> Selection:
     """Select confident samples of the unlabelled pool for one view.
 
@@ -70,9 +81,12 @@ def spamco_select(
     :param consensus: (B, N) int, the other views' consensus class, -1 where they have none.
     :param gamma: co-regularisation weight, also the width of the soft ramp.
     :param weighting: ``"hard"`` or ``"soft"``.
+    :param quota: ``"label-share"`` or ``"candidates"`` (see the module docstring).
     """
     if weighting not in WEIGHTINGS:
         raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {weighting!r}")
+    if quota not in QUOTAS:
+        raise ValueError(f"quota must be one of {QUOTAS}, got {quota!r}")
     if weighting == "soft" and gamma <= 0:
         raise ValueError(f"weighting='soft' needs gamma > 0 (the ramp width), got gamma={gamma}")
     n_runs, n_samples, n_classes = scores.shape
@@ -82,7 +96,12 @@ def spamco_select(
     predicted = boosted.argmax(axis=-1)
     score = np.take_along_axis(boosted, predicted[..., None], axis=-1)[..., 0]
 
-    counts = class_counts(label_share, add_num)
+    if quota == "label-share":
+        counts = class_counts(label_share, add_num)
+    else:
+        fraction = np.asarray(add_num, dtype=np.float64) / np.maximum(candidates.sum(axis=1), 1)
+        per_class = (candidates[..., None] & (predicted[..., None] == np.arange(n_classes))).sum(axis=1)
+        counts = class_counts(per_class.astype(np.float64), fraction)
     admitted = np.zeros((n_runs, n_samples), dtype=bool)
     threshold = np.full((n_runs, n_classes), np.nan)
     run_index = np.arange(n_runs)

@@ -57,8 +57,8 @@ class EnvConfig:
         with exploring starts, short episodes scattered over the map reach the goal far more often
         than long ones.
     :param patch_size: side k of the ``patch`` view (odd).
-    :param compass: the ``patch`` and ``rays`` views also read the goal's offset (a goal compass),
-        one-hot per axis.
+    :param compass: every view also reads the goal's offset (a goal compass): ``"none"``, ``"axes"``
+        (one-hot per axis) or ``"cell"`` (one-hot over the map's cells; :mod:`dospcot.envs.gridworld`).
     """
 
     size: int = 16
@@ -72,7 +72,7 @@ class EnvConfig:
     max_episode_steps: int = 0
     train_episode_steps: int = 0
     patch_size: int = 5
-    compass: bool = False
+    compass: Literal["none", "axes", "cell"] = "none"
 
     def __post_init__(self) -> None:
         if not 4 <= self.size <= 256:

@@ -15,12 +15,18 @@ Views (docs/design.md section 1):
 - ``rays``: along the 8 compass directions, the distance to the nearest lava, wall (or edge) and
   goal, divided by N (1.0 where there is none); 24 values.
 
-With ``compass=True`` the two egocentric views, ``patch`` and ``rays``, also read the goal's offset
-(d_row, d_column), as a goal compass would: a local sensor alone tells a cell from its
-neighbourhood, so an agent that reads only it must learn the whole map by heart to find the goal,
-which a neural network does unreliably on maps it was not tuned on. Each offset is one-hot over its
-2N - 1 values (4N - 2 more inputs): as two scaled numbers, neighbouring cells differ by 1 / (N - 1)
-in two of the inputs, and a small MLP's values blur across them (greedy loops between neighbours).
+A goal compass (``compass``) makes every view also read where the goal lies from the agent: a local
+sensor alone tells a cell only by its neighbourhood, so an agent that reads only it must learn the
+whole map by heart to find the goal, which a neural network does unreliably on maps it was not tuned
+on. Two encodings of the goal's offset (d_row, d_column):
+
+- ``"axes"``: each offset one-hot over its 2N - 1 values (4N - 2 more inputs);
+- ``"cell"``: the offset pair one-hot over the N^2 pairs a cell of the map can have (N^2 more
+  inputs, one per cell, since the goal is fixed): the first layer of an MLP then holds a separate
+  embedding for every cell, so a value learned in one cell is not blurred into its row and column.
+
+Scaled numbers (as ``coords`` holds) make neighbouring cells differ by 1 / (N - 1) in two inputs, and
+a small MLP's values blur across them (greedy loops between neighbours).
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ FREE, WALL, LAVA, GOAL, OFF_GRID = range(5)
 N_TERRAIN = 5
 MOVES = np.array([(-1, 0), (0, 1), (1, 0), (0, -1)])
 DIRECTIONS_8 = [(-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1)]
+COMPASSES: tuple[str, ...] = ("none", "axes", "cell")
 _CHARS = {".": FREE, "#": WALL, "L": LAVA, "G": GOAL, "S": FREE}
 
 
@@ -245,11 +252,13 @@ class GridWorld(gym.Env):
         return "\n".join("".join(row) for row in rows)
 
 
-def grid_views(layout: GridLayout, patch_size: int = 5, compass: bool = False) -> dict[str, View]:
-    """The ``coords``, ``patch`` and ``rays`` views of a layout, by name (``compass``: see the module
-    docstring)."""
+def grid_views(layout: GridLayout, patch_size: int = 5, compass: str = "none") -> dict[str, View]:
+    """The ``coords``, ``patch`` and ``rays`` views of a layout, by name; ``compass`` (one of
+    :data:`COMPASSES`) appends the goal's offset to every view (see the module docstring)."""
     if patch_size < 1 or patch_size % 2 == 0:
         raise ValueError(f"patch_size must be odd and positive, got {patch_size}")
+    if compass not in COMPASSES:
+        raise ValueError(f"compass must be one of {COMPASSES}, got {compass!r}")
     n = layout.size
     goal_r, goal_c = layout.goal
     scale = max(n - 1, 1)
@@ -263,21 +272,20 @@ def grid_views(layout: GridLayout, patch_size: int = 5, compass: bool = False) -
     )
     patch_table = np.eye(N_TERRAIN, dtype=np.float32)[windows].reshape(n * n, -1)
     rays_table = _ray_table(layout)
-    if compass:
+    tables = {"coords": coords_table, "patch": patch_table, "rays": rays_table}
+    if compass == "axes":
         offsets = np.eye(2 * n - 1, dtype=np.float32)
         heading = np.concatenate([offsets[goal_r - rows + n - 1], offsets[goal_c - cols + n - 1]], axis=1)
-        patch_table = np.concatenate([patch_table, heading], axis=1)
-        rays_table = np.concatenate([rays_table, heading], axis=1)
+    elif compass == "cell":  # with the goal fixed, each cell has its own offset pair: one input per cell
+        heading = np.eye(n * n, dtype=np.float32)
+    if compass != "none":
+        tables = {name: np.concatenate([table, heading], axis=1) for name, table in tables.items()}
 
     def view(name: str, table: np.ndarray, low: float) -> View:
         space = gym.spaces.Box(low, 1.0, (table.shape[1],), np.float32)
         return View(name, space, lambda state: table[int(state)])
 
-    return {
-        "coords": view("coords", coords_table, -1.0),
-        "patch": view("patch", patch_table, 0.0),
-        "rays": view("rays", rays_table, 0.0),
-    }
+    return {name: view(name, table, -1.0 if name == "coords" else 0.0) for name, table in tables.items()}
 
 
 def _ray_table(layout: GridLayout) -> np.ndarray:
@@ -306,7 +314,7 @@ def make_masked_gridworld(
     mask_seed: int = 0,
     max_episode_steps: int | None = None,
     patch_size: int = 5,
-    compass: bool = False,
+    compass: str = "none",
     **grid_kwargs: Any,
 ) -> gym.Env:
     """A :class:`GridWorld` with a step limit (default 4 N), state-action masking and views in ``info``."""

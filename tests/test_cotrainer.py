@@ -77,3 +77,23 @@ def test_the_self_paced_schedule_admits_per_class_quotas_then_everything(n_views
     assert second.pace[0] == 1.0 and second.stopped[0]
     assert (second.pseudo_class[0][~pool.labelled[0]] == truth[~pool.labelled[0]]).all()
     assert second.changed[0] == pytest.approx(18 / 36)  # the 18 newly admitted samples changed
+
+
+def test_candidate_quotas_admit_a_rare_class_whose_labels_understate_it():
+    # 30 samples of class 0 and 10 of class 1; the labels hold 4 of class 0 and 1 of class 1 (a
+    # share of 0.2 against the pool's 0.25).
+    truth = np.repeat([0, 1], [30, 10])
+    labelled = np.zeros(40, dtype=bool)
+    labelled[[0, 1, 2, 3, 30]] = True
+    pool = Pool(
+        [np.eye(2)[truth][None]], labelled[None], np.where(labelled, truth, -1)[None], ~labelled[None],
+        np.array([[True, True]]),
+    )  # fmt: skip
+    for quota, rare_admitted in (("label-share", 7), ("candidates", 9)):
+        config = CoTrainingConfig(max_classes=2, add_fraction_start=1.0, quota=quota)
+        result = SelfPacedCoTrainer([2], 1, config, [0]).step(pool)
+        admitted = result.pseudo_weight[0] > 0
+        # add_num = |U| = 35. Label share: class 1 gets ceil(0.2 * 35) = 7 of its 9 candidates.
+        # Candidates: every class admits all its candidates (26 and 9).
+        assert admitted[truth == 1].sum() == rare_admitted
+        assert admitted[truth == 0].sum() == 26

@@ -93,13 +93,20 @@ def test_views_by_hand():
     assert rays[0].tolist() == pytest.approx([1.0, 1.0, 1.0])  # up: no lava, edge after 4 cells -> 4/4
     assert rays[1].tolist() == pytest.approx([0.5, 1.0, 0.75])  # up-right: lava at 2, goal at 3, edge at 4
     assert rays[4][1] == pytest.approx(0.25)  # down: the edge right below
-    # The compass: the goal's offset (d_row, d_column), each one-hot over its 2N - 1 = 7 values.
-    compass = grid_views(layout, patch_size=3, compass=True)
+    # The compass "axes": the goal's offset (d_row, d_column), each one-hot over its 2N - 1 = 7 values.
+    compass = grid_views(layout, patch_size=3, compass="axes")
     heading = np.zeros(14)
     heading[[-3 + 3, 7 + 3 + 3]] = 1.0  # from (3, 0) the goal (0, 3) is 3 rows up, 3 columns right
-    assert compass["patch"].fn(12).tolist() == [*views["patch"].fn(12), *heading]
-    assert compass["rays"].fn(12).tolist() == [*views["rays"].fn(12), *heading]
+    for name in ("coords", "patch", "rays"):
+        assert compass[name].fn(12).tolist() == pytest.approx([*views[name].fn(12), *heading])
     assert compass["patch"].space.shape == (45 + 14,) and compass["rays"].space.shape == (24 + 14,)
+    # The compass "cell": one input per cell of the 4 x 4 map, cell 12 = (3, 0) here.
+    cell = grid_views(layout, patch_size=3, compass="cell")
+    assert cell["rays"].fn(12).tolist() == pytest.approx([*views["rays"].fn(12), *np.eye(16)[12]])
+    assert cell["patch"].space.shape == (45 + 16,) and cell["coords"].space.shape == (4 + 16,)
+    assert cell["coords"].space.low.min() == -1.0 and cell["patch"].space.low.min() == 0.0
+    with pytest.raises(ValueError, match="compass must be one of"):
+        grid_views(layout, compass="north")
 
 
 def test_masked_gridworld_has_views_and_hides_rewards():

@@ -36,6 +36,20 @@ def test_per_class_counts_follow_label_shares():
     assert sel.weight[0].tolist() == [1, 1, 1, 0, 1, 0]
 
 
+def test_candidate_quotas_admit_each_class_the_same_share_of_its_candidates():
+    # add_num 3 of |U| = 6 is a half: class 0 has 4 candidates (n_0 = 2), class 1 has 2 (n_1 = 1),
+    # whatever the labels' shares (here 0.9 / 0.1, which would give n_1 = ceil(0.3) = 1, n_0 = 3).
+    sel = _select(SCORES, add_num=np.array([3]), label_share=np.array([[0.9, 0.1]]), quota="candidates")
+    assert sel.admitted[0].tolist() == [True, True, False, False, True, False]
+    # The label-share quota with shares 0.95 / 0.05 and add_num = |U| = 6 starves class 1 (n_1 =
+    # ceil(0.3) = 1 of its 2 candidates); the candidate quota admits every candidate of every class.
+    share = np.array([[0.95, 0.05]])
+    assert _select(SCORES, add_num=np.array([6]), label_share=share).admitted[0, 5] == False  # noqa: E712
+    assert _select(SCORES, add_num=np.array([6]), label_share=share, quota="candidates").admitted.all()
+    with pytest.raises(ValueError, match="quota must be one of"):
+        _select(SCORES, quota="labels")
+
+
 def test_gamma_boost_changes_a_decision():
     # The other view admitted sample 3 (v = 1) as class 0: its score .6 + .3 * 1 = .9 beats sample 2.
     boost = np.array([[0, 0, 0, 0.3, 0, 0]])

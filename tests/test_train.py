@@ -96,7 +96,11 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
         ("training.update_steps=-1", "training: update_steps must be >= 0, got -1"),
         ("dqn.n_steps=0", "dqn: n_steps must be >= 1, got 0"),
         ("tabular_agent.n_steps=0", "tabular_agent: n_steps must be >= 1, got 0"),
-        ("env.compass=2", "env.compass: expected true or false, got 2"),
+        ("env.compass=true", "env.compass: True is not allowed; allowed: none, axes, cell"),
+        (
+            'cotraining.quota="share"',
+            "cotraining.quota: 'share' is not allowed; allowed: label-share, candidates",
+        ),
         ("dqn.net_arch=[0]", "dqn: net_arch needs one or more hidden layer widths, each >= 1, got [0]"),
         ("dqn.net_arch=[]", "dqn: net_arch needs one or more hidden layer widths, each >= 1, got []"),
         ("dqn.learning_rate=0", "dqn: learning_rate must be > 0, got 0.0"),
