@@ -84,6 +84,9 @@ class EnvConfig:
             )
         if self.patch_size < 1 or self.patch_size % 2 == 0:
             raise ValueError(f"patch_size must be odd and positive, got {self.patch_size}")
+        if self.compass == "cell" and self.size > 64:
+            # One input per cell: a view table of N^2 x N^2 floats (64 x 64: 64 MiB) grows too fast.
+            raise ValueError(f'compass = "cell" needs size <= 64, got {self.size}; use "axes"')
 
     @property
     def episode_steps(self) -> int:

@@ -97,6 +97,7 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
         ("dqn.n_steps=0", "dqn: n_steps must be >= 1, got 0"),
         ("tabular_agent.n_steps=0", "tabular_agent: n_steps must be >= 1, got 0"),
         ("env.compass=true", "env.compass: True is not allowed; allowed: none, axes, cell"),
+        ("env.size=100", 'env: compass = "cell" needs size <= 64, got 100; use "axes"'),
         (
             'cotraining.quota="share"',
             "cotraining.quota: 'share' is not allowed; allowed: label-share, candidates",
