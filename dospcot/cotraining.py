@@ -30,9 +30,9 @@ class CoTrainingConfig:
     :param weighting: ``"hard"`` (SPaMCo default) or ``"soft"`` self-paced weights.
     :param add_fraction_start: add_num in round 1, as a share of the unlabelled pool.
     :param add_fraction_step: growth of that share per round (lambda falls as it grows). It is not
-        capped at 1: per-class quotas ``ceil(share_c * add_num)`` keep a class from taking more than
-        its share, so only an add_num beyond |U| lets every class's candidates in, and U be fully
-        admitted.
+        capped at 1: under ``quota = "label-share"`` the per-class quotas ``ceil(share_c * add_num)``
+        keep a class from taking more than its share, so only an add_num beyond |U| lets every
+        class's candidates in, and U be fully admitted.
     :param quota: how add_num splits over the classes: ``"label-share"`` (SPaMCo: in proportion to
         the labels) or ``"candidates"`` (each class the same share of the samples predicted as it;
         :mod:`dospcot.selection`).

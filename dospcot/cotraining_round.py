@@ -126,7 +126,8 @@ class CoTrainingTask(Protocol):
     """What a task adapter supplies to :class:`CoTrainingRun`."""
 
     store: Any
-    """Every step the agents took, in the form the pool is built from (``__dict__`` is checkpointed)."""
+    """Every step the agents took, in the form the pool is built from; its ``state_dict()`` and
+    ``load_state_dict(state)`` checkpoint it in place."""
     classes: RewardClasses | QuantileRewardClasses
     """The reward classes of the run's labels (one run)."""
 
@@ -327,8 +328,8 @@ class CoTrainingRun:
             "agents": zips,
             "buffers": [agent.replay_buffer for agent in self.agents],
             "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
-            "store": self.store.__dict__,
-            "table": self.table.__dict__,
+            "store": self.store.state_dict(),
+            "table": self.table.state_dict(),
             "classes": self.classes,
             "trainer": self.trainer,
             # SB3 draws exploration and replay batches from the legacy global generators.
@@ -338,8 +339,8 @@ class CoTrainingRun:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
         self.round, self.stopped = state["round"], state["stopped"]
-        self.store.__dict__.update(state["store"])  # the store wrappers keep pointing at the store
-        self.table.__dict__.update(state["table"])
+        self.store.load_state_dict(state["store"])  # in place: the store wrappers keep pointing at it
+        self.table.load_state_dict(state["table"])
         self.task.classes, self.trainer = state["classes"], state["trainer"]
         for k, agent in enumerate(self.agents):
             loaded = type(agent).load(io.BytesIO(state["agents"][k]), env=agent.get_env())

@@ -64,6 +64,14 @@ class KeyStore:
             self.label_value[key] = reward
         return key
 
+    def state_dict(self) -> dict[str, Any]:
+        """Everything the store holds, for a checkpoint (arrays are shared, not copied: pickle at once)."""
+        return dict(vars(self))
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state_dict`, in place, so whatever refers to this store keeps doing so."""
+        vars(self).update(state)
+
 
 class StoreWrapper(gym.Wrapper):
     """Write every step into a :class:`KeyStore` and put its key in ``info["store_id"]``.

@@ -99,6 +99,14 @@ class StepStore:
         onehot = np.eye(n_actions, dtype=np.float32)[self.action[:n]]
         return np.concatenate([rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]], axis=1)
 
+    def state_dict(self) -> dict[str, Any]:
+        """Everything the store holds, for a checkpoint (arrays are shared, not copied: pickle at once)."""
+        return dict(vars(self))
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state_dict`, in place, so whatever refers to this store keeps doing so."""
+        vars(self).update(state)
+
 
 def _grow(array: np.ndarray, extra: int) -> np.ndarray:
     return np.concatenate([array, np.zeros((extra, *array.shape[1:]), array.dtype)])

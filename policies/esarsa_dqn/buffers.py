@@ -44,6 +44,14 @@ class RewardTable:
     def __len__(self) -> int:
         return self._size
 
+    def state_dict(self) -> dict[str, Any]:
+        """Everything the table holds, for a checkpoint (arrays are shared, not copied: pickle at once)."""
+        return dict(vars(self))
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        """Continue from :meth:`state_dict`, in place, so whatever refers to this table keeps doing so."""
+        vars(self).update(state)
+
     @property
     def reward(self) -> np.ndarray:
         """(len,) reward of each store id."""
