@@ -21,6 +21,7 @@ import gymnasium as gym
 import numpy as np
 
 from dospcot import metrics
+from dospcot.checkpointing import InPlaceState
 from dospcot.cotraining import Pool
 from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
 from dospcot.envs.masking import RewardMaskWrapper
@@ -31,7 +32,7 @@ from dospcot.policies import ExpectedSarsaDQN
 from dospcot.reward_classes import RewardClasses
 
 
-class KeyStore:
+class KeyStore(InPlaceState):
     """What the agents of one run have seen, by (s, a) key: the pool of the co-trainer.
 
     A key's id is ``s * A + a``; the reward table is indexed by it too, so a step of a key admitted
@@ -63,14 +64,6 @@ class KeyStore:
             self.labelled[key] = True
             self.label_value[key] = reward
         return key
-
-    def state_dict(self) -> dict[str, Any]:
-        """Everything the store holds, for a checkpoint (arrays are shared, not copied: pickle at once)."""
-        return dict(vars(self))
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Continue from :meth:`state_dict`, in place, so whatever refers to this store keeps doing so."""
-        vars(self).update(state)
 
 
 class StoreWrapper(gym.Wrapper):

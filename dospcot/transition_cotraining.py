@@ -30,6 +30,7 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from dospcot.checkpointing import InPlaceState
 from dospcot.cotraining import Pool
 from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
 from dospcot.policies import ExpectedSarsaDQN
@@ -39,7 +40,7 @@ EVAL_SEED = 1_000_003
 """Evaluation episodes start from seeds ``EVAL_SEED + i``, apart from every training seed."""
 
 
-class StepStore:
+class StepStore(InPlaceState):
     """Every step the agents of one run took, one pool sample each, with every view of s and s'.
 
     A state reading is stored once as a *row*: a step refers to the row of its s (the reset's or the
@@ -98,14 +99,6 @@ class StepStore:
         rows, n = self.rows[view], self._n
         onehot = np.eye(n_actions, dtype=np.float32)[self.action[:n]]
         return np.concatenate([rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]], axis=1)
-
-    def state_dict(self) -> dict[str, Any]:
-        """Everything the store holds, for a checkpoint (arrays are shared, not copied: pickle at once)."""
-        return dict(vars(self))
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Continue from :meth:`state_dict`, in place, so whatever refers to this store keeps doing so."""
-        vars(self).update(state)
 
 
 def _grow(array: np.ndarray, extra: int) -> np.ndarray:

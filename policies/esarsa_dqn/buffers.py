@@ -16,6 +16,8 @@ from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.vec_env import VecNormalize
 
+from dospcot.checkpointing import InPlaceState
+
 
 class WeightedReplayBufferSamples(NamedTuple):
     """SB3's ``ReplayBufferSamples`` plus per-sample self-paced weights of shape (batch, 1)."""
@@ -29,7 +31,7 @@ class WeightedReplayBufferSamples(NamedTuple):
     weights: th.Tensor
 
 
-class RewardTable:
+class RewardTable(InPlaceState):
     """Current reward and self-paced weight of every transition in the co-trainer's shared store.
 
     The co-trainer writes it after each round; buffers read it at sample time. Storage grows by
@@ -43,14 +45,6 @@ class RewardTable:
 
     def __len__(self) -> int:
         return self._size
-
-    def state_dict(self) -> dict[str, Any]:
-        """Everything the table holds, for a checkpoint (arrays are shared, not copied: pickle at once)."""
-        return dict(vars(self))
-
-    def load_state_dict(self, state: dict[str, Any]) -> None:
-        """Continue from :meth:`state_dict`, in place, so whatever refers to this table keeps doing so."""
-        vars(self).update(state)
 
     @property
     def reward(self) -> np.ndarray:
