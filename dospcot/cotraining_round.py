@@ -20,7 +20,7 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
 6. **Record**: the task measures every agent's greedy policy.
 
 What a task supplies (:class:`CoTrainingTask`): each agent's env (masked, writing the store), its
-reward classes, the pool, whether a predicted class is right (metrics only) and the evaluator. The
+reward classes, the pool, each sample's true class (metrics only) and the evaluator. The
 grid adapter (:mod:`dospcot.neural_cotraining`) pools (s, a) keys and measures against the exact
 optimum; the sensor adapter (:mod:`dospcot.transition_cotraining`) pools every step and runs
 evaluation episodes.
@@ -144,8 +144,9 @@ class CoTrainingTask(Protocol):
     def pool(self) -> Pool:
         """This round's pool (one run), after the classes have seen every label so far."""
 
-    def correct(self, classes: np.ndarray) -> np.ndarray:
-        """(N,) whether each pool sample's class in ``classes`` (1, N) is its true one (metrics only)."""
+    def true_class(self) -> np.ndarray:
+        """(N,) each pool sample's hidden reward as a class of the run, -1 where the reward is a value
+        no label has shown (metrics only)."""
 
     def evaluate(self, agents: Sequence[ExpectedSarsaDQN]) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) ``greedy_return``, ``success``, ``normalised_score``,
@@ -169,16 +170,30 @@ def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np
 
 
 def round_stats(
-    result: RoundResult, unlabelled: np.ndarray, correct: np.ndarray, view_correct: Sequence[np.ndarray]
+    result: RoundResult, unlabelled: np.ndarray, true_class: np.ndarray, view_correct: Sequence[np.ndarray]
 ) -> dict[str, Any]:
     """Run 0's round for the metrics: pace, coverage of U (N,) bool, accuracy of the admitted
-    pseudo-rewards and each view's figures. ``correct`` (N,) and ``view_correct[j]`` (N,) say where
-    the consensus and view j's prediction match the hidden truth (metrics only)."""
+    pseudo-rewards with its worst class, and each view's figures. ``true_class`` (N,) is each
+    sample's hidden class (-1: a value no label showed); ``view_correct[j]`` (N,) says where view j's
+    prediction matches it (metrics only).
+
+    The worst-class figures show what the mean hides: a rare class (lava) admitted on ordinary steps,
+    or a class no label showed (the goal) read as another. ``worst_class_recall`` is the lowest share
+    of the admitted samples of one hidden class given that class (samples of an unseen value count as
+    one class, always wrong); ``worst_class_precision`` the lowest share of the samples given one
+    class that truly are of it. NaN when nothing is admitted.
+    """
     admitted = result.pseudo_weight[0] > 0
+    given, truth = result.pseudo_class[0][admitted], true_class[admitted]
+    correct = (given == truth) & (truth >= 0)
+    recall = [correct[truth == c].mean() for c in np.unique(truth)]
+    precision = [correct[given == c].mean() for c in np.unique(given)]
     return {
         "pace": float(result.pace[0]),
         "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
-        "pseudo_accuracy": float(correct[admitted].mean()) if admitted.any() else float("nan"),
+        "pseudo_accuracy": float(correct.mean()) if admitted.any() else float("nan"),
+        "worst_class_recall": float(min(recall, default=float("nan"))),
+        "worst_class_precision": float(min(precision, default=float("nan"))),
         "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(view_correct)],
     }
 
@@ -297,9 +312,9 @@ class CoTrainingRun:
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
         self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight[0])
         self.stopped = bool(result.stopped[0])
-        correct = self.task.correct(result.pseudo_class)  # metrics only
-        view_correct = [self.task.correct(view_class) for view_class in result.view_class]
-        return round_stats(result, pool.unlabelled[0], correct, view_correct)
+        true_class = self.task.true_class()  # metrics only
+        view_correct = [(view_class[0] == true_class) & (true_class >= 0) for view_class in result.view_class]
+        return round_stats(result, pool.unlabelled[0], true_class, view_correct)
 
     def evaluate_policies(self) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,
@@ -379,6 +394,8 @@ class CoTrainingRun:
                     "pace": stats.get("pace", float("nan")),
                     "coverage": stats.get("coverage", float("nan")),
                     "pseudo_accuracy": stats.get("pseudo_accuracy", float("nan")),
+                    "worst_class_recall": stats.get("worst_class_recall", float("nan")),
+                    "worst_class_precision": stats.get("worst_class_precision", float("nan")),
                     **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
                 }
             )

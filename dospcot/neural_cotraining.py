@@ -152,8 +152,8 @@ class GridTask:
         ]
         return Pool(features, labelled, label_class, unlabelled, self.classes.mask)
 
-    def correct(self, classes: np.ndarray) -> np.ndarray:
-        return self.classes.decode(classes)[0] == self.store.hidden_reward
+    def true_class(self) -> np.ndarray:
+        return self.classes.encode(self.store.hidden_reward[None])[0]
 
     def greedy_actions(self, agents: Sequence[ExpectedSarsaDQN]) -> np.ndarray:
         """(m, S) each agent's greedy action in every state, read through its own view."""

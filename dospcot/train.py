@@ -4,8 +4,8 @@ A run writes ``runs/<name>/<stamp>/`` (docs/design.md section 5):
 
 - ``config.toml``: the resolved config (rerun it with ``dospcot train runs/<name>/<stamp>/config.toml``);
 - ``tb/agent_<view>/``: TensorBoard events, SB3's ``rollout/`` and ``train/`` scalars plus ``dospcot/``
-  scalars per round (pace, eps, lambda, coverage, pseudo-reward accuracy, classifier loss, greedy
-  return, agreement, ...), against the agent's env steps;
+  scalars per round (pace, eps, lambda, coverage, pseudo-reward accuracy and its worst class,
+  classifier loss, greedy return, agreement, ...), against the agent's env steps;
 - ``metrics.csv``: one row per round and view; ``summary.json``: the last round, per view and averaged;
 - ``agent_<view>.zip`` (loads with plain ``stable_baselines3.DQN.load``; a ``tabular`` agent's where
   dospcot is importable), ``classifier_<view>.pt``
@@ -68,10 +68,14 @@ from dospcot.transition_cotraining import SensorTask, TransitionConfig, Transiti
 
 ROUND_SCALARS = (
     "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
-    "classifier_loss", "greedy_return", "success", "normalised_score", "agreement",
+    "worst_class_recall", "worst_class_precision", "classifier_loss", "greedy_return", "success",
+    "normalised_score", "agreement",
 )  # fmt: skip
 """The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
-SUMMARY_METRICS = ("normalised_score", "agreement", "greedy_return", "success", "pseudo_accuracy", "coverage")
+SUMMARY_METRICS = (
+    "normalised_score", "agreement", "greedy_return", "success", "pseudo_accuracy",
+    "worst_class_recall", "worst_class_precision", "coverage",
+)  # fmt: skip
 
 
 def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], GridLayout]:

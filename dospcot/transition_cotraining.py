@@ -205,9 +205,8 @@ class SensorTask:
         features = [store.features(v, self.n_actions)[None] for v in self.spec.views]
         return Pool(features, labelled[None], label_class[None], unlabelled[None], self.classes.mask)
 
-    def correct(self, classes: np.ndarray) -> np.ndarray:
-        n = len(self.store)
-        return classes[0] == self.classes.encode(self.store.hidden_reward[:n][None])[0]  # the true bin
+    def true_class(self) -> np.ndarray:
+        return self.classes.encode(self.store.hidden_reward[: len(self.store)][None])[0]  # the true bin
 
     def _returns(self, policy: Any, env: DummyVecEnv) -> tuple[np.ndarray, np.ndarray]:
         env.seed(EVAL_SEED)

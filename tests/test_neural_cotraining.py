@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 import torch as th
 
+from dospcot.cotraining import RoundResult
+from dospcot.cotraining_round import round_stats
 from dospcot.envs import FiniteCheckWrapper, GridWorld, NonFiniteError, StateActionMask, grid_views
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 
@@ -189,3 +191,24 @@ def test_the_policy_update_learns_the_last_rounds_pseudo_rewards(kind):
     assert _last_round_q(kind, 0, -50.0) == _last_round_q(kind, 0, 0.0)
     (moved, key), (plain, same_key) = _last_round_q(kind, 300, -50.0), _last_round_q(kind, 300, 0.0)
     assert key == same_key and moved < plain - 1.0
+
+
+def test_round_stats_name_the_worst_class_the_mean_accuracy_hides():
+    # Six admitted samples (the seventh is not admitted): hidden classes 0, 0, 0, 1, -1 (a value no
+    # label showed, e.g. the goal) and 0; given classes 0, 0, 1, 1, 0 and 0.
+    true_class = np.array([0, 0, 0, 1, -1, 0, 1])
+    given = np.array([[0, 0, 1, 1, 0, 0, -1]])
+    weight = (given >= 0).astype(float)
+    result = RoundResult(
+        pseudo_class=given, pseudo_weight=weight, view_weight=weight[None], view_class=given[None],
+        threshold=np.zeros((1, 1, 2)), classifier_loss=np.zeros((1, 1)), pace=np.array([6 / 7]),
+        changed=np.zeros(1), stopped=np.zeros(1, dtype=bool),
+    )  # fmt: skip
+    unlabelled = np.ones(7, dtype=bool)
+    stats = round_stats(result, unlabelled, true_class, [given[0] == true_class])
+    assert stats["pseudo_accuracy"] == pytest.approx(4 / 6)
+    # Recall: class 0 gets 3 of its 4 right, class 1 its 1 of 1, the unseen value none of its 1.
+    assert stats["worst_class_recall"] == 0.0
+    # Precision: of the 4 given class 0, 3 are; of the 2 given class 1, 1 is.
+    assert stats["worst_class_precision"] == pytest.approx(1 / 2)
+    assert stats["coverage"] == pytest.approx(6 / 7)
