@@ -127,6 +127,8 @@ class DQNConfig:
     """Keyword arguments of every agent (stable-baselines3 ``DQN``'s, same names and units).
 
     :param net_arch: hidden layer widths of the Q-network.
+    :param cut_windows: :class:`~dospcot.policies.ExpectedSarsaDQN`'s own: under the max target
+        (``agent = "dqn"``), end n-step windows before the first exploratory action.
     """
 
     learning_rate: float = 1e-3
@@ -141,6 +143,7 @@ class DQNConfig:
     max_grad_norm: float = 10.0
     n_steps: int = 1
     net_arch: tuple[int, ...] = (128, 128)
+    cut_windows: bool = True
 
     def __post_init__(self) -> None:
         for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"):
@@ -158,7 +161,7 @@ class DQNConfig:
             )
 
     def sb3_kwargs(self) -> dict[str, Any]:
-        """The SB3 ``DQN`` keyword arguments."""
+        """The agents' keyword arguments: SB3 ``DQN``'s and ``cut_windows``."""
         kwargs = dataclasses.asdict(self)
         kwargs["policy_kwargs"] = {"net_arch": list(kwargs.pop("net_arch"))}
         return kwargs

@@ -261,9 +261,10 @@ def _window_buffer(table=None, n_steps=3, gamma=0.5, size=10):
     )  # fmt: skip
 
 
-def _add_step(buffer, k, reward, observed=True, done=False, truncated=False):
+def _add_step(buffer, k, reward, observed=True, done=False, truncated=False, explored=False):
     """Step k: obs (k, 0) -> next obs (k + 1, 0), store id k."""
     info = {"reward_observed": observed, "store_id": k, "TimeLimit.truncated": truncated}
+    info["explored"] = explored
     buffer.add(
         np.array([[k, 0.0]]), np.array([[k + 1, 0.0]]), np.array([1]), np.array([reward]),
         np.array([done]), [info],
@@ -305,6 +306,40 @@ def test_n_step_windows_relabelled_by_hand():
     assert got["next"] == [3.0, 4.0, 4.0]
     assert got["dones"] == [0.0, 1.0, 1.0]
     assert got["weights"] == [0.5, 0.5, 0.5]
+
+
+def test_n_step_windows_end_before_an_exploratory_action():
+    buffer = _window_buffer()
+    _add_step(buffer, 0, -1.0)
+    _add_step(buffer, 1, -2.0, explored=True)  # a random action: the greedy policy would not take it
+    _add_step(buffer, 2, -4.0)
+    _add_step(buffer, 3, -8.0)
+    got = _windows(buffer, [0, 1])
+    # From 0: step 0 alone, bootstrapping from the state where the random action was taken (1). From
+    # 1: the exploratory action is the window's own first action, so 1, 2, 3 as usual.
+    assert got["rewards"] == [-1.0, -2 + 0.5 * -4 + 0.25 * -8]
+    assert got["discounts"] == [0.5, 0.125]
+    assert got["next"] == [1.0, 4.0]
+
+
+@pytest.mark.parametrize(("target", "cut", "n_steps", "records"), [
+    ("q", True, 3, True), ("q", False, 3, False), ("q", True, 1, False), ("expected_sarsa", True, 3, False),
+])  # fmt: skip
+def test_the_agent_flags_its_exploratory_actions_where_windows_are_cut(target, cut, n_steps, records):
+    # learning_starts beyond the run: every action is a warm-up draw and the network never changes.
+    model = ExpectedSarsaDQN(
+        "MlpPolicy", onehot_cliff(), target=target, cut_windows=cut, n_steps=n_steps, learning_starts=1000,
+        seed=0,
+    )  # fmt: skip
+    model.learn(200)
+    buffer = model.replay_buffer
+    flags = buffer.explored[:200, 0]
+    if not records:
+        assert not flags.any()
+        return
+    greedy = model.q_net(th.as_tensor(buffer.observations[:200, 0])).argmax(dim=1).numpy()
+    assert np.array_equal(flags, buffer.actions[:200, 0, 0] != greedy)
+    assert 0.6 < flags.mean() < 0.9  # 3 in 4 uniform draws differ from the greedy action
 
 
 def test_n_step_windows_stop_at_the_oldest_step_of_a_full_buffer():

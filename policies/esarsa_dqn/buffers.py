@@ -90,8 +90,9 @@ class RewardTable(InPlaceState):
 class RelabellingReplayBuffer(ReplayBuffer):
     """SB3 ``ReplayBuffer`` whose samples carry relabelled rewards and self-paced weights.
 
-    Reads two keys of each step's ``info``: ``reward_observed`` (default True: an unmasked env) and
-    ``store_id`` (the transition's id in the co-trainer's store, default -1: none).
+    Reads three keys of each step's ``info``: ``reward_observed`` (default True: an unmasked env),
+    ``store_id`` (the transition's id in the co-trainer's store, default -1: none) and ``explored``
+    (default False: the agent took an exploratory, non-greedy action; it ends n-step windows).
 
     At sample time a transition whose reward was observed keeps it with weight 1. Otherwise, if the
     reward table knows its store id, it takes the table's reward and weight; if not, its weight is 0
@@ -102,8 +103,10 @@ class RelabellingReplayBuffer(ReplayBuffer):
     it relabelled at sample time: its reward is ``sum_k gamma^k r_k`` over the window, its next
     observation the window's last, its discount ``gamma^len``. A window ends at the first step that
     ends an episode (terminated or truncated; included) and before the first later step whose weight
-    is 0 (an unlabelled step's reward is unknown, so the window bootstraps from that step's state). A
-    sample weighs the least weight in its window, so a sample whose first step weighs 0 drives nothing.
+    is 0 (an unlabelled step's reward is unknown, so the window bootstraps from that step's state) or
+    whose action was ``explored`` (the greedy policy a max target values would not have taken it, as
+    in Watkins's Q(lambda)). A sample weighs the least weight in its window, so a sample whose first
+    step weighs 0 drives nothing.
 
     :param reward_table: the co-trainer's table, or None.
     :param masked_reward: ``"ignore"`` or ``"zero"``.
@@ -148,6 +151,7 @@ class RelabellingReplayBuffer(ReplayBuffer):
         self.masked_reward = masked_reward
         self.store_ids = np.full((self.buffer_size, self.n_envs), -1, dtype=np.int64)
         self.observed = np.ones((self.buffer_size, self.n_envs), dtype=bool)
+        self.explored = np.zeros((self.buffer_size, self.n_envs), dtype=bool)
 
     def add(
         self,
@@ -164,6 +168,7 @@ class RelabellingReplayBuffer(ReplayBuffer):
         for i, info in enumerate(infos):
             self.observed[self.pos, i] = info.get("reward_observed", True)
             self.store_ids[self.pos, i] = info.get("store_id", -1)
+            self.explored[self.pos, i] = info.get("explored", False)
         super().add(obs, next_obs, action, reward, done, infos)
 
     def relabel(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -211,7 +216,7 @@ class RelabellingReplayBuffer(ReplayBuffer):
         newest = (self.pos - 1) % self.buffer_size
         ends = (self.dones[window, envs] > 0) | (self.timeouts[window, envs] > 0) | (window == newest)
         cut_before = np.zeros_like(ends)
-        cut_before[:, 1:] = ends[:, :-1] | (weight[:, 1:] == 0)
+        cut_before[:, 1:] = ends[:, :-1] | (weight[:, 1:] == 0) | self.explored[window, envs][:, 1:]
         inside = np.cumprod(~cut_before, axis=1).astype(bool)
         length = inside.sum(axis=1)
         discounted = np.where(inside, reward * self.gamma**steps, 0.0).sum(axis=1)

@@ -16,7 +16,15 @@ Which network picks the greedy action (``greedy``) is a trade of speed against b
   s and s' together, the s' half detached, which is a forward and backward twice as wide.
 
 ``target="q"`` gives SB3's max target exactly, for ablations. With ``n_steps`` > 1 the relabelling
-buffer returns n-step windows and their discounts (:class:`RelabellingReplayBuffer`).
+buffer returns n-step windows and their discounts (:class:`RelabellingReplayBuffer`). Under the max
+target a window ends before the first exploratory action after its first step (``cut_windows``, on
+by default), as Watkins's Q(lambda) does: the max target values the greedy policy, and an n-step
+return that follows random actions values the eps-greedy one instead. In a grid with -100 lava, the
+random steps into lava inside windows drag every value near lava down by several units, more than
+the gaps between actions far from the goal, and the greedy policy loops. An action counts as
+exploratory when it differs from the online network's greedy action at the time it was taken (one
+more forward pass per env step). The Expected-SARSA target values the eps-greedy policy itself, so
+its windows stay whole.
 
 The loss is the weighted mean of the per-sample Huber loss, ``sum_i w_i l_i / sum_i w_i``; weight-0
 samples drive nothing.
@@ -86,6 +94,8 @@ class ExpectedSarsaDQN(DQN):
     :param target: ``"expected_sarsa"`` (default) or ``"q"`` (SB3's max target).
     :param greedy: which network picks pi_eps's greedy action, ``"target"`` (default) or ``"online"``
         (see the module docstring).
+    :param cut_windows: with ``target="q"`` and ``n_steps`` > 1, end n-step windows before the first
+        exploratory action (see the module docstring); False gives SB3's uncut n-step returns.
     :param exploration_horizon: env steps over which eps decays from ``exploration_initial_eps`` to
         ``exploration_final_eps`` (within ``exploration_fraction`` of them) when no co-trainer sets a
         pace. Counted in total steps, so the schedule continues across ``learn()`` calls; None takes
@@ -95,6 +105,8 @@ class ExpectedSarsaDQN(DQN):
     """
 
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = DQN.policy_aliases
+    _explored: np.ndarray | None = None
+    """(n_envs,) whether the actions just sampled were exploratory, when windows are cut."""
 
     def __init__(
         self,
@@ -103,6 +115,7 @@ class ExpectedSarsaDQN(DQN):
         *,
         target: Target = "expected_sarsa",
         greedy: Greedy = "target",
+        cut_windows: bool = True,
         exploration_horizon: int | None = None,
         **kwargs: Any,
     ) -> None:
@@ -121,6 +134,7 @@ class ExpectedSarsaDQN(DQN):
         kwargs.setdefault("replay_buffer_class", RelabellingReplayBuffer)
         self.target = target
         self.greedy = greedy
+        self.cut_windows = cut_windows
         self.exploration_horizon = exploration_horizon
         self.pace: float | None = None
         super().__init__(policy, env, **kwargs)
@@ -159,6 +173,29 @@ class ExpectedSarsaDQN(DQN):
 
     def _exploration_schedule(self, _progress_remaining: float) -> float:
         return self._scheduled_eps()
+
+    def _sample_action(
+        self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
+        action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
+        if self.cut_windows and self.target == "q" and self.n_steps > 1:
+            greedy, _ = self.policy.predict(self._last_obs, deterministic=True)
+            self._explored = np.asarray(buffer_action).reshape(n_envs) != np.asarray(greedy).reshape(n_envs)
+        return action, buffer_action
+
+    def _store_transition(
+        self,
+        replay_buffer: Any,
+        buffer_action: np.ndarray,
+        new_obs: Any,
+        reward: np.ndarray,
+        dones: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
+        if self._explored is not None:  # the relabelling buffer reads it (RelabellingReplayBuffer)
+            for info, explored in zip(infos, self._explored, strict=True):
+                info["explored"] = bool(explored)
+        super()._store_transition(replay_buffer, buffer_action, new_obs, reward, dones, infos)
 
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         self.policy.set_training_mode(True)
@@ -233,4 +270,5 @@ class ExpectedSarsaDQN(DQN):
             "replay_buffer_class",
             "replay_buffer_kwargs",
             "exploration_schedule",
+            "_explored",
         ]
