@@ -23,8 +23,8 @@ return that follows random actions values the eps-greedy one instead. In a grid 
 random steps into lava inside windows drag every value near lava down by several units, more than
 the gaps between actions far from the goal, and the greedy policy loops. An action counts as
 exploratory when it differs from the online network's greedy action at the time it was taken (one
-more forward pass per env step). The Expected-SARSA target values the eps-greedy policy itself, so
-its windows stay whole.
+more forward pass of the Q-network per env step). The Expected-SARSA target values the eps-greedy
+policy itself, so its windows stay whole.
 
 The loss is the weighted mean of the per-sample Huber loss, ``sum_i w_i l_i / sum_i w_i``; weight-0
 samples drive nothing.
@@ -179,8 +179,10 @@ class ExpectedSarsaDQN(DQN):
     ) -> tuple[np.ndarray, np.ndarray]:
         action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
         if self.cut_windows and self.target == "q" and self.n_steps > 1:
-            greedy, _ = self.policy.predict(self._last_obs, deterministic=True)
-            self._explored = np.asarray(buffer_action).reshape(n_envs) != np.asarray(greedy).reshape(n_envs)
+            # The Q-network directly: policy.predict's checks and conversions cost twice its forward.
+            with th.no_grad():
+                greedy = self.q_net(th.as_tensor(self._last_obs, device=self.device)).argmax(dim=1)
+            self._explored = np.asarray(buffer_action).reshape(n_envs) != greedy.cpu().numpy()
         return action, buffer_action
 
     def _store_transition(
