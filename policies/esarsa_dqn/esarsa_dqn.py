@@ -179,9 +179,9 @@ class ExpectedSarsaDQN(DQN):
     ) -> tuple[np.ndarray, np.ndarray]:
         action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
         if self.cut_windows and self.target == "q" and self.n_steps > 1:
-            # The Q-network directly: policy.predict's checks and conversions cost twice its forward.
+            # The Q-network directly: policy.predict's mode switch and reshaping cost more than this.
             with th.no_grad():
-                greedy = self.q_net(th.as_tensor(self._last_obs, device=self.device)).argmax(dim=1)
+                greedy = self.q_net(self.policy.obs_to_tensor(self._last_obs)[0]).argmax(dim=1)
             self._explored = np.asarray(buffer_action).reshape(n_envs) != greedy.cpu().numpy()
         return action, buffer_action
 
