@@ -169,13 +169,10 @@ def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np
     }
 
 
-def round_stats(
-    result: RoundResult, unlabelled: np.ndarray, true_class: np.ndarray, view_correct: Sequence[np.ndarray]
-) -> dict[str, Any]:
+def round_stats(result: RoundResult, unlabelled: np.ndarray, true_class: np.ndarray) -> dict[str, Any]:
     """Run 0's round for the metrics: pace, coverage of U (N,) bool, accuracy of the admitted
     pseudo-rewards with its worst class, and each view's figures. ``true_class`` (N,) is each
-    sample's hidden class (-1: a value no label showed); ``view_correct[j]`` (N,) says where view j's
-    prediction matches it (metrics only).
+    sample's hidden class (-1: a value no label showed, never a right prediction; metrics only).
 
     The worst-class figures show what the mean hides: a rare class (lava) admitted on ordinary steps,
     or a class no label showed (the goal) read as another. ``worst_class_recall`` is the lowest share
@@ -184,6 +181,7 @@ def round_stats(
     class that truly are of it. NaN when nothing is admitted.
     """
     admitted = result.pseudo_weight[0] > 0
+    right = (result.view_class[:, 0] == true_class) & (true_class >= 0)  # (m, N) per view
     given, truth = result.pseudo_class[0][admitted], true_class[admitted]
     correct = (given == truth) & (truth >= 0)
     recall = [correct[truth == c].mean() for c in np.unique(truth)]
@@ -194,7 +192,7 @@ def round_stats(
         "pseudo_accuracy": float(correct.mean()) if admitted.any() else float("nan"),
         "worst_class_recall": float(min(recall, default=float("nan"))),
         "worst_class_precision": float(min(precision, default=float("nan"))),
-        "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(view_correct)],
+        "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(right)],
     }
 
 
@@ -312,9 +310,7 @@ class CoTrainingRun:
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
         self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight[0])
         self.stopped = bool(result.stopped[0])
-        true_class = self.task.true_class()  # metrics only
-        view_correct = [(view_class[0] == true_class) & (true_class >= 0) for view_class in result.view_class]
-        return round_stats(result, pool.unlabelled[0], true_class, view_correct)
+        return round_stats(result, pool.unlabelled[0], self.task.true_class())  # metrics only
 
     def evaluate_policies(self) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,

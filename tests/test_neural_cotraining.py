@@ -205,7 +205,7 @@ def test_round_stats_name_the_worst_class_the_mean_accuracy_hides():
         changed=np.zeros(1), stopped=np.zeros(1, dtype=bool),
     )  # fmt: skip
     unlabelled = np.ones(7, dtype=bool)
-    stats = round_stats(result, unlabelled, true_class, [given[0] == true_class])
+    stats = round_stats(result, unlabelled, true_class)
     assert stats["pseudo_accuracy"] == pytest.approx(4 / 6)
     # Recall: class 0 gets 3 of its 4 right, class 1 its 1 of 1, the unseen value none of its 1.
     assert stats["worst_class_recall"] == 0.0
