@@ -342,6 +342,27 @@ def test_the_agent_flags_its_exploratory_actions_where_windows_are_cut(target, c
     assert 0.6 < flags.mean() < 0.9  # 3 in 4 uniform draws differ from the greedy action
 
 
+def test_flagging_agents_act_as_dqn_predict_does():
+    # Past learning_starts with no gradient step, the network stays put: an agent that flags its
+    # exploration (and reuses that forward pass to act) must draw the very actions DQN.predict draws.
+    def actions(cut: bool) -> np.ndarray:
+        model = ExpectedSarsaDQN(
+            "MlpPolicy", onehot_cliff(), target="q", cut_windows=cut, n_steps=3, learning_starts=10,
+            gradient_steps=0, exploration_initial_eps=0.5, exploration_final_eps=0.5, seed=3,
+        )  # fmt: skip
+        model.learn(300)
+        flags = model.replay_buffer.explored[:300, 0]
+        greedy = model.q_net(th.as_tensor(model.replay_buffer.observations[:300, 0])).argmax(dim=1).numpy()
+        taken = model.replay_buffer.actions[:300, 0, 0]
+        if cut:
+            assert np.array_equal(flags, taken != greedy)
+        return taken
+
+    taken = actions(cut=True)
+    assert np.array_equal(taken, actions(cut=False))
+    assert 0.2 < (taken[10:] != taken[9:-1]).mean()  # not one action repeated: both explore
+
+
 def test_n_step_windows_stop_at_the_oldest_step_of_a_full_buffer():
     buffer = _window_buffer(size=4)
     for k in range(6):  # positions 0, 1 now hold steps 4, 5; position 2 the oldest step, 2

@@ -22,9 +22,9 @@ by default), as Watkins's Q(lambda) does: the max target values the greedy polic
 return that follows random actions values the eps-greedy one instead. In a grid with -100 lava, the
 random steps into lava inside windows drag every value near lava down by several units, more than
 the gaps between actions far from the goal, and the greedy policy loops. An action counts as
-exploratory when it differs from the online network's greedy action at the time it was taken (one
-more forward pass of the Q-network per env step). The Expected-SARSA target values the eps-greedy
-policy itself, so its windows stay whole.
+exploratory when it differs from the online network's greedy action at the time it was taken (the
+forward pass that picks the greedy action also flags it, so flagging costs no extra pass). The
+Expected-SARSA target values the eps-greedy policy itself, so its windows stay whole.
 
 The loss is the weighted mean of the per-sample Huber loss, ``sum_i w_i l_i / sum_i w_i``; weight-0
 samples drive nothing.
@@ -107,6 +107,8 @@ class ExpectedSarsaDQN(DQN):
     policy_aliases: ClassVar[dict[str, type[BasePolicy]]] = DQN.policy_aliases
     _explored: np.ndarray | None = None
     """(n_envs,) whether the actions just sampled were exploratory, when windows are cut."""
+    _greedy: np.ndarray | None = None
+    """(n_envs,) the online network's greedy actions at ``_last_obs`` while an action is sampled."""
 
     def __init__(
         self,
@@ -177,13 +179,33 @@ class ExpectedSarsaDQN(DQN):
     def _sample_action(
         self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
+        if not (self.cut_windows and self.target == "q" and self.n_steps > 1):
+            return super()._sample_action(learning_starts, action_noise, n_envs)
+        # The Q-network directly: policy.predict's mode switch and reshaping cost more than this.
+        with th.no_grad():
+            greedy = self.q_net(self.policy.obs_to_tensor(self._last_obs)[0]).argmax(dim=1).cpu().numpy()
+        self._greedy = greedy  # predict() takes it rather than making the same forward pass again
         action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
-        if self.cut_windows and self.target == "q" and self.n_steps > 1:
-            # The Q-network directly: policy.predict's mode switch and reshaping cost more than this.
-            with th.no_grad():
-                greedy = self.q_net(self.policy.obs_to_tensor(self._last_obs)[0]).argmax(dim=1)
-            self._explored = np.asarray(buffer_action).reshape(n_envs) != greedy.cpu().numpy()
+        self._greedy = None
+        self._explored = np.asarray(buffer_action).reshape(n_envs) != greedy
         return action, buffer_action
+
+    def predict(
+        self,
+        observation: np.ndarray | dict[str, np.ndarray],
+        state: tuple[np.ndarray, ...] | None = None,
+        episode_start: np.ndarray | None = None,
+        deterministic: bool = False,
+    ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
+        """SB3 DQN's eps-greedy ``predict``; while collecting with cut windows, the greedy actions of
+        ``_last_obs`` come from the forward pass that flagged exploration."""
+        if self._greedy is None or deterministic:
+            return super().predict(observation, state, episode_start, deterministic)
+        # DQN.predict's draw from the global stream SB3 seeds: one uniform for the whole batch, then a
+        # random action per env, so a run makes the same draws as with DQN.predict.
+        if np.random.rand() < self.exploration_rate:  # noqa: NPY002
+            return np.array([self.action_space.sample() for _ in range(len(self._greedy))]), state
+        return self._greedy, state
 
     def _store_transition(
         self,
@@ -273,4 +295,5 @@ class ExpectedSarsaDQN(DQN):
             "replay_buffer_kwargs",
             "exploration_schedule",
             "_explored",
+            "_greedy",
         ]
