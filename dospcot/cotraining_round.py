@@ -293,8 +293,9 @@ class CoTrainingRun:
         for k, agent in enumerate(self.agents):  # 1. collect and learn, with last round's rewards and weights
             # Every round starts from fresh episodes with seeded resets, so a run resumed from the
             # checkpoint of the last round continues exactly as the uninterrupted run would.
-            agent.get_env().seed(self.spec.seed * 1000 + k + 7919 * self.round)
-            agent._last_obs = None  # SB3 resets the env when learn() finds no last observation
+            env = agent.get_env()
+            env.seed(self.spec.seed * 1000 + k + 7919 * self.round)
+            agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
             agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
         stats = self._cotrain() if self.trainer is not None else {}  # 2-3. co-train, pseudo-rewards
         for agent in self.agents:  # 4. policy update on the rewards and weights just written

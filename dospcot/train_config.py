@@ -16,6 +16,7 @@ tables are merged key by key over the base's.
 from __future__ import annotations
 
 import dataclasses
+import inspect
 import tomllib
 import typing
 from collections.abc import Mapping, Sequence
@@ -25,10 +26,13 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
+from stable_baselines3 import DQN
+
 from dospcot.cotraining import CoTrainingConfig
 from dospcot.cotraining_round import TrainingConfig
 from dospcot.envs.fast_highway import FastHighwayEnv
 from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, highway_view_names, try_highway_config
+from dospcot.policies import ExpectedSarsaDQN
 from dospcot.tabular_cotraining import TabularConfig
 
 GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
@@ -122,29 +126,44 @@ class HighwayConfig:
             )
 
 
-@dataclass(frozen=True)
-class DQNConfig:
-    """Keyword arguments of every agent (stable-baselines3 ``DQN``'s, same names and units).
+DQN_DEFAULTS: dict[str, Any] = {
+    # SB3's defaults suit Atari's millions of steps; dospcot's runs take tens of thousands of steps
+    # on small tasks, so these start training and move the target network much sooner.
+    "learning_rate": 1e-3,
+    "buffer_size": 100_000,
+    "learning_starts": 500,
+    "batch_size": 64,
+    "gamma": 0.97,
+    "target_update_interval": 500,
+}
+"""Where a ``[dqn]`` default differs from stable-baselines3's ``DQN``; every other default is SB3's."""
 
-    :param net_arch: hidden layer widths of the Q-network.
-    :param cut_windows: :class:`~dospcot.policies.ExpectedSarsaDQN`'s own: under the max target
-        (``agent = "dqn"``), end n-step windows before the first exploratory action.
-    """
+DQN_SET_ELSEWHERE: dict[str, str] = {
+    "exploration_initial_eps": "training.eps_start",
+    "exploration_final_eps": "training.eps_end",
+    "exploration_fraction": "training.eps_start and eps_end (the co-trainer's pace moves eps)",
+    "policy_kwargs": "dqn.net_arch",
+    "seed": "the run's seed",
+    "tensorboard_log": "the run folder",
+    "verbose": "the run (its progress bar and TensorBoard)",
+}
+"""SB3 ``DQN`` arguments a ``[dqn]`` section may not hold, and what sets them instead."""
 
-    learning_rate: float = 1e-3
-    buffer_size: int = 100_000
-    learning_starts: int = 500
-    batch_size: int = 64
-    tau: float = 1.0
-    gamma: float = 0.97
-    train_freq: int = 4
-    gradient_steps: int = 1
-    target_update_interval: int = 500
-    max_grad_norm: float = 10.0
-    n_steps: int = 1
-    net_arch: tuple[int, ...] = (128, 128)
-    cut_windows: bool = True
 
+def _sb3_dqn_fields() -> list[tuple[str, type, Any]]:
+    """SB3 ``DQN``'s keyword arguments that a TOML value can hold (a bool, an int or a float), read from
+    its signature: (name, type, default), with dospcot's default where :data:`DQN_DEFAULTS` has one."""
+    fields = []
+    for name, param in inspect.signature(DQN.__init__).parameters.items():
+        # learning_rate may be a schedule and train_freq a tuple: a config gives the plain number.
+        hint = param.annotation if param.annotation in (bool, int, float) else type(param.default)
+        if name.startswith("_") or name in DQN_SET_ELSEWHERE or hint not in (bool, int, float):
+            continue
+        fields.append((name, hint, field(default=hint(DQN_DEFAULTS.get(name, param.default)))))
+    return fields
+
+
+class _DQNChecks:
     def __post_init__(self) -> None:
         for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"):
             if getattr(self, name) < 1:
@@ -165,6 +184,33 @@ class DQNConfig:
         kwargs = dataclasses.asdict(self)
         kwargs["policy_kwargs"] = {"net_arch": list(kwargs.pop("net_arch"))}
         return kwargs
+
+
+DQNConfig = dataclasses.make_dataclass(
+    "DQNConfig",
+    [
+        *_sb3_dqn_fields(),
+        ("net_arch", tuple[int, ...], field(default=(128, 128))),
+        (
+            "cut_windows",
+            bool,
+            field(default=inspect.signature(ExpectedSarsaDQN.__init__).parameters["cut_windows"].default),
+        ),
+    ],
+    bases=(_DQNChecks,),
+    frozen=True,
+)
+DQNConfig.__module__ = __name__  # so pickle and the docs find it here
+DQNConfig.__doc__ = f"""Keyword arguments of every neural agent: each of stable-baselines3 ``DQN``'s that a
+TOML value can hold, under its own name and with its own default except {", ".join(DQN_DEFAULTS)}
+(:data:`DQN_DEFAULTS`); the fields are read from ``DQN``'s signature, not written out again. Two
+fields are dospcot's:
+
+:param net_arch: hidden layer widths of the Q-network (SB3's ``policy_kwargs["net_arch"]``).
+:param cut_windows: :class:`~dospcot.policies.ExpectedSarsaDQN`'s own: under the max target
+    (``agent = "dqn"``), end n-step windows before the first exploratory action.
+"""
+DQNConfig.set_elsewhere = DQN_SET_ELSEWHERE
 
 
 @dataclass(frozen=True)
@@ -440,7 +486,10 @@ def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
     if not isinstance(data, Mapping):
         raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a table, got {data!r}")
     fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    set_elsewhere: dict[str, str] = getattr(cls, "set_elsewhere", {})
     for key in data:
+        if key in set_elsewhere:
+            raise ConfigError(f"{prefix}{key}: not a config key here; it is set by {set_elsewhere[key]}")
         if key not in fields:
             raise ConfigError(f"unknown key '{prefix}{key}'; allowed: {', '.join(fields)}")
     hints = typing.get_type_hints(cls)

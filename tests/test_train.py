@@ -1,6 +1,8 @@
 """`dospcot train` / `evaluate`: configs, run folders, TensorBoard tags, checkpoints and resume."""
 
 import csv
+import dataclasses
+import inspect
 import json
 import os
 import random
@@ -25,7 +27,14 @@ from dospcot.cli import main
 from dospcot.envs import GridWorld, TabularMDP
 from dospcot.run_folder import RunFolderError, read_checkpoint
 from dospcot.train import ROUND_SCALARS, build_task, evaluate
-from dospcot.train_config import ConfigError, load_config, preset_names
+from dospcot.train_config import (
+    DQN_DEFAULTS,
+    DQN_SET_ELSEWHERE,
+    ConfigError,
+    DQNConfig,
+    load_config,
+    preset_names,
+)
 
 ISSUE_PRESETS = [
     "grid16-dospcot", "grid16-oracle", "grid16-masked-zero", "grid16-labels-only", "grid16-self-training",
@@ -74,6 +83,23 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
     assert (mine.name, mine.env.size, mine.env.layout_seed, mine.views) == ("mine", 8, 0, ("patch", "rays"))
 
 
+def test_dqn_section_is_sb3_dqns_signature_with_dospcots_defaults_where_named():
+    sb3 = inspect.signature(DQN.__init__).parameters
+    config = DQNConfig()
+    own = {"net_arch", "cut_windows"}
+    for f in dataclasses.fields(DQNConfig):
+        if f.name in own:
+            continue
+        expected = DQN_DEFAULTS.get(f.name, sb3[f.name].default)
+        assert getattr(config, f.name) == expected, f.name
+    names = {f.name for f in dataclasses.fields(DQNConfig)} - own
+    # Every plain-valued SB3 argument is a key, except those the run sets itself.
+    assert {"max_grad_norm", "tau", "stats_window_size", "optimize_memory_usage"} <= names
+    assert not names & set(DQN_SET_ELSEWHERE)
+    cfg = load_config("tiny", ["dqn.max_grad_norm=0.5", "dqn.tau=0.01"])
+    assert cfg.dqn.sb3_kwargs()["max_grad_norm"] == 0.5 and cfg.dqn.sb3_kwargs()["tau"] == 0.01
+
+
 @pytest.mark.parametrize(
     ("override", "message"),
     [
@@ -107,6 +133,11 @@ def test_set_overrides_are_typed_and_extends_merges(tmp_path):
         ("dqn.learning_rate=0", "dqn: learning_rate must be > 0, got 0.0"),
         ("dqn.learning_starts=-1", "dqn: learning_starts must be >= 0, got -1"),
         ("extends=grid16", "--set extends=grid16: extends is read with the file, before any --set"),
+        (
+            "dqn.exploration_initial_eps=0.3",
+            "dqn.exploration_initial_eps: not a config key here; it is set by training.eps_start",
+        ),
+        ("dqn.max_grad_norm=big", "dqn.max_grad_norm: expected a number, got 'big'"),
     ],
 )
 def test_bad_config_stops_before_training_with_one_line(tmp_path, capsys, override, message):
