@@ -127,8 +127,9 @@ class HighwayConfig:
 
 
 DQN_DEFAULTS: dict[str, Any] = {
-    # SB3's defaults suit Atari's millions of steps; dospcot's runs take tens of thousands of steps
-    # on small tasks, so these start training and move the target network much sooner.
+    # SB3's defaults suit Atari's millions of steps; dospcot's runs take tens of thousands of steps on
+    # small tasks with short horizons: a faster learner that starts sooner, moves its target network
+    # more often and discounts more.
     "learning_rate": 1e-3,
     "buffer_size": 100_000,
     "learning_starts": 500,

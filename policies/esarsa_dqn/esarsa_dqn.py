@@ -185,8 +185,10 @@ class ExpectedSarsaDQN(DQN):
         with th.no_grad():
             greedy = self.q_net(self.policy.obs_to_tensor(self._last_obs)[0]).argmax(dim=1).cpu().numpy()
         self._greedy = greedy  # predict() takes it rather than making the same forward pass again
-        action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
-        self._greedy = None
+        try:
+            action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
+        finally:
+            self._greedy = None
         self._explored = np.asarray(buffer_action).reshape(n_envs) != greedy
         return action, buffer_action
 
