@@ -87,6 +87,7 @@ class TrainingConfig:
     eps_start: float = 1.0
     eps_end: float = 0.05
     update_steps: int = 0
+    learn_from_round: int = 1
 
     def __post_init__(self) -> None:
         if self.rounds < 1 or self.steps_per_round < 1:
@@ -95,6 +96,10 @@ class TrainingConfig:
             )
         if self.update_steps < 0:
             raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
+        if not 1 <= self.learn_from_round <= self.rounds:
+            raise ValueError(
+                f"learn_from_round must lie in [1, rounds = {self.rounds}], got {self.learn_from_round}"
+            )
         if not 0 < self.label_fraction <= 1:
             raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
         for name in ("eps_start", "eps_end"):
@@ -234,6 +239,7 @@ def make_agent(
         agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **config.tabular)
     else:
         agent = ExpectedSarsaDQN("MlpPolicy", env, **common, **config.dqn)
+    agent.learning_starts = max(agent.learning_starts, (config.learn_from_round - 1) * config.steps_per_round)
     agent.set_pace(0.0)
     return agent
 

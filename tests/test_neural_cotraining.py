@@ -212,3 +212,15 @@ def test_round_stats_name_the_worst_class_the_mean_accuracy_hides():
     # Precision: of the 4 given class 0, 3 are; of the 2 given class 1, 1 is.
     assert stats["worst_class_precision"] == pytest.approx(1 / 2)
     assert stats["coverage"] == pytest.approx(6 / 7)
+
+
+def test_agents_take_their_first_gradient_step_in_learn_from_round():
+    spec = NeuralRunSpec("cotrain", ("esarsa_dqn", "tabular"), ("coords", "patch"), seed=0)
+    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, replace(CONFIG, learn_from_round=2))
+    assert [agent.learning_starts for agent in run.agents] == [300, 300]
+    run.run_round()
+    # Round 1 collects at random: every buffered step is a uniform draw, none trained the agents.
+    assert [agent._n_updates for agent in run.agents] == [0, 0]
+    assert all(agent.replay_buffer.size() == 300 for agent in run.agents)
+    run.run_round()
+    assert all(agent._n_updates > 0 for agent in run.agents)

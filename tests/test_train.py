@@ -120,6 +120,7 @@ def test_dqn_section_is_sb3_dqns_signature_with_dospcots_defaults_where_named():
             "tabular_agent: learning_rate and gamma must lie in (0, 1], got 1.5, 0.97",
         ),
         ("training.update_steps=-1", "training: update_steps must be >= 0, got -1"),
+        ("training.learn_from_round=9", "training: learn_from_round must lie in [1, rounds = 2], got 9"),
         ("dqn.n_steps=0", "dqn: n_steps must be >= 1, got 0"),
         ("tabular_agent.n_steps=0", "tabular_agent: n_steps must be >= 1, got 0"),
         ("env.compass=true", "env.compass: True is not allowed; allowed: none, axes, cell"),
