@@ -79,6 +79,11 @@ class TrainingConfig:
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.
+    :param learn_from_round: the first round (1-based) in which agents learn while they collect:
+        before it they act uniformly at random and take no gradient step during collection (SB3's
+        ``learning_starts``, raised to ``(learn_from_round - 1) * steps_per_round``), so a
+        co-trained agent's first values come from pseudo-rewards, not from the labels alone. The
+        policy update (``update_steps``) still runs at the end of every round. In [1, ``rounds``].
     """
 
     rounds: int = 5
