@@ -251,6 +251,7 @@ def _independent_seconds(cfg: TrainConfig) -> float:
             exploration_initial_eps=cfg.training.eps_start, exploration_final_eps=cfg.training.eps_end,
             exploration_fraction=1.0, **agent_kwargs(cfg),
         )  # fmt: skip
+        model.learning_starts = max(model.learning_starts, cfg.training.collect_only_steps)
         start = time.perf_counter()
         model.learn(total)
         seconds += time.perf_counter() - start
@@ -467,7 +468,8 @@ NOTES = [
     "runs the same agent with DQN's max target, so it shows what relabelling and self-paced weighting cost.",
     "- The co-training overhead row times `NeuralCoTraining.run()` (learning, the shared store, one "
     "classifier fit and scoring per view and round, relabelling and the per-round evaluation) against "
-    "each agent's `learn()` over the same steps without a co-trainer, summed over the agents.",
+    "each agent's `learn()` over the same steps without a co-trainer, summed over the agents; the peer "
+    "also takes no gradient step before the preset's `training.learn_from_round`.",
     "- The sweep row runs the same trials in fresh sweep folders with a pool of 2 worker processes and "
     "of 1 (each on one torch thread), timing the whole `run_sweep` call, worker start-up included; the "
     "ratio is the speed-up on this machine's cores.",

@@ -111,6 +111,12 @@ class TrainingConfig:
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
 
+    @property
+    def collect_only_steps(self) -> int:
+        """Env steps per agent before ``learn_from_round``: the agents learn nothing while they take
+        them (every agent's ``learning_starts`` is at least this)."""
+        return (self.learn_from_round - 1) * self.steps_per_round
+
 
 @dataclass(frozen=True)
 class NeuralConfig(TrainingConfig):
@@ -244,7 +250,7 @@ def make_agent(
         agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **config.tabular)
     else:
         agent = ExpectedSarsaDQN("MlpPolicy", env, **common, **config.dqn)
-    agent.learning_starts = max(agent.learning_starts, (config.learn_from_round - 1) * config.steps_per_round)
+    agent.learning_starts = max(agent.learning_starts, config.collect_only_steps)
     agent.set_pace(0.0)
     return agent
 
