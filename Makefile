@@ -27,7 +27,7 @@ test: $(STAMP)
 test-slow: $(STAMP)
 	$(PY) -m pytest -q -m slow
 
-bench: $(STAMP)  ## every benchmark row, written to BENCHMARKS.md (a few minutes)
+bench: $(STAMP)  ## every benchmark row, written to BENCHMARKS.md (most of an hour: the tabular row alone took 17 minutes on 2 cores)
 	$(VENV)/bin/dospcot bench
 
 lint: $(STAMP)
