@@ -110,15 +110,23 @@ class GridTask:
     :param views: every view the task offers, by name.
     :param spec: the run.
     :param config: its hyperparameters.
+    :param monitored_states: bool (S,), states whose every reward a monitor reveals
+        (:class:`~dospcot.envs.RewardMaskWrapper`); None: none.
     """
 
     def __init__(
-        self, make_env: MakeEnv, views: dict[str, View], spec: NeuralRunSpec, config: NeuralConfig
+        self,
+        make_env: MakeEnv,
+        views: dict[str, View],
+        spec: NeuralRunSpec,
+        config: NeuralConfig,
+        monitored_states: np.ndarray | None = None,
     ) -> None:
         missing = sorted(set(spec.views) - set(views))
         if missing:
             raise ValueError(f"unknown view(s) {missing}; this task has {sorted(views)}")
         self.make_env, self.views, self.spec, self.config = make_env, views, spec, config
+        self.monitored_states = monitored_states
         self.mdp = TabularMDP.from_env(
             make_env(), {name: views[name] for name in spec.views}, config.max_episode_steps
         )
@@ -131,7 +139,13 @@ class GridTask:
         env = gym.wrappers.TimeLimit(
             self.make_env(), self.config.train_episode_steps or self.config.max_episode_steps
         )
-        env = RewardMaskWrapper(env, fraction, mode="state-action", mask_seed=self.spec.seed)
+        env = RewardMaskWrapper(
+            env,
+            fraction,
+            mode="state-action",
+            mask_seed=self.spec.seed,
+            monitored_states=self.monitored_states,
+        )
         return ViewObservationWrapper(StoreWrapper(env, self.store), self.views[view])
 
     def observations(self, view: str) -> np.ndarray:
@@ -181,9 +195,15 @@ class NeuralCoTraining(CoTrainingRun):
     adapter, whose parameters it takes."""
 
     def __init__(
-        self, make_env: MakeEnv, views: dict[str, View], spec: NeuralRunSpec, config: NeuralConfig
+        self,
+        make_env: MakeEnv,
+        views: dict[str, View],
+        spec: NeuralRunSpec,
+        config: NeuralConfig,
+        monitored_states: np.ndarray | None = None,
     ) -> None:
-        super().__init__(GridTask(make_env, views, spec, config), spec, config, config.cotraining.max_classes)
+        task = GridTask(make_env, views, spec, config, monitored_states)
+        super().__init__(task, spec, config, config.cotraining.max_classes)
 
     @property
     def mdp(self) -> TabularMDP:

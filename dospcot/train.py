@@ -42,7 +42,14 @@ from tqdm.auto import tqdm
 
 from dospcot.classifier import save_classifier
 from dospcot.cotraining_round import CoTrainingRun
-from dospcot.envs import GridLayout, GridWorld, grid_views, make_masked_highway
+from dospcot.envs import (
+    GridLayout,
+    GridWorld,
+    grid_views,
+    make_masked_highway,
+    monitored_states,
+    view_blind_spots,
+)
 from dospcot.envs.views import View
 from dospcot.neural_cotraining import GridTask, MakeEnv, NeuralConfig, NeuralCoTraining, NeuralRunSpec
 from dospcot.paper import episodes_per_seed, train_protocol_at
@@ -79,14 +86,19 @@ SUMMARY_METRICS = (
 
 
 def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], GridLayout]:
-    """The env factory, the views and the map of a config."""
+    """The env factory, the views (with the run's blind spots, if any) and the map of a config."""
     env = cfg.env
     layout = GridLayout.random(env.size, env.layout_seed, env.lava_density, env.wall_density)
     make_env = partial(
         GridWorld, layout, step_cost=env.step_cost, lava_penalty=env.lava_penalty,
         goal_reward=env.goal_reward, exploring_starts=env.exploring_starts,
     )  # fmt: skip
-    return make_env, grid_views(layout, env.patch_size, env.compass), layout
+    blind = (
+        view_blind_spots(layout, env.blind_spot_rate, cfg.seed, identical=env.blind_spots == "identical")
+        if env.blind_spot_rate > 0
+        else None
+    )
+    return make_env, grid_views(layout, env.patch_size, env.compass, blind), layout
 
 
 def agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
@@ -112,16 +124,25 @@ def _highway_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunS
         **_common_kwargs(cfg), max_episode_steps=highway.episode_steps,
         reward_classes=highway.reward_classes, eval_episodes=highway.eval_episodes,
     )  # fmt: skip
-    return partial(make_masked_highway, highway.env_id, config=highway.config), _spec(cfg), config
+    make_env = partial(
+        make_masked_highway,
+        highway.env_id,
+        config=highway.config,
+        reveal_first_steps=highway.reveal_first_steps,
+    )
+    return make_env, _spec(cfg), config
 
 
-def _grid_parts(cfg: TrainConfig) -> tuple[MakeEnv, dict[str, View], NeuralRunSpec, NeuralConfig]:
-    make_env, views, _ = build_task(cfg)
+def _grid_parts(
+    cfg: TrainConfig,
+) -> tuple[MakeEnv, dict[str, View], NeuralRunSpec, NeuralConfig, np.ndarray | None]:
+    make_env, views, layout = build_task(cfg)
     config = NeuralConfig(
         **_common_kwargs(cfg), max_episode_steps=cfg.env.episode_steps,
         train_episode_steps=cfg.env.train_episode_steps,
     )  # fmt: skip
-    return make_env, views, _spec(cfg), config
+    columns = cfg.env.monitored_columns
+    return make_env, views, _spec(cfg), config, monitored_states(layout.size, columns) if columns else None
 
 
 def _common_kwargs(cfg: TrainConfig) -> dict[str, Any]:

@@ -63,6 +63,12 @@ class EnvConfig:
     :param patch_size: side k of the ``patch`` view (odd).
     :param compass: every view also reads the goal's offset (a goal compass): ``"none"``, ``"axes"``
         (one-hot per axis) or ``"cell"`` (one-hot over the map's cells; :mod:`dospcot.envs.gridworld`).
+    :param blind_spot_rate: the share of lava cells each terrain view (``patch``, ``rays``) reads as
+        free, a persistent blind spot drawn per run seed and view (0: error-free sensors).
+    :param blind_spots: ``"independent"`` (each view misses its own cells) or ``"identical"`` (every
+        view misses the same cells, the control).
+    :param monitored_columns: a reward monitor: every reward of a state in the map's first this many
+        columns is revealed, and ``training.label_fraction`` is the share of the other keys (0: none).
     """
 
     size: int = 16
@@ -77,10 +83,19 @@ class EnvConfig:
     train_episode_steps: int = 0
     patch_size: int = 5
     compass: Literal["none", "axes", "cell"] = "none"
+    blind_spot_rate: float = 0.0
+    blind_spots: Literal["independent", "identical"] = "independent"
+    monitored_columns: int = 0
 
     def __post_init__(self) -> None:
         if not 4 <= self.size <= 256:
             raise ValueError(f"size must lie in [4, 256], got {self.size}")
+        if not 0.0 <= self.blind_spot_rate <= 1.0:
+            raise ValueError(f"blind_spot_rate must lie in [0, 1], got {self.blind_spot_rate}")
+        if not 0 <= self.monitored_columns <= self.size:
+            raise ValueError(
+                f"monitored_columns must lie in [0, size = {self.size}], got {self.monitored_columns}"
+            )
         if self.max_episode_steps < 0 or self.train_episode_steps < 0:
             raise ValueError(
                 "max_episode_steps and train_episode_steps must be >= 0 (0: the default), "
@@ -110,6 +125,8 @@ class HighwayConfig:
     :param eval_episodes: greedy evaluation episodes per agent and round.
     :param config: the task's own config overrides: highway-env's keys (``vehicles_count``,
         ``duration``, ...), or :class:`dospcot.envs.FastHighwayConfig`'s for the fast env.
+    :param reveal_first_steps: a reward monitor: the first this many steps of every training episode
+        are revealed, later ones with probability ``training.label_fraction`` (0: none).
     """
 
     env_id: str = "highway-fast-v0"
@@ -117,6 +134,7 @@ class HighwayConfig:
     reward_classes: int = 5
     eval_episodes: int = 10
     config: dict[str, Any] = field(default_factory=dict)
+    reveal_first_steps: int = 0
 
     def __post_init__(self) -> None:
         if self.episode_steps < 1 or self.reward_classes < 1 or self.eval_episodes < 1:
@@ -124,6 +142,8 @@ class HighwayConfig:
                 "episode_steps, reward_classes and eval_episodes must be >= 1, got "
                 f"{self.episode_steps}, {self.reward_classes}, {self.eval_episodes}"
             )
+        if self.reveal_first_steps < 0:
+            raise ValueError(f"reveal_first_steps must be >= 0, got {self.reveal_first_steps}")
 
 
 DQN_DEFAULTS: dict[str, Any] = {

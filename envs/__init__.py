@@ -5,7 +5,15 @@ from gymnasium.envs.registration import register
 from dospcot.envs.cliffwalking import CLIFF_VIEWS, make_masked_cliffwalking
 from dospcot.envs.fast_highway import FastHighwayConfig, FastHighwayEnv, FastHighwayVec
 from dospcot.envs.finite_check import FiniteCheckWrapper, NonFiniteError
-from dospcot.envs.gridworld import GridLayout, GridWorld, grid_views, make_masked_gridworld
+from dospcot.envs.gridworld import (
+    GridLayout,
+    GridWorld,
+    grid_views,
+    lava_blind_spots,
+    make_masked_gridworld,
+    monitored_states,
+    view_blind_spots,
+)
 from dospcot.envs.highway import make_highway, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper, StateActionMask, check_label_fraction
 from dospcot.envs.sensors import SensorViewWrapper
@@ -49,9 +57,12 @@ __all__ = [
     "ViewObservationWrapper",
     "check_label_fraction",
     "grid_views",
+    "lava_blind_spots",
     "make_highway",
     "make_masked_cliffwalking",
     "make_masked_gridworld",
     "make_masked_highway",
+    "monitored_states",
     "select_views",
+    "view_blind_spots",
 ]

@@ -27,12 +27,18 @@ on. Two encodings of the goal's offset (d_row, d_column):
 
 Scaled numbers (as ``coords`` holds) make neighbouring cells differ by 1 / (N - 1) in two inputs, and
 a small MLP's values blur across them (greedy loops between neighbours).
+
+Sensors with errors (``blind_spots`` of :func:`grid_views`): a view may have a persistent blind spot,
+a set of lava cells it reads as free (the patch shows free terrain there, the rays pass through).
+:func:`lava_blind_spots` draws one from a seed; two views with different seeds misread different
+cells, so neither alone tells every lava step while together they can (docs/preregistration.md).
+The dynamics and rewards do not change, only what the views report.
 """
 
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -252,27 +258,80 @@ class GridWorld(gym.Env):
         return "\n".join("".join(row) for row in rows)
 
 
-def grid_views(layout: GridLayout, patch_size: int = 5, compass: str = "none") -> dict[str, View]:
+TERRAIN_VIEWS: tuple[str, ...] = ("patch", "rays")
+"""The views that read the terrain, and so can have a blind spot."""
+
+
+def lava_blind_spots(layout: GridLayout, rate: float, seed: int | Sequence[int]) -> np.ndarray:
+    """A sensor's blind spot: ``round(rate * n_lava)`` of the layout's lava cells, drawn from ``seed``.
+
+    :param layout: the map.
+    :param rate: the share of lava cells the sensor misreads, in [0, 1].
+    :param seed: the sensor's seed (an int or a sequence of ints, as numpy's ``default_rng`` takes);
+        the same seed always gives the same cells.
+    :return: bool (N, N), True on the misread lava cells.
+    """
+    if not 0.0 <= rate <= 1.0:
+        raise ValueError(f"a blind-spot rate must lie in [0, 1], got {rate}")
+    lava = np.flatnonzero(layout.terrain.reshape(-1) == LAVA)
+    chosen = np.random.default_rng(seed).permutation(lava)[: round(rate * lava.size)]
+    blind = np.zeros(layout.size * layout.size, dtype=bool)
+    blind[chosen] = True
+    return blind.reshape(layout.size, layout.size)
+
+
+def view_blind_spots(
+    layout: GridLayout, rate: float, seed: int, identical: bool = False
+) -> dict[str, np.ndarray]:
+    """The blind spot of every terrain view of a run: view j of :data:`TERRAIN_VIEWS` draws from the
+    seed ``[seed, j]``, or with ``identical`` every view from ``[seed, 0]`` (the control in which no
+    view can correct another)."""
+    return {
+        name: lava_blind_spots(layout, rate, [seed, 0 if identical else j])
+        for j, name in enumerate(TERRAIN_VIEWS)
+    }
+
+
+def misread(layout: GridLayout, blind: np.ndarray) -> GridLayout:
+    """The map as a sensor with blind spot ``blind`` (bool (N, N), lava cells only) perceives it."""
+    if blind.shape != layout.terrain.shape:
+        raise ValueError(f"a blind spot must have the map's shape {layout.terrain.shape}, got {blind.shape}")
+    if np.any(blind & (layout.terrain != LAVA)):
+        raise ValueError("a blind spot may hold lava cells only")
+    return GridLayout(np.where(blind, FREE, layout.terrain), layout.start)
+
+
+def grid_views(
+    layout: GridLayout,
+    patch_size: int = 5,
+    compass: str = "none",
+    blind_spots: Mapping[str, np.ndarray] | None = None,
+) -> dict[str, View]:
     """The ``coords``, ``patch`` and ``rays`` views of a layout, by name; ``compass`` (one of
-    :data:`COMPASSES`) appends the goal's offset to every view (see the module docstring)."""
+    :data:`COMPASSES`) appends the goal's offset to every view (see the module docstring).
+
+    :param blind_spots: view name (of :data:`TERRAIN_VIEWS`) -> bool (N, N), the lava cells that view
+        reads as free (see :func:`lava_blind_spots`).
+    """
     if patch_size < 1 or patch_size % 2 == 0:
         raise ValueError(f"patch_size must be odd and positive, got {patch_size}")
     if compass not in COMPASSES:
         raise ValueError(f"compass must be one of {COMPASSES}, got {compass!r}")
+    blind_spots = dict(blind_spots or {})
+    unknown = sorted(set(blind_spots) - set(TERRAIN_VIEWS))
+    if unknown:
+        raise ValueError(f"blind spots for view(s) {unknown}; only {list(TERRAIN_VIEWS)} read the terrain")
+    perceived = {name: misread(layout, blind) for name, blind in blind_spots.items()}
     n = layout.size
     goal_r, goal_c = layout.goal
     scale = max(n - 1, 1)
-    half = patch_size // 2
-    padded = np.pad(layout.terrain, half, constant_values=OFF_GRID)
-    states = np.arange(n * n)
-    rows, cols = np.divmod(states, n)
+    rows, cols = np.divmod(np.arange(n * n), n)
     coords_table = np.stack([rows, cols, goal_r - rows, goal_c - cols], axis=1).astype(np.float32) / scale
-    windows = np.stack(
-        [padded[r : r + patch_size, c : c + patch_size] for r, c in zip(rows, cols, strict=True)]
-    )
-    patch_table = np.eye(N_TERRAIN, dtype=np.float32)[windows].reshape(n * n, -1)
-    rays_table = _ray_table(layout)
-    tables = {"coords": coords_table, "patch": patch_table, "rays": rays_table}
+    tables = {
+        "coords": coords_table,
+        "patch": _patch_table(perceived.get("patch", layout), patch_size),
+        "rays": _ray_table(perceived.get("rays", layout)),
+    }
     if compass == "axes":
         offsets = np.eye(2 * n - 1, dtype=np.float32)
         heading = np.concatenate([offsets[goal_r - rows + n - 1], offsets[goal_c - cols + n - 1]], axis=1)
@@ -286,6 +345,17 @@ def grid_views(layout: GridLayout, patch_size: int = 5, compass: str = "none") -
         return View(name, space, lambda state: table[int(state)])
 
     return {name: view(name, table, -1.0 if name == "coords" else 0.0) for name, table in tables.items()}
+
+
+def _patch_table(layout: GridLayout, patch_size: int) -> np.ndarray:
+    """(N*N, k*k*5) the one-hot terrain of the k x k window around every cell."""
+    n, half = layout.size, patch_size // 2
+    padded = np.pad(layout.terrain, half, constant_values=OFF_GRID)
+    rows, cols = np.divmod(np.arange(n * n), n)
+    windows = np.stack(
+        [padded[r : r + patch_size, c : c + patch_size] for r, c in zip(rows, cols, strict=True)]
+    )
+    return np.eye(N_TERRAIN, dtype=np.float32)[windows].reshape(n * n, -1)
 
 
 def _ray_table(layout: GridLayout) -> np.ndarray:
@@ -315,11 +385,26 @@ def make_masked_gridworld(
     max_episode_steps: int | None = None,
     patch_size: int = 5,
     compass: str = "none",
+    blind_spots: Mapping[str, np.ndarray] | None = None,
+    monitored_columns: int = 0,
     **grid_kwargs: Any,
 ) -> gym.Env:
-    """A :class:`GridWorld` with a step limit (default 4 N), state-action masking and views in ``info``."""
+    """A :class:`GridWorld` with a step limit (default 4 N), state-action masking and views in ``info``.
+
+    ``blind_spots`` go to :func:`grid_views`; with ``monitored_columns`` every reward of a state in
+    the first that many columns is revealed (:func:`monitored_states`)."""
     base = GridWorld(**grid_kwargs)
-    selected = select_views(grid_views(base.layout, patch_size, compass), views)
+    selected = select_views(grid_views(base.layout, patch_size, compass, blind_spots), views)
     env = gym.wrappers.TimeLimit(base, max_episode_steps or 4 * base.layout.size)
-    env = RewardMaskWrapper(env, label_fraction, mode="state-action", mask_seed=mask_seed)
+    monitored = monitored_states(base.layout.size, monitored_columns) if monitored_columns else None
+    env = RewardMaskWrapper(
+        env, label_fraction, mode="state-action", mask_seed=mask_seed, monitored_states=monitored
+    )
     return MultiViewWrapper(env, selected)
+
+
+def monitored_states(size: int, columns: int) -> np.ndarray:
+    """bool (N * N,): the states of the map's first ``columns`` columns, which a reward monitor sees."""
+    if not 0 <= columns <= size:
+        raise ValueError(f"monitored columns must lie in [0, {size}], got {columns}")
+    return np.tile(np.arange(size) < columns, size)

@@ -172,6 +172,7 @@ def make_masked_highway(
     label_fraction: float = 0.1,
     mask_seed: int = 0,
     config: Mapping[str, Any] | None = None,
+    reveal_first_steps: int = 0,
 ) -> gym.Env:
     """A highway task whose rewards are revealed per transition with probability ``label_fraction``.
 
@@ -181,9 +182,11 @@ def make_masked_highway(
     :param label_fraction: probability that a step's reward is revealed, in (0, 1].
     :param mask_seed: seed of the reveal draws.
     :param config: the task's config overrides (highway-env's keys, or :class:`FastHighwayConfig`'s).
+    :param reveal_first_steps: a reward monitor: the first this many steps of every episode are revealed.
     """
     check_views(env_id, views)
     env = RewardMaskWrapper(
-        make_highway(env_id, config), label_fraction, mode="transition", mask_seed=mask_seed
-    )
+        make_highway(env_id, config), label_fraction, mode="transition", mask_seed=mask_seed,
+        reveal_first_steps=reveal_first_steps,
+    )  # fmt: skip
     return SensorViewWrapper(env, view, views)

@@ -8,6 +8,12 @@ Two modes (docs/design.md section 1):
 - ``"transition"``: each step is revealed with probability ``label_fraction``, from a generator
   seeded by ``mask_seed`` (and re-seeded from ``mask_seed`` and the seed of every seeded reset).
 
+State-dependent monitors (the monitored-MDP setting, docs/preregistration.md): what is revealed may
+depend on where the agent is. In state-action mode ``monitored_states`` names states whose every
+reward is revealed (``label_fraction`` then is the share of the other keys); in transition mode the
+first ``reveal_first_steps`` steps of every episode are revealed. Reading hidden rewards as 0 is then
+biased, not a rescaling.
+
 A masked step returns reward 0.0 with ``info["reward_observed"] = False``, and loses the reward's
 parts an env reports in ``info`` (:data:`REWARD_INFO_KEYS`). The true reward is kept in
 ``info["hidden_reward"]`` for metrics only.
@@ -38,21 +44,38 @@ def check_label_fraction(label_fraction: float) -> float:
 class StateActionMask:
     """A seeded subset of the ``n_states * n_actions`` keys of a discrete env.
 
-    Exactly ``round(label_fraction * n_states * n_actions)`` keys are labelled (at least one).
+    Exactly ``round(label_fraction * n_keys)`` of the ``n_keys`` drawn keys are labelled (at least
+    one): every key, or with ``monitored_states`` the keys of the other states, whose keys are all
+    labelled.
 
     :param n_states: number of discrete states.
     :param n_actions: number of discrete actions.
     :param label_fraction: share of labelled keys, in (0, 1].
     :param seed: seed of the draw; the same seed always labels the same keys.
+    :param monitored_states: bool (n_states,), states whose every key is labelled; None: none.
     """
 
-    def __init__(self, n_states: int, n_actions: int, label_fraction: float, seed: int) -> None:
+    def __init__(
+        self,
+        n_states: int,
+        n_actions: int,
+        label_fraction: float,
+        seed: int,
+        monitored_states: np.ndarray | None = None,
+    ) -> None:
         fraction = check_label_fraction(label_fraction)
-        n_keys = n_states * n_actions
-        n_labelled = max(1, round(fraction * n_keys))
-        chosen = np.random.default_rng(seed).permutation(n_keys)[:n_labelled]
-        labelled = np.zeros(n_keys, dtype=bool)
-        labelled[chosen] = True
+        monitored = (
+            np.zeros(n_states, dtype=bool) if monitored_states is None else np.asarray(monitored_states)
+        )
+        if monitored.shape != (n_states,) or monitored.dtype != bool:
+            raise ValueError(
+                f"monitored_states must be a bool array of shape ({n_states},), got {monitored!r}"
+            )
+        labelled = np.repeat(monitored, n_actions)
+        drawn = np.flatnonzero(~labelled)
+        if drawn.size:
+            n_labelled = max(1, round(fraction * drawn.size))
+            labelled[np.random.default_rng(seed).permutation(drawn)[:n_labelled]] = True
         self.labelled: np.ndarray = labelled.reshape(n_states, n_actions)
         """Boolean array of shape (n_states, n_actions): True where the reward is revealed."""
 
@@ -69,6 +92,10 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         is revealed (transition mode), in (0, 1].
     :param mode: ``"state-action"`` or ``"transition"``.
     :param mask_seed: seed of the mask, independent of the seed passed to ``reset``.
+    :param monitored_states: state-action mode: bool (n_states,), states whose every reward is
+        revealed (a monitor); ``label_fraction`` is then the share of the other keys.
+    :param reveal_first_steps: transition mode: the first this many steps of every episode are
+        revealed (a monitor); later steps with probability ``label_fraction``.
     """
 
     def __init__(
@@ -77,13 +104,27 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         label_fraction: float,
         mode: MaskMode = "state-action",
         mask_seed: int = 0,
+        monitored_states: np.ndarray | None = None,
+        reveal_first_steps: int = 0,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
-            self, label_fraction=label_fraction, mode=mode, mask_seed=mask_seed
-        )
+            self, label_fraction=label_fraction, mode=mode, mask_seed=mask_seed,
+            monitored_states=monitored_states, reveal_first_steps=reveal_first_steps,
+        )  # fmt: skip
         super().__init__(env)
         if mode not in MASK_MODES:
             raise ValueError(f"mode must be one of {MASK_MODES}, got {mode!r}")
+        if monitored_states is not None and mode != "state-action":
+            raise ValueError(
+                "monitored_states needs mode='state-action'; use reveal_first_steps in 'transition'"
+            )
+        if reveal_first_steps and mode != "transition":
+            raise ValueError(
+                "reveal_first_steps needs mode='transition'; use monitored_states in 'state-action'"
+            )
+        if reveal_first_steps < 0:
+            raise ValueError(f"reveal_first_steps must be >= 0, got {reveal_first_steps}")
+        self.reveal_first_steps = int(reveal_first_steps)
         self.label_fraction = check_label_fraction(label_fraction)
         self.mode: MaskMode = mode
         self.mask: StateActionMask | None = None
@@ -96,15 +137,18 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                         f"use mode='transition' for other spaces"
                     )
             self.mask = StateActionMask(
-                int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed
-            )
+                int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed,
+                monitored_states,
+            )  # fmt: skip
         self._mask_seed = mask_seed
         self._reveal_rng = np.random.default_rng(mask_seed)
         self._state: int | None = None
+        self._episode_step = 0
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self._state = obs if self.mode == "state-action" else None
+        self._episode_step = 0
         if kwargs.get("seed") is not None:
             # A seeded reset replays the same reveals too, as gymnasium's determinism contract asks.
             self._reveal_rng = np.random.default_rng([self._mask_seed, kwargs["seed"]])
@@ -115,8 +159,10 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.mask is not None:
             observed = (int(self._state), int(action)) in self.mask
             self._state = obs
-        else:
-            observed = bool(self._reveal_rng.random() < self.label_fraction)
+        else:  # the monitored first steps draw nothing, so reveal_first_steps=0 keeps every draw
+            monitored = self._episode_step < self.reveal_first_steps
+            observed = monitored or bool(self._reveal_rng.random() < self.label_fraction)
+            self._episode_step += 1
         info = dict(info, reward_observed=observed, hidden_reward=float(reward))
         if not observed:
             for key in REWARD_INFO_KEYS:  # the reward's parts would give the hidden reward away

@@ -161,18 +161,24 @@ class _ScrambledHiddenReward(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_identical():
-    cfg = load_config("fasthighway-dospcot", TINY)
+@pytest.mark.parametrize("monitor", [[], ["highway.reveal_first_steps=5"]])
+def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_identical(monitor):
+    cfg = load_config("fasthighway-dospcot", TINY + monitor)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
     plain = build_run(cfg)
     plain.run()
-    make = partial(make_masked_highway, cfg.highway.env_id, config=cfg.highway.config)
+    make = partial(
+        make_masked_highway, cfg.highway.env_id, config=cfg.highway.config,
+        reveal_first_steps=cfg.highway.reveal_first_steps,
+    )  # fmt: skip
     scrambled = TransitionCoTraining(
         lambda *args: _ScrambledHiddenReward(make(*args)), plain.spec, plain.config
     )
     scrambled.run()
     n = len(plain.store)
     assert (plain.table.weight[:n][~plain.store.labelled[:n]] > 0).any()  # pseudo-rewards were used
+    if monitor:  # the first 5 steps of every episode were revealed besides the share
+        assert plain.store.labelled[:n].mean() > cfg.training.label_fraction + 0.05
     assert not np.array_equal(plain.store.hidden_reward[:n], scrambled.store.hidden_reward[:n])
     for a, b in zip(plain.agents, scrambled.agents, strict=True):
         for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
@@ -195,6 +201,7 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_id
             "views: the highway-fast-v0 has no view 'lidar'; allowed: kinematics, occupancy, ttc",
         ),
         ("highway.reward_classes=0", "reward_classes and eval_episodes must be >= 1"),
+        ("highway.reveal_first_steps=-1", "highway: reveal_first_steps must be >= 0, got -1"),
         (
             'highway.config={vehicles_count="many"}',
             "highway.config: vehicles_count must be a number (highway-env's default is 20), got 'many'",

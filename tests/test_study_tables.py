@@ -1,0 +1,76 @@
+"""The pre-registered second-view tables of scripts/study.py: paired differences and verdicts by hand."""
+
+import sys
+from pathlib import Path
+
+import pytest
+
+from dospcot.metrics import SeedSummary
+from dospcot.report import TrialRun
+from dospcot.sweep import Trial
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
+import study
+
+INDEPENDENT = {"env.blind_spot_rate": "0.5", "env.blind_spots": "independent", "agent": "dqn"}
+IDENTICAL = {**INDEPENDENT, "env.blind_spots": "identical"}
+MONITOR = {"env.monitored_columns": "8", "training.label_fraction": "0.02", "agent": "dqn"}
+
+
+def _run(preset: str, params: dict[str, str], seed: int, success: float, accuracy: float) -> TrialRun:
+    summary = {"mean": {"success": success, "pseudo_accuracy": accuracy}}
+    return TrialRun(Trial(preset, preset, dict(params), seed), summary, [], Path())
+
+
+def _setting(params, dospcot, patch, rays, zero=(0.0,) * 4):
+    """Four seeds of DOSPCoT, self-training on each view and masked-zero: (success, accuracy) each."""
+    runs = []
+    for seed in range(4):
+        runs.append(_run("grid16-dospcot", params, seed, *dospcot[seed]))
+        runs.append(_run("grid16-masked-zero", params, seed, zero[seed], float("nan")))
+        for view, values in (("patch", patch), ("rays", rays)):
+            runs.append(_run("grid16-self-training", {**params, "views": f'["{view}"]'}, seed, *values[seed]))
+    return runs
+
+
+def test_h1_is_confirmed_only_when_both_paired_intervals_clear_zero_by_the_smallest_effect():
+    patch = [(0.5, 0.90), (0.5, 0.91), (0.5, 0.92), (0.5, 0.93)]
+    rays = [(0.0, 0.95), (0.5, 0.95), (0.0, 0.95), (0.5, 0.95)]  # higher accuracy, lower success
+    dospcot = [(1.0, 0.97), (1.0, 0.98), (1.0, 0.97), (1.0, 0.98)]
+    lines = study.second_view_tables(_setting(INDEPENDENT, dospcot, patch, rays))
+    text = "\n".join(lines)
+    # The better view per metric: rays for accuracy (0.95 > 0.915), patch for success (0.5 > 0.25).
+    accuracy = SeedSummary.of([0.02, 0.03, 0.02, 0.03])
+    better = "self-training (rays) (the better view, paired by seed)"
+    assert f"pseudo-reward accuracy, DOSPCoT minus {better}: {accuracy}" in text
+    assert "success, DOSPCoT minus self-training (patch)" in text
+    assert "H1 (DOSPCoT above the better self-training view in both): **confirmed**" in text
+    # An accuracy gain below the smallest effect (0.01) does not count, however sure.
+    small = [(1.0, 0.955), (1.0, 0.955), (1.0, 0.955), (1.0, 0.955)]
+    text = "\n".join(study.second_view_tables(_setting(INDEPENDENT, small, patch, rays)))
+    assert "H1 (DOSPCoT above the better self-training view in both): **not confirmed**" in text
+
+
+def test_h2_asks_both_intervals_to_hold_zero():
+    same = [(0.5, 0.9), (1.0, 0.95), (0.5, 0.9), (1.0, 0.95)]
+    text = "\n".join(study.second_view_tables(_setting(IDENTICAL, same, same, same)))
+    assert "H2 (no difference: both intervals hold 0): **confirmed**" in text
+    better = [(1.0, 0.99)] * 4
+    text = "\n".join(study.second_view_tables(_setting(IDENTICAL, better, same, same)))
+    assert "H2 (no difference: both intervals hold 0): **not confirmed**" in text
+
+
+@pytest.mark.parametrize(
+    ("zero", "verdict"), [((0.0, 0.0, 0.5, 0.0), "confirmed"), ((1.0,) * 4, "not confirmed")]
+)
+def test_h3_compares_masked_zero_with_the_better_self_training_view_and_dospcot(zero, verdict):
+    ones = [(1.0, 0.9)] * 4
+    text = "\n".join(study.second_view_tables(_setting(MONITOR, ones, ones, ones, zero)))
+    assert f"H3 (masked-zero below self-training and DOSPCoT): **{verdict}**" in text
+    assert "success, DOSPCoT minus masked-zero (paired by seed)" in text
+
+
+def test_a_setting_with_a_method_not_yet_run_says_so():
+    runs = [r for r in _setting(INDEPENDENT, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4)]
+    text = "\n".join(study.second_view_tables([r for r in runs if r.trial.name != "grid16-dospcot"]))
+    assert "H1 (DOSPCoT above the better self-training view in both): not yet run" in text
