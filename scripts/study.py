@@ -365,21 +365,28 @@ def _verdict(ok: bool | None) -> str:
     return "not yet run" if ok is None else ("**confirmed**" if ok else "**not confirmed**")
 
 
+SECOND_VIEW_ORDER = ("oracle", "masked-zero", "labels-only", "self-training", "dospcot", "m3")
+SECOND_VIEW_WORDS = {"dospcot": "DOSPCoT (m = 2)", "m3": "m = 3 (+ coords, error-free)"}
+
+
 def second_view_tables(runs: list[TrialRun], columns: tuple[str, ...] = SECOND_VIEW_COLUMNS) -> list[str]:
     """Per setting and agent kind: every method's metrics over seeds, then the pre-registered paired
     differences and each hypothesis marked confirmed or not (docs/preregistration.md)."""
+    titles = {**COLUMNS, **(HIGHWAY_COLUMNS if "greedy_return" in columns else {})}
     lines = []
     for setting, by_method in _by_seed(runs).items():
         for agent in sorted({agent for agent, _ in by_method}):
             methods = {m: seeds for (a, m), seeds in by_method.items() if a == agent}
             lines += [
                 "", f"**{setting}, {AGENT_WORDS[agent]} agents**", "",
-                "| method | " + " | ".join(COLUMNS.get(c, c.replace("_", " ")) for c in columns) + " |",
+                "| method | " + " | ".join(titles[c] for c in columns) + " |",
                 "|---|" + "---|" * len(columns),
             ]  # fmt: skip
-            for method, seeds in methods.items():
-                cells = [str(SeedSummary.of([_value(r, c) for r in seeds.values()])) for c in columns]
-                lines.append(f"| {method} | " + " | ".join(cells) + " |")
+            for method in sorted(methods, key=lambda m: (SECOND_VIEW_ORDER.index(m.split(" (")[0]), m)):
+                cells = [
+                    str(SeedSummary.of([_value(r, c) for r in methods[method].values()])) for c in columns
+                ]
+                lines.append(f"| {SECOND_VIEW_WORDS.get(method, method)} | " + " | ".join(cells) + " |")
             lines += ["", *_hypothesis_lines(setting, methods, columns[0])]
     return lines
 
