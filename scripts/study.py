@@ -383,9 +383,7 @@ def second_view_tables(runs: list[TrialRun], columns: tuple[str, ...] = SECOND_V
                 "|---|" + "---|" * len(columns),
             ]  # fmt: skip
             for method in sorted(methods, key=lambda m: (SECOND_VIEW_ORDER.index(m.split(" (")[0]), m)):
-                cells = [
-                    str(SeedSummary.of([_value(r, c) for r in methods[method].values()])) for c in columns
-                ]
+                cells = [_over_seeds(list(methods[method].values()), c) for c in columns]
                 lines.append(f"| {SECOND_VIEW_WORDS.get(method, method)} | " + " | ".join(cells) + " |")
             lines += ["", *_hypothesis_lines(setting, methods, columns[0])]
     return lines
@@ -426,13 +424,14 @@ def _hypothesis_lines(setting: str, methods: dict[str, dict[int, TrialRun]], out
 
 def _second_view_sweeps() -> tuple[Sweep, ...]:
     """Per grid setting: the presets with neural and tabular agents, and self-training on each view."""
+    presets = tuple(p for p in GRID16_PRESETS if p != "grid16-self-training")
+    views = {"views": ('["patch"]', '["rays"]')}
     sweeps = []
-    for setting, keys in list(SECOND_VIEW_SETTINGS.items())[:3]:
+    for setting in ("independent errors", "identical errors", "monitor"):
+        keys = SECOND_VIEW_SETTINGS[setting]
         grid = {**{key: (value,) for key, value in keys.items()}, "agent": ("dqn", "tabular")}
         slug = setting.split()[0]
-        presets = tuple(p for p in GRID16_PRESETS if p != "grid16-self-training")
         sweeps.append(Sweep(f"second-view-{slug}", presets, grid))
-        views = {"views": ('["patch"]', '["rays"]')}
         sweeps.append(
             Sweep(f"second-view-{slug}-self-training", ("grid16-self-training",), {**grid, **views})
         )

@@ -1,4 +1,5 @@
-"""Neural co-training on a small masked grid world: rounds, views, counters, leakage."""
+"""Neural co-training on a small masked grid world: rounds, views, counters, leakage (also under
+sensor blind spots and a reward monitor)."""
 
 import json
 import pickle
@@ -12,7 +13,15 @@ import torch as th
 
 from dospcot.cotraining import RoundResult
 from dospcot.cotraining_round import round_stats
-from dospcot.envs import FiniteCheckWrapper, GridWorld, NonFiniteError, StateActionMask, grid_views
+from dospcot.envs import (
+    FiniteCheckWrapper,
+    GridWorld,
+    NonFiniteError,
+    StateActionMask,
+    grid_views,
+    monitored_states,
+    view_blind_spots,
+)
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 
 LAYOUT = GridWorld(size=6, layout_seed=0).layout
@@ -53,9 +62,11 @@ def test_with_every_reward_revealed_the_pace_is_full_and_exploration_decays():
     assert [r["eps"] for r in records] == pytest.approx([0.05, 0.05])
 
 
-def _permuted_grid(seed: int) -> GridWorld:
+def _permuted_grid(seed: int, monitored_states: np.ndarray | None = None) -> GridWorld:
     env = GridWorld(LAYOUT)
-    masked = ~StateActionMask(env.observation_space.n, 4, CONFIG.label_fraction, seed).labelled
+    masked = ~StateActionMask(
+        env.observation_space.n, 4, CONFIG.label_fraction, seed, monitored_states
+    ).labelled
     env.reward[masked] = np.random.default_rng(0).permutation(env.reward[masked])
     return env
 
@@ -69,6 +80,23 @@ def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical(kinds):
     a.run()
     b = NeuralCoTraining(partial(_permuted_grid, 3), VIEWS, spec, CONFIG)
     b.run()
+    for agent_a, agent_b in zip(a.agents, b.agents, strict=True):
+        for p, q in zip(agent_a.policy.parameters(), agent_b.policy.parameters(), strict=True):
+            assert th.equal(p, q)
+    assert np.array_equal(a.table.reward, b.table.reward) and np.array_equal(a.table.weight, b.table.weight)
+
+
+def test_leakage_under_blind_spots_and_a_monitor_agents_stay_bit_identical():
+    monitor = monitored_states(6, 2)
+    assert not np.array_equal(_permuted_grid(3, monitor).reward, GridWorld(LAYOUT).reward)
+    views = grid_views(LAYOUT, 3, blind_spots=view_blind_spots(LAYOUT, 0.5, 3))
+    spec = NeuralRunSpec("cotrain", ("dqn", "dqn"), ("patch", "rays"), seed=3)
+    # SB3 seeds the global generators when an agent is built: build and run one run at a time.
+    a = NeuralCoTraining(partial(GridWorld, LAYOUT), views, spec, CONFIG, monitor)
+    a.run()
+    b = NeuralCoTraining(partial(_permuted_grid, 3, monitor), views, spec, CONFIG, monitor)
+    b.run()
+    assert a.store.labelled[a.store.visited].mean() > 0.2  # the monitor revealed more than the share
     for agent_a, agent_b in zip(a.agents, b.agents, strict=True):
         for p, q in zip(agent_a.policy.parameters(), agent_b.policy.parameters(), strict=True):
             assert th.equal(p, q)
