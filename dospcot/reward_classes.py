@@ -60,7 +60,9 @@ class QuantileRewardClasses(_ClassValues):
     The bin edges are the labelled rewards' quantiles at 1/K, ..., (K-1)/K; a bin's value is the
     mean of the labelled rewards inside it. :meth:`fit` recomputes both from all labels so far, so the
     bins follow the labels as more arrive. Duplicate edges (a reward that fills several quantiles)
-    merge their bins, so a run may have fewer than K classes. The interface matches
+    merge their bins, so a run may have fewer than K classes. Two cases keep a rare reward apart from
+    a common one: labels of at most K distinct values (a sparse goal reward, 0 or 1) get one class per
+    value, and a quantile at the smallest labelled value moves up to the next one. The interface matches
     :class:`RewardClasses` with one run: ``values`` is (1, K).
 
     :param n_classes: K.
@@ -81,9 +83,15 @@ class QuantileRewardClasses(_ClassValues):
         if rewards.size == 0:
             self.edges = np.zeros(0)
             return
-        quantiles = np.quantile(rewards, np.arange(1, n_classes) / n_classes)
-        # An edge equal to the minimum would leave its bin empty.
-        self.edges = np.unique(quantiles[quantiles > rewards.min()])
+        distinct = np.unique(rewards)
+        if distinct.size <= n_classes:  # a reward of few values: one class each, however rare
+            self.edges = distinct[1:]
+        else:
+            quantiles = np.quantile(rewards, np.arange(1, n_classes) / n_classes)
+            # A quantile at the minimum would leave its bin empty. Where the reward mostly takes its
+            # smallest value (0 but for a rare goal reward) it moves up to the next labelled value,
+            # so the rare rewards keep a class apart from the common one.
+            self.edges = np.unique(np.where(quantiles > distinct[0], quantiles, distinct[1]))
         bins = np.searchsorted(self.edges, rewards, side="right")
         for c in range(self.edges.size + 1):
             self.values[0, c] = rewards[bins == c].mean()

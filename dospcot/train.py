@@ -46,6 +46,7 @@ from dospcot.envs import (
     GridLayout,
     GridWorld,
     grid_views,
+    make_masked_gym,
     make_masked_highway,
     monitored_states,
     view_blind_spots,
@@ -133,6 +134,27 @@ def _highway_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunS
     return make_env, _spec(cfg), config
 
 
+def _gym_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
+    task = cfg.gym
+    config = TransitionConfig(
+        **_common_kwargs(cfg), max_episode_steps=task.episode_steps, reward_classes=task.reward_classes,
+        eval_episodes=task.eval_episodes, success_return=task.success_return, max_return=task.max_return,
+    )  # fmt: skip
+    make_env = partial(
+        make_masked_gym,
+        task.env_id,
+        view_specs=task.views,
+        env_kwargs=task.env_kwargs,
+        wrappers=task.wrappers,
+    )
+    return make_env, _spec(cfg), config
+
+
+def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
+    """A sensor task's parts: a highway's or any gymnasium env's (one pool sample per step)."""
+    return _highway_parts(cfg) if cfg.task == "highway" else _gym_parts(cfg)
+
+
 def _grid_parts(
     cfg: TrainConfig,
 ) -> tuple[MakeEnv, dict[str, View], NeuralRunSpec, NeuralConfig, np.ndarray | None]:
@@ -158,11 +180,11 @@ def _spec(cfg: TrainConfig) -> NeuralRunSpec:
 
 def build_run(cfg: TrainConfig) -> CoTrainingRun:
     """The co-trainer of a config, before its first round: the grid adapter's on a grid
-    (:class:`~dospcot.neural_cotraining.NeuralCoTraining`), the sensor adapter's on a highway
-    (:class:`~dospcot.transition_cotraining.TransitionCoTraining`)."""
-    if cfg.task == "highway":
-        return TransitionCoTraining(*_highway_parts(cfg))
-    return NeuralCoTraining(*_grid_parts(cfg))
+    (:class:`~dospcot.neural_cotraining.NeuralCoTraining`), the sensor adapter's on a highway or any
+    gymnasium env (:class:`~dospcot.transition_cotraining.TransitionCoTraining`)."""
+    if cfg.task == "grid":
+        return NeuralCoTraining(*_grid_parts(cfg))
+    return TransitionCoTraining(*_sensor_parts(cfg))
 
 
 class _StepBar(BaseCallback):
@@ -336,7 +358,7 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
         )
     agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
     # The task adapter's evaluator, as during training: no training run, no fresh agents.
-    task = SensorTask(*_highway_parts(cfg)) if cfg.task == "highway" else GridTask(*_grid_parts(cfg))
+    task = GridTask(*_grid_parts(cfg)) if cfg.task == "grid" else SensorTask(*_sensor_parts(cfg))
     policy = task.evaluate(agents)
     per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
     result = {"per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()}}

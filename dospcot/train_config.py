@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import math
 import tomllib
 import typing
 from collections.abc import Mapping, Sequence
@@ -31,11 +32,14 @@ from stable_baselines3 import DQN
 from dospcot.cotraining import CoTrainingConfig
 from dospcot.cotraining_round import TrainingConfig
 from dospcot.envs.fast_highway import FastHighwayEnv
+from dospcot.envs.gym_sensors import check_gym_task
 from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, highway_view_names, try_highway_config
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.tabular_cotraining import TabularConfig
 
 GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
+TASK_SECTIONS: dict[str, str] = {"grid": "env", "highway": "highway", "gym": "gym"}
+"""Each task of :class:`TrainConfig` and the section that sets it up."""
 RUN_AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
 
 
@@ -144,6 +148,50 @@ class HighwayConfig:
             )
         if self.reveal_first_steps < 0:
             raise ValueError(f"reveal_first_steps must be >= 0, got {self.reveal_first_steps}")
+
+
+@dataclass(frozen=True)
+class GymConfig:
+    """Any gymnasium task with discrete actions (``task = "gym"``; docs/your_env.md), with views
+    computed from its observation (:mod:`dospcot.envs.gym_sensors`). Every step is one pool sample
+    and is revealed with probability ``training.label_fraction``.
+
+    :param env_id: a registered gymnasium id (``"CartPole-v1"``; ``"package:Env-v0"`` imports the
+        package that registers it first), or a dotted path ``"package.module:function"`` to a function
+        that returns the env.
+    :param env_kwargs: keyword arguments of the env.
+    :param wrappers: wrappers applied in order before the views read the observation: gymnasium's by
+        class name (``"FlattenObservation"``) or any class by dotted path.
+    :param views: each view's name and what it reads: ``"observation"`` (the whole observation), a key
+        of a ``Dict`` observation, or a dotted path ``"package.module:function"`` to a function of the
+        observation. The run's ``views`` pick among these names.
+    :param episode_steps: the step limit of an evaluation episode.
+    :param reward_classes: K, the quantile bins of the reward.
+    :param eval_episodes: greedy evaluation episodes per agent and round.
+    :param success_return: an evaluation episode whose true return exceeds this counts as a success.
+    :param max_return: the best return an evaluation episode can reach, ``R_max`` of the normalised
+        score; ``inf`` (the default): not known, and the normalised score is NaN.
+    """
+
+    env_id: str = ""
+    env_kwargs: dict[str, Any] = field(default_factory=dict)
+    wrappers: tuple[str, ...] = ()
+    views: dict[str, str] = field(default_factory=dict)
+    episode_steps: int = 100
+    reward_classes: int = 5
+    eval_episodes: int = 10
+    success_return: float = 0.0
+    max_return: float = math.inf
+
+    def __post_init__(self) -> None:
+        if self.episode_steps < 1 or self.reward_classes < 1 or self.eval_episodes < 1:
+            raise ValueError(
+                "episode_steps, reward_classes and eval_episodes must be >= 1, got "
+                f"{self.episode_steps}, {self.reward_classes}, {self.eval_episodes}"
+            )
+        for name, spec in self.views.items():
+            if not isinstance(spec, str):
+                raise ValueError(f"views.{name}: expected a string (a key, a dotted path), got {spec!r}")
 
 
 DQN_DEFAULTS: dict[str, Any] = {
@@ -283,8 +331,9 @@ class TrainConfig:
         empty: ``agent`` for every view.
     :param agent: the agent kind of every view when ``agents`` is empty (``--set agent=tabular``
         switches a preset's agents whatever its number of views).
-    :param task: ``grid`` (the ``[env]`` section) or ``highway`` (the ``[highway]`` section); a config
-        with ``task = "paper"`` is a :class:`PaperConfig`.
+    :param task: ``grid`` (the ``[env]`` section), ``highway`` (the ``[highway]`` section) or ``gym``
+        (any gymnasium env, the ``[gym]`` section); a config with ``task = "paper"`` is a
+        :class:`PaperConfig`.
     """
 
     name: str = "run"
@@ -293,9 +342,10 @@ class TrainConfig:
     views: tuple[str, ...] = ("coords", "patch")
     agents: tuple[str, ...] = ()
     agent: str = "esarsa_dqn"
-    task: Literal["grid", "highway"] = "grid"
+    task: Literal["grid", "highway", "gym"] = "grid"
     env: EnvConfig = field(default_factory=EnvConfig)
     highway: HighwayConfig = field(default_factory=HighwayConfig)
+    gym: GymConfig = field(default_factory=GymConfig)
     training: TrainingConfig = field(default_factory=TrainingConfig)
     dqn: DQNConfig = field(default_factory=DQNConfig)
     tabular_agent: TabularAgentConfig = field(default_factory=TabularAgentConfig)
@@ -303,6 +353,12 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         _check_name_and_seed(self.name, self.seed)
+        if self.task == "gym" and not self.gym.env_id:
+            raise ConfigError('gym.env_id: a task = "gym" run needs one (a gymnasium id or a dotted path)')
+        if self.task == "gym" and not self.gym.views:
+            raise ConfigError(
+                'gym.views: a task = "gym" run needs its views, e.g. views = {state = "observation"}'
+            )
         allowed = ", ".join(self.view_names)
         if not self.views:
             raise ConfigError(f"views: need at least one view; allowed: {allowed}")
@@ -321,34 +377,46 @@ class TrainConfig:
             if unknown:
                 raise ConfigError(f"{key}: unknown agent kind {unknown[0]!r}; allowed: {allowed_kinds}")
 
-        # The other task's section would be accepted and change nothing; at its defaults (as in the
+        # Another task's section would be accepted and change nothing; at its defaults (as in the
         # config.toml of a run folder written before it was left out) it says nothing either.
-        unread, read = ("highway", "env") if self.task == "grid" else ("env", "highway")
-        if getattr(self, unread) != type(getattr(self, unread))():
+        read = TASK_SECTIONS[self.task]
+        for unread in self._unread_sections:
+            if getattr(self, unread) != type(getattr(self, unread))():
+                raise ConfigError(
+                    f'{unread}: a task = "{self.task}" run does not read the [{unread}] section; its task '
+                    f"is set in [{read}]"
+                )
+        if self.task != "grid" and "tabular" in self.agent_kinds:
+            key = "agents" if self.agents else "agent"
+            neural = ", ".join(kind for kind in RUN_AGENT_KINDS if kind != "tabular")
             raise ConfigError(
-                f'{unread}: a task = "{self.task}" run does not read the [{unread}] section; its task '
-                f"is set in [{read}]"
+                f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
+                f"{self.task_name}: {neural}"
             )
         if self.task == "highway":
-            if "tabular" in self.agent_kinds:
-                key = "agents" if self.agents else "agent"
-                neural = ", ".join(kind for kind in RUN_AGENT_KINDS if kind != "tabular")
-                raise ConfigError(
-                    f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
-                    f"{self.highway.env_id}: {neural}"
-                )
             _check_highway_task(self.highway)
+        if self.task == "gym":
+            try:
+                check_gym_task(self.gym.env_id, self.gym.env_kwargs, self.gym.wrappers, self.gym.views)
+            except ValueError as err:
+                raise ConfigError(str(err)) from None
+
+    @property
+    def _unread_sections(self) -> list[str]:
+        return [section for task, section in TASK_SECTIONS.items() if task != self.task]
 
     @property
     def task_name(self) -> str:
         """The task, in words."""
-        return "grid world" if self.task == "grid" else self.highway.env_id
+        return {"grid": "grid world", "highway": self.highway.env_id, "gym": self.gym.env_id}[self.task]
 
     @property
     def view_names(self) -> tuple[str, ...]:
         """The views the task offers."""
         if self.task == "grid":
             return GRID_VIEWS
+        if self.task == "gym":
+            return tuple(self.gym.views)
         return highway_view_names(self.highway.env_id)
 
     @property
@@ -357,10 +425,11 @@ class TrainConfig:
         return self.agents or (self.agent,) * len(self.views)
 
     def to_dict(self) -> dict[str, Any]:
-        """The config as plain TOML-ready values (tuples become lists), without the section of the
-        other task, which this run does not read."""
+        """The config as plain TOML-ready values (tuples become lists), without the sections of the
+        other tasks, which this run does not read."""
         data = _plain(dataclasses.asdict(self))
-        del data["highway" if self.task == "grid" else "env"]
+        for unread in self._unread_sections:
+            del data[unread]
         return data
 
 

@@ -1,4 +1,5 @@
-"""The sensor adapter: DOSPCoT on a continuous task (highway driving), m sensor views.
+"""The sensor adapter: DOSPCoT on a sensor task (highway driving, or any gymnasium env with discrete
+actions: docs/your_env.md), m sensor views.
 
 The round itself is :class:`~dospcot.cotraining_round.CoTrainingRun`'s; this adapter supplies what
 a continuous task does differently (docs/design.md section 3):
@@ -136,10 +137,16 @@ class TransitionConfig(NeuralConfig):
 
     :param reward_classes: K, the quantile bins of the continuous reward.
     :param eval_episodes: greedy evaluation episodes per agent and round.
+    :param success_return: an evaluation episode whose true return exceeds this is a success; None:
+        one that lasts ``max_episode_steps`` is (highway: no crash).
+    :param max_return: ``R_max`` of the normalised score; None: ``max_episode_steps`` (highway-env's
+        rewards are at most 1 a step); ``inf``: not known, the normalised score is NaN.
     """
 
     reward_classes: int = 5
     eval_episodes: int = 10
+    success_return: float | None = None
+    max_return: float | None = None
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -221,8 +228,10 @@ class SensorTask:
 
     def evaluate(self, agents: Sequence[ExpectedSarsaDQN]) -> dict[str, np.ndarray]:
         """Greedy evaluation episodes of every agent: (m,) ``greedy_return`` (mean true return),
-        ``success`` (share of episodes without a crash), ``normalised_score``; ``agreement`` is NaN."""
-        r_max = float(self.config.max_episode_steps)
+        ``success`` (share of successful episodes, :class:`TransitionConfig`), ``normalised_score``;
+        ``agreement`` is NaN."""
+        r_max = self.reference_returns()["max_return"]
+        threshold = self.config.success_return
         out: dict[str, list[float]] = {
             "greedy_return": [],
             "success": [],
@@ -232,15 +241,22 @@ class SensorTask:
         for agent, env in zip(agents, self.eval_envs, strict=True):
             returns, lengths = self._returns(agent, env)
             out["greedy_return"].append(float(returns.mean()))
-            out["success"].append(float((lengths >= self.config.max_episode_steps).mean()))
+            won = lengths >= self.config.max_episode_steps if threshold is None else returns > threshold
+            out["success"].append(float(won.mean()))
             out["normalised_score"].append(
                 (returns.mean() - self.random_return) / (r_max - self.random_return)
+                if np.isfinite(r_max) and r_max > self.random_return
+                else float("nan")
             )
             out["agreement"].append(float("nan"))
         return {key: np.asarray(values) for key, values in out.items()}
 
     def reference_returns(self) -> dict[str, float]:
-        return {"max_return": float(self.config.max_episode_steps), "random_return": self.random_return}
+        r_max = self.config.max_return
+        return {
+            "max_return": float(self.config.max_episode_steps if r_max is None else r_max),
+            "random_return": self.random_return,
+        }
 
 
 class TransitionCoTraining(CoTrainingRun):

@@ -14,6 +14,7 @@ from dospcot.envs.gridworld import (
     monitored_states,
     view_blind_spots,
 )
+from dospcot.envs.gym_sensors import ObservationSensors, make_gym_env, make_masked_gym
 from dospcot.envs.highway import make_highway, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper, StateActionMask, check_label_fraction
 from dospcot.envs.sensors import SensorViewWrapper
@@ -49,6 +50,7 @@ __all__ = [
     "GridWorld",
     "MultiViewWrapper",
     "NonFiniteError",
+    "ObservationSensors",
     "RewardMaskWrapper",
     "SensorViewWrapper",
     "StateActionMask",
@@ -58,9 +60,11 @@ __all__ = [
     "check_label_fraction",
     "grid_views",
     "lava_blind_spots",
+    "make_gym_env",
     "make_highway",
     "make_masked_cliffwalking",
     "make_masked_gridworld",
+    "make_masked_gym",
     "make_masked_highway",
     "monitored_states",
     "select_views",

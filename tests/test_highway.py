@@ -92,6 +92,20 @@ def test_quantile_reward_classes_bin_by_label_quantiles_and_round_trip():
     assert not classes.mask[0, 2:].any() and np.isnan(classes.decode(np.array([[-1]]))[0, 0])
 
 
+def test_a_rare_reward_keeps_its_own_quantile_class():
+    classes = QuantileRewardClasses(4)
+    # A sparse goal reward: 0 on 19 steps in 20. Its quartiles are all 0, yet 1 is a class of its own.
+    classes.fit(np.array([0.0] * 19 + [1.0]))
+    np.testing.assert_allclose(classes.edges, [1.0])
+    np.testing.assert_allclose(classes.values[0, :2], [0.0, 1.0])
+    np.testing.assert_array_equal(classes.encode(np.array([[0.0, 1.0]])), [[0, 1]])
+    # MiniGrid's goal reward, 1 - 0.9 t / T, takes many values: the quartiles at 0 move up to the
+    # smallest goal reward (0.4), and the goal rewards share one class, worth their mean.
+    classes.fit(np.array([0.0] * 16 + [0.4, 0.6, 0.8, 1.0]))
+    np.testing.assert_allclose(classes.edges, [0.4])
+    np.testing.assert_allclose(classes.values[0, :2], [0.0, 0.7])
+
+
 def _train(tmp_path, preset: str, *overrides: str):
     args = ["train", preset, "--runs-dir", str(tmp_path), "--no-progress"]
     assert main([*args, *(a for o in (*TINY, *overrides) for a in ("--set", o))]) == 0

@@ -1,0 +1,262 @@
+"""Any gymnasium env with discrete actions as a sensor task: views computed from its observation.
+
+A view is a function of the env's observation that returns a fixed-shape array, e.g. a lidar reading
+or the agent's position. :class:`ObservationSensors` gives an env the sensor interface that
+:class:`~dospcot.envs.SensorViewWrapper` reads (``observe(name)``, ``view_space(name)``), so a user's
+env co-trains like the highway tasks: one agent per view, every step one pool sample.
+
+A view is named in a config by one of (:func:`resolve_view`):
+
+- ``"observation"``: the whole observation, flattened (:data:`VIEW_REGISTRY`);
+- a key of a ``Dict`` observation space, e.g. ``"image"``: that entry, flattened;
+- a dotted path ``"package.module:function"``: the function, imported when the env is built.
+
+An env is named by a registered gymnasium id, or by a dotted path to a function that returns the env
+(:func:`make_gym_env`). Wrappers are gymnasium's by class name (``"FlattenObservation"``) or any
+wrapper class by dotted path.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from dospcot.envs.masking import RewardMaskWrapper
+from dospcot.envs.sensors import SensorViewWrapper
+
+ViewFn = Callable[[Any], np.ndarray]
+"""A view: the env's observation in, an array of a fixed shape out."""
+
+VIEW_REGISTRY: dict[str, ViewFn] = {"observation": lambda obs: obs}
+"""Views by name that any env offers."""
+
+
+def import_dotted(path: str, what: str) -> Any:
+    """The object at ``"package.module:name"`` (``name`` may hold dots, for a class attribute).
+
+    :param what: what the path names, for the error message, e.g. ``"gym.views.lidar"``.
+    """
+    module_name, sep, attr = path.partition(":")
+    if not sep or not module_name or not attr:
+        raise ValueError(f"{what}: {path!r} is not a dotted path of the form 'package.module:name'")
+    try:
+        target: Any = importlib.import_module(module_name)
+    except ImportError as err:
+        raise ValueError(f"{what}: cannot import module {module_name!r} ({err})") from None
+    for part in attr.split("."):
+        if not hasattr(target, part):
+            raise ValueError(f"{what}: module {module_name!r} has no {attr!r}")
+        target = getattr(target, part)
+    return target
+
+
+def dotted_path(obj: Any, what: str) -> str:
+    """The dotted path ``"module:qualname"`` that :func:`import_dotted` reads back as ``obj``, or a
+    ``ValueError`` if there is none (a lambda, a nested function, a bound method)."""
+    module, qualname = getattr(obj, "__module__", None), getattr(obj, "__qualname__", None)
+    if not module or not qualname or "<" in qualname:
+        raise ValueError(
+            f"{what}: {obj!r} cannot be named by a dotted path: define it at the top level of a module"
+        )
+    path = f"{module}:{qualname}"
+    if import_dotted(path, what) is not obj:
+        raise ValueError(f"{what}: {path!r} does not import back as {obj!r}: define it at module level")
+    return path
+
+
+def resolve_view(spec: str, observation_space: gym.Space, name: str) -> ViewFn:
+    """The view function that ``spec`` names for an env with ``observation_space``
+    (:data:`VIEW_REGISTRY` name, ``Dict`` key or dotted path; see the module docstring)."""
+    if spec in VIEW_REGISTRY:
+        return VIEW_REGISTRY[spec]
+    if ":" in spec:
+        fn = import_dotted(spec, f"gym.views.{name}")
+        if not callable(fn):
+            raise ValueError(f"gym.views.{name}: {spec!r} is not callable")
+        return fn
+    if isinstance(observation_space, gym.spaces.Dict):
+        if spec in observation_space.spaces:
+            return lambda obs: obs[spec]
+        keys = ", ".join(observation_space.spaces)
+        raise ValueError(
+            f"gym.views.{name}: {spec!r} is not a key of the observation ({keys}), a dotted path "
+            f"'module:function' or one of {sorted(VIEW_REGISTRY)}"
+        )
+    raise ValueError(
+        f"gym.views.{name}: {spec!r} is neither a dotted path 'module:function' nor one of "
+        f"{sorted(VIEW_REGISTRY)} (the observation is not a Dict, so keys do not apply)"
+    )
+
+
+def require_discrete_actions(env: gym.Env) -> None:
+    """Raise ``ValueError`` unless ``env``'s actions are ``Discrete``, which Q-learning agents need."""
+    if not isinstance(env.action_space, gym.spaces.Discrete):
+        raise ValueError(
+            f"{env.spec.id if env.spec else type(env.unwrapped).__name__} has a "
+            f"{type(env.action_space).__name__} action space: DOSPCoT's Q-learning agents need "
+            "Discrete actions (discretise the actions with a wrapper)"
+        )
+
+
+class ObservationSensors(gym.Wrapper):
+    """Give an env with ``Discrete`` actions the sensor interface: each view a function of the last
+    observation, flattened to float32.
+
+    Each view's shape is read from the observation of a reset (seed 0) at construction; a view that
+    raises, returns a non-numeric value or changes shape later fails with one line naming it.
+
+    :param env: the env.
+    :param views: the view functions, by name.
+    """
+
+    def __init__(self, env: gym.Env, views: Mapping[str, ViewFn]) -> None:
+        super().__init__(env)
+        require_discrete_actions(env)
+        if not views:
+            raise ValueError("need at least one view")
+        self._fns = dict(views)
+        self._obs, _ = env.reset(seed=0)
+        self._spaces = {
+            name: gym.spaces.Box(-np.inf, np.inf, self._read(name).shape, np.float32) for name in self._fns
+        }
+
+    def _read(self, name: str) -> np.ndarray:
+        try:
+            value = np.asarray(self._fns[name](self._obs), dtype=np.float32)
+        except Exception as err:  # a user's function may raise anything
+            raise ValueError(f"view {name!r} failed on an observation: {type(err).__name__}: {err}") from None
+        return value.ravel()
+
+    def view_space(self, name: str) -> gym.spaces.Box:
+        """The flat ``Box`` of a view."""
+        if name not in self._spaces:
+            raise ValueError(f"unknown view {name!r}; allowed: {', '.join(self._spaces)}")
+        return self._spaces[name]
+
+    def observe(self, name: str) -> np.ndarray:
+        """The view ``name`` of the last observation, float32 of ``view_space(name).shape``."""
+        value = self._read(name)
+        if value.shape != self.view_space(name).shape:
+            raise ValueError(
+                f"view {name!r} changed shape: {self.view_space(name).shape[0]} values at the first "
+                f"reset, {value.size} now; a view must return the same shape on every observation"
+            )
+        return value
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        self._obs, info = self.env.reset(**kwargs)
+        return self._obs, info
+
+    def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        self._obs, reward, terminated, truncated, info = self.env.step(action)
+        return self._obs, reward, terminated, truncated, info
+
+
+def make_gym_env(
+    env_id: str, env_kwargs: Mapping[str, Any] | None = None, wrappers: Sequence[str] = ()
+) -> gym.Env:
+    """The env ``env_id`` names, built with ``env_kwargs`` and wrapped by ``wrappers`` in order.
+
+    :param env_id: a registered gymnasium id; ``"package:Env-v0"`` (gymnasium's own form) imports the
+        package that registers it first; ``"package.module:function"`` calls a function that returns
+        the env.
+    """
+    kwargs = dict(env_kwargs or {})
+    module, sep, name = env_id.partition(":")
+    factory = import_dotted(env_id, "gym.env_id") if sep and not _registers(module, name) else None
+    if factory is not None:
+        if not callable(factory):
+            raise ValueError(f"gym.env_id: {env_id!r} is neither a registered env id nor callable")
+        env = factory(**kwargs)
+        if not isinstance(env, gym.Env):
+            raise ValueError(f"gym.env_id: {env_id!r} returned a {type(env).__name__}, not a gymnasium Env")
+    else:
+        try:
+            env = gym.make(name if sep else env_id, **kwargs)
+        except gym.error.Error as err:
+            raise ValueError(f"gym.env_id: {err}") from None
+        except TypeError as err:  # an env_kwargs key the env does not take
+            raise ValueError(f"gym.env_kwargs: {err}") from None
+    for wrapper in wrappers:
+        cls = (
+            import_dotted(wrapper, "gym.wrappers") if ":" in wrapper else getattr(gym.wrappers, wrapper, None)
+        )
+        if cls is None:
+            raise ValueError(
+                f"gym.wrappers: gymnasium.wrappers has no {wrapper!r}; name another wrapper by its "
+                "dotted path 'module:Class'"
+            )
+        env = cls(env)
+    return env
+
+
+def _registers(module: str, env_id: str) -> bool:
+    """Whether importing ``module`` registers the gymnasium id ``env_id``."""
+    try:
+        importlib.import_module(module)
+    except ImportError as err:
+        raise ValueError(f"gym.env_id: cannot import module {module!r} ({err})") from None
+    return env_id in gym.registry
+
+
+def check_gym_task(
+    env_id: str, env_kwargs: Mapping[str, Any], wrappers: Sequence[str], view_specs: Mapping[str, str]
+) -> None:
+    """Build the task once and read every view of a reset; raise ``ValueError`` with one line naming
+    what is wrong (an unknown id or path, continuous actions, a view that fails)."""
+    env = make_gym_env(env_id, env_kwargs, wrappers)
+    try:
+        require_discrete_actions(env)
+        fns = {name: resolve_view(spec, env.observation_space, name) for name, spec in view_specs.items()}
+        ObservationSensors(env, fns)
+    finally:
+        env.close()
+
+
+def make_masked_gym(
+    env_id: str,
+    view: str,
+    views: Sequence[str],
+    label_fraction: float,
+    mask_seed: int = 0,
+    *,
+    view_specs: Mapping[str, str],
+    env_kwargs: Mapping[str, Any] | None = None,
+    wrappers: Sequence[str] = (),
+) -> gym.Env:
+    """A gymnasium task whose rewards are revealed per step with probability ``label_fraction``.
+
+    :param env_id: a registered gymnasium id, or a dotted path to a function returning the env.
+    :param view: the view the agent observes.
+    :param views: every view recorded in ``info["views"]``.
+    :param label_fraction: probability that a step's reward is revealed, in (0, 1].
+    :param mask_seed: seed of the reveal draws.
+    :param view_specs: what each view name means (:func:`resolve_view`).
+    :param env_kwargs: keyword arguments of the env.
+    :param wrappers: wrappers applied to the env before the views read it.
+    """
+    unknown = [name for name in views if name not in view_specs]
+    if unknown:
+        raise ValueError(f"unknown view(s) {unknown}; allowed: {', '.join(view_specs)}")
+    env = make_gym_env(env_id, env_kwargs, wrappers)
+    fns = {name: resolve_view(view_specs[name], env.observation_space, name) for name in views}
+    sensors = ObservationSensors(env, fns)
+    return SensorViewWrapper(
+        RewardMaskWrapper(sensors, label_fraction, mode="transition", mask_seed=mask_seed), view, views
+    )
+
+
+__all__ = [
+    "VIEW_REGISTRY",
+    "ObservationSensors",
+    "check_gym_task",
+    "dotted_path",
+    "import_dotted",
+    "make_gym_env",
+    "make_masked_gym",
+    "resolve_view",
+]

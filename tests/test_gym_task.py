@@ -1,0 +1,244 @@
+"""Any gymnasium env with discrete actions (task = "gym"): a toy corridor defined here, nothing shipped."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from functools import partial
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import stable_baselines3
+
+from dospcot.envs.gym_sensors import ObservationSensors, dotted_path, make_masked_gym
+from dospcot.gym_task import gym_config, train_env
+from dospcot.run_folder import RunFolderError
+from dospcot.train import build_run, evaluate, resume
+from dospcot.train_config import ConfigError, load_config
+from dospcot.transition_cotraining import TransitionCoTraining
+
+LENGTH = 10
+
+
+class Corridor(gym.Env):
+    """Cells 0..9 in a row, start at 0; action 1 moves right, 0 left. Reaching cell 9 pays 1 and ends
+    the episode; every other step pays 0 (sparse, as MiniGrid). The observation is a Dict: the cell
+    one-hot, and the cell as one number in [0, 1]."""
+
+    def __init__(self) -> None:
+        self.action_space = gym.spaces.Discrete(2)
+        self.observation_space = gym.spaces.Dict(
+            {
+                "onehot": gym.spaces.Box(0, 1, (LENGTH,), np.float32),
+                "cell": gym.spaces.Box(0, 1, (1,), np.float32),
+            }
+        )
+        self.pos = 0
+
+    def _obs(self) -> dict[str, np.ndarray]:
+        return {
+            "onehot": np.eye(LENGTH, dtype=np.float32)[self.pos],
+            "cell": np.array([self.pos / (LENGTH - 1)], np.float32),
+        }
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        self.pos = 0
+        return self._obs(), {}
+
+    def step(self, action: int):
+        self.pos = int(np.clip(self.pos + (1 if action == 1 else -1), 0, LENGTH - 1))
+        done = self.pos == LENGTH - 1
+        return self._obs(), float(done), done, False, {}
+
+
+def make_corridor() -> gym.Env:
+    return gym.wrappers.TimeLimit(Corridor(), 20)
+
+
+def signed_cell(obs: dict[str, np.ndarray]) -> np.ndarray:
+    """The second view: the cell number, scaled to [-1, 1]."""
+    return 2 * obs["cell"] - 1
+
+
+def one_number_then_two(obs: dict[str, np.ndarray]) -> np.ndarray:
+    return np.zeros(1 if obs["cell"][0] == 0 else 2)
+
+
+def failing_view(obs: dict[str, np.ndarray]) -> np.ndarray:
+    raise KeyError("lidar")
+
+
+SETTINGS = {
+    "training.rounds": 3,
+    "training.steps_per_round": 1500,
+    "training.eps_start": 0.5,
+    "training.update_steps": 200,
+    "dqn.learning_starts": 100,
+    "dqn.target_update_interval": 100,
+    "dqn.net_arch": [32, 32],
+    "gym.episode_steps": 20,
+    "gym.eval_episodes": 2,
+    "gym.max_return": 1.0,
+}
+VIEWS = {"onehot": "onehot", "signed": signed_cell}
+
+
+def _corridor_toml(tmp_path: Path, **gym_keys: str) -> Path:
+    views = {"onehot": '"onehot"', "signed": f'"{dotted_path(signed_cell, "view")}"', **gym_keys}
+    path = tmp_path / "corridor.toml"
+    path.write_text(
+        f"""name = "corridor"
+task = "gym"
+agent = "dqn"
+views = ["onehot", "signed"]
+[gym]
+env_id = "{dotted_path(make_corridor, "env")}"
+episode_steps = 20
+eval_episodes = 2
+max_return = 1.0
+views = {{{", ".join(f"{k} = {v}" for k, v in views.items())}}}
+[training]
+rounds = 3
+steps_per_round = 1500
+label_fraction = 0.1
+eps_start = 0.5
+update_steps = 200
+[dqn]
+learning_starts = 100
+target_update_interval = 100
+net_arch = [32, 32]
+"""
+    )
+    return path
+
+
+def test_a_toy_env_co_trains_from_python_and_its_run_folder_resumes_and_evaluates(tmp_path):
+    run_dir = train_env(
+        make_corridor, VIEWS, runs_dir=tmp_path, label_fraction=0.1, settings=SETTINGS, show_progress=False
+    )
+    with (run_dir / "metrics.csv").open() as rows:
+        last = [row for row in csv.DictReader(rows) if row["round"] == "3"]
+    assert [row["view"] for row in last] == ["onehot", "signed"]
+    # Pseudo-rewards were admitted in the last round, and right: 0 everywhere but at the goal.
+    assert all(float(row["coverage"]) > 0.5 and float(row["pseudo_accuracy"]) > 0.95 for row in last)
+    result = evaluate(run_dir)
+    # Both agents walk the corridor: the only reward is the goal's, 1, reached in 9 steps.
+    assert result["mean"]["success"] == 1.0
+    assert result["mean"]["greedy_return"] == 1.0
+    assert result["mean"]["normalised_score"] > 0.5  # a random walk often fails within 20 steps
+    # The agents are plain SB3 zips; the config names the functions by their dotted paths.
+    agent = stable_baselines3.DQN.load(run_dir / "agent_signed.zip")
+    assert agent.observation_space.shape == (1,)
+    config = (run_dir / "config.toml").read_text()
+    assert f'signed = "{dotted_path(signed_cell, "v")}"' in config
+    with pytest.raises(RunFolderError, match="is a finished run"):  # nothing to resume
+        resume(run_dir, show_progress=False)
+
+
+def test_a_toml_config_with_a_dotted_path_view_is_the_python_entry_points_config(tmp_path):
+    from_toml = load_config(str(_corridor_toml(tmp_path)))
+    from_python = gym_config(make_corridor, VIEWS, label_fraction=0.1, name="corridor", settings=SETTINGS)
+    assert from_toml == from_python  # the same run, which the test above trains
+    assert isinstance(build_run(from_toml), TransitionCoTraining)
+
+
+def test_success_counts_returns_above_the_threshold_and_the_score_needs_a_max_return(tmp_path):
+    cfg = gym_config(
+        make_corridor, VIEWS, settings={**SETTINGS, "gym.max_return": math.inf, "gym.success_return": 2.0}
+    )
+    run = build_run(cfg)
+    policy = run.evaluate_policies()
+    assert np.all(policy["success"] == 0.0)  # no episode returns more than 1
+    assert np.all(np.isnan(policy["normalised_score"]))  # R_max unknown
+    assert np.all(np.isnan(policy["agreement"]))
+
+
+class _ScrambledHiddenReward(gym.Wrapper):
+    """Replace the hidden reward of every masked step by noise: a learner must never see it."""
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if not info["reward_observed"]:
+            info = dict(info, hidden_reward=float(self.np_random.normal()))
+        return obs, reward, terminated, truncated, info
+
+
+def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical():
+    settings = {**SETTINGS, "training.rounds": 2, "training.steps_per_round": 600}
+    cfg = gym_config(make_corridor, VIEWS, label_fraction=0.1, settings=settings)
+    plain = build_run(cfg)
+    plain.run()
+    make = partial(make_masked_gym, cfg.gym.env_id, view_specs=cfg.gym.views)
+    scrambled = TransitionCoTraining(
+        lambda *args: _ScrambledHiddenReward(make(*args)), plain.spec, plain.config
+    )
+    scrambled.run()
+    n = len(plain.store)
+    assert (plain.table.weight[:n][~plain.store.labelled[:n]] > 0).any()
+    assert not np.array_equal(plain.store.hidden_reward[:n], scrambled.store.hidden_reward[:n])
+    for a, b in zip(plain.agents, scrambled.agents, strict=True):
+        for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
+            assert np.array_equal(p.detach().numpy(), q.detach().numpy())
+    assert np.array_equal(plain.table.reward, scrambled.table.reward)
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        (
+            'gym.env_id="MountainCarContinuous-v0"',
+            "has a Box action space: DOSPCoT's Q-learning agents need Discrete",
+        ),
+        ('gym.env_id="NoSuchEnv-v0"', "gym.env_id: Environment `NoSuchEnv` doesn't exist"),
+        ('gym.env_id="no_such_module:make"', "gym.env_id: cannot import module 'no_such_module'"),
+        ('gym.views.signed="test_gym_task:nope"', "gym.views.signed: module 'test_gym_task' has no 'nope'"),
+        (
+            'gym.views.signed="lidar"',
+            "gym.views.signed: 'lidar' is not a key of the observation (cell, onehot)",
+        ),
+        ('gym.views.signed="test_gym_task:failing_view"', "view 'signed' failed on an observation: KeyError"),
+        ('gym.wrappers=["NoSuchWrapper"]', "gym.wrappers: gymnasium.wrappers has no 'NoSuchWrapper'"),
+        ('views=["onehot", "lidar"]', "views: the test_gym_task:make_corridor has no view 'lidar'"),
+        ('agent="tabular"', "agent: 'tabular' needs a discrete task"),
+        ("gym.episode_steps=0", "episode_steps, reward_classes and eval_episodes must be >= 1"),
+        ("env={size=8}", 'env: a task = "gym" run does not read the [env] section'),
+    ],
+)
+def test_bad_gym_input_fails_with_one_line(tmp_path, override, message):
+    with pytest.raises(ConfigError) as err:
+        load_config(str(_corridor_toml(tmp_path)), [override])
+    assert message in str(err.value) and "\n" not in str(err.value)
+
+
+def test_a_view_that_changes_shape_fails_with_one_line():
+    sensors = ObservationSensors(make_corridor(), {"bad": one_number_then_two})
+    sensors.reset(seed=0)
+    assert sensors.observe("bad").shape == (1,)
+    sensors.step(1)
+    with pytest.raises(ValueError, match="view 'bad' changed shape: 1 values at the first reset, 2 now"):
+        sensors.observe("bad")
+
+
+@pytest.mark.slow
+def test_the_readme_example_runs_as_it_stands_and_its_agents_reach_the_goal(tmp_path):
+    readme = (Path(__file__).parents[1] / "README.md").read_text()
+    block = readme.split("<!-- your-env-example:start -->")[1].split("<!-- your-env-example:end -->")[0]
+    code = block.split("```python\n")[1].split("```")[0]
+    (tmp_path / "corridor.py").write_text(code)
+    done = subprocess.run(
+        [sys.executable, "corridor.py"], cwd=tmp_path, capture_output=True, text=True, check=True
+    )
+    summary = json.loads(done.stdout)
+    assert summary["mean"]["success"] == 1.0
+    assert summary["mean"]["pseudo_accuracy"] > 0.95
+
+
+def test_a_lambda_cannot_be_saved_in_a_config():
+    with pytest.raises(ValueError, match="cannot be named by a dotted path: define it at the top level"):
+        gym_config(make_corridor, {"onehot": lambda obs: obs["onehot"]})
