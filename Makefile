@@ -12,7 +12,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q -c constraints.txt torch
-	$(PIP) install -q -c constraints.txt -e ".[dev,ray,highway]"
+	$(PIP) install -q -c constraints.txt -e ".[dev,ray,highway,minigrid]"
 	touch $(STAMP)
 
 install: $(STAMP)
