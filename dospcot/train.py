@@ -119,40 +119,29 @@ def _capped_buffer(kwargs: dict[str, Any], cfg: TrainConfig) -> dict[str, Any]:
     return kwargs
 
 
-def _highway_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
-    highway = cfg.highway
-    config = TransitionConfig(
-        **_common_kwargs(cfg), max_episode_steps=highway.episode_steps,
-        reward_classes=highway.reward_classes, eval_episodes=highway.eval_episodes,
-    )  # fmt: skip
-    make_env = partial(
-        make_masked_highway,
-        highway.env_id,
-        config=highway.config,
-        reveal_first_steps=highway.reveal_first_steps,
-    )
-    return make_env, _spec(cfg), config
-
-
-def _gym_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
-    task = cfg.gym
+def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
+    """A sensor task's parts (one pool sample per step): a highway's or any gymnasium env's."""
+    extra: dict[str, float] = {}
+    if cfg.task == "highway":
+        task = cfg.highway
+        make_env = partial(
+            make_masked_highway, task.env_id, config=task.config, reveal_first_steps=task.reveal_first_steps
+        )
+    else:
+        task = cfg.gym
+        make_env = partial(
+            make_masked_gym,
+            task.env_id,
+            view_specs=task.views,
+            env_kwargs=task.env_kwargs,
+            wrappers=task.wrappers,
+        )
+        extra = {"success_return": task.success_return, "max_return": task.max_return}
     config = TransitionConfig(
         **_common_kwargs(cfg), max_episode_steps=task.episode_steps, reward_classes=task.reward_classes,
-        eval_episodes=task.eval_episodes, success_return=task.success_return, max_return=task.max_return,
+        eval_episodes=task.eval_episodes, **extra,
     )  # fmt: skip
-    make_env = partial(
-        make_masked_gym,
-        task.env_id,
-        view_specs=task.views,
-        env_kwargs=task.env_kwargs,
-        wrappers=task.wrappers,
-    )
     return make_env, _spec(cfg), config
-
-
-def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
-    """A sensor task's parts: a highway's or any gymnasium env's (one pool sample per step)."""
-    return _highway_parts(cfg) if cfg.task == "highway" else _gym_parts(cfg)
 
 
 def _grid_parts(
