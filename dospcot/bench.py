@@ -308,6 +308,17 @@ def bench_sweep_throughput(quick: bool, repeats: int) -> Row:
     )
 
 
+def _random_steps_per_second(env: gym.Env, steps: int, seed: int) -> float:
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    start = time.perf_counter()
+    for _ in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+    return steps / (time.perf_counter() - start)
+
+
 def _fast_highway_steps_per_second(steps: int, n_envs: int, seed: int) -> float:
     from dospcot.envs.fast_highway import FastHighwayVec
 
@@ -323,15 +334,7 @@ def _fast_highway_steps_per_second(steps: int, n_envs: int, seed: int) -> float:
 def _highway_env_steps_per_second(steps: int, seed: int) -> float:
     from dospcot.envs.highway import make_highway
 
-    env = make_highway("highway-fast-v0")
-    env.action_space.seed(seed)
-    env.reset(seed=seed)
-    start = time.perf_counter()
-    for _ in range(steps):
-        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-        if terminated or truncated:
-            env.reset()
-    return steps / (time.perf_counter() - start)
+    return _random_steps_per_second(make_highway("highway-fast-v0"), steps, seed)
 
 
 def bench_fast_highway(quick: bool, repeats: int) -> Row:
@@ -350,6 +353,36 @@ def bench_fast_highway(quick: bool, repeats: int) -> Row:
         Measurement.of(peer, "steps/s"),
         higher_is_better=True,
         target=50.0,
+    )
+
+
+MINIGRID_ID = "MiniGrid-LavaGapS7-v0"
+
+
+def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
+    """Env steps per second with random actions: MiniGrid through our masking and two views against
+    the bare MiniGrid env (what ``task = "gym"`` adds to every step)."""
+    import minigrid  # noqa: F401  (registers the MiniGrid ids)
+
+    from dospcot.envs.gym_sensors import make_masked_gym
+
+    steps = 2_000 if quick else 20_000
+    views = {"image": "image", "direction": "direction"}
+    ours, peer = _alternating(
+        repeats,
+        lambda rep: _random_steps_per_second(
+            make_masked_gym(MINIGRID_ID, "image", tuple(views), 0.1, rep, view_specs=views), steps, rep
+        ),
+        lambda rep: _random_steps_per_second(gym.make(MINIGRID_ID), steps, rep),
+    )
+    return Row(
+        f"{MINIGRID_ID} through dospcot's wrappers vs bare: env steps per second",
+        f"random actions, resets included, {steps} steps; ours: reward mask (10%), views image "
+        "(7 x 7 x 3, observed) and direction, both recorded every step",
+        Measurement.of(ours, "steps/s"),
+        Measurement.of(peer, "steps/s"),
+        higher_is_better=True,
+        target=round(1 / 1.3, 3),
     )
 
 
@@ -447,6 +480,7 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "store_memory": bench_store_memory,
     "cotraining_scaling": bench_cotraining_scaling,
     "fast_highway": bench_fast_highway,
+    "minigrid_wrappers": bench_minigrid_wrappers,
 }
 
 

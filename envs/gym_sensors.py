@@ -7,7 +7,8 @@ env co-trains like the highway tasks: one agent per view, every step one pool sa
 
 A view is named in a config by one of (:func:`resolve_view`):
 
-- ``"observation"``: the whole observation, flattened (:data:`VIEW_REGISTRY`);
+- ``"observation"``: the whole observation, flattened (:data:`VIEW_REGISTRY`; a ``Discrete`` one
+  one-hot);
 - a key of a ``Dict`` observation space, e.g. ``"image"``: that entry, flattened;
 - a dotted path ``"package.module:function"``: the function, imported when the env is built.
 
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import importlib
 from collections.abc import Callable, Mapping, Sequence
+from functools import partial
 from typing import Any
 
 import gymnasium as gym
@@ -31,8 +33,11 @@ from dospcot.envs.sensors import SensorViewWrapper
 ViewFn = Callable[[Any], np.ndarray]
 """A view: the env's observation in, an array of a fixed shape out."""
 
-VIEW_REGISTRY: dict[str, ViewFn] = {"observation": lambda obs: obs}
-"""Views by name that any env offers."""
+VIEW_REGISTRY: dict[str, Callable[[gym.Space], ViewFn]] = {
+    "observation": lambda space: partial(gym.spaces.flatten, space),
+}
+"""Views by name that any env offers, each made from the env's observation space: ``observation`` is
+the whole observation as gymnasium's ``flatten`` gives it (a ``Discrete`` one one-hot)."""
 
 
 def import_dotted(path: str, what: str) -> Any:
@@ -72,7 +77,7 @@ def resolve_view(spec: str, observation_space: gym.Space, name: str) -> ViewFn:
     """The view function that ``spec`` names for an env with ``observation_space``
     (:data:`VIEW_REGISTRY` name, ``Dict`` key or dotted path; see the module docstring)."""
     if spec in VIEW_REGISTRY:
-        return VIEW_REGISTRY[spec]
+        return VIEW_REGISTRY[spec](observation_space)
     if ":" in spec:
         fn = import_dotted(spec, f"gym.views.{name}")
         if not callable(fn):
