@@ -121,7 +121,7 @@ def _capped_buffer(kwargs: dict[str, Any], cfg: TrainConfig) -> dict[str, Any]:
 
 def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
     """A sensor task's parts (one pool sample per step): a highway's or any gymnasium env's."""
-    extra: dict[str, float] = {}
+    extra: dict[str, Any] = {}
     if cfg.task == "highway":
         task = cfg.highway
         make_env = partial(
@@ -135,8 +135,13 @@ def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSp
             view_specs=task.views,
             env_kwargs=task.env_kwargs,
             wrappers=task.wrappers,
+            state_key=task.state_key,
         )
-        extra = {"success_return": task.success_return, "max_return": task.max_return}
+        extra = {
+            "success_return": task.success_return,
+            "max_return": task.max_return,
+            "keyed": bool(task.state_key),
+        }
     config = TransitionConfig(
         **_common_kwargs(cfg), max_episode_steps=task.episode_steps, reward_classes=task.reward_classes,
         eval_episodes=task.eval_episodes, **extra,

@@ -171,6 +171,10 @@ class GymConfig:
     :param success_return: an evaluation episode whose true return exceeds this counts as a success.
     :param max_return: the best return an evaluation episode can reach, ``R_max`` of the normalised
         score; ``inf`` (the default): not known, and the normalised score is NaN.
+    :param state_key: names each state by a hashable key: ``"minigrid"`` (the agent's cell and
+        direction, what it carries, the doors) or a dotted path to a function of the unwrapped env.
+        The pool then holds (state key, action) pairs, each labelled with probability
+        ``training.label_fraction`` for all its visits, as on the grid; empty: single steps.
     """
 
     env_id: str = ""
@@ -182,6 +186,7 @@ class GymConfig:
     eval_episodes: int = 10
     success_return: float = 0.0
     max_return: float = math.inf
+    state_key: str = ""
 
     def __post_init__(self) -> None:
         if self.episode_steps < 1 or self.reward_classes < 1 or self.eval_episodes < 1:
@@ -397,7 +402,13 @@ class TrainConfig:
             _check_highway_task(self.highway)
         if self.task == "gym":
             try:
-                check_gym_task(self.gym.env_id, self.gym.env_kwargs, self.gym.wrappers, self.gym.views)
+                check_gym_task(
+                    self.gym.env_id,
+                    self.gym.env_kwargs,
+                    self.gym.wrappers,
+                    self.gym.views,
+                    self.gym.state_key,
+                )
             except ValueError as err:
                 raise ConfigError(str(err)) from None
 

@@ -21,7 +21,7 @@ normalised reward is at most 1). There is no exact optimum, so no optimal-action
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -78,9 +78,17 @@ class StepStore(InPlaceState):
         return self._n_rows - 1
 
     def add(
-        self, state_row: int, action: int, next_row: int, observed: bool, reward: float, hidden: float
+        self,
+        state_row: int,
+        action: int,
+        next_row: int,
+        observed: bool,
+        reward: float,
+        hidden: float,
+        key: Hashable = None,
     ) -> int:
-        """Record one step between two stored rows; return its store id."""
+        """Record one step between two stored rows; return its store id (a new one: every step is its
+        own sample; ``key`` is for :class:`KeyedStepStore`)."""
         if self._n == self.action.size:
             grow = max(1024, self._n)
             for name in ("state_row", "next_row", "action", "labelled", "label_value", "hidden_reward"):
@@ -100,6 +108,40 @@ class StepStore(InPlaceState):
         rows, n = self.rows[view], self._n
         onehot = np.eye(n_actions, dtype=np.float32)[self.action[:n]]
         return np.concatenate([rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]], axis=1)
+
+
+class KeyedStepStore(StepStore):
+    """A :class:`StepStore` whose samples are (state key, action) pairs, as on the grid: every visit of
+    a pair returns the pair's id, so the pool holds each pair once and every stored step of it reads
+    the same pseudo-reward. A pair keeps the rows (views of s and s') of its first visit; its label is
+    the reward of its latest revealed visit, its hidden reward its latest (metrics only).
+
+    :param view_shapes: the shape of each view, by name.
+    """
+
+    def __init__(self, view_shapes: dict[str, tuple[int, ...]]) -> None:
+        super().__init__(view_shapes)
+        self.ids: dict[tuple[Hashable, int], int] = {}
+        """The store id of each (state key, action) pair seen."""
+
+    def add(
+        self,
+        state_row: int,
+        action: int,
+        next_row: int,
+        observed: bool,
+        reward: float,
+        hidden: float,
+        key: Hashable = None,
+    ) -> int:
+        """Record a visit of the pair (``key``, ``action``); return the pair's id."""
+        n = self.ids.get((key, action))
+        if n is None:
+            n = self.ids[key, action] = super().add(state_row, action, next_row, observed, reward, hidden)
+        elif observed:
+            self.labelled[n], self.label_value[n] = True, reward
+        self.hidden_reward[n] = hidden
+        return n
 
 
 def _grow(array: np.ndarray, extra: int) -> np.ndarray:
@@ -125,8 +167,9 @@ class SensorStoreWrapper(gym.Wrapper):
         next_row = self.store.add_row(info["views"])
         info = dict(info)
         info["store_id"] = self.store.add(
-            self._row, int(action), next_row, info["reward_observed"], float(reward), info["hidden_reward"]
-        )
+            self._row, int(action), next_row, info["reward_observed"], float(reward), info["hidden_reward"],
+            key=info.get("state_key"),
+        )  # fmt: skip
         self._row = next_row
         return obs, reward, terminated, truncated, info
 
@@ -141,12 +184,16 @@ class TransitionConfig(NeuralConfig):
         one that lasts ``max_episode_steps`` is (highway: no crash).
     :param max_return: ``R_max`` of the normalised score; None: ``max_episode_steps`` (highway-env's
         rewards are at most 1 a step); ``inf``: not known, the normalised score is NaN.
+    :param keyed: the env names its states (``info["state_key"]``, the mask's ``"key"`` mode): the pool
+        holds (state key, action) pairs (:class:`KeyedStepStore`), and every agent's env shares the
+        run's mask, so a pair is labelled for all of them or for none.
     """
 
     reward_classes: int = 5
     eval_episodes: int = 10
     success_return: float | None = None
     max_return: float | None = None
+    keyed: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -184,9 +231,11 @@ class SensorTask:
     ) -> None:
         self.spec, self.config = spec, config
         fraction = 1.0 if spec.method == "oracle" else config.label_fraction
-        envs = [make_env(v, spec.views, fraction, spec.seed * 1000 + k) for k, v in enumerate(spec.views)]
+        # A keyed pool holds each pair once: its agents must agree on whether it is labelled.
+        seeds = [spec.seed if config.keyed else spec.seed * 1000 + k for k in range(len(spec.views))]
+        envs = [make_env(v, spec.views, fraction, seed) for v, seed in zip(spec.views, seeds, strict=True)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
-        self.store = StepStore(self.shapes)
+        self.store = (KeyedStepStore if config.keyed else StepStore)(self.shapes)
         self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
         self.n_actions = int(envs[0].action_space.n)
         self.classes = QuantileRewardClasses(config.reward_classes)
@@ -278,4 +327,11 @@ def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> Du
     return DummyVecEnv([build])
 
 
-__all__ = ["SensorStoreWrapper", "SensorTask", "StepStore", "TransitionCoTraining", "TransitionConfig"]
+__all__ = [
+    "KeyedStepStore",
+    "SensorStoreWrapper",
+    "SensorTask",
+    "StepStore",
+    "TransitionCoTraining",
+    "TransitionConfig",
+]

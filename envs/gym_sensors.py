@@ -20,7 +20,7 @@ wrapper class by dotted path.
 from __future__ import annotations
 
 import importlib
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from functools import partial
 from typing import Any
 
@@ -32,6 +32,23 @@ from dospcot.envs.sensors import SensorViewWrapper
 
 ViewFn = Callable[[Any], np.ndarray]
 """A view: the env's observation in, an array of a fixed shape out."""
+StateKeyFn = Callable[[gym.Env], Hashable]
+"""A state key: the unwrapped env in, a hashable name of its current state out."""
+
+
+def minigrid_state_key(env: gym.Env) -> Hashable:
+    """A MiniGrid state's key: the agent's cell and direction, what it carries, and every door's
+    state (open, locked) in grid order: everything a MiniGrid step's outcome depends on but the step
+    count (the goal pays ``1 - 0.9 t / T``)."""
+    doors = tuple(
+        (cell.is_open, cell.is_locked) for cell in env.grid.grid if cell is not None and cell.type == "door"
+    )
+    held = None if env.carrying is None else (env.carrying.type, env.carrying.color)
+    return (tuple(int(v) for v in env.agent_pos), int(env.agent_dir), held, doors)
+
+
+STATE_KEYS: dict[str, StateKeyFn] = {"minigrid": minigrid_state_key}
+"""State keys by name (a config may also name a function by its dotted path)."""
 
 VIEW_REGISTRY: dict[str, Callable[[gym.Space], ViewFn]] = {
     "observation": lambda space: partial(gym.spaces.flatten, space),
@@ -107,6 +124,21 @@ def require_discrete_actions(env: gym.Env) -> None:
         )
 
 
+def resolve_state_key(spec: str) -> StateKeyFn:
+    """The state-key function ``spec`` names: a name from :data:`STATE_KEYS` or a dotted path."""
+    if spec in STATE_KEYS:
+        return STATE_KEYS[spec]
+    if ":" not in spec:
+        raise ValueError(
+            f"gym.state_key: {spec!r} is neither one of {sorted(STATE_KEYS)} nor a dotted path "
+            "'module:function'"
+        )
+    fn = import_dotted(spec, "gym.state_key")
+    if not callable(fn):
+        raise ValueError(f"gym.state_key: {spec!r} is not callable")
+    return fn
+
+
 class ObservationSensors(gym.Wrapper):
     """Give an env with ``Discrete`` actions the sensor interface: each view a function of the last
     observation, flattened to float32.
@@ -116,18 +148,40 @@ class ObservationSensors(gym.Wrapper):
 
     :param env: the env.
     :param views: the view functions, by name.
+    :param state_key: a function of the unwrapped env that names its current state by a hashable key
+        (read by :class:`~dospcot.envs.RewardMaskWrapper` in ``"key"`` mode as :meth:`state_key`);
+        None: the states have no names.
     """
 
-    def __init__(self, env: gym.Env, views: Mapping[str, ViewFn]) -> None:
+    def __init__(
+        self, env: gym.Env, views: Mapping[str, ViewFn], state_key: StateKeyFn | None = None
+    ) -> None:
         super().__init__(env)
         require_discrete_actions(env)
         if not views:
             raise ValueError("need at least one view")
         self._fns = dict(views)
+        self._key_fn = state_key
         self._obs, _ = env.reset(seed=0)
         self._spaces = {
             name: gym.spaces.Box(-np.inf, np.inf, self._read(name).shape, np.float32) for name in self._fns
         }
+        if state_key is not None:
+            self.state_key()  # an unhashable key fails here, before anything trains
+
+    def state_key(self) -> Hashable:
+        """The key of the current state."""
+        if self._key_fn is None:
+            raise ValueError("this env has no state key")
+        key = self._key_fn(self.env.unwrapped)
+        try:
+            hash(key)
+        except TypeError:
+            raise ValueError(
+                f"gym.state_key returned an unhashable {type(key).__name__} ({key!r}); a key must be "
+                "hashable, best a tuple of plain values"
+            ) from None
+        return key
 
     def _read(self, name: str) -> np.ndarray:
         try:
@@ -209,7 +263,11 @@ def _registers(module: str, env_id: str) -> bool:
 
 
 def check_gym_task(
-    env_id: str, env_kwargs: Mapping[str, Any], wrappers: Sequence[str], view_specs: Mapping[str, str]
+    env_id: str,
+    env_kwargs: Mapping[str, Any],
+    wrappers: Sequence[str],
+    view_specs: Mapping[str, str],
+    state_key: str = "",
 ) -> None:
     """Build the task once and read every view of a reset; raise ``ValueError`` with one line naming
     what is wrong (an unknown id or path, continuous actions, a view that fails)."""
@@ -217,7 +275,7 @@ def check_gym_task(
     try:
         require_discrete_actions(env)
         fns = {name: resolve_view(spec, env.observation_space, name) for name, spec in view_specs.items()}
-        ObservationSensors(env, fns)
+        ObservationSensors(env, fns, resolve_state_key(state_key) if state_key else None)
     finally:
         env.close()
 
@@ -232,6 +290,7 @@ def make_masked_gym(
     view_specs: Mapping[str, str],
     env_kwargs: Mapping[str, Any] | None = None,
     wrappers: Sequence[str] = (),
+    state_key: str = "",
 ) -> gym.Env:
     """A gymnasium task whose rewards are revealed per step with probability ``label_fraction``.
 
@@ -243,19 +302,23 @@ def make_masked_gym(
     :param view_specs: what each view name means (:func:`resolve_view`).
     :param env_kwargs: keyword arguments of the env.
     :param wrappers: wrappers applied to the env before the views read it.
+    :param state_key: a name from :data:`STATE_KEYS` or a dotted path to a function of the unwrapped
+        env: the mask then labels (state key, action) pairs (``"key"`` mode); empty: single steps.
     """
     unknown = [name for name in views if name not in view_specs]
     if unknown:
         raise ValueError(f"unknown view(s) {unknown}; allowed: {', '.join(view_specs)}")
     env = make_gym_env(env_id, env_kwargs, wrappers)
     fns = {name: resolve_view(view_specs[name], env.observation_space, name) for name in views}
-    sensors = ObservationSensors(env, fns)
-    return SensorViewWrapper(
-        RewardMaskWrapper(sensors, label_fraction, mode="transition", mask_seed=mask_seed), view, views
+    sensors = ObservationSensors(env, fns, resolve_state_key(state_key) if state_key else None)
+    mask = RewardMaskWrapper(
+        sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed
     )
+    return SensorViewWrapper(mask, view, views)
 
 
 __all__ = [
+    "STATE_KEYS",
     "VIEW_REGISTRY",
     "ObservationSensors",
     "check_gym_task",
@@ -263,5 +326,7 @@ __all__ = [
     "import_dotted",
     "make_gym_env",
     "make_masked_gym",
+    "minigrid_state_key",
+    "resolve_state_key",
     "resolve_view",
 ]

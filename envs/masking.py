@@ -7,6 +7,10 @@ Two modes (docs/design.md section 1):
   across resets.
 - ``"transition"``: each step is revealed with probability ``label_fraction``, from a generator
   seeded by ``mask_seed`` (and re-seeded from ``mask_seed`` and the seed of every seeded reset).
+- ``"key"``: as state-action mode for an env whose states are not known in advance: the env names
+  each state by a hashable key (``state_key()``, e.g. a MiniGrid agent's position and direction),
+  and a (key, action) pair is labelled when a hash of it and ``mask_seed`` falls below
+  ``label_fraction`` (:func:`key_is_labelled`), so every visit of a pair is labelled or none is.
 
 State-dependent monitors (the monitored-MDP setting, docs/preregistration.md): what is revealed may
 depend on where the agent is. In state-action mode ``monitored_states`` names states whose every
@@ -21,13 +25,15 @@ parts an env reports in ``info`` (:data:`REWARD_INFO_KEYS`). The true reward is 
 
 from __future__ import annotations
 
+import hashlib
+from collections.abc import Hashable
 from typing import Any, Literal
 
 import gymnasium as gym
 import numpy as np
 
-MaskMode = Literal["state-action", "transition"]
-MASK_MODES: tuple[str, ...] = ("state-action", "transition")
+MaskMode = Literal["state-action", "transition", "key"]
+MASK_MODES: tuple[str, ...] = ("state-action", "transition", "key")
 REWARD_INFO_KEYS: tuple[str, ...] = ("rewards",)
 """``info`` keys in which an env reports its reward's parts (highway-env and our fast highway do):
 a masked step drops them."""
@@ -39,6 +45,18 @@ def check_label_fraction(label_fraction: float) -> float:
     if not 0.0 < fraction <= 1.0:
         raise ValueError(f"label_fraction must lie in (0, 1], got {label_fraction!r}")
     return fraction
+
+
+def key_is_labelled(key: Hashable, action: int, label_fraction: float, seed: int) -> bool:
+    """Whether the reward of ``action`` in the state named ``key`` is revealed: a hash of
+    ``(seed, key, action)`` read as a number in [0, 1) falls below ``label_fraction``.
+
+    The hash is of the pair's ``repr`` (BLAKE2), not Python's ``hash``, which changes from process to
+    process for strings: the same key is labelled in every worker and after a resume. A key is best a
+    tuple of plain values (ints, strings), whose ``repr`` names it exactly.
+    """
+    digest = hashlib.blake2b(repr((seed, key, int(action))).encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "little") / 2.0**64 < label_fraction
 
 
 class StateActionMask:
@@ -87,10 +105,12 @@ class StateActionMask:
 class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     """Hide the reward of unlabelled transitions.
 
-    :param env: the env to mask. In ``"state-action"`` mode both spaces must be ``Discrete``.
+    :param env: the env to mask. In ``"state-action"`` mode both spaces must be ``Discrete``; in
+        ``"key"`` mode ``env.get_wrapper_attr("state_key")()`` must name the current state.
     :param label_fraction: share of labelled keys (state-action mode) or probability that a step
         is revealed (transition mode), in (0, 1].
-    :param mode: ``"state-action"`` or ``"transition"``.
+    :param mode: ``"state-action"``, ``"transition"`` or ``"key"``. In key mode ``info["state_key"]``
+        holds the key of the state a step started from.
     :param mask_seed: seed of the mask, independent of the seed passed to ``reset``.
     :param monitored_states: state-action mode: bool (n_states,), states whose every reward is
         revealed (a monitor); ``label_fraction`` is then the share of the other keys.
@@ -140,14 +160,17 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed,
                 monitored_states,
             )  # fmt: skip
+        self._state_key = env.get_wrapper_attr("state_key") if mode == "key" else None
         self._mask_seed = mask_seed
         self._reveal_rng = np.random.default_rng(mask_seed)
-        self._state: int | None = None
+        self._state: Any = None
         self._episode_step = 0
 
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self._state = obs if self.mode == "state-action" else None
+        if self._state_key is not None:
+            self._state = self._state_key()
         self._episode_step = 0
         if kwargs.get("seed") is not None:
             # A seeded reset replays the same reveals too, as gymnasium's determinism contract asks.
@@ -159,6 +182,10 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if self.mask is not None:
             observed = (int(self._state), int(action)) in self.mask
             self._state = obs
+        elif self._state_key is not None:
+            observed = key_is_labelled(self._state, action, self.label_fraction, self._mask_seed)
+            info = dict(info, state_key=self._state)
+            self._state = self._state_key()
         else:  # the monitored first steps draw nothing, so reveal_first_steps=0 keeps every draw
             monitored = self._episode_step < self.reveal_first_steps
             observed = monitored or bool(self._reveal_rng.random() < self.label_fraction)

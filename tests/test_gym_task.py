@@ -15,12 +15,19 @@ import numpy as np
 import pytest
 import stable_baselines3
 
-from dospcot.envs.gym_sensors import ObservationSensors, dotted_path, make_masked_gym
+from dospcot.envs.gym_sensors import (
+    ObservationSensors,
+    dotted_path,
+    make_gym_env,
+    make_masked_gym,
+    minigrid_state_key,
+)
+from dospcot.envs.masking import key_is_labelled
 from dospcot.gym_task import gym_config, train_env
 from dospcot.run_folder import RunFolderError
 from dospcot.train import build_run, evaluate, resume
 from dospcot.train_config import ConfigError, load_config
-from dospcot.transition_cotraining import TransitionCoTraining
+from dospcot.transition_cotraining import KeyedStepStore, TransitionCoTraining
 
 LENGTH = 10
 
@@ -72,6 +79,15 @@ def one_number_then_two(obs: dict[str, np.ndarray]) -> np.ndarray:
 
 def failing_view(obs: dict[str, np.ndarray]) -> np.ndarray:
     raise KeyError("lidar")
+
+
+def corridor_cell(env: Corridor) -> int:
+    """The corridor's state key: the agent's cell."""
+    return env.pos
+
+
+def unhashable_key(env: Corridor) -> list[int]:
+    return [env.pos]
 
 
 SETTINGS = {
@@ -179,10 +195,14 @@ def minigrid_direction(obs: dict[str, np.ndarray]) -> np.ndarray:
     return np.concatenate([np.eye(4)[obs["direction"]], obs["image"][..., 0].ravel() / 10])
 
 
-@pytest.mark.parametrize("task", ["corridor", "minigrid"])
+# Single-step labels on MiniGrid, (state key, action) labels on the corridor.
+@pytest.mark.parametrize("task", ["corridor-keyed", "minigrid"])
 def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(task):
     settings = {**SETTINGS, "training.rounds": 2, "training.steps_per_round": 600}
     env, views, fraction = make_corridor, VIEWS, 0.1
+    if task == "corridor-keyed":
+        settings["gym.state_key"] = dotted_path(corridor_cell, "key")
+        fraction = 0.3  # 18 (cell, action) pairs: a few labelled
     if task == "minigrid":
         pytest.importorskip("minigrid")
         env, views = "minigrid:MiniGrid-LavaGapS7-v0", {"image": "image", "direction": minigrid_direction}
@@ -190,7 +210,7 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
     cfg = gym_config(env, views, label_fraction=fraction, settings=settings)
     plain = build_run(cfg)
     plain.run()
-    make = partial(make_masked_gym, cfg.gym.env_id, view_specs=cfg.gym.views)
+    make = partial(make_masked_gym, cfg.gym.env_id, view_specs=cfg.gym.views, state_key=cfg.gym.state_key)
     scrambled = TransitionCoTraining(
         lambda *args: _ScrambledHiddenReward(make(*args)), plain.spec, plain.config
     )
@@ -224,6 +244,8 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
         ('agent="tabular"', "agent: 'tabular' needs a discrete task"),
         ("gym.episode_steps=0", "episode_steps, reward_classes and eval_episodes must be >= 1"),
         ("env={size=8}", 'env: a task = "gym" run does not read the [env] section'),
+        ('gym.state_key="test_gym_task:unhashable_key"', "gym.state_key returned an unhashable list ([0])"),
+        ('gym.state_key="cell"', "gym.state_key: 'cell' is neither one of ['minigrid'] nor a dotted path"),
     ],
 )
 def test_bad_gym_input_fails_with_one_line(tmp_path, override, message):
@@ -258,3 +280,54 @@ def test_the_readme_example_runs_as_it_stands_and_its_agents_reach_the_goal(tmp_
 def test_a_lambda_cannot_be_saved_in_a_config():
     with pytest.raises(ValueError, match="cannot be named by a dotted path: define it at the top level"):
         gym_config(make_corridor, {"onehot": lambda obs: obs["onehot"]})
+
+
+def test_a_keyed_pool_holds_each_state_action_pair_once_labelled_for_every_visit_or_none():
+    settings = {**SETTINGS, "training.rounds": 1, "gym.state_key": dotted_path(corridor_cell, "key")}
+    cfg = gym_config(make_corridor, VIEWS, label_fraction=0.3, seed=3, settings=settings)
+    run = build_run(cfg)
+    run.run()
+    store = run.store
+    assert isinstance(store, KeyedStepStore)
+    # 9 cells to act in (the last ends the episode) x 2 actions, each pair one sample.
+    assert sorted(store.ids) == [(cell, a) for cell in range(LENGTH - 1) for a in range(2)]
+    assert len(store) == 18 and sorted(store.ids.values()) == list(range(18))
+    for (cell, action), n in store.ids.items():
+        # Both agents' envs share the run's mask: the pair is labelled as the hash says.
+        assert store.labelled[n] == key_is_labelled(cell, action, 0.3, cfg.seed)
+        assert store.action[n] == action
+        assert store.hidden_reward[n] == float(cell == LENGTH - 2 and action == 1)
+        np.testing.assert_array_equal(store.rows["onehot"][store.state_row[n]], np.eye(LENGTH)[cell])
+    assert 0 < store.labelled[:18].sum() < 18
+
+
+def test_the_key_mask_labels_a_share_of_pairs_the_same_way_in_every_process():
+    labelled = [key_is_labelled((x, "door"), a, 0.1, seed=7) for x in range(5000) for a in range(4)]
+    assert 0.09 < np.mean(labelled) < 0.11
+    assert key_is_labelled((12, "door"), 2, 0.1, seed=7) == labelled[12 * 4 + 2]
+    other = [key_is_labelled((x, "door"), a, 0.1, seed=8) for x in range(5000) for a in range(4)]
+    assert labelled != other
+    # repr-based, not hash(): the same in a fresh process with another PYTHONHASHSEED.
+    code = (
+        "from dospcot.envs.masking import key_is_labelled as f; "
+        "print([f(('k', x), 1, 0.5, 3) for x in range(20)])"
+    )
+    fresh = subprocess.run(
+        [sys.executable, "-c", code],
+        capture_output=True,
+        text=True,
+        check=True,
+        env={"PYTHONHASHSEED": "123"},
+    )
+    assert fresh.stdout.strip() == str([key_is_labelled(("k", x), 1, 0.5, 3) for x in range(20)])
+
+
+def test_the_minigrid_state_key_names_the_agents_cell_direction_load_and_doors():
+    pytest.importorskip("minigrid")
+    env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
+    env.reset(seed=0)
+    cell, direction, held, doors = minigrid_state_key(env.unwrapped)
+    assert cell == tuple(int(v) for v in env.unwrapped.agent_pos) and direction == env.unwrapped.agent_dir
+    assert held is None and doors == ((False, True),)  # one locked door
+    env.step(0)  # turn left
+    assert minigrid_state_key(env.unwrapped)[1] == (direction - 1) % 4
