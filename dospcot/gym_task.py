@@ -20,7 +20,7 @@ Example (CartPole, two views: the whole state, and the pole alone)::
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Hashable, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -44,6 +44,7 @@ def gym_config(
     agent: str = "dqn",
     seed: int = 0,
     label_fraction: float = 0.1,
+    state_key: str | Callable[[gym.Env], Hashable] | None = None,
     name: str = "gym",
     settings: Mapping[str, Any] | None = None,
 ) -> TrainConfig:
@@ -54,7 +55,10 @@ def gym_config(
     :param method: ``cotrain`` (DOSPCoT), ``oracle``, ``masked-zero`` or ``labels-only``.
     :param agent: every agent's kind: ``dqn`` or ``esarsa_dqn``.
     :param seed: the run's seed.
-    :param label_fraction: the share of steps whose reward is revealed, in (0, 1].
+    :param label_fraction: the share of steps (with ``state_key``: of (state, action) pairs) whose
+        reward is revealed, in (0, 1].
+    :param state_key: a module-level function of the unwrapped env that names its state by a hashable
+        key, or ``"minigrid"``; the pool then holds (key, action) pairs, as on the grid.
     :param name: the run's name (its folder under the runs root).
     :param settings: any other config key by its dotted name, e.g. ``{"training.rounds": 3,
         "gym.episode_steps": 500, "dqn.learning_rate": 5e-4}``.
@@ -68,6 +72,10 @@ def gym_config(
         "name": name, "seed": seed, "method": method, "agent": agent, "task": "gym", "views": list(specs),
         "gym": {"env_id": env_id, "views": specs}, "training": {"label_fraction": label_fraction},
     }  # fmt: skip
+    if state_key is not None:
+        data["gym"]["state_key"] = (
+            state_key if isinstance(state_key, str) else dotted_path(state_key, "state_key")
+        )
     for key, value in (settings or {}).items():
         *sections, leaf = key.split(".")
         table = data

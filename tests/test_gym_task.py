@@ -283,8 +283,10 @@ def test_a_lambda_cannot_be_saved_in_a_config():
 
 
 def test_a_keyed_pool_holds_each_state_action_pair_once_labelled_for_every_visit_or_none():
-    settings = {**SETTINGS, "training.rounds": 1, "gym.state_key": dotted_path(corridor_cell, "key")}
-    cfg = gym_config(make_corridor, VIEWS, label_fraction=0.3, seed=3, settings=settings)
+    settings = {**SETTINGS, "training.rounds": 1}
+    cfg = gym_config(
+        make_corridor, VIEWS, label_fraction=0.3, seed=3, state_key=corridor_cell, settings=settings
+    )
     run = build_run(cfg)
     run.run()
     store = run.store
