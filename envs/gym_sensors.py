@@ -10,7 +10,9 @@ A view is named in a config by one of (:func:`resolve_view`):
 - ``"observation"``: the whole observation, flattened (:data:`VIEW_REGISTRY`; a ``Discrete`` one
   one-hot);
 - a key of a ``Dict`` observation space, e.g. ``"image"``: that entry, flattened;
-- a dotted path ``"package.module:function"``: the function, imported when the env is built.
+- a dotted path ``"package.module:function"``: the function, imported when the env is built;
+- ``"minigrid.full"``, ``"minigrid.position"``: MiniGrid's map and the agent's pose, read from the env
+  (:mod:`dospcot.envs.minigrid_views`).
 
 An env is named by a registered gymnasium id, or by a dotted path to a function that returns the env
 (:func:`make_gym_env`). Wrappers are gymnasium's by class name (``"FlattenObservation"``) or any
@@ -27,6 +29,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from dospcot.envs import minigrid_views
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.sensors import SensorViewWrapper
 
@@ -36,18 +39,7 @@ StateKeyFn = Callable[[gym.Env], Hashable]
 """A state key: the unwrapped env in, a hashable name of its current state out."""
 
 
-def minigrid_state_key(env: gym.Env) -> Hashable:
-    """A MiniGrid state's key: the agent's cell and direction, what it carries, and every door's
-    state (open, locked) in grid order: everything a MiniGrid step's outcome depends on but the step
-    count (the goal pays ``1 - 0.9 t / T``)."""
-    doors = tuple(
-        (cell.is_open, cell.is_locked) for cell in env.grid.grid if cell is not None and cell.type == "door"
-    )
-    held = None if env.carrying is None else (env.carrying.type, env.carrying.color)
-    return (tuple(int(v) for v in env.agent_pos), int(env.agent_dir), held, doors)
-
-
-STATE_KEYS: dict[str, StateKeyFn] = {"minigrid": minigrid_state_key}
+STATE_KEYS: dict[str, StateKeyFn] = {"minigrid": minigrid_views.state_key}
 """State keys by name (a config may also name a function by its dotted path)."""
 
 VIEW_REGISTRY: dict[str, Callable[[gym.Space], ViewFn]] = {
@@ -90,11 +82,16 @@ def dotted_path(obj: Any, what: str) -> str:
     return path
 
 
-def resolve_view(spec: str, observation_space: gym.Space, name: str) -> ViewFn:
-    """The view function that ``spec`` names for an env with ``observation_space``
-    (:data:`VIEW_REGISTRY` name, ``Dict`` key or dotted path; see the module docstring)."""
+def resolve_view(spec: str, env: gym.Env, name: str) -> ViewFn:
+    """The view function that ``spec`` names for ``env`` (a :data:`VIEW_REGISTRY` name, a view of
+    :data:`~dospcot.envs.minigrid_views.ENV_VIEWS`, a ``Dict`` key or a dotted path; see the module
+    docstring)."""
+    observation_space = env.observation_space
     if spec in VIEW_REGISTRY:
         return VIEW_REGISTRY[spec](observation_space)
+    if spec in minigrid_views.ENV_VIEWS:
+        read = minigrid_views.ENV_VIEWS[spec]
+        return lambda obs: read(env.unwrapped)
     if ":" in spec:
         fn = import_dotted(spec, f"gym.views.{name}")
         if not callable(fn):
@@ -106,12 +103,16 @@ def resolve_view(spec: str, observation_space: gym.Space, name: str) -> ViewFn:
         keys = ", ".join(observation_space.spaces)
         raise ValueError(
             f"gym.views.{name}: {spec!r} is not a key of the observation ({keys}), a dotted path "
-            f"'module:function' or one of {sorted(VIEW_REGISTRY)}"
+            f"'module:function' or one of {_named_views()}"
         )
     raise ValueError(
         f"gym.views.{name}: {spec!r} is neither a dotted path 'module:function' nor one of "
-        f"{sorted(VIEW_REGISTRY)} (the observation is not a Dict, so keys do not apply)"
+        f"{_named_views()} (the observation is not a Dict, so keys do not apply)"
     )
+
+
+def _named_views() -> str:
+    return ", ".join([*VIEW_REGISTRY, *minigrid_views.ENV_VIEWS])
 
 
 def require_discrete_actions(env: gym.Env) -> None:
@@ -274,7 +275,7 @@ def check_gym_task(
     env = make_gym_env(env_id, env_kwargs, wrappers)
     try:
         require_discrete_actions(env)
-        fns = {name: resolve_view(spec, env.observation_space, name) for name, spec in view_specs.items()}
+        fns = {name: resolve_view(spec, env, name) for name, spec in view_specs.items()}
         ObservationSensors(env, fns, resolve_state_key(state_key) if state_key else None)
     finally:
         env.close()
@@ -309,7 +310,7 @@ def make_masked_gym(
     if unknown:
         raise ValueError(f"unknown view(s) {unknown}; allowed: {', '.join(view_specs)}")
     env = make_gym_env(env_id, env_kwargs, wrappers)
-    fns = {name: resolve_view(view_specs[name], env.observation_space, name) for name in views}
+    fns = {name: resolve_view(view_specs[name], env, name) for name in views}
     sensors = ObservationSensors(env, fns, resolve_state_key(state_key) if state_key else None)
     mask = RewardMaskWrapper(
         sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed
@@ -326,7 +327,6 @@ __all__ = [
     "import_dotted",
     "make_gym_env",
     "make_masked_gym",
-    "minigrid_state_key",
     "resolve_state_key",
     "resolve_view",
 ]

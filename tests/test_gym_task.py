@@ -15,12 +15,12 @@ import numpy as np
 import pytest
 import stable_baselines3
 
+from dospcot.envs import minigrid_views
 from dospcot.envs.gym_sensors import (
     ObservationSensors,
     dotted_path,
     make_gym_env,
     make_masked_gym,
-    minigrid_state_key,
 )
 from dospcot.envs.masking import key_is_labelled
 from dospcot.gym_task import gym_config, train_env
@@ -328,8 +328,25 @@ def test_the_minigrid_state_key_names_the_agents_cell_direction_load_and_doors()
     pytest.importorskip("minigrid")
     env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
     env.reset(seed=0)
-    cell, direction, held, doors = minigrid_state_key(env.unwrapped)
+    cell, direction, held, doors = minigrid_views.state_key(env.unwrapped)
     assert cell == tuple(int(v) for v in env.unwrapped.agent_pos) and direction == env.unwrapped.agent_dir
     assert held is None and doors == ((False, True),)  # one locked door
     env.step(0)  # turn left
-    assert minigrid_state_key(env.unwrapped)[1] == (direction - 1) % 4
+    assert minigrid_views.state_key(env.unwrapped)[1] == (direction - 1) % 4
+
+
+def test_the_minigrid_views_read_the_map_and_the_agents_pose():
+    minigrid = pytest.importorskip("minigrid")
+    views = {"full": "minigrid.full", "pose": "minigrid.position", "ahead": "image"}
+    env = make_masked_gym("minigrid:MiniGrid-DoorKey-5x5-v0", "full", tuple(views), 1.0, view_specs=views)
+    _, info = env.reset(seed=0)
+    unwrapped = env.unwrapped
+    # The full view is what MiniGrid's own FullyObsWrapper observes.
+    fully = minigrid.wrappers.FullyObsWrapper(gym.make("MiniGrid-DoorKey-5x5-v0"))
+    np.testing.assert_array_equal(info["views"]["full"], fully.reset(seed=0)[0]["image"].ravel())
+    x, y = unwrapped.agent_pos
+    expected = np.concatenate([np.eye(5)[x], np.eye(5)[y], np.eye(4)[unwrapped.agent_dir]])
+    np.testing.assert_array_equal(info["views"]["pose"], expected)
+    assert info["views"]["ahead"].shape == (7 * 7 * 3,)
+    _, _, _, _, info = env.step(1)  # turn right: the pose follows
+    assert info["views"]["pose"][10 + (unwrapped.agent_dir)] == 1.0
