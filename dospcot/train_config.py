@@ -172,7 +172,7 @@ class GymConfig:
     :param max_return: the best return an evaluation episode can reach, ``R_max`` of the normalised
         score; ``inf`` (the default): not known, and the normalised score is NaN.
     :param state_key: names each state by a hashable key: ``"minigrid"`` (the agent's cell and
-        direction, what it carries, the doors) or a dotted path to a function of the unwrapped env.
+        direction, what it carries, the map) or a dotted path to a function of the unwrapped env.
         The pool then holds (state key, action) pairs, each labelled with probability
         ``training.label_fraction`` for all its visits, as on the grid; empty: single steps.
     """

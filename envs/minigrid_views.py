@@ -41,14 +41,12 @@ def position(env: gym.Env) -> np.ndarray:
 
 
 def state_key(env: gym.Env) -> Hashable:
-    """A MiniGrid state's key: the agent's cell and direction, what it carries, and every door's
-    state (open, locked) in grid order: everything a step's outcome depends on but the step count
-    (the goal pays ``1 - 0.9 t / T``)."""
-    doors = tuple(
-        (cell.is_open, cell.is_locked) for cell in env.grid.grid if cell is not None and cell.type == "door"
-    )
+    """A MiniGrid state's key: the agent's cell and direction, what it carries, and the map's encoding
+    (walls, lava, doors open or locked, keys still lying), everything a step's outcome depends on but
+    the step count (the goal pays ``1 - 0.9 t / T``). The map is part of the key because most MiniGrid
+    tasks draw a new one every episode (LavaGap's gap, DoorKey's door and key)."""
     held = None if env.carrying is None else (env.carrying.type, env.carrying.color)
-    return (tuple(int(v) for v in env.agent_pos), int(env.agent_dir), held, doors)
+    return (tuple(int(v) for v in env.agent_pos), int(env.agent_dir), held, env.grid.encode().tobytes())
 
 
 ENV_VIEWS: dict[str, Callable[[gym.Env], np.ndarray]] = {

@@ -324,15 +324,21 @@ def test_the_key_mask_labels_a_share_of_pairs_the_same_way_in_every_process():
     assert fresh.stdout.strip() == str([key_is_labelled(("k", x), 1, 0.5, 3) for x in range(20)])
 
 
-def test_the_minigrid_state_key_names_the_agents_cell_direction_load_and_doors():
+def test_the_minigrid_state_key_names_the_agents_pose_load_and_map():
     pytest.importorskip("minigrid")
     env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
     env.reset(seed=0)
-    cell, direction, held, doors = minigrid_views.state_key(env.unwrapped)
+    cell, direction, held, grid = minigrid_views.state_key(env.unwrapped)
     assert cell == tuple(int(v) for v in env.unwrapped.agent_pos) and direction == env.unwrapped.agent_dir
-    assert held is None and doors == ((False, True),)  # one locked door
-    env.step(0)  # turn left
-    assert minigrid_views.state_key(env.unwrapped)[1] == (direction - 1) % 4
+    assert held is None and grid == env.unwrapped.grid.encode().tobytes()
+    env.step(0)  # turn left: only the direction changes
+    assert minigrid_views.state_key(env.unwrapped)[1:] == ((direction - 1) % 4, None, grid)
+    # Another episode draws another map: the same pose is another state.
+    maps = set()
+    for seed in range(5):
+        env.reset(seed=seed)
+        maps.add(minigrid_views.state_key(env.unwrapped)[3])
+    assert len(maps) > 1
 
 
 def test_the_minigrid_views_read_the_map_and_the_agents_pose():
