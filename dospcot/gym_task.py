@@ -32,8 +32,8 @@ from dospcot.train import train
 from dospcot.train_config import TrainConfig, from_mapping
 
 ViewSpec = str | Callable[[Any], Any]
-"""A view: a function of the observation (defined at module level), or a name: ``"observation"`` or
-a key of a ``Dict`` observation."""
+"""A view: a function of the observation (defined at module level), or a name: ``"observation"``, a
+key of a ``Dict`` observation, or on MiniGrid ``"minigrid.full"`` / ``"minigrid.position"``."""
 
 
 def gym_config(

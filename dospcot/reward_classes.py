@@ -62,7 +62,7 @@ class QuantileRewardClasses(_ClassValues):
     bins follow the labels as more arrive. Duplicate edges (a reward that fills several quantiles)
     merge their bins, so a run may have fewer than K classes. Two cases keep a rare reward apart from
     a common one: labels of at most K distinct values (a sparse goal reward, 0 or 1) get one class per
-    value, and a quantile at the smallest labelled value moves up to the next one. The interface matches
+    value, and a quantile below the second-smallest labelled value moves up to it. The interface matches
     :class:`RewardClasses` with one run: ``values`` is (1, K).
 
     :param n_classes: K.
@@ -88,10 +88,10 @@ class QuantileRewardClasses(_ClassValues):
             self.edges = distinct[1:]
         else:
             quantiles = np.quantile(rewards, np.arange(1, n_classes) / n_classes)
-            # A quantile at the minimum would leave its bin empty. Where the reward mostly takes its
-            # smallest value (0 but for a rare goal reward) it moves up to the next labelled value,
-            # so the rare rewards keep a class apart from the common one.
-            self.edges = np.unique(np.where(quantiles > distinct[0], quantiles, distinct[1]))
+            # A quantile at or just above the minimum would leave a bin empty. Where the reward mostly
+            # takes its smallest value (0 but for a rare goal reward) such quantiles move up to the
+            # next labelled value, so the rare rewards keep a class apart from the common one.
+            self.edges = np.unique(np.maximum(quantiles, distinct[1]))
         bins = np.searchsorted(self.edges, rewards, side="right")
         for c in range(self.edges.size + 1):
             self.values[0, c] = rewards[bins == c].mean()

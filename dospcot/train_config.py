@@ -197,6 +197,9 @@ class GymConfig:
         for name, spec in self.views.items():
             if not isinstance(spec, str):
                 raise ValueError(f"views.{name}: expected a string (a key, a dotted path), got {spec!r}")
+        for name, value in self.env_kwargs.items():
+            if value is None:  # TOML has no null: the run's config.toml could not hold it
+                raise ValueError(f"env_kwargs.{name}: None cannot be saved in a config; leave the key out")
 
 
 DQN_DEFAULTS: dict[str, Any] = {

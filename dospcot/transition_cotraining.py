@@ -5,18 +5,22 @@ The round itself is :class:`~dospcot.cotraining_round.CoTrainingRun`'s; this ada
 a continuous task does differently (docs/design.md section 3):
 
 - **the store**: a state is a sensor reading that never repeats exactly, so every stored step is one
-  pool sample, with every view of s and s' (:class:`StepStore`; each reading stored once);
-- **the pool**: every step, its classifier input under view j being (view j of s, one-hot action,
-  view j of s'); the continuous reward is binned into K quantile classes of the labels
-  (:class:`~dospcot.reward_classes.QuantileRewardClasses`), and an admitted step's reward is the mean
-  of its consensus bin;
+  pool sample, with every view of s and s' (:class:`StepStore`; each reading stored once); an env
+  that names its states (a state key, ``TransitionConfig.keyed``) pools (key, action) pairs instead
+  (:class:`KeyedStepStore`);
+- **the pool**: every sample, its classifier input under view j being (view j of s, one-hot action,
+  view j of s'); the reward is binned into K classes of the labels
+  (:class:`~dospcot.reward_classes.QuantileRewardClasses`), and an admitted sample's reward is the
+  mean of its consensus class;
 - **the evaluator**: greedy evaluation episodes (below).
 
 Policies are measured by greedy evaluation episodes on unmasked copies of the task: the mean true
-return, the share of episodes that last their whole duration (no crash) and the normalised score
+return, the share of successful episodes (on a highway those that last their whole duration, no
+crash; elsewhere those whose return exceeds ``success_return``) and the normalised score
 ``(R - R_random) / (R_max - R_random)``, where ``R_random`` is a uniformly random policy's return on
-the same evaluation seeds and ``R_max`` the number of evaluation steps (every reward of highway-env's
-normalised reward is at most 1). There is no exact optimum, so no optimal-action agreement (NaN).
+the same evaluation seeds and ``R_max`` the number of evaluation steps on a highway (every reward of
+highway-env's normalised reward is at most 1) or ``max_return`` (NaN where it is not known). There is
+no exact optimum, so no optimal-action agreement (NaN).
 """
 
 from __future__ import annotations
@@ -67,6 +71,11 @@ class StepStore(InPlaceState):
     def __len__(self) -> int:
         return self._n
 
+    @property
+    def n_rows(self) -> int:
+        """The state readings stored (each view once per reading)."""
+        return self._n_rows
+
     def add_row(self, views: dict[str, np.ndarray]) -> int:
         """Store one state reading (every view); return its row."""
         if self._n_rows == len(next(iter(self.rows.values()))):
@@ -103,6 +112,10 @@ class StepStore(InPlaceState):
         self._n += 1
         return n
 
+    def is_new(self, key: Hashable, action: int) -> bool:
+        """Whether a step of ``action`` from the state named ``key`` starts a new sample: always here."""
+        return True
+
     def features(self, view: str, n_actions: int) -> np.ndarray:
         """(len, 2 d + A) float32: view of s, one-hot action, view of s' of every step."""
         rows, n = self.rows[view], self._n
@@ -112,9 +125,11 @@ class StepStore(InPlaceState):
 
 class KeyedStepStore(StepStore):
     """A :class:`StepStore` whose samples are (state key, action) pairs, as on the grid: every visit of
-    a pair returns the pair's id, so the pool holds each pair once and every stored step of it reads
-    the same pseudo-reward. A pair keeps the rows (views of s and s') of its first visit; its label is
-    the reward of its latest revealed visit, its hidden reward its latest (metrics only).
+    a pair returns the pair's id, so the pool holds each pair once. The mask labels a pair for all its
+    visits or none (mode ``"key"``): a labelled pair's steps train on their own revealed rewards, an
+    unlabelled pair's steps all read the pair's pseudo-reward. A pair keeps the views of s and s' of
+    its first visit (later visits store none); its label is the reward of its latest visit, its hidden
+    reward its latest (metrics only).
 
     :param view_shapes: the shape of each view, by name.
     """
@@ -134,14 +149,19 @@ class KeyedStepStore(StepStore):
         hidden: float,
         key: Hashable = None,
     ) -> int:
-        """Record a visit of the pair (``key``, ``action``); return the pair's id."""
+        """Record a visit of the pair (``key``, ``action``); return the pair's id. The rows are read on
+        the pair's first visit only."""
         n = self.ids.get((key, action))
         if n is None:
             n = self.ids[key, action] = super().add(state_row, action, next_row, observed, reward, hidden)
-        elif observed:
-            self.labelled[n], self.label_value[n] = True, reward
+            return n
+        if observed:  # the mask labels every visit of a pair or none
+            self.label_value[n] = reward
         self.hidden_reward[n] = hidden
         return n
+
+    def is_new(self, key: Hashable, action: int) -> bool:
+        return (key, action) not in self.ids
 
 
 def _grow(array: np.ndarray, extra: int) -> np.ndarray:
@@ -156,21 +176,29 @@ class SensorStoreWrapper(gym.Wrapper):
         super().__init__(env)
         self.store = store
         self._row = -1
+        self._views: dict[str, np.ndarray] = {}
 
     def reset(self, **kwargs: Any):
         obs, info = self.env.reset(**kwargs)
-        self._row = self.store.add_row(info["views"])
+        self._views, self._row = info["views"], -1  # stored by the first step that needs them
         return obs, info
 
     def step(self, action: Any):
         obs, reward, terminated, truncated, info = self.env.step(action)
-        next_row = self.store.add_row(info["views"])
+        key, views = info.get("state_key"), info["views"]
+        # A step stores views only when it starts a new sample (a keyed pair keeps its first visit's);
+        # consecutive new samples share the row between them.
+        if self.store.is_new(key, int(action)):
+            state_row = self._row if self._row >= 0 else self.store.add_row(self._views)
+            next_row = self.store.add_row(views)
+        else:
+            state_row = next_row = -1
         info = dict(info)
         info["store_id"] = self.store.add(
-            self._row, int(action), next_row, info["reward_observed"], float(reward), info["hidden_reward"],
-            key=info.get("state_key"),
+            state_row, int(action), next_row, info["reward_observed"], float(reward), info["hidden_reward"],
+            key=key,
         )  # fmt: skip
-        self._row = next_row
+        self._views, self._row = views, next_row
         return obs, reward, terminated, truncated, info
 
 

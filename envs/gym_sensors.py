@@ -150,7 +150,7 @@ class ObservationSensors(gym.Wrapper):
     :param env: the env.
     :param views: the view functions, by name.
     :param state_key: a function of the unwrapped env that names its current state by a hashable key
-        (read by :class:`~dospcot.envs.RewardMaskWrapper` in ``"key"`` mode as :meth:`state_key`);
+        (read by :class:`~dospcot.envs.RewardMaskWrapper` in ``"key"`` mode through :meth:`state_key`);
         None: the states have no names.
     """
 
@@ -163,18 +163,27 @@ class ObservationSensors(gym.Wrapper):
             raise ValueError("need at least one view")
         self._fns = dict(views)
         self._key_fn = state_key
-        self._obs, _ = env.reset(seed=0)
+        try:
+            self._obs, _ = env.reset(seed=0)
+        except Exception as err:  # a user's env may raise anything
+            raise ValueError(f"the env's reset failed: {type(err).__name__}: {err}") from None
         self._spaces = {
             name: gym.spaces.Box(-np.inf, np.inf, self._read(name).shape, np.float32) for name in self._fns
         }
         if state_key is not None:
             self.state_key()  # an unhashable key fails here, before anything trains
 
-    def state_key(self) -> Hashable:
-        """The key of the current state."""
+    def state_key(self) -> str:
+        """The current state's name: the ``repr`` of its key. Keys are told apart by their ``repr``
+        (the mask hashes it, :func:`~dospcot.envs.masking.key_is_labelled`), so the store and the mask
+        always agree: ``3`` and ``3.0`` are two states, and a key should be a tuple of plain values
+        (ints, strings, bytes) whose ``repr`` is the same in every process, unlike a set's."""
         if self._key_fn is None:
             raise ValueError("this env has no state key")
-        key = self._key_fn(self.env.unwrapped)
+        try:
+            key = self._key_fn(self.env.unwrapped)
+        except Exception as err:  # a user's function may raise anything
+            raise ValueError(f"gym.state_key failed on the env: {type(err).__name__}: {err}") from None
         try:
             hash(key)
         except TypeError:
@@ -182,7 +191,7 @@ class ObservationSensors(gym.Wrapper):
                 f"gym.state_key returned an unhashable {type(key).__name__} ({key!r}); a key must be "
                 "hashable, best a tuple of plain values"
             ) from None
-        return key
+        return repr(key)
 
     def _read(self, name: str) -> np.ndarray:
         try:
@@ -231,7 +240,10 @@ def make_gym_env(
     if factory is not None:
         if not callable(factory):
             raise ValueError(f"gym.env_id: {env_id!r} is neither a registered env id nor callable")
-        env = factory(**kwargs)
+        try:
+            env = factory(**kwargs)
+        except TypeError as err:  # an env_kwargs key the function does not take
+            raise ValueError(f"gym.env_kwargs: {err}") from None
         if not isinstance(env, gym.Env):
             raise ValueError(f"gym.env_id: {env_id!r} returned a {type(env).__name__}, not a gymnasium Env")
     else:
@@ -250,7 +262,10 @@ def make_gym_env(
                 f"gym.wrappers: gymnasium.wrappers has no {wrapper!r}; name another wrapper by its "
                 "dotted path 'module:Class'"
             )
-        env = cls(env)
+        try:
+            env = cls(env)
+        except TypeError as err:  # a wrapper that needs more than the env
+            raise ValueError(f"gym.wrappers: {wrapper} cannot wrap the env by itself ({err})") from None
     return env
 
 
@@ -298,8 +313,9 @@ def make_masked_gym(
     :param env_id: a registered gymnasium id, or a dotted path to a function returning the env.
     :param view: the view the agent observes.
     :param views: every view recorded in ``info["views"]``.
-    :param label_fraction: probability that a step's reward is revealed, in (0, 1].
-    :param mask_seed: seed of the reveal draws.
+    :param label_fraction: probability that a step's reward is revealed (with ``state_key``: that a
+        (state, action) pair's is, for all its visits), in (0, 1].
+    :param mask_seed: seed of the reveal draws (with ``state_key``: of the pairs' hash).
     :param view_specs: what each view name means (:func:`resolve_view`).
     :param env_kwargs: keyword arguments of the env.
     :param wrappers: wrappers applied to the env before the views read it.

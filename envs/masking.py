@@ -107,8 +107,8 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     :param env: the env to mask. In ``"state-action"`` mode both spaces must be ``Discrete``; in
         ``"key"`` mode ``env.get_wrapper_attr("state_key")()`` must name the current state.
-    :param label_fraction: share of labelled keys (state-action mode) or probability that a step
-        is revealed (transition mode), in (0, 1].
+    :param label_fraction: share of labelled keys (state-action mode), probability that a step is
+        revealed (transition mode) or that a (state key, action) pair is (key mode), in (0, 1].
     :param mode: ``"state-action"``, ``"transition"`` or ``"key"``. In key mode ``info["state_key"]``
         holds the key of the state a step started from.
     :param mask_seed: seed of the mask, independent of the seed passed to ``reset``.

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import pickle
 import subprocess
 import sys
 from functools import partial
@@ -134,7 +135,7 @@ net_arch = [32, 32]
     return path
 
 
-def test_a_toy_env_co_trains_from_python_and_its_run_folder_resumes_and_evaluates(tmp_path):
+def test_a_toy_env_co_trains_from_python_and_its_run_folder_evaluates(tmp_path):
     run_dir = train_env(
         make_corridor, VIEWS, runs_dir=tmp_path, label_fraction=0.1, settings=SETTINGS, show_progress=False
     )
@@ -173,6 +174,9 @@ def test_success_counts_returns_above_the_threshold_and_the_score_needs_a_max_re
     assert np.all(policy["success"] == 0.0)  # no episode returns more than 1
     assert np.all(np.isnan(policy["normalised_score"]))  # R_max unknown
     assert np.all(np.isnan(policy["agreement"]))
+    # Every episode returns 0 or 1, so above -1 each one is a success.
+    run = build_run(gym_config(make_corridor, VIEWS, settings={**SETTINGS, "gym.success_return": -1.0}))
+    assert np.all(run.evaluate_policies()["success"] == 1.0)
 
 
 class _ScrambledHiddenReward(gym.Wrapper):
@@ -246,6 +250,8 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
         ("env={size=8}", 'env: a task = "gym" run does not read the [env] section'),
         ('gym.state_key="test_gym_task:unhashable_key"', "gym.state_key returned an unhashable list ([0])"),
         ('gym.state_key="cell"', "gym.state_key: 'cell' is neither one of ['minigrid'] nor a dotted path"),
+        ('gym.state_key="minigrid"', "gym.state_key failed on the env: AttributeError"),
+        ('gym.wrappers=["TimeLimit"]', "gym.wrappers: TimeLimit cannot wrap the env by itself"),
     ],
 )
 def test_bad_gym_input_fails_with_one_line(tmp_path, override, message):
@@ -291,16 +297,36 @@ def test_a_keyed_pool_holds_each_state_action_pair_once_labelled_for_every_visit
     run.run()
     store = run.store
     assert isinstance(store, KeyedStepStore)
-    # 9 cells to act in (the last ends the episode) x 2 actions, each pair one sample.
-    assert sorted(store.ids) == [(cell, a) for cell in range(LENGTH - 1) for a in range(2)]
+    # 9 cells to act in (the last ends the episode) x 2 actions, each pair one sample; keys by repr.
+    assert sorted(store.ids) == sorted((repr(cell), a) for cell in range(LENGTH - 1) for a in range(2))
     assert len(store) == 18 and sorted(store.ids.values()) == list(range(18))
-    for (cell, action), n in store.ids.items():
-        # Both agents' envs share the run's mask: the pair is labelled as the hash says.
-        assert store.labelled[n] == key_is_labelled(cell, action, 0.3, cfg.seed)
+    for (key, action), n in store.ids.items():
+        cell = int(key)
+        assert store.labelled[n] == key_is_labelled(key, action, 0.3, cfg.seed)
         assert store.action[n] == action
         assert store.hidden_reward[n] == float(cell == LENGTH - 2 and action == 1)
         np.testing.assert_array_equal(store.rows["onehot"][store.state_row[n]], np.eye(LENGTH)[cell])
     assert 0 < store.labelled[:18].sum() < 18
+    # Each visit: both agents' envs (other views, one mask per run) reveal a pair's reward or both hide it.
+    envs = [
+        make_masked_gym(
+            cfg.gym.env_id, v, (v,), 0.3, cfg.seed, view_specs=cfg.gym.views, state_key=cfg.gym.state_key
+        )
+        for v in VIEWS
+    ]
+    moves = np.random.default_rng(0).integers(0, 2, 60)
+    for env in envs:
+        env.reset(seed=0)
+        cell = 0
+        for action in moves:
+            _, _, done, _, info = env.step(int(action))
+            assert info["reward_observed"] == key_is_labelled(repr(cell), int(action), 0.3, cfg.seed)
+            cell = env.unwrapped.pos
+            if done:
+                env.reset()
+                cell = 0
+    # A store keeps a pair's views once: 18 pairs, at most two rows each, however many steps.
+    assert store.n_rows <= 2 * 18
 
 
 def test_the_key_mask_labels_a_share_of_pairs_the_same_way_in_every_process():
@@ -356,3 +382,26 @@ def test_the_minigrid_views_read_the_map_and_the_agents_pose():
     assert info["views"]["ahead"].shape == (7 * 7 * 3,)
     _, _, _, _, info = env.step(1)  # turn right: the pose follows
     assert info["views"]["pose"][10 + (unwrapped.agent_dir)] == 1.0
+
+
+def test_a_keyed_run_resumed_from_its_checkpoint_ends_as_the_uninterrupted_run():
+    settings = {**SETTINGS, "training.rounds": 2, "training.steps_per_round": 600}
+    cfg = gym_config(make_corridor, VIEWS, label_fraction=0.3, state_key=corridor_cell, settings=settings)
+    whole = build_run(cfg)
+    whole.run()
+    first = build_run(cfg)
+    first.run_round()
+    saved = pickle.dumps(first.state_dict())
+    resumed = build_run(cfg)
+    resumed.load_state_dict(pickle.loads(saved))
+    resumed.run_round()
+    assert resumed.store.ids == whole.store.ids
+    np.testing.assert_array_equal(resumed.table.reward, whole.table.reward)
+    for a, b in zip(whole.agents, resumed.agents, strict=True):
+        for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
+            assert np.array_equal(p.detach().numpy(), q.detach().numpy())
+
+
+def test_a_none_env_kwarg_is_refused_as_a_config_cannot_hold_it():
+    with pytest.raises(ConfigError, match=r"env_kwargs\.render_mode: None cannot be saved in a config"):
+        gym_config(make_corridor, VIEWS, settings={"gym.env_kwargs": {"render_mode": None}})

@@ -104,6 +104,12 @@ def test_a_rare_reward_keeps_its_own_quantile_class():
     classes.fit(np.array([0.0] * 16 + [0.4, 0.6, 0.8, 1.0]))
     np.testing.assert_allclose(classes.edges, [0.4])
     np.testing.assert_allclose(classes.values[0, :2], [0.0, 0.7])
+    # A quantile interpolated between 0 and the smallest goal reward would leave an empty bin.
+    classes = QuantileRewardClasses(5)
+    classes.fit(np.array([0.0] * 17 + [0.4, 0.5, 0.6, 0.8, 1.0]))  # quintiles 0, 0, 0, 0.32
+    np.testing.assert_allclose(classes.edges, [0.4])
+    np.testing.assert_allclose(classes.values[0, :2], [0.0, 0.66])
+    assert classes.mask[0].sum() == 2
 
 
 def _train(tmp_path, preset: str, *overrides: str):
