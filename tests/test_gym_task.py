@@ -405,3 +405,36 @@ def test_a_keyed_run_resumed_from_its_checkpoint_ends_as_the_uninterrupted_run()
 def test_a_none_env_kwarg_is_refused_as_a_config_cannot_hold_it():
     with pytest.raises(ConfigError, match=r"env_kwargs\.render_mode: None cannot be saved in a config"):
         gym_config(make_corridor, VIEWS, settings={"gym.env_kwargs": {"render_mode": None}})
+
+
+def test_minigrid_action_sets_keep_the_actions_a_task_needs():
+    pytest.importorskip("minigrid")
+    env = make_gym_env(
+        "minigrid:MiniGrid-DoorKey-5x5-v0", wrappers=["dospcot.envs.minigrid_views:DoorActions"]
+    )
+    assert env.action_space == gym.spaces.Discrete(5)
+    assert [env.action(a) for a in range(5)] == [0, 1, 2, 3, 5]  # 4 is toggle, MiniGrid's 5
+    env.reset(seed=0)
+    direction = env.unwrapped.agent_dir
+    env.step(1)  # turn right
+    assert env.unwrapped.agent_dir == (direction + 1) % 4
+    moves = make_gym_env(
+        "minigrid:MiniGrid-LavaGapS7-v0", wrappers=["dospcot.envs.minigrid_views:MoveActions"]
+    )
+    assert moves.action_space == gym.spaces.Discrete(3)
+
+
+def test_a_random_policy_reaches_lavagaps_goal_more_often_with_three_actions_than_with_seven():
+    pytest.importorskip("minigrid")
+    goals = {}
+    for wrappers in ((), ("dospcot.envs.minigrid_views:MoveActions",)):
+        env = make_gym_env("minigrid:MiniGrid-LavaGapS7-v0", wrappers=wrappers)
+        env.reset(seed=0)
+        env.action_space.seed(0)
+        goals[len(wrappers)] = 0
+        for _ in range(10_000):
+            _, reward, terminated, truncated, _ = env.step(env.action_space.sample())
+            goals[len(wrappers)] += reward > 0
+            if terminated or truncated:
+                env.reset()
+    assert goals[1] > 2 * goals[0] > 0
