@@ -3,7 +3,10 @@
 A view is a function of the env's observation that returns a fixed-shape array, e.g. a lidar reading
 or the agent's position. :class:`ObservationSensors` gives an env the sensor interface that
 :class:`~dospcot.envs.SensorViewWrapper` reads (``observe(name)``, ``view_space(name)``), so a user's
-env co-trains like the highway tasks: one agent per view, every step one pool sample.
+env co-trains like the highway tasks: one agent per view, every step one pool sample. An env whose
+states can be named (a state key, :data:`STATE_KEYS` or a function of the env) pools (state, action)
+pairs instead, as on the grid, masked per pair (:class:`~dospcot.envs.RewardMaskWrapper`'s ``"key"``
+mode).
 
 A view is named in a config by one of (:func:`resolve_view`):
 
