@@ -12,7 +12,8 @@ A run writes ``runs/<name>/<stamp>/`` (docs/design.md section 5):
   (:func:`dospcot.classifier.load_classifier`) and ``reward_classes.json`` (class index -> reward);
 - ``learning_curves.png``; ``run_info.json`` (command, versions, wall time);
 - ``summary.json`` is written last: a folder that has it holds a finished run;
-- ``checkpoint.pkl``: the state after the last finished round, for ``dospcot train --resume``.
+- ``checkpoint.pkl``: the state after the last finished round, for ``dospcot train --resume``;
+  removed when the run finishes (a finished run is not resumed).
 
 ``metrics.csv``, the agents, the classifiers and the checkpoint are rewritten at the end of every
 round, the plot, ``run_info.json`` and ``summary.json`` when the run finishes; every file atomically,
@@ -298,6 +299,9 @@ def _train_in(
     write_run_info(run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions)
     # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
     write_json(run_dir / SUMMARY_FILE, run_summary(records, run))
+    # A finished run is never resumed, and its checkpoint holds every replay buffer (about a GB on
+    # a 32 x 32 grid): a sweep of finished runs would fill a disk.
+    (run_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
     return run_dir
 
 

@@ -25,7 +25,7 @@ TINY = [
     "highway.eval_episodes=2",
 ]  # fmt: skip
 RUN_FILES = [
-    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json", "checkpoint.pkl",
+    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json",
     "agent_kinematics.zip", "agent_occupancy.zip", "classifier_kinematics.pt", "classifier_occupancy.pt",
     "reward_classes.json",
 ]  # fmt: skip

@@ -5,6 +5,7 @@ import dataclasses
 import inspect
 import json
 import os
+import pickle
 import random
 import signal
 import subprocess
@@ -41,7 +42,7 @@ ISSUE_PRESETS = [
     "grid32-dospcot",
 ]  # fmt: skip
 RUN_FILES = [
-    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json", "checkpoint.pkl",
+    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json",
 ]  # fmt: skip
 
 
@@ -62,12 +63,13 @@ def test_every_issue_preset_ships_and_validates():
 
 
 @pytest.mark.parametrize("method", ["oracle", "masked-zero", "labels-only", "self-training", "dospcot", "m3"])
-def test_grid32_presets_are_the_grid16_ones_on_a_32_map_with_twice_the_learning_rate(method):
+def test_grid32_presets_are_the_grid16_ones_on_a_32_map(method):
     small, large = load_config(f"grid16-{method}"), load_config(f"grid32-{method}")
     assert (large.env.size, large.env.train_episode_steps, large.env.max_episode_steps) == (32, 32, 128)
     assert large.training.steps_per_round == 2 * small.training.steps_per_round
-    assert large.dqn == dataclasses.replace(small.dqn, learning_rate=2 * small.dqn.learning_rate)
-    assert (large.method, large.views, large.cotraining) == (small.method, small.views, small.cotraining)
+    assert (large.method, large.views, large.dqn, large.cotraining) == (
+        small.method, small.views, small.dqn, small.cotraining,
+    )  # fmt: skip
 
 
 def test_set_overrides_are_typed_and_extends_merges(tmp_path):
@@ -203,6 +205,7 @@ def test_tiny_run_writes_every_file_for_one_two_and_three_views(tmp_path, views)
     run_dir = _train(tmp_path, f"views={json.dumps(views)}")
     for name in RUN_FILES:
         assert (run_dir / name).is_file(), name
+    assert not (run_dir / "checkpoint.pkl").exists()  # a finished run keeps no checkpoint
     assert (run_dir / "learning_curves.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert len(rows) == 1 + 2 * len(views)  # one row per round and view
@@ -236,11 +239,11 @@ def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(tmp_path, capsys,
 
 def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
     run_dir = _train(tmp_path)
-    data = (run_dir / "checkpoint.pkl").read_bytes()
-    (run_dir / "checkpoint.pkl").write_bytes(data[: len(data) // 2])
+    (run_dir / "summary.json").unlink()  # a killed run's folder: a finished one is not resumed
+    whole = pickle.dumps({"records": [], "elapsed_s": 1.0, "sessions": 1})
+    (run_dir / "checkpoint.pkl").write_bytes(whole[: len(whole) // 2])  # as a kill mid-write would leave it
     with pytest.raises(RunFolderError, match="corrupt or truncated"):
         read_checkpoint(run_dir)
-    (run_dir / "summary.json").unlink()  # a killed run's folder: a finished one is not resumed
     assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
     assert "checkpoint.pkl is corrupt or truncated" in capsys.readouterr().err
     (run_dir / "agent_patch.zip").write_bytes(b"not a zip")
