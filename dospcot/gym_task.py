@@ -98,7 +98,7 @@ def train_env(
 ) -> Path:
     """Train a run of :func:`gym_config` (same arguments) in a new folder ``runs_dir/<name>/<stamp>/``;
     return the folder. It holds what ``dospcot train`` writes: the agents (plain SB3 ``DQN`` zips),
-    ``metrics.csv``, ``summary.json``, TensorBoard events and a checkpoint.
+    ``metrics.csv``, ``summary.json`` and TensorBoard events (and, while it runs, a checkpoint).
 
     :param threads: torch's threads for this process (``torch.set_num_threads``), as ``dospcot train
         --threads``: small networks run fastest on one.
