@@ -1,6 +1,6 @@
 """Reward masking: the true reward of a transition reaches the learner only when it is labelled.
 
-Two modes (docs/design.md section 1):
+Three modes (docs/design.md section 1):
 
 - ``"state-action"``: a fixed, seeded subset of the (s, a) keys of a discrete env, of share
   ``label_fraction``, is labelled; the subset is drawn once from ``mask_seed`` and stays the same
@@ -8,7 +8,7 @@ Two modes (docs/design.md section 1):
 - ``"transition"``: each step is revealed with probability ``label_fraction``, from a generator
   seeded by ``mask_seed`` (and re-seeded from ``mask_seed`` and the seed of every seeded reset).
 - ``"key"``: as state-action mode for an env whose states are not known in advance: the env names
-  each state by a hashable key (``state_key()``, e.g. a MiniGrid agent's position and direction),
+  each state by a hashable key (``state_key()``, e.g. a MiniGrid agent's pose, load and map),
   and a (key, action) pair is labelled when a hash of it and ``mask_seed`` falls below
   ``label_fraction`` (:func:`key_is_labelled`), so every visit of a pair is labelled or none is.
 
