@@ -29,7 +29,7 @@ import torch as th
 
 from dospcot.envs.gym_sensors import dotted_path
 from dospcot.train import train
-from dospcot.train_config import TrainConfig, from_mapping
+from dospcot.train_config import TrainConfig, from_mapping, set_key
 
 ViewSpec = str | Callable[[Any], Any]
 """A view: a function of the observation (defined at module level), or a name: ``"observation"``, a
@@ -77,13 +77,7 @@ def gym_config(
             state_key if isinstance(state_key, str) else dotted_path(state_key, "state_key")
         )
     for key, value in (settings or {}).items():
-        *sections, leaf = key.split(".")
-        table = data
-        for section in sections:
-            table = table.setdefault(section, {})
-            if not isinstance(table, dict):
-                raise ValueError(f"settings[{key!r}]: {section!r} is not a section")
-        table[leaf] = value
+        set_key(data, key.split("."), value, f"settings[{key!r}]")
     return from_mapping(TrainConfig, data)
 
 

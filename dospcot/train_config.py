@@ -576,13 +576,19 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> TrainConfig | Pap
                 f"--set {override}: extends is read with the file, before any --set; write a .toml "
                 f'holding extends = "{value}" and your keys, and pass its path as CONFIG'
             )
-        table = data
-        for part in path[:-1]:
-            table = table.setdefault(part, {})
-            if not isinstance(table, dict):
-                raise ConfigError(f"--set {override}: {part!r} is not a section")
-        table[path[-1]] = value
+        set_key(data, path, value, f"--set {override}")
     return from_mapping(PaperConfig if data.get("task") == "paper" else TrainConfig, data)
+
+
+def set_key(data: dict[str, Any], path: Sequence[str], value: Any, where: str) -> None:
+    """Set the key ``path`` (sections, then the key) of the config table ``data`` to ``value``,
+    making missing sections; ``where`` names the override in the error for a key that is no section."""
+    table = data
+    for part in path[:-1]:
+        table = table.setdefault(part, {})
+        if not isinstance(table, dict):
+            raise ConfigError(f"{where}: {part!r} is not a section")
+    table[path[-1]] = value
 
 
 def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:

@@ -71,6 +71,15 @@ def import_dotted(path: str, what: str) -> Any:
     return target
 
 
+def import_callable(path: str, what: str) -> Callable[..., Any]:
+    """The function or class at the dotted path ``path`` (:func:`import_dotted`); a ``ValueError`` if
+    it is not callable."""
+    fn = import_dotted(path, what)
+    if not callable(fn):
+        raise ValueError(f"{what}: {path!r} is not callable")
+    return fn
+
+
 def dotted_path(obj: Any, what: str) -> str:
     """The dotted path ``"module:qualname"`` that :func:`import_dotted` reads back as ``obj``, or a
     ``ValueError`` if there is none (a lambda, a nested function, a bound method)."""
@@ -96,10 +105,7 @@ def resolve_view(spec: str, env: gym.Env, name: str) -> ViewFn:
         read = minigrid_views.ENV_VIEWS[spec]
         return lambda obs: read(env.unwrapped)
     if ":" in spec:
-        fn = import_dotted(spec, f"gym.views.{name}")
-        if not callable(fn):
-            raise ValueError(f"gym.views.{name}: {spec!r} is not callable")
-        return fn
+        return import_callable(spec, f"gym.views.{name}")
     if isinstance(observation_space, gym.spaces.Dict):
         if spec in observation_space.spaces:
             return lambda obs: obs[spec]
@@ -137,10 +143,7 @@ def resolve_state_key(spec: str) -> StateKeyFn:
             f"gym.state_key: {spec!r} is neither one of {sorted(STATE_KEYS)} nor a dotted path "
             "'module:function'"
         )
-    fn = import_dotted(spec, "gym.state_key")
-    if not callable(fn):
-        raise ValueError(f"gym.state_key: {spec!r} is not callable")
-    return fn
+    return import_callable(spec, "gym.state_key")
 
 
 class ObservationSensors(gym.Wrapper):
@@ -290,13 +293,32 @@ def check_gym_task(
 ) -> None:
     """Build the task once and read every view of a reset; raise ``ValueError`` with one line naming
     what is wrong (an unknown id or path, continuous actions, a view that fails)."""
+    make_gym_sensors(env_id, view_specs, tuple(view_specs), env_kwargs, wrappers, state_key).close()
+
+
+def make_gym_sensors(
+    env_id: str,
+    view_specs: Mapping[str, str],
+    views: Sequence[str],
+    env_kwargs: Mapping[str, Any] | None = None,
+    wrappers: Sequence[str] = (),
+    state_key: str = "",
+) -> ObservationSensors:
+    """The env ``env_id`` names (:func:`make_gym_env`) with the sensor interface for ``views``, each
+    resolved from ``view_specs`` (:func:`resolve_view`), and the state key ``state_key`` names (empty:
+    none)."""
+    unknown = [name for name in views if name not in view_specs]
+    if unknown:
+        raise ValueError(f"unknown view(s) {unknown}; allowed: {', '.join(view_specs)}")
     env = make_gym_env(env_id, env_kwargs, wrappers)
     try:
+        # Before the views: an env with continuous actions is refused for that, whatever its views.
         require_discrete_actions(env)
-        fns = {name: resolve_view(spec, env, name) for name, spec in view_specs.items()}
-        ObservationSensors(env, fns, resolve_state_key(state_key) if state_key else None)
-    finally:
+        fns = {name: resolve_view(view_specs[name], env, name) for name in views}
+        return ObservationSensors(env, fns, resolve_state_key(state_key) if state_key else None)
+    except Exception:  # whatever failed, the env is not handed out: close it
         env.close()
+        raise
 
 
 def make_masked_gym(
@@ -325,12 +347,7 @@ def make_masked_gym(
     :param state_key: a name from :data:`STATE_KEYS` or a dotted path to a function of the unwrapped
         env: the mask then labels (state key, action) pairs (``"key"`` mode); empty: single steps.
     """
-    unknown = [name for name in views if name not in view_specs]
-    if unknown:
-        raise ValueError(f"unknown view(s) {unknown}; allowed: {', '.join(view_specs)}")
-    env = make_gym_env(env_id, env_kwargs, wrappers)
-    fns = {name: resolve_view(view_specs[name], env, name) for name in views}
-    sensors = ObservationSensors(env, fns, resolve_state_key(state_key) if state_key else None)
+    sensors = make_gym_sensors(env_id, view_specs, views, env_kwargs, wrappers, state_key)
     mask = RewardMaskWrapper(
         sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed
     )
@@ -343,8 +360,10 @@ __all__ = [
     "ObservationSensors",
     "check_gym_task",
     "dotted_path",
+    "import_callable",
     "import_dotted",
     "make_gym_env",
+    "make_gym_sensors",
     "make_masked_gym",
     "resolve_state_key",
     "resolve_view",
