@@ -120,17 +120,20 @@ def _capped_buffer(kwargs: dict[str, Any], cfg: TrainConfig) -> dict[str, Any]:
     return kwargs
 
 
-def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig]:
-    """A sensor task's parts (one pool sample per step): a highway's or any gymnasium env's."""
+def _sensor_parts(
+    cfg: TrainConfig,
+) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig, Callable[..., gym.Env]]:
+    """A sensor task's parts (one pool sample per step), a highway's or any gymnasium env's: the
+    training env's builder, the run, its hyperparameters and the evaluation env's builder."""
     extra: dict[str, Any] = {}
     if cfg.task == "highway":
         task = cfg.highway
-        make_env = partial(
+        make_env = make_eval_env = partial(
             make_masked_highway, task.env_id, config=task.config, reveal_first_steps=task.reveal_first_steps
         )
     else:
         task = cfg.gym
-        make_env = partial(
+        make_eval_env = partial(
             make_masked_gym,
             task.env_id,
             view_specs=task.views,
@@ -138,6 +141,7 @@ def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSp
             wrappers=task.wrappers,
             state_key=task.state_key,
         )
+        make_env = partial(make_eval_env, train_wrappers=task.train_wrappers)
         extra = {
             "success_return": task.success_return,
             "max_return": task.max_return,
@@ -147,7 +151,7 @@ def _sensor_parts(cfg: TrainConfig) -> tuple[Callable[..., gym.Env], NeuralRunSp
         **_common_kwargs(cfg), max_episode_steps=task.episode_steps, reward_classes=task.reward_classes,
         eval_episodes=task.eval_episodes, **extra,
     )  # fmt: skip
-    return make_env, _spec(cfg), config
+    return make_env, _spec(cfg), config, make_eval_env
 
 
 def _grid_parts(

@@ -162,6 +162,9 @@ class GymConfig:
     :param env_kwargs: keyword arguments of the env.
     :param wrappers: wrappers applied in order before the views read the observation: gymnasium's by
         class name (``"FlattenObservation"``) or any class by dotted path.
+    :param train_wrappers: wrappers of the training episodes only, applied first (inside
+        ``wrappers``); evaluation episodes run without them. E.g. exploring starts on MiniGrid
+        (``"dospcot.envs.minigrid_views:RandomStart"``).
     :param views: each view's name and what it reads: ``"observation"`` (the whole observation), a key
         of a ``Dict`` observation, or a dotted path ``"package.module:function"`` to a function of the
         observation. The run's ``views`` pick among these names.
@@ -180,6 +183,7 @@ class GymConfig:
     env_id: str = ""
     env_kwargs: dict[str, Any] = field(default_factory=dict)
     wrappers: tuple[str, ...] = ()
+    train_wrappers: tuple[str, ...] = ()
     views: dict[str, str] = field(default_factory=dict)
     episode_steps: int = 100
     reward_classes: int = 5
@@ -411,6 +415,7 @@ class TrainConfig:
                     self.gym.wrappers,
                     self.gym.views,
                     self.gym.state_key,
+                    self.gym.train_wrappers,
                 )
             except ValueError as err:
                 raise ConfigError(str(err)) from None

@@ -252,10 +252,17 @@ class SensorTask:
     :param spec: the run.
     :param config: its hyperparameters; ``max_episode_steps`` bounds evaluation episodes and is
         ``R_max`` of the normalised score.
+    :param make_eval_env: builds the evaluation envs, with ``make_env``'s arguments; None:
+        ``make_env`` (they differ where training episodes have their own wrappers, e.g. exploring
+        starts).
     """
 
     def __init__(
-        self, make_env: Callable[..., gym.Env], spec: NeuralRunSpec, config: TransitionConfig
+        self,
+        make_env: Callable[..., gym.Env],
+        spec: NeuralRunSpec,
+        config: TransitionConfig,
+        make_eval_env: Callable[..., gym.Env] | None = None,
     ) -> None:
         self.spec, self.config = spec, config
         fraction = 1.0 if spec.method == "oracle" else config.label_fraction
@@ -267,7 +274,8 @@ class SensorTask:
         self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
         self.n_actions = int(envs[0].action_space.n)
         self.classes = QuantileRewardClasses(config.reward_classes)
-        self.eval_envs = [_eval_env(make_env, v, config.max_episode_steps) for v in spec.views]
+        build_eval = make_eval_env or make_env
+        self.eval_envs = [_eval_env(build_eval, v, config.max_episode_steps) for v in spec.views]
         returns = self._returns(_RandomPolicy(envs[0].action_space, spec.seed), self.eval_envs[0])[0]
         self.random_return = float(np.mean(returns))
 
@@ -341,9 +349,15 @@ class TransitionCoTraining(CoTrainingRun):
     adapter, whose parameters it takes."""
 
     def __init__(
-        self, make_env: Callable[..., gym.Env], spec: NeuralRunSpec, config: TransitionConfig
+        self,
+        make_env: Callable[..., gym.Env],
+        spec: NeuralRunSpec,
+        config: TransitionConfig,
+        make_eval_env: Callable[..., gym.Env] | None = None,
     ) -> None:
-        super().__init__(SensorTask(make_env, spec, config), spec, config, config.reward_classes)
+        super().__init__(
+            SensorTask(make_env, spec, config, make_eval_env), spec, config, config.reward_classes
+        )
 
 
 def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> DummyVecEnv:

@@ -232,9 +232,13 @@ class ObservationSensors(gym.Wrapper):
 
 
 def make_gym_env(
-    env_id: str, env_kwargs: Mapping[str, Any] | None = None, wrappers: Sequence[str] = ()
+    env_id: str,
+    env_kwargs: Mapping[str, Any] | None = None,
+    wrappers: Sequence[str] = (),
+    train_wrappers: Sequence[str] = (),
 ) -> gym.Env:
-    """The env ``env_id`` names, built with ``env_kwargs`` and wrapped by ``wrappers`` in order.
+    """The env ``env_id`` names, built with ``env_kwargs`` and wrapped by ``train_wrappers``, then
+    ``wrappers``, in order (the first named is the innermost).
 
     :param env_id: a registered gymnasium id; ``"package:Env-v0"`` (gymnasium's own form) imports the
         package that registers it first; ``"package.module:function"`` calls a function that returns
@@ -259,20 +263,25 @@ def make_gym_env(
             raise ValueError(f"gym.env_id: {err}") from None
         except TypeError as err:  # an env_kwargs key the env does not take
             raise ValueError(f"gym.env_kwargs: {err}") from None
-    for wrapper in wrappers:
-        cls = (
-            import_dotted(wrapper, "gym.wrappers") if ":" in wrapper else getattr(gym.wrappers, wrapper, None)
-        )
-        if cls is None:
-            raise ValueError(
-                f"gym.wrappers: gymnasium.wrappers has no {wrapper!r}; name another wrapper by its "
-                "dotted path 'module:Class'"
-            )
-        try:
-            env = cls(env)
-        except TypeError as err:  # a wrapper that needs more than the env
-            raise ValueError(f"gym.wrappers: {wrapper} cannot wrap the env by itself ({err})") from None
+    # Training-only wrappers innermost: an exploring start moves the agent in the env itself, before
+    # any observation wrapper reads it.
+    for key, names in (("gym.train_wrappers", train_wrappers), ("gym.wrappers", wrappers)):
+        for wrapper in names:
+            env = _wrap(env, wrapper, key)
     return env
+
+
+def _wrap(env: gym.Env, wrapper: str, key: str) -> gym.Env:
+    cls = import_dotted(wrapper, key) if ":" in wrapper else getattr(gym.wrappers, wrapper, None)
+    if cls is None:
+        raise ValueError(
+            f"{key}: gymnasium.wrappers has no {wrapper!r}; name another wrapper by its dotted path "
+            "'module:Class'"
+        )
+    try:
+        return cls(env)
+    except TypeError as err:  # a wrapper that needs more than the env
+        raise ValueError(f"{key}: {wrapper} cannot wrap the env by itself ({err})") from None
 
 
 def _registers(module: str, env_id: str) -> bool:
@@ -290,10 +299,13 @@ def check_gym_task(
     wrappers: Sequence[str],
     view_specs: Mapping[str, str],
     state_key: str = "",
+    train_wrappers: Sequence[str] = (),
 ) -> None:
     """Build the task once and read every view of a reset; raise ``ValueError`` with one line naming
     what is wrong (an unknown id or path, continuous actions, a view that fails)."""
-    make_gym_sensors(env_id, view_specs, tuple(view_specs), env_kwargs, wrappers, state_key).close()
+    make_gym_sensors(
+        env_id, view_specs, tuple(view_specs), env_kwargs, wrappers, state_key, train_wrappers
+    ).close()
 
 
 def make_gym_sensors(
@@ -303,6 +315,7 @@ def make_gym_sensors(
     env_kwargs: Mapping[str, Any] | None = None,
     wrappers: Sequence[str] = (),
     state_key: str = "",
+    train_wrappers: Sequence[str] = (),
 ) -> ObservationSensors:
     """The env ``env_id`` names (:func:`make_gym_env`) with the sensor interface for ``views``, each
     resolved from ``view_specs`` (:func:`resolve_view`), and the state key ``state_key`` names (empty:
@@ -310,7 +323,7 @@ def make_gym_sensors(
     unknown = [name for name in views if name not in view_specs]
     if unknown:
         raise ValueError(f"unknown view(s) {unknown}; allowed: {', '.join(view_specs)}")
-    env = make_gym_env(env_id, env_kwargs, wrappers)
+    env = make_gym_env(env_id, env_kwargs, wrappers, train_wrappers)
     try:
         # Before the views: an env with continuous actions is refused for that, whatever its views.
         require_discrete_actions(env)
@@ -332,6 +345,7 @@ def make_masked_gym(
     env_kwargs: Mapping[str, Any] | None = None,
     wrappers: Sequence[str] = (),
     state_key: str = "",
+    train_wrappers: Sequence[str] = (),
 ) -> gym.Env:
     """A gymnasium task whose rewards are revealed per step with probability ``label_fraction``.
 
@@ -344,10 +358,12 @@ def make_masked_gym(
     :param view_specs: what each view name means (:func:`resolve_view`).
     :param env_kwargs: keyword arguments of the env.
     :param wrappers: wrappers applied to the env before the views read it.
+    :param train_wrappers: wrappers applied inside ``wrappers`` (training envs: evaluation leaves them
+        out), e.g. :class:`~dospcot.envs.minigrid_views.RandomStart`.
     :param state_key: a name from :data:`STATE_KEYS` or a dotted path to a function of the unwrapped
         env: the mask then labels (state key, action) pairs (``"key"`` mode); empty: single steps.
     """
-    sensors = make_gym_sensors(env_id, view_specs, views, env_kwargs, wrappers, state_key)
+    sensors = make_gym_sensors(env_id, view_specs, views, env_kwargs, wrappers, state_key, train_wrappers)
     mask = RewardMaskWrapper(
         sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed
     )

@@ -6,6 +6,7 @@
     python scripts/study.py grid32 --docs           # 4 grid32 presets x seeds 0-4
     python scripts/study.py grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
     python scripts/study.py fasthighway --docs      # 4 fasthighway presets x seeds 0-4
+    python scripts/study.py minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
     python scripts/study.py highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
     python scripts/study.py paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
     python scripts/study.py paper-published-code --docs   # the same with its published code's settings
@@ -70,6 +71,19 @@ METHODS = {
         }.items()
     },
 }
+MINIGRID_TASKS = {"lavagap": "MiniGrid-LavaGapS7-v0", "doorkey": "MiniGrid-DoorKey-5x5-v0"}
+METHODS.update(
+    {
+        f"minigrid-{task}-{method}": label
+        for task in MINIGRID_TASKS
+        for method, label in {
+            "oracle": "oracle (all rewards)",
+            "masked-zero": "masked-zero",
+            "self-training": "self-training (m = 1, image)",
+            "dospcot": "DOSPCoT (m = 2, image + full map)",
+        }.items()
+    }
+)
 COLUMNS = {
     "success": "success",
     "agreement": "optimal-action agreement",
@@ -197,6 +211,53 @@ def highway_tables(runs: list[TrialRun]) -> list[str]:
     lines += ["", "Per view (greedy return, no-crash episodes):", "", "| method | view | return | no crash |"]
     lines.append("|---|---|---|---|")
     return lines + _per_view_rows(grouped, ["greedy_return", "success"])
+
+
+MINIGRID_COLUMNS = {
+    "success": "success",
+    "greedy_return": "greedy return",
+    "pseudo_accuracy": "pseudo-reward accuracy",
+    "worst_class_precision": "worst-class precision",
+}
+
+
+def minigrid_tables(runs: list[TrialRun]) -> list[str]:
+    """Per task and method: success (the share of evaluation episodes that reach the goal), return
+    and pseudo-reward quality over seeds, and the share of the oracle's mean success; then per view."""
+    grouped = _by_method(runs)
+    episodes = load_config(str(runs[0].run_dir / "config.toml")).gym.eval_episodes
+    lines = [
+        f"Evaluation: {episodes} greedy episodes per agent from the task's own start, each on a new map; "
+        "success is the share that reach the goal, and the return is MiniGrid's (1 - 0.9 t / T at the "
+        "goal). The label fraction is the share of (state, action) pairs whose reward is revealed.",
+        "",
+        "| task | method | preset | "
+        + " | ".join(MINIGRID_COLUMNS.values())
+        + " | share of oracle success |",
+        "|---|---|---|" + "---|" * (len(MINIGRID_COLUMNS) + 1),
+    ]
+    for task, env_id in MINIGRID_TASKS.items():
+        cells_of_task = {key: m for key, m in grouped.items() if key[0].startswith(f"minigrid-{task}-")}
+        oracle = [
+            r.summary["mean"]["success"]
+            for (n, _), m in cells_of_task.items()
+            if n.endswith("-oracle")
+            for r in m
+        ]
+        oracle_mean = SeedSummary.of(oracle).mean if oracle else math.nan
+        for (name, _), members in cells_of_task.items():
+            stats = [_over_seeds(members, key) for key in MINIGRID_COLUMNS]
+            mean = SeedSummary.of([r.summary["mean"]["success"] for r in members]).mean
+            share = f"{mean / oracle_mean:.0%}" if oracle_mean > 0 else "n/a (oracle 0)"
+            lines.append(f"| {env_id} | {METHODS[name]} | `{name}` | " + " | ".join(stats) + f" | {share} |")
+    lines += [
+        "",
+        "Per view (success, return):",
+        "",
+        "| method | view | success | return |",
+        "|---|---|---|---|",
+    ]
+    return lines + _per_view_rows(grouped, ["success", "greedy_return"])
 
 
 def grid16_tables(runs: list[TrialRun]) -> list[str]:
@@ -545,6 +606,18 @@ STUDIES = {
             ("fasthighway", "our fast highway env", 5),
         )
     },
+    "minigrid": Study(
+        tuple(
+            Sweep(
+                f"minigrid-{task}",
+                tuple(f"minigrid-{task}-{m}" for m in ("oracle", "masked-zero", "self-training", "dospcot")),
+                {},
+            )
+            for task in MINIGRID_TASKS
+        ),
+        minigrid_tables,
+        "MiniGrid: LavaGapS7 and DoorKey-5x5",
+    ),
     "second-view": Study(
         _second_view_sweeps(), second_view_tables, "When does a second view help? (grid)", seeds=10
     ),

@@ -438,3 +438,38 @@ def test_a_random_policy_reaches_lavagaps_goal_more_often_with_three_actions_tha
             if terminated or truncated:
                 env.reset()
     assert goals[1] > 2 * goals[0] > 0
+
+
+def test_exploring_starts_move_training_episodes_only_and_follow_the_envs_seed():
+    pytest.importorskip("minigrid")
+    env_id, start = "minigrid:MiniGrid-LavaGapS7-v0", "dospcot.envs.minigrid_views:RandomStart"
+    starts = []
+    for seed in range(20):
+        env = make_gym_env(env_id, train_wrappers=[start])
+        env.reset(seed=seed)
+        u = env.unwrapped
+        assert u.grid.get(*u.agent_pos) is None  # an empty cell: not lava, wall or the goal
+        starts.append((tuple(int(v) for v in u.agent_pos), u.agent_dir))
+        again = make_gym_env(env_id, train_wrappers=[start])
+        again.reset(seed=seed)
+        assert (tuple(int(v) for v in again.unwrapped.agent_pos), again.unwrapped.agent_dir) == starts[-1]
+    assert len(set(starts)) > 10
+    # The image observation is drawn from the new pose.
+    env = make_gym_env(env_id, train_wrappers=[start])
+    obs, _ = env.reset(seed=3)
+    np.testing.assert_array_equal(obs["image"], env.unwrapped.gen_obs()["image"])
+    # A run's training envs start anywhere, its evaluation envs at the task's start (1, 1).
+    views = {"image": "image", "pose": "minigrid.position"}
+    cfg = gym_config(
+        env_id, views,
+        settings={"gym.wrappers": ["dospcot.envs.minigrid_views:MoveActions"], "gym.train_wrappers": [start]},
+    )  # fmt: skip
+    task = build_run(cfg).task
+    train_starts = set()
+    for seed in range(10):
+        _, info = task.agent_env(0, "image").reset(seed=seed)
+        train_starts.add(tuple(info["views"]["pose"]))
+    assert len(train_starts) > 1
+    for env in task.eval_envs:
+        env.reset()
+        assert tuple(int(v) for v in env.envs[0].unwrapped.agent_pos) == (1, 1)
