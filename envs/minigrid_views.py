@@ -23,6 +23,7 @@ minigrid.
 
 from __future__ import annotations
 
+import weakref
 from collections.abc import Callable, Hashable, Sequence
 from typing import Any
 
@@ -34,9 +35,26 @@ AGENT_CELL = (10, 0, 0)
 number is its direction."""
 
 
+_ENCODINGS: weakref.WeakKeyDictionary[gym.Env, tuple[object, int, np.ndarray]] = weakref.WeakKeyDictionary()
+
+
+def map_encoding(env: gym.Env) -> np.ndarray:
+    """(W, H, 3) ``env.grid.encode()``, read-only, encoded once per step: the full views and the
+    state key all read it every step, and encoding the map cell by cell is most of their cost. A
+    step moves ``env.step_count`` and a reset builds a new grid, so either one encodes afresh; the
+    cache holds the grid itself, so a new grid cannot be mistaken for a freed one."""
+    cached = _ENCODINGS.get(env)
+    if cached is not None and cached[0] is env.grid and cached[1] == env.step_count:
+        return cached[2]
+    encoding = env.grid.encode()
+    encoding.flags.writeable = False
+    _ENCODINGS[env] = (env.grid, env.step_count, encoding)
+    return encoding
+
+
 def full_grid(env: gym.Env) -> np.ndarray:
     """(W, H, 3) the map's encoding with the agent drawn in."""
-    grid = env.grid.encode()
+    grid = map_encoding(env).copy()
     x, y = env.agent_pos
     grid[x, y] = (AGENT_CELL[0], AGENT_CELL[1], env.agent_dir)
     return grid
@@ -51,7 +69,7 @@ def full_one_hot(env: gym.Env) -> np.ndarray:
     door's open / closed / locked, the agent's direction on its own cell). The raw encoding holds
     object indices as numbers (lava 9, agent 10), which an MLP reads as magnitudes; with indicators
     the agent's cell is one input per cell. With every reward revealed on LavaGapS7, a DQN agent on
-    the indicators reached the goal far more often than on the raw numbers (docs/your_env.md)."""
+    the indicators reached the goal more often than on the raw numbers (docs/your_env.md)."""
     grid = full_grid(env)
     return np.concatenate([np.eye(OBJECT_TYPES)[grid[..., 0]], np.eye(4)[grid[..., 2]]], axis=-1).astype(
         np.float32
@@ -72,7 +90,7 @@ def state_key(env: gym.Env) -> Hashable:
     the step count (the goal pays ``1 - 0.9 t / T``). The map is part of the key because most MiniGrid
     tasks draw a new one every episode (LavaGap's gap, DoorKey's door and key)."""
     held = None if env.carrying is None else (env.carrying.type, env.carrying.color)
-    return (tuple(int(v) for v in env.agent_pos), int(env.agent_dir), held, env.grid.encode().tobytes())
+    return (tuple(int(v) for v in env.agent_pos), int(env.agent_dir), held, map_encoding(env).tobytes())
 
 
 ENV_VIEWS: dict[str, Callable[[gym.Env], np.ndarray]] = {

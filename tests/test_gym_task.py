@@ -252,6 +252,10 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
         ('gym.state_key="cell"', "gym.state_key: 'cell' is neither one of ['minigrid'] nor a dotted path"),
         ('gym.state_key="minigrid"', "gym.state_key failed on the env: AttributeError"),
         ('gym.wrappers=["TimeLimit"]', "gym.wrappers: TimeLimit cannot wrap the env by itself"),
+        (
+            'gym.train_wrappers=["NoSuchWrapper"]',
+            "gym.train_wrappers: gymnasium.wrappers has no 'NoSuchWrapper'",
+        ),
     ],
 )
 def test_bad_gym_input_fails_with_one_line(tmp_path, override, message):
@@ -380,6 +384,12 @@ def test_the_minigrid_views_read_the_map_and_the_agents_pose():
     expected = np.concatenate([np.eye(5)[x], np.eye(5)[y], np.eye(4)[unwrapped.agent_dir]])
     np.testing.assert_array_equal(info["views"]["pose"], expected)
     assert info["views"]["ahead"].shape == (7 * 7 * 3,)
+    # As indicators: one object type and one state per cell, the agent's direction on its own cell.
+    indicators = minigrid_views.full_one_hot(unwrapped)
+    assert indicators.shape == (5, 5, 15) and (indicators.sum(axis=-1) == 2).all()
+    full = info["views"]["full"].reshape(5, 5, 3)
+    np.testing.assert_array_equal(indicators[..., :11].argmax(-1), full[..., 0])
+    assert indicators[x, y, 10] == 1 and indicators[x, y, 11 + unwrapped.agent_dir] == 1
     _, _, _, _, info = env.step(1)  # turn right: the pose follows
     assert info["views"]["pose"][10 + (unwrapped.agent_dir)] == 1.0
 
@@ -473,3 +483,26 @@ def test_exploring_starts_move_training_episodes_only_and_follow_the_envs_seed()
     for env in task.eval_envs:
         env.reset()
         assert tuple(int(v) for v in env.envs[0].unwrapped.agent_pos) == (1, 1)
+
+
+def test_the_map_encoding_is_read_once_per_step_and_follows_every_change():
+    pytest.importorskip("minigrid")
+    env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
+    env.reset(seed=0)
+    u = env.unwrapped
+    first = minigrid_views.map_encoding(u)
+    assert minigrid_views.map_encoding(u) is first  # the same step: encoded once
+    np.testing.assert_array_equal(first, u.grid.encode())
+    # Stand beside the key, facing it, and pick it up: the map changes with the step.
+    kx, ky = next((x, y) for x in range(5) for y in range(5) if (c := u.grid.get(x, y)) and c.type == "key")
+    u.agent_pos, u.agent_dir = (kx, ky - 1), 1  # above the key, facing down (direction 1)
+    assert u.grid.get(kx, ky - 1) is None
+    env.step(3)  # pick up
+    assert u.carrying is not None and u.carrying.type == "key"
+    after = minigrid_views.map_encoding(u)
+    np.testing.assert_array_equal(after, u.grid.encode())
+    assert after[kx, ky, 0] == 1 and first[kx, ky, 0] == 5  # empty now, a key before
+    # A reset draws a new map, encoded afresh even at the same step count.
+    env.reset(seed=1)
+    np.testing.assert_array_equal(minigrid_views.map_encoding(u), u.grid.encode())
+    assert minigrid_views.state_key(u)[3] == u.grid.encode().tobytes()

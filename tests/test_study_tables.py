@@ -74,3 +74,29 @@ def test_a_setting_with_a_method_not_yet_run_says_so():
     runs = [r for r in _setting(INDEPENDENT, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4)]
     text = "\n".join(study.second_view_tables([r for r in runs if r.trial.name != "grid16-dospcot"]))
     assert "H1 (DOSPCoT above the better self-training view in both): not yet run" in text
+
+
+def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_success(tmp_path):
+    from dospcot.run_folder import write_toml
+    from dospcot.train_config import load_config
+
+    write_toml(tmp_path / "config.toml", load_config("minigrid-lavagap-oracle").to_dict())
+
+    def run(preset: str, seed: int, success: float) -> TrialRun:
+        view = {"success": success, "greedy_return": success / 2}
+        summary = {"mean": dict(view), "views": ["image"], "per_view": {"image": view}, "rounds": 5}
+        return TrialRun(Trial(preset, preset, {}, seed), summary, [], tmp_path)
+
+    runs = [
+        *(run("minigrid-lavagap-oracle", s, v) for s, v in enumerate((1.0, 0.8))),
+        *(run("minigrid-lavagap-dospcot", s, v) for s, v in enumerate((0.45, 0.45))),
+        *(run("minigrid-doorkey-oracle", s, 0.0) for s in range(2)),
+        *(run("minigrid-doorkey-dospcot", s, 0.5) for s in range(2)),
+    ]
+    rows = {
+        line.split(" | ")[2]: line for line in study.minigrid_tables(runs) if line.startswith("| MiniGrid")
+    }
+    assert rows["`minigrid-lavagap-oracle`"].endswith("| 100% |")
+    assert rows["`minigrid-lavagap-dospcot`"].endswith("| 50% |")  # 0.45 of the oracle's 0.9
+    assert rows["`minigrid-doorkey-dospcot`"].endswith("| n/a (oracle 0) |")
+    assert "20 greedy episodes per agent" in study.minigrid_tables(runs)[0]
