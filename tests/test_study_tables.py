@@ -99,4 +99,6 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
     assert rows["`minigrid-lavagap-oracle`"].endswith("| 100% |")
     assert rows["`minigrid-lavagap-dospcot`"].endswith("| 50% |")  # 0.45 of the oracle's 0.9
     assert rows["`minigrid-doorkey-dospcot`"].endswith("| n/a (oracle 0) |")
-    assert "20 greedy episodes per agent" in study.minigrid_tables(runs)[0]
+    lines = study.minigrid_tables(runs)
+    assert "20 greedy episodes per agent" in lines[0]
+    assert "| MiniGrid-DoorKey-5x5-v0 | DOSPCoT (m = 2, image + full map) | image | 0.500" in "\n".join(lines)
