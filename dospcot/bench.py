@@ -13,7 +13,7 @@ import platform
 import statistics
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from functools import partial
@@ -526,6 +526,18 @@ NOTES = [
 ]
 
 
+TABLE_HEADER = "| benchmark | setting | ours | peer | ratio | target | met |"
+RERUN_NOTE = "Rerun alone by"
+
+
+def _table_line(row: Row) -> str:
+    sign = ">=" if row.higher_is_better else "<="
+    return (
+        f"| {row.name} | {row.setting} | {row.ours} | {row.peer} | {row.ratio:.3f} | "
+        f"{sign} {row.target} | {'yes' if row.met else 'no'} |"
+    )
+
+
 def render(rows: list[Row], command: str, repeats: int) -> str:
     """The text of BENCHMARKS.md."""
     cpu = platform.processor() or platform.machine()
@@ -538,27 +550,56 @@ def render(rows: list[Row], command: str, repeats: int) -> str:
         f"Each figure: median of {repeats} repetitions [min, max]; "
         "ours and the peer alternate in the same run.",
         "",
-        "| benchmark | setting | ours | peer | ratio | target | met |",
+        TABLE_HEADER,
         "|---|---|---|---|---|---|---|",
     ]
-    for row in rows:
-        sign = ">=" if row.higher_is_better else "<="
-        lines.append(
-            f"| {row.name} | {row.setting} | {row.ours} | {row.peer} | {row.ratio:.3f} | "
-            f"{sign} {row.target} | {'yes' if row.met else 'no'} |"
-        )
+    lines += [_table_line(row) for row in rows]
     lines += ["", *NOTES]
     return "\n".join(lines) + "\n"
 
 
-def run_benchmarks(out: Path, quick: bool, repeats: int, command: str) -> list[Row]:
-    """Run every benchmark and write ``out`` (on one torch thread, as ``dospcot train`` runs)."""
+def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Sequence[str] = ()) -> list[Row]:
+    """Run every benchmark and write ``out`` (on one torch thread, as ``dospcot train`` runs).
+
+    :param only: run these benchmarks (names of :data:`BENCHMARKS`) alone and put their rows into
+        ``out``, a file a full run wrote: each replaces its row of the same benchmark and setting, or
+        goes last, and a line under the header names them, the command and the time.
+    :raises ValueError: ``only`` names an unknown benchmark, or ``out`` holds no benchmark table.
+    """
+    unknown = [name for name in only if name not in BENCHMARKS]
+    if unknown:
+        raise ValueError(f"unknown benchmark(s) {unknown}; allowed: {', '.join(BENCHMARKS)}")
+    if only and (not out.is_file() or TABLE_HEADER not in out.read_text()):
+        raise ValueError(f"--only updates the table of a file a full `dospcot bench` wrote; {out} holds none")
     torch.set_num_threads(1)
     rows = []
-    with tqdm(BENCHMARKS.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
+    chosen = {name: BENCHMARKS[name] for name in only} if only else BENCHMARKS
+    with tqdm(chosen.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
         for name, bench in bar:
             bar.set_postfix_str(name)
             rows.append(bench(quick, repeats))
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(render(rows, command, repeats))
+    out.write_text(_with_rows(out.read_text(), rows, command) if only else render(rows, command, repeats))
     return rows
+
+
+def _with_rows(text: str, rows: list[Row], command: str) -> str:
+    """``text`` (a BENCHMARKS.md) with ``rows`` in its table and a line saying when they were rerun."""
+    lines = text.splitlines()
+    for row in rows:
+        key = f"| {row.name} | {row.setting} |"
+        at = next((i for i, line in enumerate(lines) if line.startswith(key)), None)
+        if at is None:  # a new row: after the table's last
+            at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
+            lines.insert(at, _table_line(row))
+        else:
+            lines[at] = _table_line(row)
+    rerun = {row.name for row in rows}
+    for i in reversed(range(len(lines))):  # a note whose rows are all rerun now is out of date
+        if lines[i].startswith(RERUN_NOTE) and set(lines[i].split(" UTC: ", 1)[1][:-1].split("; ")) <= rerun:
+            del lines[i - 1 : i + 1]  # the note and the blank line above it
+    header = lines.index(TABLE_HEADER)
+    names = "; ".join(row.name for row in rows)
+    note = f"{RERUN_NOTE} `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {names}."
+    lines[header - 1 : header - 1] = ["", note]  # a paragraph of its own above the table
+    return "\n".join(lines) + "\n"

@@ -203,6 +203,14 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("--quick", action="store_true", help="short runs: a smoke test, not a measurement")
     bench.add_argument("--repeats", type=positive_int, default=3, help="repetitions per figure (default 3)")
     bench.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="run this benchmark alone (repeatable) and replace its row in --out, which a full run "
+        "wrote; a line above the table says when",
+    )
+    bench.add_argument(
         "--out",
         type=Path,
         help=f"output file (default BENCHMARKS.md; with --quick {QUICK_BENCH_OUT}, never BENCHMARKS.md)",
@@ -240,7 +248,11 @@ def main(argv: Sequence[str] | None = None) -> int:
                 file=sys.stderr,
             )
             return 2
-        rows = run_benchmarks(args.out, args.quick, args.repeats, command)
+        try:
+            rows = run_benchmarks(args.out, args.quick, args.repeats, command, args.only)
+        except ValueError as err:
+            print(f"dospcot bench: error: {err}", file=sys.stderr)
+            return 2
         for row in rows:
             print(
                 f"{row.name}: ratio {row.ratio:.3f} (target {row.target}, {'met' if row.met else 'not met'})"

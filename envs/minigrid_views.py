@@ -35,6 +35,9 @@ AGENT_CELL = (10, 0, 0)
 number is its direction."""
 
 
+EMPTY_CELL = (1, 0, 0)
+"""How MiniGrid encodes an empty cell: object "empty" (1), colour 0, state 0."""
+
 _ENCODINGS: weakref.WeakKeyDictionary[gym.Env, tuple[object, int, np.ndarray]] = weakref.WeakKeyDictionary()
 
 
@@ -46,7 +49,11 @@ def map_encoding(env: gym.Env) -> np.ndarray:
     cached = _ENCODINGS.get(env)
     if cached is not None and cached[0] is env.grid and cached[1] == env.step_count:
         return cached[2]
-    encoding = env.grid.encode()
+    grid = env.grid
+    # What grid.encode() returns, from its flat list of cells (row by row) in one pass: about 2.5
+    # times faster than its per-cell get().
+    cells = [EMPTY_CELL if obj is None else obj.encode() for obj in grid.grid]
+    encoding = np.array(cells, dtype=np.uint8).reshape(grid.height, grid.width, 3).transpose(1, 0, 2)
     encoding.flags.writeable = False
     _ENCODINGS[env] = (env.grid, env.step_count, encoding)
     return encoding

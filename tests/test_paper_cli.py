@@ -8,6 +8,7 @@ import sys
 import numpy as np
 import pytest
 
+from dospcot import bench
 from dospcot.cli import main
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS, cell_summary, protocol_specs, train_protocol_at
@@ -187,3 +188,36 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert "FastHighwayVec vs highway-env's highway-fast-v0: env steps per second" in text
     assert "Tabular agents, vectorised vs a per-step Python loop: agent steps per second" in text
     assert "| ratio | target | met |" in text
+
+
+def _row(name: str, ours: float) -> bench.Row:
+    steps = bench.Measurement.of([ours, ours, ours], "steps/s")
+    return bench.Row(name, "setting", steps, bench.Measurement.of([10.0] * 3, "steps/s"), True, 0.5)
+
+
+def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench", 3))
+    rerun = {"A": lambda quick, repeats: _row("A", 20.0), "C": lambda quick, repeats: _row("C", 2.0)}
+    monkeypatch.setattr(bench, "BENCHMARKS", rerun)
+    assert main(["bench", "--only", "A", "--only", "C", "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    table = [line for line in lines if line.startswith("| ") and not line.startswith("| benchmark")]
+    assert [line.split(" | ")[0] for line in table] == ["| A", "| B", "| C"]
+    assert "| 2.000 | >= 0.5 | yes |" in table[0] and "| 0.600 |" in table[1]  # A rerun, B kept
+    assert "| 0.200 | >= 0.5 | no |" in table[2]
+    assert any(line.startswith("Rerun alone by `dospcot bench --only A --only C") for line in lines)
+    assert lines[-1] == bench.NOTES[-1]
+    # Rerunning A alone keeps the note on A and C (C's figure is still from then), then adds one.
+    assert main(["bench", "--only", "A", "--out", str(out)]) == 0
+    notes = [line for line in out.read_text().splitlines() if line.startswith("Rerun alone by")]
+    assert len(notes) == 2 and notes[1].startswith("Rerun alone by `dospcot bench --only A --out")
+    assert main(["bench", "--only", "A", "--out", str(out)]) == 0  # the same again: replaces its note
+    notes = [line for line in out.read_text().splitlines() if line.startswith("Rerun alone by")]
+    assert len(notes) == 2
+    # An unknown name, or a file no full run wrote, fails with one line.
+    assert main(["bench", "--only", "Z", "--out", str(out)]) == 2
+    assert "unknown benchmark(s) ['Z']" in capsys.readouterr().err
+    assert main(["bench", "--only", "A", "--out", str(tmp_path / "none.md")]) == 2
+    err = capsys.readouterr().err
+    assert "holds none" in err and err.count("\n") == 1
