@@ -563,7 +563,7 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
 
     :param only: run these benchmarks (names of :data:`BENCHMARKS`) alone and put their rows into
         ``out``, a file a full run wrote: each replaces its row of the same benchmark and setting, or
-        goes last, and a line under the header names them, the command and the time.
+        goes last, and a line above the table names them, the command and the time.
     :raises ValueError: ``only`` names an unknown benchmark, or ``out`` holds no benchmark table.
     """
     unknown = [name for name in only if name not in BENCHMARKS]
