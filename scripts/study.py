@@ -170,11 +170,19 @@ def _over_seeds(members: list[TrialRun], key: str, view: str | None = None) -> s
     )
 
 
-def _per_view_rows(grouped: dict[tuple[str, tuple], list[TrialRun]], keys: list[str]) -> list[str]:
-    """One table row per method and view: ``keys`` over seeds."""
+def _per_view_rows(
+    grouped: dict[tuple[str, tuple], list[TrialRun]],
+    keys: list[str],
+    first: Callable[[str], str] | None = None,
+) -> list[str]:
+    """One table row per method and view: ``keys`` over seeds; ``first`` gives a leading cell from
+    the preset's name (a task column)."""
     labels = _labels(grouped)
     return [
-        f"| {labels[key]} | {view} | " + " | ".join(_over_seeds(members, k, view) for k in keys) + " |"
+        ("" if first is None else f"| {first(key[0])} ")
+        + f"| {labels[key]} | {view} | "
+        + " | ".join(_over_seeds(members, k, view) for k in keys)
+        + " |"
         for key, members in grouped.items()
         for view in members[0].summary["views"]
     ]
@@ -257,12 +265,9 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
         "| task | method | view | success | greedy return |",
         "|---|---|---|---|---|",
     ]
-    for (name, _), members in grouped.items():
-        task = MINIGRID_TASKS[name.split("-")[1]]
-        for view in members[0].summary["views"]:
-            stats = " | ".join(_over_seeds(members, key, view) for key in ("success", "greedy_return"))
-            lines.append(f"| {task} | {METHODS[name]} | {view} | {stats} |")
-    return lines
+    return lines + _per_view_rows(
+        grouped, ["success", "greedy_return"], lambda name: MINIGRID_TASKS[name.split("-")[1]]
+    )
 
 
 def grid16_tables(runs: list[TrialRun]) -> list[str]:
