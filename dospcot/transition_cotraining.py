@@ -25,7 +25,7 @@ no exact optimum, so no optimal-action agreement (NaN).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Hashable, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -169,14 +169,20 @@ def _grow(array: np.ndarray, extra: int) -> np.ndarray:
 
 
 class SensorStoreWrapper(gym.Wrapper):
-    """Write every step, with every view of s and s' (``info["views"]``), into a :class:`StepStore`
-    and put its id in ``info["store_id"]``. Sits above :class:`~dospcot.envs.RewardMaskWrapper`."""
+    """Write every step, with the views of s and s' (``info["views"]``), into a :class:`StepStore`
+    and put its id in ``info["store_id"]``. Sits above :class:`~dospcot.envs.RewardMaskWrapper`.
+
+    Views are read only for a step that starts a new sample (on a keyed store, a pair's first visit):
+    the wrapper turns on the views' ``lazy_views`` (:class:`~dospcot.envs.sensors.StepViews`, each
+    computed when read) and asks the store before the env steps, while s's views can still be read."""
 
     def __init__(self, env: gym.Env, store: StepStore) -> None:
         super().__init__(env)
+        env.set_wrapper_attr("lazy_views", True, force=False)
         self.store = store
+        self._state_key = env.get_wrapper_attr("current_state_key")
         self._row = -1
-        self._views: dict[str, np.ndarray] = {}
+        self._views: Mapping[str, np.ndarray] = {}
 
     def reset(self, **kwargs: Any):
         obs, info = self.env.reset(**kwargs)
@@ -184,19 +190,17 @@ class SensorStoreWrapper(gym.Wrapper):
         return obs, info
 
     def step(self, action: Any):
+        action = int(action)
+        new = self.store.is_new(self._state_key(), action)
+        if new and self._row < 0:  # consecutive new samples share the row between them
+            self._row = self.store.add_row(self._views)
         obs, reward, terminated, truncated, info = self.env.step(action)
-        key, views = info.get("state_key"), info["views"]
-        # A step stores views only when it starts a new sample (a keyed pair keeps its first visit's);
-        # consecutive new samples share the row between them.
-        if self.store.is_new(key, int(action)):
-            state_row = self._row if self._row >= 0 else self.store.add_row(self._views)
-            next_row = self.store.add_row(views)
-        else:
-            state_row = next_row = -1
+        views = info["views"]
+        next_row = self.store.add_row(views) if new else -1
         info = dict(info)
         info["store_id"] = self.store.add(
-            state_row, int(action), next_row, info["reward_observed"], float(reward), info["hidden_reward"],
-            key=key,
+            self._row if new else -1, action, next_row, info["reward_observed"], float(reward),
+            info["hidden_reward"], key=info.get("state_key"),
         )  # fmt: skip
         self._views, self._row = views, next_row
         return obs, reward, terminated, truncated, info

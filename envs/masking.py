@@ -166,6 +166,11 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._state: Any = None
         self._episode_step = 0
 
+    def current_state_key(self) -> Hashable:
+        """Key mode: the key of the state the env is in (the ``info["state_key"]`` of the next step);
+        other modes: None."""
+        return self._state if self._state_key is not None else None
+
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self._state = obs if self.mode == "state-action" else None

@@ -318,3 +318,34 @@ def test_a_sensor_step_computes_each_view_once(monkeypatch: pytest.MonkeyPatch) 
         *_, info = env.step(IDLE)
     assert calls == {name: 6 for name in VIEW_NAMES}  # the reset and five steps, each view once
     np.testing.assert_array_equal(env.unwrapped.observe("kinematics"), info["views"]["kinematics"])
+
+
+def test_lazy_views_are_computed_when_read_once_and_never_for_a_past_state(monkeypatch: pytest.MonkeyPatch):
+    from dospcot.envs import fast_highway
+    from dospcot.envs.highway import make_masked_highway
+
+    calls = {name: 0 for name in VIEW_NAMES}
+    for name, fn in list(fast_highway._VIEW_FUNCTIONS.items()):
+
+        def counted(*args, _name=name, _fn=fn):
+            calls[_name] += 1
+            return _fn(*args)
+
+        monkeypatch.setitem(fast_highway._VIEW_FUNCTIONS, name, counted)
+    env = make_masked_highway("dospcot/FastHighway-v0", "kinematics", VIEW_NAMES)
+    env.set_wrapper_attr("lazy_views", True, force=False)
+    env.reset(seed=0)
+    for _ in range(5):
+        *_, info = env.step(IDLE)
+    # Only the observed view, for the reset and five steps: nothing read the other.
+    assert calls == {name: 6 if name == "kinematics" else 0 for name in VIEW_NAMES}
+    *_, info = env.step(IDLE)
+    for name in VIEW_NAMES:  # read twice, computed once
+        np.testing.assert_array_equal(info["views"][name], info["views"][name])
+    assert calls == {name: 7 if name == "kinematics" else 1 for name in VIEW_NAMES}
+    np.testing.assert_array_equal(env.unwrapped.observe("occupancy"), info["views"]["occupancy"])
+    *_, unread = env.step(IDLE)
+    env.step(IDLE)
+    with pytest.raises(RuntimeError, match="before the env stepped on"):
+        unread["views"]["occupancy"]  # computed now, it would describe a later state
+    np.testing.assert_array_equal(info["views"]["occupancy"], info["views"]["occupancy"])  # read in time

@@ -310,6 +310,10 @@ def test_a_keyed_pool_holds_each_state_action_pair_once_labelled_for_every_visit
         assert store.action[n] == action
         assert store.hidden_reward[n] == float(cell == LENGTH - 2 and action == 1)
         np.testing.assert_array_equal(store.rows["onehot"][store.state_row[n]], np.eye(LENGTH)[cell])
+        after = min(max(cell + (1 if action == 1 else -1), 0), LENGTH - 1)
+        np.testing.assert_array_equal(store.rows["onehot"][store.next_row[n]], np.eye(LENGTH)[after])
+    # Views are stored on a pair's first visit only, a row shared where one new pair follows another.
+    assert 18 < store.n_rows <= 36
     assert 0 < store.labelled[:18].sum() < 18
     # Each visit: both agents' envs (other views, one mask per run) reveal a pair's reward or both hide it.
     envs = [
