@@ -47,6 +47,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.demonstrations import DemonstrationsConfig
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
@@ -129,6 +130,7 @@ class NeuralConfig(TrainingConfig):
     :param tabular: further keyword arguments of every ``tabular`` agent
         (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
     :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
+    :param demonstrations: expert episodes and their roles (a task without them ignores it).
     """
 
     max_episode_steps: int = 64
@@ -136,6 +138,7 @@ class NeuralConfig(TrainingConfig):
     dqn: dict[str, Any] = field(default_factory=dict)
     tabular: dict[str, Any] = field(default_factory=dict)
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+    demonstrations: DemonstrationsConfig = field(default_factory=DemonstrationsConfig)
 
 
 class CoTrainingTask(Protocol):
@@ -170,6 +173,10 @@ class CoTrainingTask(Protocol):
 
     def reference_returns(self) -> dict[str, float]:
         """The returns the normalised score is measured between."""
+
+    def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """(N, d) the demonstrated states in ``view`` and (N,) the demonstrated actions, for the
+        agents' large-margin loss; None: the run has no demonstrations."""
 
 
 def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
@@ -249,7 +256,11 @@ def make_agent(
             )
         agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **config.tabular)
     else:
-        agent = ExpectedSarsaDQN("MlpPolicy", env, **common, **config.dqn)
+        demos = config.demonstrations
+        agent = ExpectedSarsaDQN(
+            "MlpPolicy", env, **common, **config.dqn,
+            demo_margin=demos.margin, demo_loss_weight=demos.margin_loss_weight,
+        )  # fmt: skip
     agent.learning_starts = max(agent.learning_starts, config.collect_only_steps)
     agent.set_pace(0.0)
     return agent
@@ -276,6 +287,8 @@ class CoTrainingRun:
             )
             for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True))
         ]
+        for k in range(len(self.agents)):
+            self._give_demonstrations(k)
         self.trainer: SelfPacedCoTrainer | None = None
         if spec.method == "cotrain":
             cfg = replace(config.cotraining, gamma=spec.gamma, max_classes=n_classes)
@@ -283,6 +296,13 @@ class CoTrainingRun:
         self.round = 0
         self.stopped = False
         """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
+
+    def _give_demonstrations(self, k: int) -> None:
+        """Agent ``k``'s large-margin loss reads the task's demonstrations in its own view (a neural
+        agent's; a saved agent holds none, so a loaded one gets them again)."""
+        demos = self.task.demonstrations(self.spec.views[k])
+        if demos is not None and self.spec.agents[k] != "tabular":
+            self.agents[k].set_demonstrations(*demos)
 
     @property
     def store(self) -> Any:
@@ -377,6 +397,7 @@ class CoTrainingRun:
             loaded.replay_buffer.reward_table = agent.replay_buffer.reward_table
             loaded.action_space.np_random.bit_generator.state = state["action_space_rng"][k]
             self.agents[k] = loaded
+            self._give_demonstrations(k)
         # Loading re-seeds the global generators (SB3's _setup_model): restore them last.
         random.setstate(state["rng"]["python"])
         np.random.set_state(state["rng"]["numpy"])  # noqa: NPY002

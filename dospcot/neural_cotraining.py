@@ -24,6 +24,7 @@ from dospcot import metrics
 from dospcot.checkpointing import InPlaceState
 from dospcot.cotraining import Pool
 from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
+from dospcot.demonstrations import expert_demonstrations
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import View, ViewObservationWrapper
@@ -133,6 +134,24 @@ class GridTask:
         self.store = KeyStore(self.mdp.n_states, self.mdp.n_actions)
         self.classes = RewardClasses(1, config.cotraining.max_classes)
         self.policy_metrics = metrics.GreedyPolicyMetrics(self.mdp, discount=1.0)
+        wanted = config.demonstrations
+        self.demos = (
+            expert_demonstrations(self.mdp, wanted.episodes, spec.seed, with_rewards=wanted.labels)
+            if wanted.episodes
+            else None
+        )
+        """The run's expert episodes (:func:`~dospcot.demonstrations.expert_demonstrations`), or None."""
+        self.revealed_keys: np.ndarray | None = None
+        """bool (S, A): the keys whose rewards the demonstrations reveal (labelled ones only), or None."""
+        if self.demos is not None and self.demos.rewards is not None:
+            self.revealed_keys = np.zeros((self.mdp.n_states, self.mdp.n_actions), dtype=bool)
+            self.revealed_keys[self.demos.states, self.demos.actions] = True
+            # Labelled samples of the pool from the start, as if the agents had stepped there.
+            nxt = self.mdp.next_state[self.demos.states, self.demos.actions]
+            for s, a, s2, r in zip(
+                self.demos.states, self.demos.actions, nxt, self.demos.rewards, strict=True
+            ):
+                self.store.add(int(s), int(a), int(s2), True, float(r), float(r))
 
     def agent_env(self, k: int, view: str) -> gym.Env:
         fraction = 1.0 if self.spec.method == "oracle" else self.config.label_fraction
@@ -145,6 +164,7 @@ class GridTask:
             mode="state-action",
             mask_seed=self.spec.seed,
             monitored_states=self.monitored_states,
+            revealed_keys=self.revealed_keys,
         )
         return ViewObservationWrapper(StoreWrapper(env, self.store), self.views[view])
 
@@ -188,6 +208,11 @@ class GridTask:
             "optimal_return": self.policy_metrics.optimal_return,
             "random_return": self.policy_metrics.random_return,
         }
+
+    def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
+        if self.demos is None or self.config.demonstrations.margin_loss_weight == 0:
+            return None
+        return self.demos.observations[view], self.demos.actions
 
 
 class NeuralCoTraining(CoTrainingRun):

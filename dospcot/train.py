@@ -170,6 +170,7 @@ def _common_kwargs(cfg: TrainConfig) -> dict[str, Any]:
     return {
         **dataclasses.asdict(cfg.training),
         "dqn": agent_kwargs(cfg), "tabular": tabular_agent_kwargs(cfg), "cotraining": cfg.cotraining,
+        "demonstrations": cfg.demonstrations,
     }  # fmt: skip
 
 

@@ -2,11 +2,12 @@
 
 A config is a TOML table read with the stdlib's :mod:`tomllib`. Its keys mirror
 :class:`TrainConfig`; sections (``[env]``, ``[training]``, ``[dqn]``, ``[tabular_agent]``,
-``[cotraining]``, ``[cotraining.classifier]``) mirror its nested dataclasses. A config with
-``task = "paper"`` is a :class:`PaperConfig` instead (one seed of the seed paper's tabular protocol,
-its ``[tabular]`` section a :class:`~dospcot.tabular_cotraining.TabularConfig`). Every key is checked
-against the dataclass fields and their type hints before anything is built, so a typo or a wrong type
-stops the run with one line (:class:`ConfigError`) naming the key and what is allowed.
+``[cotraining]``, ``[cotraining.classifier]``, ``[demonstrations]``) mirror its nested dataclasses.
+A config with ``task = "paper"`` is a :class:`PaperConfig` instead (one seed of the seed paper's
+tabular protocol, its ``[tabular]`` section a :class:`~dospcot.tabular_cotraining.TabularConfig`).
+Every key is checked against the dataclass fields and their type hints before anything is built, so a
+typo or a wrong type stops the run with one line (:class:`ConfigError`) naming the key and what is
+allowed.
 
 Presets ship in ``dospcot/presets/*.toml``; a name without ``.toml`` is looked up there, anything
 else is read as a path. A config may start from another with ``extends = "<preset or path>"``: its
@@ -31,6 +32,7 @@ from stable_baselines3 import DQN
 
 from dospcot.cotraining import CoTrainingConfig
 from dospcot.cotraining_round import TrainingConfig
+from dospcot.demonstrations import DemonstrationsConfig
 from dospcot.envs.fast_highway import FastHighwayEnv
 from dospcot.envs.gym_sensors import check_gym_task
 from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, highway_view_names, try_highway_config
@@ -362,6 +364,7 @@ class TrainConfig:
     dqn: DQNConfig = field(default_factory=DQNConfig)
     tabular_agent: TabularAgentConfig = field(default_factory=TabularAgentConfig)
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+    demonstrations: DemonstrationsConfig = field(default_factory=DemonstrationsConfig)
 
     def __post_init__(self) -> None:
         _check_name_and_seed(self.name, self.seed)
@@ -404,6 +407,20 @@ class TrainConfig:
             raise ConfigError(
                 f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
                 f"{self.task_name}: {neural}"
+            )
+        if self.demonstrations.episodes and self.task != "grid":
+            raise ConfigError(
+                'demonstrations.episodes: expert demonstrations exist for task = "grid" only so far '
+                "(value iteration's optimal policy)"
+            )
+        if (
+            self.demonstrations.episodes
+            and self.demonstrations.margin_loss_weight
+            and "tabular" in self.agent_kinds
+        ):
+            raise ConfigError(
+                "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "
+                "to use the demonstrations as labels only"
             )
         if self.task == "highway":
             _check_highway_task(self.highway)

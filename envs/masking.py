@@ -116,6 +116,8 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         revealed (a monitor); ``label_fraction`` is then the share of the other keys.
     :param reveal_first_steps: transition mode: the first this many steps of every episode are
         revealed (a monitor); later steps with probability ``label_fraction``.
+    :param revealed_keys: state-action mode: bool (n_states, n_actions), keys revealed besides the
+        drawn ones, e.g. the steps of demonstrations whose rewards a rater gave; None: none.
     """
 
     def __init__(
@@ -126,14 +128,18 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         mask_seed: int = 0,
         monitored_states: np.ndarray | None = None,
         reveal_first_steps: int = 0,
+        revealed_keys: np.ndarray | None = None,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, label_fraction=label_fraction, mode=mode, mask_seed=mask_seed,
             monitored_states=monitored_states, reveal_first_steps=reveal_first_steps,
+            revealed_keys=revealed_keys,
         )  # fmt: skip
         super().__init__(env)
         if mode not in MASK_MODES:
             raise ValueError(f"mode must be one of {MASK_MODES}, got {mode!r}")
+        if revealed_keys is not None and mode != "state-action":
+            raise ValueError("revealed_keys needs mode='state-action', whose keys are (state, action) pairs")
         if monitored_states is not None and mode != "state-action":
             raise ValueError(
                 "monitored_states needs mode='state-action'; use reveal_first_steps in 'transition'"
@@ -160,6 +166,13 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                 int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed,
                 monitored_states,
             )  # fmt: skip
+            if revealed_keys is not None:
+                if revealed_keys.shape != self.mask.labelled.shape:
+                    raise ValueError(
+                        f"revealed_keys must be (n_states, n_actions) = {self.mask.labelled.shape}, got "
+                        f"{revealed_keys.shape}"
+                    )
+                self.mask.labelled |= revealed_keys.astype(bool)
         self._state_key = env.get_wrapper_attr("state_key") if mode == "key" else None
         self._mask_seed = mask_seed
         self._reveal_rng = np.random.default_rng(mask_seed)

@@ -8,6 +8,7 @@ from dospcot.policies.esarsa_dqn.buffers import (
 from dospcot.policies.esarsa_dqn.esarsa_dqn import (
     ExpectedSarsaDQN,
     epsilon_greedy_expectation,
+    large_margin_loss,
     weighted_huber_loss,
 )
 
@@ -24,5 +25,6 @@ __all__ = [
     "RewardTable",
     "WeightedReplayBufferSamples",
     "epsilon_greedy_expectation",
+    "large_margin_loss",
     "weighted_huber_loss",
 ]

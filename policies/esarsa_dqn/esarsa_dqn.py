@@ -27,7 +27,10 @@ forward pass that picks the greedy action also flags it, so flagging costs no ex
 Expected-SARSA target values the eps-greedy policy itself, so its windows stay whole.
 
 The loss is the weighted mean of the per-sample Huber loss, ``sum_i w_i l_i / sum_i w_i``; weight-0
-samples drive nothing.
+samples drive nothing. With demonstrations (:meth:`ExpectedSarsaDQN.set_demonstrations`) every
+gradient step adds ``demo_loss_weight`` times DQfD's large-margin loss (:func:`large_margin_loss`)
+on a minibatch of demonstrated (state, action) pairs, which pulls the demonstrated action's value
+above every other action's by a margin.
 
 The saved zip holds the stock ``DQNPolicy`` and nothing of dospcot, so
 ``stable_baselines3.DQN.load`` reads it in a process that never imported dospcot.
@@ -79,6 +82,20 @@ def weighted_huber_loss(
     return th.dot(per_sample.view(-1), weights.view(-1)) / max(total, 1e-12)
 
 
+def large_margin_loss(q: th.Tensor, expert_actions: th.Tensor, margin: float) -> th.Tensor:
+    """DQfD's supervised loss (Hester et al., 2018): ``mean_i max_a [Q(s_i, a) + l(a_i, a)] - Q(s_i, a_i)``
+    with ``l(a_i, a) = margin`` for ``a != a_i`` and 0 for the expert's action ``a_i``. It is 0 exactly
+    when every demonstrated action's value leads every other by at least ``margin``.
+
+    :param q: (batch, A) online values at the demonstrated states.
+    :param expert_actions: (batch,) int64, the demonstrated actions.
+    :param margin: the margin, >= 0, in reward units.
+    """
+    expert = expert_actions.long().view(-1, 1)
+    penalty = th.full_like(q, margin).scatter(1, expert, 0.0)
+    return ((q + penalty).max(dim=1).values - q.gather(1, expert).view(-1)).mean()
+
+
 def _check_eps(name: str, value: float) -> float:
     value = float(value)
     if not 0.0 <= value <= 1.0:
@@ -100,6 +117,9 @@ class ExpectedSarsaDQN(DQN):
         ``exploration_final_eps`` (within ``exploration_fraction`` of them) when no co-trainer sets a
         pace. Counted in total steps, so the schedule continues across ``learn()`` calls; None takes
         the ``total_timesteps`` of the first ``learn()``.
+    :param demo_margin: the large-margin loss's margin (DQfD's 0.8), in reward units.
+    :param demo_loss_weight: lambda of the large-margin loss in every gradient step's loss, once
+        demonstrations are set (:meth:`set_demonstrations`).
     :param kwargs: every other argument of ``stable_baselines3.DQN``. ``replay_buffer_class``
         defaults to :class:`RelabellingReplayBuffer`.
     """
@@ -109,6 +129,10 @@ class ExpectedSarsaDQN(DQN):
     """(n_envs,) whether the actions just sampled were exploratory, when windows are cut."""
     _greedy: np.ndarray | None = None
     """(n_envs,) the online network's greedy actions at ``_last_obs`` while an action is sampled."""
+    _demo_obs: th.Tensor | None = None
+    """(N, d) the demonstrated states, as this agent observes them (:meth:`set_demonstrations`)."""
+    _demo_actions: th.Tensor | None = None
+    """(N,) the demonstrated actions."""
 
     def __init__(
         self,
@@ -119,6 +143,8 @@ class ExpectedSarsaDQN(DQN):
         greedy: Greedy = "target",
         cut_windows: bool = True,
         exploration_horizon: int | None = None,
+        demo_margin: float = 0.8,
+        demo_loss_weight: float = 1.0,
         **kwargs: Any,
     ) -> None:
         if target not in TARGETS:
@@ -133,7 +159,13 @@ class ExpectedSarsaDQN(DQN):
                 _check_eps(name, kwargs[name])
         if exploration_horizon is not None and exploration_horizon < 1:
             raise ValueError(f"exploration_horizon must be a positive step count, got {exploration_horizon}")
+        if demo_margin < 0 or demo_loss_weight < 0:
+            raise ValueError(
+                f"demo_margin and demo_loss_weight must be >= 0, got {demo_margin} and {demo_loss_weight}"
+            )
         kwargs.setdefault("replay_buffer_class", RelabellingReplayBuffer)
+        self.demo_margin = float(demo_margin)
+        self.demo_loss_weight = float(demo_loss_weight)
         self.target = target
         self.greedy = greedy
         self.cut_windows = cut_windows
@@ -148,6 +180,44 @@ class ExpectedSarsaDQN(DQN):
             raise ValueError(f"pace must lie in [0, 1], got {pace}")
         self.pace = pace
         self.exploration_rate = self._scheduled_eps()
+
+    def set_demonstrations(self, observations: np.ndarray | None, actions: np.ndarray | None) -> None:
+        """Demonstrated (state, action) pairs for the large-margin loss; None clears them.
+
+        :param observations: (N, *observation shape), the states as this agent observes them.
+        :param actions: (N,) ints, the actions demonstrated there.
+        """
+        if observations is None or actions is None or len(actions) == 0:
+            self._demo_obs = self._demo_actions = None
+            return
+        observations, actions = np.asarray(observations), np.asarray(actions)
+        shape = self.observation_space.shape
+        if observations.shape != (len(actions), *shape) or actions.ndim != 1:
+            raise ValueError(
+                f"set_demonstrations needs observations (N, {', '.join(map(str, shape))}) and actions "
+                f"(N,), got {observations.shape} and {actions.shape}"
+            )
+        n_actions = int(self.action_space.n)  # type: ignore[attr-defined]
+        if actions.min() < 0 or actions.max() >= n_actions:
+            raise ValueError(
+                f"demonstrated actions must lie in [0, {n_actions}), got {actions.min()} to {actions.max()}"
+            )
+        self._demo_obs = th.as_tensor(observations, dtype=th.float32, device=self.device)
+        self._demo_actions = th.as_tensor(actions, dtype=th.int64, device=self.device)
+
+    @property
+    def n_demonstrations(self) -> int:
+        """The demonstrated (state, action) pairs the large-margin loss reads (0: none)."""
+        return 0 if self._demo_actions is None else len(self._demo_actions)
+
+    def _demo_loss(self, batch_size: int) -> th.Tensor | None:
+        """``demo_loss_weight`` x the large-margin loss on ``batch_size`` demonstrated pairs drawn from
+        numpy's global stream (which SB3 seeds, as its buffers' draws); None without demonstrations."""
+        if self._demo_obs is None or self._demo_actions is None or self.demo_loss_weight == 0.0:
+            return None
+        index = th.as_tensor(np.random.randint(0, len(self._demo_actions), size=batch_size))  # noqa: NPY002
+        q = self.q_net(self._demo_obs[index])
+        return self.demo_loss_weight * large_margin_loss(q, self._demo_actions[index], self.demo_margin)
 
     def _scheduled_eps(self) -> float:
         initial, final = self.exploration_initial_eps, self.exploration_final_eps
@@ -233,7 +303,8 @@ class ExpectedSarsaDQN(DQN):
             if weights is None:
                 weights = th.ones_like(data.rewards)
             total = float(weights.sum())
-            if total == 0.0:
+            demo_loss = self._demo_loss(batch_size)
+            if total == 0.0 and demo_loss is None:
                 continue  # nothing labelled in this batch: no update
             current_q, next_value = self._current_and_next_value(data.observations, data.next_observations)
             with th.no_grad():
@@ -242,6 +313,8 @@ class ExpectedSarsaDQN(DQN):
             current_q = th.gather(current_q, dim=1, index=data.actions.long())
             loss = weighted_huber_loss(current_q, target_q, weights, total)
             losses.append(loss.item())
+            if demo_loss is not None:
+                loss = loss + demo_loss
             self.policy.optimizer.zero_grad()
             loss.backward()
             th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
@@ -298,4 +371,6 @@ class ExpectedSarsaDQN(DQN):
             "exploration_schedule",
             "_explored",
             "_greedy",
+            "_demo_obs",
+            "_demo_actions",
         ]
