@@ -6,10 +6,11 @@
     python scripts/study.py grid32 --docs           # 4 grid32 presets x seeds 0-4
     python scripts/study.py grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
     python scripts/study.py fasthighway --docs      # 4 fasthighway presets x seeds 0-4
-    python scripts/study.py minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
+    python scripts/study.py minigrid --docs         # 4 presets x 3 MiniGrid tasks x seeds 0-4
     python scripts/study.py highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
     python scripts/study.py paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
     python scripts/study.py paper-published-code --docs   # the same with its published code's settings
+    python scripts/study.py demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
     python scripts/study.py second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
     python scripts/study.py second-view-highway --docs   # its highway monitor setting x seeds 0-4
 
@@ -71,7 +72,11 @@ METHODS = {
         }.items()
     },
 }
-MINIGRID_TASKS = {"lavagap": "MiniGrid-LavaGapS7-v0", "doorkey": "MiniGrid-DoorKey-5x5-v0"}
+MINIGRID_TASKS = {
+    "lavagap": "MiniGrid-LavaGapS7-v0",
+    "doorkey": "MiniGrid-DoorKey-5x5-v0",
+    "lavacrossing": "MiniGrid-LavaCrossingS9N1-v0",
+}
 METHODS.update(
     {
         f"minigrid-{task}-{method}": label
@@ -526,6 +531,57 @@ def _second_view_highway_sweeps() -> tuple[Sweep, ...]:
     )
 
 
+# Issue 20's first comparison: expert demonstrations with 1% per-step labels against 5% per-step
+# labels, on grid16-dospcot, seeds 0-9. Each arm is a set of overrides of the preset, one sweep each.
+DEMOS, MARGIN_WEIGHT, DEMO_LABELS = (
+    "demonstrations.episodes",
+    "demonstrations.margin_loss_weight",
+    "demonstrations.labels",
+)
+DEMO_ARMS: dict[str, dict[str, str]] = {
+    "labels 5%": {FRACTION: "0.05"},
+    "labels 1%": {FRACTION: "0.01"},
+    "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10"},
+    "labels 1% + 10 demonstrations, as labels only": {FRACTION: "0.01", DEMOS: "10", MARGIN_WEIGHT: "0"},
+    "labels 1% + 10 demonstrations, margin loss only": {FRACTION: "0.01", DEMOS: "10", DEMO_LABELS: "false"},
+}
+DEMO_COLUMNS = ("success", "agreement", "pseudo_accuracy", "worst_class_precision")
+DEMO_TARGET = ("labels 1% + 10 demonstrations", "labels 5%")
+"""Issue 20's target on grid16: the first arm's success at least the second's."""
+
+
+def _demo_arm(run: TrialRun) -> str:
+    params = {k: v for k, v in run.trial.params.items() if k != "seed"}
+    return next(name for name, keys in DEMO_ARMS.items() if keys == params)
+
+
+def demonstration_tables(runs: list[TrialRun]) -> list[str]:
+    """One row per arm over seeds, then the target's paired difference in success."""
+    by_arm: dict[str, dict[int, TrialRun]] = {}
+    for run in runs:
+        by_arm.setdefault(_demo_arm(run), {})[run.trial.seed] = run
+    lines = [
+        "Every arm is `grid16-dospcot` with the overrides named; demonstrations are value iteration's "
+        "optimal episodes, the first from the map's start (docs/demonstrations.md).",
+        "",
+        "| arm | " + " | ".join(COLUMNS[c] for c in DEMO_COLUMNS) + " |",
+        "|---|" + "---|" * len(DEMO_COLUMNS),
+    ]
+    for arm in DEMO_ARMS:
+        if arm in by_arm:
+            cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in DEMO_COLUMNS]
+            lines.append(f"| {arm} | " + " | ".join(cells_) + " |")
+    ours, theirs = DEMO_TARGET
+    if ours in by_arm and theirs in by_arm:
+        diff = _paired(by_arm[ours], by_arm[theirs], "success")
+        met = "**met**" if diff.mean >= 0 else "**not met**"
+        lines += [
+            "",
+            f"- success, {ours} minus {theirs} (paired by seed): {diff}; target (at least 0): {met}",
+        ]
+    return lines
+
+
 @dataclass(frozen=True)
 class Sweep:
     """One sweep of a study: its folder's name under --runs-dir, its configs and its grid."""
@@ -626,7 +682,20 @@ STUDIES = {
             for task in MINIGRID_TASKS
         ),
         minigrid_tables,
-        "MiniGrid: LavaGapS7 and DoorKey-5x5",
+        "MiniGrid: LavaGapS7, DoorKey-5x5 and LavaCrossingS9N1",
+    ),
+    "demo-labels": Study(
+        tuple(
+            Sweep(
+                "demonstrations-" + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
+                ("grid16-dospcot",),
+                {key: (value,) for key, value in keys.items()},
+            )
+            for arm, keys in DEMO_ARMS.items()
+        ),
+        demonstration_tables,
+        "Expert demonstrations against per-step labels (grid16)",
+        seeds=10,
     ),
     "second-view": Study(
         _second_view_sweeps(), second_view_tables, "When does a second view help? (grid)", seeds=10

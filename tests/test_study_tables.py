@@ -102,3 +102,25 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
     lines = study.minigrid_tables(runs)
     assert "20 greedy episodes per agent" in lines[0]
     assert "| MiniGrid-DoorKey-5x5-v0 | DOSPCoT (m = 2, image + full map) | image | 0.500" in "\n".join(lines)
+
+
+def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
+    runs = []
+    success = {  # per arm, four seeds
+        "labels 5%": [1.0, 0.5, 1.0, 0.5],
+        "labels 1%": [0.0, 0.0, 0.5, 0.0],
+        "labels 1% + 10 demonstrations": [1.0, 1.0, 1.0, 0.5],
+    }
+    for arm, values in success.items():
+        for seed, value in enumerate(values):
+            runs.append(_run("grid16-dospcot", study.DEMO_ARMS[arm], seed, value, 0.9))
+    text = "\n".join(study.demonstration_tables(runs))
+    for arm, values in success.items():
+        assert f"| {arm} | {SeedSummary.of(values)} |" in text
+    assert "as labels only" not in text  # an arm not run has no row
+    diff = SeedSummary.of([0.0, 0.5, 0.0, 0.0])  # 1% + demonstrations minus 5%, seed by seed
+    assert f"(paired by seed): {diff}; target (at least 0): **met**" in text
+    worse = [run for run in runs if study._demo_arm(run) != "labels 5%"] + [
+        _run("grid16-dospcot", study.DEMO_ARMS["labels 5%"], seed, 1.0, 0.9) for seed in range(4)
+    ]
+    assert "target (at least 0): **not met**" in "\n".join(study.demonstration_tables(worse))
