@@ -12,21 +12,15 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from test_neural_cotraining import CONFIG, LAYOUT, VIEWS  # the small grid of the co-training tests
 
 from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, expert_demonstrations
-from dospcot.envs import GridWorld, StateActionMask, View, ViewObservationWrapper, grid_views
+from dospcot.envs import GridWorld, StateActionMask, View, ViewObservationWrapper
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn import large_margin_loss
 from dospcot.train_config import ConfigError, load_config
-
-LAYOUT = GridWorld(size=6, layout_seed=0).layout
-VIEWS = grid_views(LAYOUT, patch_size=3)
-CONFIG = NeuralConfig(
-    rounds=2, steps_per_round=300, label_fraction=0.05, max_episode_steps=36,
-    dqn={"learning_starts": 50, "buffer_size": 5_000, "policy_kwargs": {"net_arch": [32]}},
-)  # fmt: skip
 
 
 def test_the_large_margin_loss_by_hand():

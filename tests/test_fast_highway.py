@@ -13,6 +13,7 @@ from dospcot.envs.fast_highway import (
     FastHighwayVec,
     view_space,
 )
+from dospcot.envs.highway import make_masked_highway
 
 IDLE, FASTER = 1, 3
 
@@ -300,9 +301,9 @@ def test_views_and_spaces_match_highway_fast_v0() -> None:
     assert view_space("occupancy").shape == (4, 11, 11)
 
 
-def test_a_sensor_step_computes_each_view_once(monkeypatch: pytest.MonkeyPatch) -> None:
+def _counted_view_calls(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
+    """Count the fast env's calls of each view function from now on, by view."""
     from dospcot.envs import fast_highway
-    from dospcot.envs.highway import make_masked_highway
 
     calls = {name: 0 for name in VIEW_NAMES}
     for name, fn in list(fast_highway._VIEW_FUNCTIONS.items()):
@@ -312,6 +313,11 @@ def test_a_sensor_step_computes_each_view_once(monkeypatch: pytest.MonkeyPatch) 
             return _fn(*args)
 
         monkeypatch.setitem(fast_highway._VIEW_FUNCTIONS, name, counted)
+    return calls
+
+
+def test_a_sensor_step_computes_each_view_once(monkeypatch: pytest.MonkeyPatch) -> None:
+    calls = _counted_view_calls(monkeypatch)
     env = make_masked_highway("dospcot/FastHighway-v0", "kinematics", VIEW_NAMES)
     env.reset(seed=0)
     for _ in range(5):
@@ -321,17 +327,7 @@ def test_a_sensor_step_computes_each_view_once(monkeypatch: pytest.MonkeyPatch) 
 
 
 def test_lazy_views_are_computed_when_read_once_and_never_for_a_past_state(monkeypatch: pytest.MonkeyPatch):
-    from dospcot.envs import fast_highway
-    from dospcot.envs.highway import make_masked_highway
-
-    calls = {name: 0 for name in VIEW_NAMES}
-    for name, fn in list(fast_highway._VIEW_FUNCTIONS.items()):
-
-        def counted(*args, _name=name, _fn=fn):
-            calls[_name] += 1
-            return _fn(*args)
-
-        monkeypatch.setitem(fast_highway._VIEW_FUNCTIONS, name, counted)
+    calls = _counted_view_calls(monkeypatch)
     env = make_masked_highway("dospcot/FastHighway-v0", "kinematics", VIEW_NAMES)
     env.set_wrapper_attr("lazy_views", True, force=False)
     env.reset(seed=0)
