@@ -189,17 +189,17 @@ def _per_view_rows(
     ]
 
 
+def _oracle_mean(grouped: dict[tuple[str, tuple], list[TrialRun]], metric: str) -> float:
+    """``metric``'s mean over the seeds of the oracle cells (NaN without one)."""
+    values = [r.summary["mean"][metric] for (n, _), m in grouped.items() if n.endswith("-oracle") for r in m]
+    return SeedSummary.of(values).mean if values else math.nan
+
+
 def highway_tables(runs: list[TrialRun]) -> list[str]:
     """Per method: return, success and pseudo-reward quality over seeds, and the share of the oracle's
     mean return; then per view."""
     grouped = _by_method(runs)
-    oracle = [
-        r.summary["mean"]["greedy_return"]
-        for (n, _), m in grouped.items()
-        if n.endswith("-oracle")
-        for r in m
-    ]
-    oracle_mean = max(SeedSummary.of(oracle).mean, 1e-12)
+    oracle_mean = max(_oracle_mean(grouped, "greedy_return"), 1e-12)
     first = runs[0].summary
     episodes = load_config(str(runs[0].run_dir / "config.toml")).highway.eval_episodes
     # Each seed's evaluation episodes start from its own traffic, so the random floor differs by seed.
@@ -247,13 +247,7 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
     ]
     for task, env_id in MINIGRID_TASKS.items():
         cells_of_task = {key: m for key, m in grouped.items() if key[0].startswith(f"minigrid-{task}-")}
-        oracle = [
-            r.summary["mean"]["success"]
-            for (n, _), m in cells_of_task.items()
-            if n.endswith("-oracle")
-            for r in m
-        ]
-        oracle_mean = SeedSummary.of(oracle).mean if oracle else math.nan
+        oracle_mean = _oracle_mean(cells_of_task, "success")
         for (name, _), members in cells_of_task.items():
             stats = [_over_seeds(members, key) for key in MINIGRID_COLUMNS]
             mean = SeedSummary.of([r.summary["mean"]["success"] for r in members]).mean
