@@ -528,10 +528,10 @@ DEMOS, MARGIN_WEIGHT, DEMO_LABELS = (
     "demonstrations.margin_loss_weight",
     "demonstrations.labels",
 )
-DEMO_ARMS: dict[str, dict[str, str]] = {
+DEMO_ARMS: dict[str, dict[str, str]] = {  # the target's two arms first: a partial sweep has them
     "labels 5%": {FRACTION: "0.05"},
-    "labels 1%": {FRACTION: "0.01"},
     "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10"},
+    "labels 1%": {FRACTION: "0.01"},
     "labels 1% + 10 demonstrations, as labels only": {FRACTION: "0.01", DEMOS: "10", MARGIN_WEIGHT: "0"},
     "labels 1% + 10 demonstrations, margin loss only": {FRACTION: "0.01", DEMOS: "10", DEMO_LABELS: "false"},
 }
