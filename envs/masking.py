@@ -174,6 +174,7 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                     )
                 self.mask.labelled |= revealed_keys.astype(bool)
         self._state_key = env.get_wrapper_attr("state_key") if mode == "key" else None
+        self._pair_labelled: dict[tuple[Hashable, int], bool] = {}
         self._mask_seed = mask_seed
         self._reveal_rng = np.random.default_rng(mask_seed)
         self._state: Any = None
@@ -201,7 +202,12 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             observed = (int(self._state), int(action)) in self.mask
             self._state = obs
         elif self._state_key is not None:
-            observed = key_is_labelled(self._state, action, self.label_fraction, self._mask_seed)
+            pair = (self._state, int(action))
+            observed = self._pair_labelled.get(pair)
+            if observed is None:  # a pair's hash is drawn once: states recur, and hashing is costly
+                observed = self._pair_labelled[pair] = key_is_labelled(
+                    self._state, action, self.label_fraction, self._mask_seed
+                )
             info = dict(info, state_key=self._state)
             self._state = self._state_key()
         else:  # the monitored first steps draw nothing, so reveal_first_steps=0 keeps every draw
