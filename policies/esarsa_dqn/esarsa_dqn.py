@@ -296,7 +296,7 @@ class ExpectedSarsaDQN(DQN):
     def train(self, gradient_steps: int, batch_size: int = 100) -> None:
         self.policy.set_training_mode(True)
         self._update_learning_rate(self.policy.optimizer)
-        losses = []
+        losses, margin_losses = [], []
         for _ in range(gradient_steps):
             data = self.replay_buffer.sample(batch_size, env=self._vec_normalize_env)  # type: ignore[union-attr]
             weights = getattr(data, "weights", None)
@@ -314,6 +314,7 @@ class ExpectedSarsaDQN(DQN):
             loss = weighted_huber_loss(current_q, target_q, weights, total)
             losses.append(loss.item())
             if demo_loss is not None:
+                margin_losses.append(demo_loss.item())
                 loss = loss + demo_loss
             self.policy.optimizer.zero_grad()
             loss.backward()
@@ -323,6 +324,8 @@ class ExpectedSarsaDQN(DQN):
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
         if losses:
             self.logger.record("train/loss", float(np.mean(losses)))
+        if margin_losses:  # weighted, as it enters the loss
+            self.logger.record("train/margin_loss", float(np.mean(margin_losses)))
 
     def update(self, gradient_steps: int) -> None:
         """``gradient_steps`` of :meth:`train` on the replay buffer as it reads now, without acting: the
