@@ -25,6 +25,7 @@ key                       shape, dtype   meaning
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,17 +40,22 @@ from dospcot.envs.tabular import TabularMDP
 class DemonstrationsConfig:
     """The ``[demonstrations]`` section of a config: expert episodes and the roles they play.
 
-    :param episodes: expert episodes (value iteration's optimal policy on the grid; the first from the
-        task's start, the others from random states, :func:`expert_demonstrations`); 0: none.
-    :param labels: the episodes' rewards are labels: each demonstrated (s, a) key is revealed, to the
-        reward classifiers and to the agents' own steps on it. False: the rewards are not recorded, so
-        the demonstrations reach the agents through the margin loss only.
+    :param episodes: on the grid, expert episodes of value iteration's optimal policy (the first from
+        the task's start, the others from random states, :func:`expert_demonstrations`); with
+        ``file``, the first this many episodes of the file; 0: none (with ``file``: all of them).
+    :param file: a gym task's demonstrations, an ``.npz`` file (:meth:`Demonstrations.save`) holding
+        every view of the run; empty: none.
+    :param labels: the episodes' rewards are labels. On the grid each demonstrated (s, a) key is
+        revealed, to the reward classifiers and to the agents' own steps on it; from a file each
+        step joins the classifiers' labelled samples. False: the rewards are not read, so the
+        demonstrations reach the agents through the margin loss only.
     :param margin_loss_weight: lambda of the large-margin loss on the demonstrated actions in every
         neural agent's gradient steps (:func:`~dospcot.policies.esarsa_dqn.large_margin_loss`); 0: off.
     :param margin: that loss's margin, in reward units (DQfD's 0.8).
     """
 
     episodes: int = 0
+    file: str = ""
     labels: bool = True
     margin_loss_weight: float = 1.0
     margin: float = 0.8
@@ -117,6 +123,10 @@ class Demonstrations:
     @property
     def views(self) -> tuple[str, ...]:
         return tuple(self.observations)
+
+    def without_rewards(self) -> Demonstrations:
+        """The same steps with no rewards: nothing the expert earned can reach a learner."""
+        return dataclasses.replace(self, rewards=None)
 
     def first_episodes(self, n: int) -> Demonstrations:
         """The first ``n`` episodes."""

@@ -32,7 +32,7 @@ from stable_baselines3 import DQN
 
 from dospcot.cotraining import CoTrainingConfig
 from dospcot.cotraining_round import TrainingConfig
-from dospcot.demonstrations import DemonstrationsConfig
+from dospcot.demonstrations import Demonstrations, DemonstrationsConfig
 from dospcot.envs.fast_highway import FastHighwayEnv
 from dospcot.envs.gym_sensors import check_gym_task
 from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, highway_view_names, try_highway_config
@@ -408,20 +408,7 @@ class TrainConfig:
                 f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
                 f"{self.task_name}: {neural}"
             )
-        if self.demonstrations.episodes and self.task != "grid":
-            raise ConfigError(
-                'demonstrations.episodes: expert demonstrations exist for task = "grid" only so far '
-                "(value iteration's optimal policy)"
-            )
-        if (
-            self.demonstrations.episodes
-            and self.demonstrations.margin_loss_weight
-            and "tabular" in self.agent_kinds
-        ):
-            raise ConfigError(
-                "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "
-                "to use the demonstrations as labels only"
-            )
+        self._check_demonstrations()
         if self.task == "highway":
             _check_highway_task(self.highway)
         if self.task == "gym":
@@ -436,6 +423,31 @@ class TrainConfig:
                 )
             except ValueError as err:
                 raise ConfigError(str(err)) from None
+
+    def _check_demonstrations(self) -> None:
+        demos = self.demonstrations
+        if demos.file and self.task != "gym":
+            raise ConfigError(
+                'demonstrations.file: a file of demonstrations is read by task = "gym" runs; on the '
+                "grid, demonstrations.episodes draws them from value iteration"
+            )
+        if demos.episodes and self.task == "highway":
+            raise ConfigError('demonstrations.episodes: no demonstrations exist for task = "highway" yet')
+        if demos.episodes and self.task == "gym" and not demos.file:
+            raise ConfigError(
+                "demonstrations.episodes: a gym task's demonstrations come from a file: set "
+                "demonstrations.file (docs/demonstrations.md)"
+            )
+        if demos.file:
+            try:
+                Demonstrations.load(demos.file)
+            except ValueError as err:
+                raise ConfigError(f"demonstrations.file: {err}") from None
+        if (demos.episodes or demos.file) and demos.margin_loss_weight and "tabular" in self.agent_kinds:
+            raise ConfigError(
+                "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "
+                "to use the demonstrations as labels only"
+            )
 
     @property
     def _unread_sections(self) -> list[str]:

@@ -38,6 +38,7 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from dospcot.checkpointing import InPlaceState
 from dospcot.cotraining import Pool
 from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
+from dospcot.demonstrations import Demonstrations, DemonstrationsConfig
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.reward_classes import QuantileRewardClasses
 
@@ -275,6 +276,7 @@ class SensorTask:
         envs = [make_env(v, spec.views, fraction, seed) for v, seed in zip(spec.views, seeds, strict=True)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
         self.store = (KeyedStepStore if config.keyed else StepStore)(self.shapes)
+        self.demos = self._read_demonstrations(config.demonstrations)
         self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
         self.n_actions = int(envs[0].action_space.n)
         self.classes = QuantileRewardClasses(config.reward_classes)
@@ -347,8 +349,43 @@ class SensorTask:
             "random_return": self.random_return,
         }
 
-    def demonstrations(self, view: str) -> None:
-        return None  # expert episodes exist for the grid only so far (the config refuses them here)
+    def _read_demonstrations(self, wanted: DemonstrationsConfig) -> Demonstrations | None:
+        """The file's demonstrations (its first ``wanted.episodes``, or all), each of the run's views
+        checked against the env's; with labels, each step a labelled sample of the store."""
+        if not wanted.file:
+            return None
+        demos = Demonstrations.load(wanted.file)
+        if wanted.episodes:
+            demos = demos.first_episodes(wanted.episodes)
+        for view, shape in self.shapes.items():
+            if view not in demos.observations:
+                raise ValueError(
+                    f"demonstrations.file holds no view {view!r} (it has {', '.join(demos.views)})"
+                )
+            width = int(np.prod(shape))
+            if demos.observations[view].shape[1] != width:
+                raise ValueError(
+                    f"demonstrations.file: view {view!r} has {demos.observations[view].shape[1]} values per "
+                    f"step, the env's {width}"
+                )
+        if not wanted.labels or demos.rewards is None:
+            return demos.without_rewards()
+        if self.config.keyed:
+            raise ValueError(
+                "demonstrations.labels: a file's steps name no state key, so they cannot join a keyed "
+                "pool; set demonstrations.labels = false to use them in the margin loss only"
+            )
+        for i in range(len(demos)):
+            state_row = self.store.add_row({v: demos.observations[v][i] for v in self.shapes})
+            next_row = self.store.add_row({v: demos.next_observations[v][i] for v in self.shapes})
+            reward = float(demos.rewards[i])
+            self.store.add(state_row, int(demos.actions[i]), next_row, True, reward, reward)
+        return demos
+
+    def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
+        if self.demos is None or self.config.demonstrations.margin_loss_weight == 0:
+            return None
+        return self.demos.observations[view].reshape(-1, *self.shapes[view]), self.demos.actions
 
 
 class TransitionCoTraining(CoTrainingRun):

@@ -108,7 +108,12 @@ def test_expert_episodes_follow_the_optimal_policy_first_from_the_start():
 
 
 def _run(labels: bool, weight: float = 1.0, seed: int = 0) -> NeuralCoTraining:
-    config = NeuralConfig(**{**vars(CONFIG), "demonstrations": DemonstrationsConfig(3, labels, weight)})
+    config = NeuralConfig(
+        **{
+            **vars(CONFIG),
+            "demonstrations": DemonstrationsConfig(episodes=3, labels=labels, margin_loss_weight=weight),
+        }
+    )
     spec = NeuralRunSpec("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed=seed)
     return NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, config)
 
@@ -199,7 +204,7 @@ def test_bad_demonstrations_settings_fail_with_one_line():
     with pytest.raises(ConfigError, match="demonstrations: episodes must be >= 0, got -1"):
         load_config("grid16-dospcot", ["demonstrations.episodes=-1"])
     with pytest.raises(
-        ConfigError, match=r'demonstrations\.episodes: expert demonstrations exist for task = "grid"'
+        ConfigError, match=r'demonstrations\.episodes: no demonstrations exist for task = "highway"'
     ):
         load_config("fasthighway-dospcot", ["demonstrations.episodes=3"])
     with pytest.raises(ConfigError, match="tabular agents have no large-margin loss; set it to 0"):

@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import stable_baselines3
 
+from dospcot.demonstrations import Demonstrations
 from dospcot.envs import minigrid_views
 from dospcot.envs.gym_sensors import (
     ObservationSensors,
@@ -510,3 +511,52 @@ def test_the_map_encoding_is_read_once_per_step_and_follows_every_change():
     env.reset(seed=1)
     np.testing.assert_array_equal(minigrid_views.map_encoding(u), u.grid.encode())
     assert minigrid_views.state_key(u)[3] == u.grid.encode().tobytes()
+
+
+def _corridor_demonstrations(path: Path, episodes: int = 2) -> Path:
+    """An expert's episodes on the corridor, always right: cells 0..8, the last step pays 1."""
+    cells = np.tile(np.arange(LENGTH - 1), episodes)
+    onehot = np.eye(LENGTH, dtype=np.float32)
+    signed = (2 * cells / (LENGTH - 1) - 1).astype(np.float32)[:, None]
+    next_signed = (2 * (cells + 1) / (LENGTH - 1) - 1).astype(np.float32)[:, None]
+    Demonstrations(
+        {"onehot": onehot[cells], "signed": signed},
+        {"onehot": onehot[cells + 1], "signed": next_signed},
+        np.ones(len(cells), np.int64),
+        np.repeat(np.arange(episodes), LENGTH - 1),
+        (cells == LENGTH - 2).astype(np.float64),
+    ).save(path)
+    return path
+
+
+def test_a_gym_run_reads_demonstrations_from_a_file_as_labels_and_for_the_margin_loss(tmp_path):
+    path = _corridor_demonstrations(tmp_path / "demos.npz", episodes=3)
+    settings = {**SETTINGS, "demonstrations.file": str(path), "demonstrations.episodes": 2}
+    run = build_run(gym_config(make_corridor, VIEWS, label_fraction=0.1, settings=settings))
+    store = run.store
+    # The first two episodes' 18 steps are the pool's first samples, labelled, with their rewards.
+    assert len(store) == 18 and store.labelled[:18].all()
+    np.testing.assert_array_equal(store.label_value[:18], np.tile((np.arange(9) == 8).astype(float), 2))
+    np.testing.assert_array_equal(store.features("onehot", 2)[:9, :LENGTH], np.eye(LENGTH)[:9])
+    assert all(agent.n_demonstrations == 18 for agent in run.agents)
+    # Without labels the rewards go unread: the store stays empty, the loss keeps the steps.
+    settings["demonstrations.labels"] = False
+    run = build_run(gym_config(make_corridor, VIEWS, settings=settings))
+    assert len(run.store) == 0 and all(agent.n_demonstrations == 18 for agent in run.agents)
+
+
+def test_bad_demonstrations_files_for_a_gym_run_fail_with_one_line(tmp_path):
+    path = _corridor_demonstrations(tmp_path / "demos.npz")
+    settings = {**SETTINGS, "demonstrations.file": str(path)}
+    with pytest.raises(ValueError, match="holds no view 'cell' \\(it has onehot, signed\\)"):
+        build_run(gym_config(make_corridor, {"onehot": "onehot", "cell": "cell"}, settings=settings))
+    with pytest.raises(
+        ValueError, match="a file's steps name no state key, so they cannot join a keyed pool"
+    ):
+        build_run(gym_config(make_corridor, VIEWS, state_key=corridor_cell, settings=settings))
+    with pytest.raises(ConfigError, match=r"demonstrations\.file: demonstrations: cannot read"):
+        gym_config(make_corridor, VIEWS, settings={"demonstrations.file": str(tmp_path / "none.npz")})
+    with pytest.raises(ConfigError, match="a gym task's demonstrations come from a file"):
+        gym_config(make_corridor, VIEWS, settings={"demonstrations.episodes": 3})
+    with pytest.raises(ConfigError, match='a file of demonstrations is read by task = "gym" runs'):
+        load_config("grid16-dospcot", [f"demonstrations.file={str(path)!r}"])
