@@ -521,7 +521,7 @@ def _second_view_highway_sweeps() -> tuple[Sweep, ...]:
     )
 
 
-# Issue 20's first comparison: expert demonstrations with 1% per-step labels against 5% per-step
+# A first comparison of label sources: expert demonstrations with 1% per-step labels against 5% per-step
 # labels, on grid16-dospcot, seeds 0-9. Each arm is a set of overrides of the preset, one sweep each.
 DEMOS, MARGIN_WEIGHT, DEMO_LABELS = (
     "demonstrations.episodes",
@@ -537,7 +537,7 @@ DEMO_ARMS: dict[str, dict[str, str]] = {  # the target's two arms first: a parti
 }
 DEMO_COLUMNS = ("success", "agreement", "pseudo_accuracy", "worst_class_precision")
 DEMO_TARGET = ("labels 1% + 10 demonstrations", "labels 5%")
-"""Issue 20's target on grid16: the first arm's success at least the second's."""
+"""The target on grid16: the first arm's success at least the second's."""
 
 
 def _demo_arm(run: TrialRun) -> str:
