@@ -47,7 +47,7 @@ from readme_block import check_readme_block, replace_readme_block
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS
 from dospcot.report import TrialRun, cells, load_runs, paper_report_tables, write_report
-from dospcot.sweep import SweepSpec, run_sweep
+from dospcot.sweep import SWEEP_FILE, SweepSpec, run_sweep
 from dospcot.train_config import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -736,9 +736,12 @@ def main() -> None:
     # Another --seeds or --set is another sweep: it gets its own folder.
     default = (args.seeds, args.overrides) == (study.seeds, [])
     suffix = "" if default else f"-{args.seeds}seeds-{len(args.overrides)}sets"
-    runs, sweep_dirs, written = [], [], []
+    runs, sweep_dirs, written, not_started = [], [], [], []
     for sweep in study.sweeps:
         sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
+        if args.render_only and not (sweep_dir / SWEEP_FILE).exists():
+            not_started.append(sweep_dir)  # a study cut short: its tables say which sweeps are missing
+            continue
         if not args.render_only:
             spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
             result = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers)
@@ -749,7 +752,8 @@ def main() -> None:
         sweep_dirs.append(sweep_dir)
     options = [a for a in sys.argv[2:] if a != "--render-only"]
     command = shlex.join(["python", "scripts/study.py", args.study, *options])
-    table = "\n".join([*header(runs, command, sweep_dirs), *study.tables(runs)]) + "\n"
+    missing = [f"Not run yet: sweep(s) {', '.join(f'`{d}`' for d in not_started)}."] if not_started else []
+    table = "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
     print(table)
     if args.docs:
         docs_table = table.replace("](docs/", "](")  # the docs page sits beside the plot
