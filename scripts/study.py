@@ -554,13 +554,13 @@ def demonstration_tables(runs: list[TrialRun]) -> list[str]:
         "Every arm is `grid16-dospcot` with the overrides named; demonstrations are value iteration's "
         "optimal episodes, the first from the map's start (docs/demonstrations.md).",
         "",
-        "| arm | " + " | ".join(COLUMNS[c] for c in DEMO_COLUMNS) + " |",
-        "|---|" + "---|" * len(DEMO_COLUMNS),
+        "| arm | seeds | " + " | ".join(COLUMNS[c] for c in DEMO_COLUMNS) + " |",
+        "|---|---|" + "---|" * len(DEMO_COLUMNS),
     ]
     for arm in DEMO_ARMS:
         if arm in by_arm:
             cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in DEMO_COLUMNS]
-            lines.append(f"| {arm} | " + " | ".join(cells_) + " |")
+            lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
     ours, theirs = DEMO_TARGET
     if ours in by_arm and theirs in by_arm:
         diff = _paired(by_arm[ours], by_arm[theirs], "success")

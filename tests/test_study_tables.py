@@ -116,7 +116,7 @@ def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
             runs.append(_run("grid16-dospcot", study.DEMO_ARMS[arm], seed, value, 0.9))
     text = "\n".join(study.demonstration_tables(runs))
     for arm, values in success.items():
-        assert f"| {arm} | {SeedSummary.of(values)} |" in text
+        assert f"| {arm} | 4 | {SeedSummary.of(values)} |" in text
     assert "as labels only" not in text  # an arm not run has no row
     diff = SeedSummary.of([0.0, 0.5, 0.0, 0.0])  # 1% + demonstrations minus 5%, seed by seed
     assert f"(paired by seed): {diff}; target (at least 0): **met**" in text
