@@ -565,8 +565,9 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
     """Run every benchmark and write ``out`` (on one torch thread, as ``dospcot train`` runs).
 
     :param only: run these benchmarks (names of :data:`BENCHMARKS`) alone and put their rows into
-        ``out``, a file a full run wrote: each replaces its row of the same benchmark and setting, or
-        goes last, and a line above the table names them, the command and the time.
+        ``out``, a file a full run wrote: each replaces its row of the same benchmark and setting
+        (or the benchmark's only row, whose setting has changed), or goes last, and a line above the
+        table names them, the command and the time.
     :raises ValueError: ``only`` names an unknown benchmark, or ``out`` holds no benchmark table.
     """
     unknown = [name for name in only if name not in BENCHMARKS]
@@ -592,6 +593,9 @@ def _with_rows(text: str, rows: list[Row], command: str) -> str:
     for row in rows:
         key = f"| {row.name} | {row.setting} |"
         at = next((i for i, line in enumerate(lines) if line.startswith(key)), None)
+        named = [i for i, line in enumerate(lines) if line.startswith(f"| {row.name} | ")]
+        if at is None and len(named) == 1 and [r.name for r in rows].count(row.name) == 1:
+            at = named[0]  # the benchmark's setting changed: its one old row describes it no more
         if at is None:  # a new row: after the table's last
             at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
             lines.insert(at, _table_line(row))

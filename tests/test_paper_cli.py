@@ -1,6 +1,7 @@
 """The reproduce-paper protocol, its tables, its sweep and report, and the command line."""
 
 import csv
+import dataclasses
 import json
 import subprocess
 import sys
@@ -221,3 +222,9 @@ def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, mon
     assert main(["bench", "--only", "A", "--out", str(tmp_path / "none.md")]) == 2
     err = capsys.readouterr().err
     assert "holds none" in err and err.count("\n") == 1
+    # A benchmark whose setting changed replaces its one old row rather than sitting beside it.
+    changed = dataclasses.replace(_row("B", 30.0), setting="new setting")
+    monkeypatch.setattr(bench, "BENCHMARKS", {"B": lambda quick, repeats: changed})
+    assert main(["bench", "--only", "B", "--out", str(out)]) == 0
+    table = [line for line in out.read_text().splitlines() if line.startswith("| B | ")]
+    assert len(table) == 1 and table[0].startswith("| B | new setting |") and "| 3.000 |" in table[0]
