@@ -176,7 +176,7 @@ class CoTrainingTask(Protocol):
 
     def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
         """(N, d) the demonstrated states in ``view`` and (N,) the demonstrated actions, for the
-        agents' large-margin loss; None: the run has no demonstrations."""
+        agents' large-margin loss (read only when it is on); None: the run has no demonstrations."""
 
 
 def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
@@ -299,9 +299,11 @@ class CoTrainingRun:
 
     def _give_demonstrations(self, k: int) -> None:
         """Agent ``k``'s large-margin loss reads the task's demonstrations in its own view (a neural
-        agent's; a saved agent holds none, so a loaded one gets them again)."""
+        agent's, with the loss on; a saved agent holds none, so a loaded one gets them again)."""
+        if self.spec.agents[k] == "tabular" or self.config.demonstrations.margin_loss_weight == 0:
+            return
         demos = self.task.demonstrations(self.spec.views[k])
-        if demos is not None and self.spec.agents[k] != "tabular":
+        if demos is not None:
             self.agents[k].set_demonstrations(*demos)
 
     @property

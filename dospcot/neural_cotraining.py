@@ -210,9 +210,7 @@ class GridTask:
         }
 
     def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
-        if self.demos is None or self.config.demonstrations.margin_loss_weight == 0:
-            return None
-        return self.demos.observations[view], self.demos.actions
+        return None if self.demos is None else (self.demos.observations[view], self.demos.actions)
 
 
 class NeuralCoTraining(CoTrainingRun):

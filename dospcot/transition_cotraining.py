@@ -383,7 +383,7 @@ class SensorTask:
         return demos
 
     def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
-        if self.demos is None or self.config.demonstrations.margin_loss_weight == 0:
+        if self.demos is None:
             return None
         return self.demos.observations[view].reshape(-1, *self.shapes[view]), self.demos.actions
 
