@@ -13,6 +13,9 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
    :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
 3. **Pseudo-reward**: each admitted sample's consensus reward and weight go into the reward table,
    whose ids are the pool's samples, so every stored step of a sample reads them.
+   Under segment labels (``segment_length`` k > 1, :mod:`dospcot.segments`) the pool's samples are
+   k-step segments labelled with their summed reward, and each view's per-step reward model turns
+   the labelled and admitted sums back into per-step rewards for the table.
 4. **Policy update**: every agent takes ``update_steps`` gradient steps on its replay buffer, which
    now reads this round's pseudo-rewards, so they shape the policy evaluated at the end of the round.
 5. **Age**: the pace (admitted share of U) sets every agent's exploration rate via ``set_pace``.
@@ -52,6 +55,7 @@ from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
 from dospcot.run_spec import RunSpec
+from dospcot.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 
 VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
 AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
@@ -85,6 +89,10 @@ class TrainingConfig:
         ``learning_starts``, raised to ``(learn_from_round - 1) * steps_per_round``), so a
         co-trained agent's first values come from pseudo-rewards, not from the labels alone. The
         policy update (``update_steps``) still runs at the end of every round. In [1, ``rounds``].
+    :param segment_length: k; 1: the labels are single rewards (``label_fraction`` of the (s, a)
+        keys or steps). Above 1, co-training only: the labels are the summed rewards of k-step
+        segments of the agents' episodes, a share ``label_fraction`` of the segments, so the same
+        rater effort in labelled steps (:mod:`dospcot.segments`).
     """
 
     rounds: int = 5
@@ -94,8 +102,11 @@ class TrainingConfig:
     eps_end: float = 0.05
     update_steps: int = 0
     learn_from_round: int = 1
+    segment_length: int = 1
 
     def __post_init__(self) -> None:
+        if self.segment_length < 1:
+            raise ValueError(f"segment_length must be >= 1, got {self.segment_length}")
         if self.rounds < 1 or self.steps_per_round < 1:
             raise ValueError(
                 f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
@@ -280,10 +291,21 @@ class CoTrainingRun:
     ) -> None:
         self.task, self.spec, self.config = task, spec, config
         self.table = RewardTable()
+        self.segments: SegmentStore | None = None
+        """The labelled and unlabelled segments under segment labels (``segment_length`` > 1), or None."""
+        self.segment_classes = QuantileRewardClasses(n_classes)
+        """The quantile classes of the segments' summed rewards (segment labels only)."""
+        if config.segment_length > 1:
+            if spec.method != "cotrain":
+                raise ValueError(
+                    f"segment_length {config.segment_length}: segment labels need co-training (method "
+                    f"'cotrain'; one view is self-training), got method {spec.method!r}"
+                )
+            self.segments = SegmentStore(config.segment_length)
         buffer_kwargs = relabelling_kwargs(spec.method, self.table)
         self.agents: list[ExpectedSarsaDQN] = [
             make_agent(
-                task.agent_env(k, view), k, kind, view, spec, config, buffer_kwargs, task.observations(view)
+                self._agent_env(k, view), k, kind, view, spec, config, buffer_kwargs, task.observations(view)
             )
             for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True))
         ]
@@ -292,10 +314,15 @@ class CoTrainingRun:
         self.trainer: SelfPacedCoTrainer | None = None
         if spec.method == "cotrain":
             cfg = replace(config.cotraining, gamma=spec.gamma, max_classes=n_classes)
+            # A segment's input is the sum of its steps' (dospcot.segments.segment_pool).
             self.trainer = SelfPacedCoTrainer(task.feature_dims(), 1, cfg, [spec.seed])
         self.round = 0
         self.stopped = False
         """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
+
+    def _agent_env(self, k: int, view: str) -> gym.Env:
+        env = self.task.agent_env(k, view)
+        return env if self.segments is None else SegmentLabelWrapper(env, self.segments)
 
     def _give_demonstrations(self, k: int) -> None:
         """Agent ``k``'s large-margin loss reads the task's demonstrations in its own view (a neural
@@ -346,11 +373,33 @@ class CoTrainingRun:
 
     def _cotrain(self) -> dict:
         pool = self.task.pool()
+        if self.segments is not None:
+            return self._cotrain_segments(pool)
         result = self.trainer.step(pool)
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
         self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight[0])
         self.stopped = bool(result.stopped[0])
-        return round_stats(result, pool.unlabelled[0], self.task.true_class())  # metrics only
+        stats = round_stats(result, pool.unlabelled[0], self.task.true_class())  # metrics only
+        return {**stats, "labelled_steps": int(pool.labelled[0].sum())}
+
+    def _cotrain_segments(self, steps: Pool) -> dict:
+        """Steps 2-3 under segment labels: co-train on segments, then turn the labelled and admitted
+        segment sums into per-step rewards (:mod:`dospcot.segments`)."""
+        segments, n = self.segments, len(self.segments)
+        pool = segment_pool(steps, segments, self.segment_classes)
+        result = self.trainer.step(pool)
+        labelled = pool.labelled[0]
+        pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class)[0], nan=0.0)
+        sums = np.where(labelled, segments.label[:n], pseudo)
+        weight = np.where(labelled, 1.0, result.pseudo_weight[0])
+        seeds = [self.spec.seed * 101 + j for j in range(len(steps.features))]
+        model = self.config.cotraining.classifier
+        reward, step_weight = step_rewards(steps, segments, sums, weight, model, seeds)
+        self.table.set(np.arange(reward.size), reward, step_weight)
+        self.stopped = bool(result.stopped[0])
+        true_class = self.segment_classes.encode(segments.hidden[None, :n])[0]  # metrics only
+        stats = round_stats(result, pool.unlabelled[0], true_class)
+        return {**stats, "labelled_steps": int((segments.ids[:n][labelled] >= 0).sum())}
 
     def evaluate_policies(self) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,
@@ -380,6 +429,8 @@ class CoTrainingRun:
             "buffers": [agent.replay_buffer for agent in self.agents],
             "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
             "store": self.store.state_dict(),
+            "segments": None if self.segments is None else self.segments.state_dict(),
+            "segment_classes": self.segment_classes,
             "table": self.table.state_dict(),
             "classes": self.classes,
             "trainer": self.trainer,
@@ -391,6 +442,9 @@ class CoTrainingRun:
         """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
         self.round, self.stopped = state["round"], state["stopped"]
         self.store.load_state_dict(state["store"])  # in place: the store wrappers keep pointing at it
+        if self.segments is not None:
+            self.segments.load_state_dict(state["segments"])
+        self.segment_classes = state.get("segment_classes", self.segment_classes)  # older checkpoints lack it
         self.table.load_state_dict(state["table"])
         self.task.classes, self.trainer = state["classes"], state["trainer"]
         for k, agent in enumerate(self.agents):
@@ -433,6 +487,7 @@ class CoTrainingRun:
                     "pseudo_accuracy": stats.get("pseudo_accuracy", float("nan")),
                     "worst_class_recall": stats.get("worst_class_recall", float("nan")),
                     "worst_class_precision": stats.get("worst_class_precision", float("nan")),
+                    "labelled_steps": stats.get("labelled_steps", float("nan")),
                     **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
                 }
             )

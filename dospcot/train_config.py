@@ -409,6 +409,7 @@ class TrainConfig:
                 f"{self.task_name}: {neural}"
             )
         self._check_demonstrations()
+        self._check_segments()
         if self.task == "highway":
             _check_highway_task(self.highway)
         if self.task == "gym":
@@ -447,6 +448,27 @@ class TrainConfig:
             raise ConfigError(
                 "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "
                 "to use the demonstrations as labels only"
+            )
+
+    def _check_segments(self) -> None:
+        k = self.training.segment_length
+        if k == 1:
+            return
+        if self.method != "cotrain":
+            raise ConfigError(
+                f'training.segment_length: segment labels need co-training (method = "cotrain"; one '
+                f'view is self-training), got method = "{self.method}"'
+            )
+        if self.demonstrations.labels and (self.demonstrations.episodes or self.demonstrations.file):
+            raise ConfigError(
+                "training.segment_length: segment labels reveal no single reward, so demonstrations "
+                "cannot be labels too; set demonstrations.labels = false"
+            )
+        monitor = {"grid": self.env.monitored_columns, "highway": self.highway.reveal_first_steps}
+        if monitor.get(self.task):
+            raise ConfigError(
+                "training.segment_length: segment labels reveal no single reward, so they cannot be "
+                "combined with a reward monitor"
             )
 
     @property

@@ -12,6 +12,13 @@ Three modes (docs/design.md section 1):
   and a (key, action) pair is labelled when a hash of it and ``mask_seed`` falls below
   ``label_fraction`` (:func:`key_is_labelled`), so every visit of a pair is labelled or none is.
 
+Segment labels (docs/segments.md): with ``segment_length`` k > 1 no single reward is revealed. The
+steps of an episode fall into segments of k (the last one shorter where the episode ends), and a
+segment is labelled with probability ``label_fraction`` as a whole: the step that ends it carries
+``info["segment_end"] = True`` and, where labelled, ``info["segment_label"]``, the sum of its hidden
+rewards (a rater scoring a clip). Segments are drawn in every mode from the generator of transition
+mode, so a seeded reset replays them.
+
 State-dependent monitors (the monitored-MDP setting, docs/preregistration.md): what is revealed may
 depend on where the agent is. In state-action mode ``monitored_states`` names states whose every
 reward is revealed (``label_fraction`` then is the share of the other keys); in transition mode the
@@ -118,6 +125,9 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         revealed (a monitor); later steps with probability ``label_fraction``.
     :param revealed_keys: state-action mode: bool (n_states, n_actions), keys revealed besides the
         drawn ones, e.g. the steps of demonstrations whose rewards a rater gave; None: none.
+    :param segment_length: k; above 1, whole k-step segments are labelled with their summed reward,
+        each with probability ``label_fraction``, and no single reward is revealed (settable later,
+        as :class:`dospcot.segments.SegmentLabelWrapper` does).
     """
 
     def __init__(
@@ -129,11 +139,12 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         monitored_states: np.ndarray | None = None,
         reveal_first_steps: int = 0,
         revealed_keys: np.ndarray | None = None,
+        segment_length: int = 1,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, label_fraction=label_fraction, mode=mode, mask_seed=mask_seed,
             monitored_states=monitored_states, reveal_first_steps=reveal_first_steps,
-            revealed_keys=revealed_keys,
+            revealed_keys=revealed_keys, segment_length=segment_length,
         )  # fmt: skip
         super().__init__(env)
         if mode not in MASK_MODES:
@@ -173,12 +184,35 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                         f"{revealed_keys.shape}"
                     )
                 self.mask.labelled |= revealed_keys.astype(bool)
+        self._revealed_keys = revealed_keys
+        self._monitored = monitored_states is not None and bool(np.any(monitored_states))
         self._state_key = env.get_wrapper_attr("state_key") if mode == "key" else None
         self._pair_labelled: dict[tuple[Hashable, int], bool] = {}
         self._mask_seed = mask_seed
         self._reveal_rng = np.random.default_rng(mask_seed)
         self._state: Any = None
         self._episode_step = 0
+        self._segment_length = 1
+        self._segment_step = 0
+        self._segment_sum = 0.0
+        self.segment_length = segment_length
+
+    @property
+    def segment_length(self) -> int:
+        """k: 1 reveals single rewards; k > 1 labels whole k-step segments with their summed reward
+        (``info["segment_label"]``) and reveals no single reward."""
+        return self._segment_length
+
+    @segment_length.setter
+    def segment_length(self, k: int) -> None:
+        if int(k) != k or k < 1:
+            raise ValueError(f"segment_length must be an integer >= 1, got {k!r}")
+        if k > 1 and (self.reveal_first_steps or self._monitored or self._revealed_keys is not None):
+            raise ValueError(
+                "segment labels reveal no single reward: they cannot be combined with a reward monitor "
+                "or with revealed keys (labelled demonstrations)"
+            )
+        self._segment_length = int(k)
 
     def current_state_key(self) -> Hashable:
         """Key mode: the key of the state the env is in (the ``info["state_key"]`` of the next step);
@@ -190,7 +224,8 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         self._state = obs if self.mode == "state-action" else None
         if self._state_key is not None:
             self._state = self._state_key()
-        self._episode_step = 0
+        self._episode_step = self._segment_step = 0
+        self._segment_sum = 0.0
         if kwargs.get("seed") is not None:
             # A seeded reset replays the same reveals too, as gymnasium's determinism contract asks.
             self._reveal_rng = np.random.default_rng([self._mask_seed, kwargs["seed"]])
@@ -198,6 +233,8 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
 
     def step(self, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
+        if self._segment_length > 1:
+            return obs, 0.0, terminated, truncated, self._segment_info(info, reward, terminated or truncated)
         if self.mask is not None:
             observed = (int(self._state), int(action)) in self.mask
             self._state = obs
@@ -219,3 +256,20 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
             for key in REWARD_INFO_KEYS:  # the reward's parts would give the hidden reward away
                 info.pop(key, None)
         return obs, float(reward) if observed else 0.0, terminated, truncated, info
+
+    def _segment_info(self, info: dict[str, Any], reward: float, episode_end: bool) -> dict[str, Any]:
+        """A step under segment labels: its reward hidden, and the segment's sum where it ends one
+        that is labelled."""
+        if self._state_key is not None:  # the pool's pairs are still named by their state key
+            info = dict(info, state_key=self._state)
+            self._state = self._state_key()
+        info = {key: value for key, value in info.items() if key not in REWARD_INFO_KEYS}
+        info.update(reward_observed=False, hidden_reward=float(reward))
+        self._segment_sum += float(reward)
+        self._segment_step += 1
+        if self._segment_step == self._segment_length or episode_end:
+            info["segment_end"] = True
+            if self._reveal_rng.random() < self.label_fraction:
+                info["segment_label"] = self._segment_sum
+            self._segment_step, self._segment_sum = 0, 0.0
+        return info

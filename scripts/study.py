@@ -11,6 +11,7 @@
     python scripts/study.py paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
     python scripts/study.py paper-published-code --docs   # the same with its published code's settings
     python scripts/study.py demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
+    python scripts/study.py equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
     python scripts/study.py second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
     python scripts/study.py second-view-highway --docs   # its highway monitor setting x seeds 0-4
 
@@ -540,16 +541,32 @@ DEMO_TARGET = ("labels 1% + 10 demonstrations", "labels 5%")
 """The target on grid16: the first arm's success at least the second's."""
 
 
-def _demo_arm(run: TrialRun) -> str:
-    params = {k: v for k, v in run.trial.params.items() if k != "seed"}
-    return next(name for name, keys in DEMO_ARMS.items() if keys == params)
+def _by_arm(runs: list[TrialRun], arms: dict[str, dict[str, str]]) -> dict[str, dict[int, TrialRun]]:
+    """The runs of each arm (its overrides of the preset), by seed."""
+    by_arm: dict[str, dict[int, TrialRun]] = {}
+    for run in runs:
+        params = {k: v for k, v in run.trial.params.items() if k != "seed"}
+        arm = next(name for name, keys in arms.items() if keys == params)
+        by_arm.setdefault(arm, {})[run.trial.seed] = run
+    return by_arm
+
+
+def _arm_sweeps(prefix: str, arms: dict[str, dict[str, str]], shared: dict[str, str]) -> tuple[Sweep, ...]:
+    """One grid16-dospcot sweep per arm, named after it; ``shared`` names arms that another study's
+    sweep already holds (the same trials: they run once)."""
+    return tuple(
+        Sweep(
+            shared.get(arm) or prefix + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
+            ("grid16-dospcot",),
+            {key: (value,) for key, value in keys.items()},
+        )
+        for arm, keys in arms.items()
+    )
 
 
 def demonstration_tables(runs: list[TrialRun]) -> list[str]:
     """One row per arm over seeds, then the target's paired difference in success."""
-    by_arm: dict[str, dict[int, TrialRun]] = {}
-    for run in runs:
-        by_arm.setdefault(_demo_arm(run), {})[run.trial.seed] = run
+    by_arm = _by_arm(runs, DEMO_ARMS)
     lines = [
         "Every arm is `grid16-dospcot` with the overrides named; demonstrations are value iteration's "
         "optimal episodes, the first from the map's start (docs/demonstrations.md).",
@@ -569,6 +586,58 @@ def demonstration_tables(runs: list[TrialRun]) -> list[str]:
             "",
             f"- success, {ours} minus {theirs} (paired by seed): {diff}; target (at least 0): {met}",
         ]
+    return lines
+
+
+# Label sources at equal rater effort, counted in labelled env steps (docs/segments.md): per-step
+# labels, segment sums (k = 4 and 8) and demonstrations, on grid16-dospcot, seeds 0-9.
+SEGMENT = "training.segment_length"
+EQUAL_EFFORT_FRACTION = "0.0006"
+"""The segments' label fraction at the per-step arm's effort. A grid run's per-step labels reveal 5% of
+the 1,024 (s, a) keys, each labelled once for every visit: at most 51 labelled steps. Its agents take
+80,000 steps, so segments labelled with probability 0.0006 hold about 48 labelled steps, whatever k.
+The table shows the effort each arm measured."""
+EFFORT_ARMS: dict[str, dict[str, str]] = {  # the target's arms first: a partial study has them
+    "per-step labels, 5% of keys": {FRACTION: "0.05"},
+    "segments of 4, equal effort": {FRACTION: EQUAL_EFFORT_FRACTION, SEGMENT: "4"},
+    "segments of 8, equal effort": {FRACTION: EQUAL_EFFORT_FRACTION, SEGMENT: "8"},
+    "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10"},
+    "segments of 4, 5% of segments": {FRACTION: "0.05", SEGMENT: "4"},
+}
+EFFORT_SHARED = {"labels 1% + 10 demonstrations": "demonstrations-labels-1-10-demonstrations"}
+EFFORT_COLUMNS = ("labelled_steps", "success", "agreement", "pseudo_accuracy")
+EFFORT_BASE = "per-step labels, 5% of keys"
+
+
+def effort_tables(runs: list[TrialRun]) -> list[str]:
+    """One row per arm over seeds (effort first), then each arm's paired difference in success from the
+    per-step arm."""
+    by_arm = _by_arm(runs, EFFORT_ARMS)
+    names = {**COLUMNS, "labelled_steps": "labelled steps (effort)"}
+    lines = [
+        "Every arm is `grid16-dospcot` with the overrides named. Effort is the labelled env steps a "
+        "rater watched: labelled (s, a) keys under per-step labels, the summed length of the labelled "
+        "segments under segment labels (docs/segments.md). Under segment labels the pseudo-reward "
+        "accuracy is that of the segments' sums (their quantile classes), not of single steps.",
+        "",
+        "| arm | seeds | " + " | ".join(names[c] for c in EFFORT_COLUMNS) + " |",
+        "|---|---|" + "---|" * len(EFFORT_COLUMNS),
+    ]
+    for arm in EFFORT_ARMS:
+        if arm in by_arm:
+            cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in EFFORT_COLUMNS]
+            lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
+    lines += [
+        "",
+        "n/a: runs written before the effort was recorded (the demonstrations arm is the demo-labels "
+        "study's own sweep; its effort is the 1% labelled keys plus the demonstrated steps).",
+    ]
+    if EFFORT_BASE in by_arm:
+        lines.append("")
+        for arm in EFFORT_ARMS:
+            if arm != EFFORT_BASE and arm in by_arm:
+                diff = _paired(by_arm[arm], by_arm[EFFORT_BASE], "success")
+                lines.append(f"- success, {arm} minus {EFFORT_BASE} (paired by seed): {diff}")
     return lines
 
 
@@ -675,16 +744,15 @@ STUDIES = {
         "MiniGrid: LavaGapS7 and DoorKey-5x5",
     ),
     "demo-labels": Study(
-        tuple(
-            Sweep(
-                "demonstrations-" + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
-                ("grid16-dospcot",),
-                {key: (value,) for key, value in keys.items()},
-            )
-            for arm, keys in DEMO_ARMS.items()
-        ),
+        _arm_sweeps("demonstrations-", DEMO_ARMS, {}),
         demonstration_tables,
         "Expert demonstrations against per-step labels (grid16)",
+        seeds=10,
+    ),
+    "equal-effort": Study(
+        _arm_sweeps("effort-", EFFORT_ARMS, EFFORT_SHARED),
+        effort_tables,
+        "Label sources at equal effort: per-step labels, segments, demonstrations (grid16)",
         seeds=10,
     ),
     "second-view": Study(

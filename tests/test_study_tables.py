@@ -120,7 +120,37 @@ def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
     assert "as labels only" not in text  # an arm not run has no row
     diff = SeedSummary.of([0.0, 0.5, 0.0, 0.0])  # 1% + demonstrations minus 5%, seed by seed
     assert f"(paired by seed): {diff}; target (at least 0): **met**" in text
-    worse = [run for run in runs if study._demo_arm(run) != "labels 5%"] + [
+    worse = [run for run in runs if run.trial.params != study.DEMO_ARMS["labels 5%"]] + [
         _run("grid16-dospcot", study.DEMO_ARMS["labels 5%"], seed, 1.0, 0.9) for seed in range(4)
     ]
     assert "target (at least 0): **not met**" in "\n".join(study.demonstration_tables(worse))
+
+
+def test_the_equal_effort_table_leads_with_effort_and_pairs_each_arm_with_per_step_labels():
+    runs = []
+    arms = {  # per arm, three seeds of (effort, success); the demonstrations arm predates the effort
+        "per-step labels, 5% of keys": [(40, 1.0), (44, 0.5), (42, 1.0)],
+        "segments of 4, equal effort": [(48, 0.0), (40, 0.5), (52, 0.0)],
+        "labels 1% + 10 demonstrations": [(None, 1.0), (None, 1.0), (None, 1.0)],
+    }
+    for arm, values in arms.items():
+        for seed, (effort, success) in enumerate(values):
+            mean = {"success": success, "pseudo_accuracy": 0.9}
+            if effort is not None:
+                mean["labelled_steps"] = effort
+            trial = Trial("grid16-dospcot", "grid16-dospcot", dict(study.EFFORT_ARMS[arm]), seed)
+            runs.append(TrialRun(trial, {"mean": mean}, [], Path()))
+    text = "\n".join(study.effort_tables(runs))
+    effort, success = SeedSummary.of([40, 44, 42]), SeedSummary.of([1.0, 0.5, 1.0])
+    assert f"| per-step labels, 5% of keys | 3 | {effort} | {success} |" in text
+    assert "| labels 1% + 10 demonstrations | 3 | n/a | 1.000 [1.000, 1.000] |" in text
+    assert "segments of 8" not in text  # an arm not run has no row
+    diff = SeedSummary.of([-1.0, 0.0, -1.0])
+    assert (
+        f"- success, segments of 4, equal effort minus per-step labels, 5% of keys (paired by seed): {diff}"
+        in text
+    )
+    # The arm shared with the demo-labels study runs once, in that study's sweep.
+    names = [sweep.name for sweep in study.STUDIES["equal-effort"].sweeps]
+    assert "demonstrations-labels-1-10-demonstrations" in names
+    assert names[0] == "effort-per-step-labels-5-of-keys"
