@@ -29,8 +29,9 @@ import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
+import gymnasium as gym
 import numpy as np
 
 from dospcot.envs.tabular import TabularMDP
@@ -52,10 +53,18 @@ class DemonstrationsConfig:
     :param margin_loss_weight: lambda of the large-margin loss on the demonstrated actions in every
         neural agent's gradient steps (:func:`~dospcot.policies.esarsa_dqn.large_margin_loss`); 0: off.
     :param margin: that loss's margin, in reward units (DQfD's 0.8).
+    :param agent: a sensor task's (highway, gym) demonstrations recorded from a saved SB3 agent (a
+        ``.zip``): ``episodes`` greedy episodes of it on the run's task, every reward known
+        (:func:`record_demonstrations`); empty: none.
+    :param agent_algorithm: the SB3 (or sb3-contrib) class that loads ``agent``, e.g. ``DQN``, ``PPO``.
+    :param agent_view: the view ``agent`` observes; empty: the run's first view.
     """
 
     episodes: int = 0
     file: str = ""
+    agent: str = ""
+    agent_algorithm: str = "DQN"
+    agent_view: str = ""
     labels: bool = True
     margin_loss_weight: float = 1.0
     margin: float = 0.8
@@ -63,6 +72,10 @@ class DemonstrationsConfig:
     def __post_init__(self) -> None:
         if self.episodes < 0:
             raise ValueError(f"episodes must be >= 0, got {self.episodes}")
+        if self.file and self.agent:
+            raise ValueError("give file or agent, not both: each is a source of demonstrations")
+        if self.agent and not self.episodes:
+            raise ValueError("agent: set episodes, the number of episodes to record from it")
         if self.margin_loss_weight < 0 or self.margin < 0:
             raise ValueError(
                 f"margin_loss_weight and margin must be >= 0, got {self.margin_loss_weight}, {self.margin}"
@@ -218,4 +231,81 @@ def expert_demonstrations(
     )
 
 
-__all__ = ["Demonstrations", "DemonstrationsConfig", "expert_demonstrations"]
+class Policy(Protocol):
+    """Anything with SB3's ``predict`` (a loaded SB3 model)."""
+
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = False
+    ) -> Any: ...
+
+
+def load_agent(path: str | Path, algorithm: str = "DQN") -> Policy:
+    """A saved SB3 agent, loaded on the CPU by ``algorithm``, a class of ``stable_baselines3`` or
+    ``sb3_contrib``; a ``ValueError`` names what is wrong."""
+    import stable_baselines3
+
+    cls = getattr(stable_baselines3, algorithm, None)
+    if cls is None:
+        try:
+            import sb3_contrib
+
+            cls = getattr(sb3_contrib, algorithm, None)
+        except ImportError:
+            pass
+    if cls is None or not hasattr(cls, "load"):
+        raise ValueError(
+            f"agent_algorithm: {algorithm!r} is not an SB3 or sb3-contrib algorithm, e.g. DQN, PPO"
+        )
+    if not Path(path).is_file():
+        raise ValueError(f"agent: no file {str(path)!r}")
+    try:
+        return cls.load(path, device="cpu")
+    except Exception as err:  # zipfile, pickle and torch raise many types for a damaged or foreign file
+        raise ValueError(
+            f"agent: cannot load {str(path)!r} as {algorithm} ({type(err).__name__}: {err})"
+        ) from None
+
+
+def record_demonstrations(policy: Policy, env: gym.Env, n_episodes: int, seed: int) -> Demonstrations:
+    """``n_episodes`` greedy episodes of ``policy`` on a sensor env, in every view it records.
+
+    :param policy: the expert, e.g. :func:`load_agent`'s; it reads the env's observations.
+    :param env: an env whose ``reset`` and ``step`` infos hold ``info["views"]`` (every view to record,
+        :class:`~dospcot.envs.SensorViewWrapper`) and that ends its episodes (a time limit). Its
+        reward is recorded, or ``info["hidden_reward"]`` where a mask hid it.
+    :param seed: episode i resets with seed ``seed + i``.
+    """
+    if n_episodes < 1:
+        raise ValueError(f"record at least one episode, got {n_episodes}")
+    obs_rows: dict[str, list[np.ndarray]] = {}
+    next_rows: dict[str, list[np.ndarray]] = {}
+    actions, episode, rewards = [], [], []
+    for k in range(n_episodes):
+        obs, info = env.reset(seed=seed + k)
+        views, done = {v: np.ravel(x) for v, x in info["views"].items()}, False
+        while not done:
+            action = int(np.asarray(policy.predict(obs, deterministic=True)[0]).item())
+            obs, reward, terminated, truncated, info = env.step(action)
+            following = {v: np.ravel(x) for v, x in info["views"].items()}
+            for v in views:
+                obs_rows.setdefault(v, []).append(views[v])
+                next_rows.setdefault(v, []).append(following[v])
+            actions.append(action), episode.append(k)
+            rewards.append(float(info.get("hidden_reward", reward)))
+            views, done = following, terminated or truncated
+    return Demonstrations(
+        {v: np.asarray(rows, np.float32) for v, rows in obs_rows.items()},
+        {v: np.asarray(rows, np.float32) for v, rows in next_rows.items()},
+        np.asarray(actions, np.int64),
+        np.asarray(episode, np.int64),
+        np.asarray(rewards, np.float64),
+    )
+
+
+__all__ = [
+    "Demonstrations",
+    "DemonstrationsConfig",
+    "expert_demonstrations",
+    "load_agent",
+    "record_demonstrations",
+]

@@ -32,7 +32,7 @@ from stable_baselines3 import DQN
 
 from dospcot.cotraining import CoTrainingConfig
 from dospcot.cotraining_round import TrainingConfig
-from dospcot.demonstrations import Demonstrations, DemonstrationsConfig
+from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, load_agent
 from dospcot.envs.fast_highway import FastHighwayEnv
 from dospcot.envs.gym_sensors import check_gym_task
 from dospcot.envs.highway import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, highway_view_names, try_highway_config
@@ -427,23 +427,32 @@ class TrainConfig:
 
     def _check_demonstrations(self) -> None:
         demos = self.demonstrations
-        if demos.file and self.task != "gym":
+        if (demos.file or demos.agent) and self.task == "grid":
+            source = "file" if demos.file else "agent"
             raise ConfigError(
-                'demonstrations.file: a file of demonstrations is read by task = "gym" runs; on the '
-                "grid, demonstrations.episodes draws them from value iteration"
+                f"demonstrations.{source}: a grid run's demonstrations come from value iteration "
+                '(demonstrations.episodes); a file or a saved agent serves task = "highway" or "gym"'
             )
-        if demos.episodes and self.task == "highway":
-            raise ConfigError('demonstrations.episodes: no demonstrations exist for task = "highway" yet')
-        if demos.episodes and self.task == "gym" and not demos.file:
+        if demos.episodes and self.task != "grid" and not (demos.file or demos.agent):
             raise ConfigError(
-                "demonstrations.episodes: a gym task's demonstrations come from a file: set "
-                "demonstrations.file (docs/demonstrations.md)"
+                f'demonstrations.episodes: a task = "{self.task}" run\'s demonstrations come from a file '
+                "or a saved agent: set demonstrations.file or demonstrations.agent (docs/demonstrations.md)"
             )
         if demos.file:
             try:
                 Demonstrations.load(demos.file)
             except ValueError as err:
                 raise ConfigError(f"demonstrations.file: {err}") from None
+        if demos.agent:
+            if demos.agent_view and demos.agent_view not in self.view_names:
+                raise ConfigError(
+                    f"demonstrations.agent_view: the {self.task_name} has no view {demos.agent_view!r}; "
+                    f"allowed: {', '.join(self.view_names)}"
+                )
+            try:
+                load_agent(demos.agent, demos.agent_algorithm)
+            except ValueError as err:
+                raise ConfigError(f"demonstrations.{err}") from None
         if (demos.episodes or demos.file) and demos.margin_loss_weight and "tabular" in self.agent_kinds:
             raise ConfigError(
                 "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "

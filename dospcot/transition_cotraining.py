@@ -38,12 +38,15 @@ from stable_baselines3.common.vec_env import DummyVecEnv
 from dospcot.checkpointing import InPlaceState
 from dospcot.cotraining import Pool
 from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
-from dospcot.demonstrations import Demonstrations, DemonstrationsConfig
+from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, load_agent, record_demonstrations
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.reward_classes import QuantileRewardClasses
 
 EVAL_SEED = 1_000_003
 """Evaluation episodes start from seeds ``EVAL_SEED + i``, apart from every training seed."""
+DEMO_SEED = 3_000_017
+"""A saved agent's demonstrations of run seed s start from seeds ``DEMO_SEED + 10,000 s + i``, apart
+from the evaluation episodes."""
 
 
 class StepStore(InPlaceState):
@@ -276,7 +279,7 @@ class SensorTask:
         envs = [make_env(v, spec.views, fraction, seed) for v, seed in zip(spec.views, seeds, strict=True)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
         self.store = (KeyedStepStore if config.keyed else StepStore)(self.shapes)
-        self.demos = self._read_demonstrations(config.demonstrations)
+        self.demos = self._read_demonstrations(config.demonstrations, make_env)
         self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
         self.n_actions = int(envs[0].action_space.n)
         self.classes = QuantileRewardClasses(config.reward_classes)
@@ -349,14 +352,20 @@ class SensorTask:
             "random_return": self.random_return,
         }
 
-    def _read_demonstrations(self, wanted: DemonstrationsConfig) -> Demonstrations | None:
-        """The file's demonstrations (its first ``wanted.episodes``, or all), each of the run's views
-        checked against the env's; with labels, each step a labelled sample of the store."""
-        if not wanted.file:
+    def _read_demonstrations(
+        self, wanted: DemonstrationsConfig, make_env: Callable[..., gym.Env]
+    ) -> Demonstrations | None:
+        """The run's demonstrations: recorded from a saved agent, or a file's (its first
+        ``wanted.episodes``, or all), each of the run's views checked against the env's; with labels,
+        each step a labelled sample of the store."""
+        if wanted.agent:
+            demos = self._record(wanted, make_env)
+        elif wanted.file:
+            demos = Demonstrations.load(wanted.file)
+            if wanted.episodes:
+                demos = demos.first_episodes(wanted.episodes)
+        else:
             return None
-        demos = Demonstrations.load(wanted.file)
-        if wanted.episodes:
-            demos = demos.first_episodes(wanted.episodes)
         for view, shape in self.shapes.items():
             if view not in demos.observations:
                 raise ValueError(
@@ -381,6 +390,20 @@ class SensorTask:
             reward = float(demos.rewards[i])
             self.store.add(state_row, int(demos.actions[i]), next_row, True, reward, reward)
         return demos
+
+    def _record(self, wanted: DemonstrationsConfig, make_env: Callable[..., gym.Env]) -> Demonstrations:
+        """``wanted.episodes`` greedy episodes of the saved agent on an unmasked copy of the task."""
+        agent = load_agent(wanted.agent, wanted.agent_algorithm)
+        view = wanted.agent_view or self.spec.views[0]
+        env = make_env(view, tuple(dict.fromkeys([*self.spec.views, view])), 1.0, self.spec.seed)
+        if agent.observation_space.shape != env.observation_space.shape:
+            raise ValueError(
+                f"demonstrations.agent observes shape {agent.observation_space.shape}, but view {view!r} "
+                f"gives {env.observation_space.shape}; set demonstrations.agent_view to the view it was "
+                "trained on"
+            )
+        env = gym.wrappers.TimeLimit(env, self.config.max_episode_steps)
+        return record_demonstrations(agent, env, wanted.episodes, DEMO_SEED + 10_000 * self.spec.seed)
 
     def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
         if self.demos is None:

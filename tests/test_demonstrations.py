@@ -12,14 +12,17 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from stable_baselines3 import DQN
 from test_neural_cotraining import CONFIG, LAYOUT, VIEWS  # the small grid of the co-training tests
 
 from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, expert_demonstrations
 from dospcot.envs import GridWorld, StateActionMask, View, ViewObservationWrapper
+from dospcot.envs.highway import FAST_HIGHWAY_ID, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn import large_margin_loss
+from dospcot.train import build_run
 from dospcot.train_config import ConfigError, load_config
 
 
@@ -204,7 +207,7 @@ def test_bad_demonstrations_settings_fail_with_one_line():
     with pytest.raises(ConfigError, match="demonstrations: episodes must be >= 0, got -1"):
         load_config("grid16-dospcot", ["demonstrations.episodes=-1"])
     with pytest.raises(
-        ConfigError, match=r'demonstrations\.episodes: no demonstrations exist for task = "highway"'
+        ConfigError, match=r'a task = "highway" run\'s demonstrations come from a file or a saved agent'
     ):
         load_config("fasthighway-dospcot", ["demonstrations.episodes=3"])
     with pytest.raises(ConfigError, match="tabular agents have no large-margin loss; set it to 0"):
@@ -214,3 +217,27 @@ def test_bad_demonstrations_settings_fail_with_one_line():
         ["demonstrations.episodes=3", "agent=tabular", "demonstrations.margin_loss_weight=0"],
     )
     assert cfg.demonstrations.episodes == 3
+
+
+def test_on_highway_a_saved_agent_demonstrates_in_every_view_of_the_run(tmp_path):
+    env = make_masked_highway(FAST_HIGHWAY_ID, "kinematics", ("kinematics",), 1.0, 0)
+    DQN("MlpPolicy", env, seed=0).save(tmp_path / "expert.zip")
+    settings = [
+        f"demonstrations.agent={str(tmp_path / 'expert.zip')!r}",
+        "demonstrations.episodes=2",
+        "training.steps_per_round=50",
+    ]
+    run = build_run(load_config("fasthighway-dospcot", settings))
+    demos = run.task.demos
+    assert demos.n_episodes == 2 and set(demos.views) == {"kinematics", "occupancy"}
+    assert len(demos) <= 2 * run.config.max_episode_steps
+    # Within an episode each step starts where the last one ended, in every view.
+    same_episode = demos.episode[1:] == demos.episode[:-1]
+    for view in demos.views:
+        np.testing.assert_array_equal(
+            demos.observations[view][1:][same_episode], demos.next_observations[view][:-1][same_episode]
+        )
+    assert np.all((demos.rewards >= 0) & (demos.rewards <= 1))  # highway's normalised reward
+    assert all(agent.n_demonstrations == len(demos) for agent in run.agents)
+    labelled = run.store.labelled[: len(run.store)]
+    assert labelled.sum() == len(demos)  # before any training step, the pool holds the demonstrations

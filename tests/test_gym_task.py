@@ -15,6 +15,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import stable_baselines3
+import torch
 
 from dospcot.demonstrations import Demonstrations
 from dospcot.envs import minigrid_views
@@ -556,7 +557,66 @@ def test_bad_demonstrations_files_for_a_gym_run_fail_with_one_line(tmp_path):
         build_run(gym_config(make_corridor, VIEWS, state_key=corridor_cell, settings=settings))
     with pytest.raises(ConfigError, match=r"demonstrations\.file: demonstrations: cannot read"):
         gym_config(make_corridor, VIEWS, settings={"demonstrations.file": str(tmp_path / "none.npz")})
-    with pytest.raises(ConfigError, match="a gym task's demonstrations come from a file"):
+    with pytest.raises(ConfigError, match='a task = "gym" run\'s demonstrations come from a file or a saved'):
         gym_config(make_corridor, VIEWS, settings={"demonstrations.episodes": 3})
-    with pytest.raises(ConfigError, match='a file of demonstrations is read by task = "gym" runs'):
+    with pytest.raises(ConfigError, match="a grid run's demonstrations come from value iteration"):
         load_config("grid16-dospcot", [f"demonstrations.file={str(path)!r}"])
+
+
+def _saved_corridor_agent(path: Path) -> Path:
+    """A DQN on the corridor's one-hot view whose greedy action is always 1 (right): the expert."""
+    corridor = make_corridor()
+    space = corridor.observation_space["onehot"]
+    env = gym.wrappers.TransformObservation(corridor, lambda obs: obs["onehot"], space)
+    agent = stable_baselines3.DQN("MlpPolicy", env, seed=0)
+    with torch.no_grad():
+        for net in (agent.q_net, agent.q_net_target):
+            last = net.q_net[-1]
+            last.weight.zero_()
+            last.bias.copy_(torch.tensor([0.0, 1.0]))
+    agent.save(path)
+    return path
+
+
+def test_a_saved_agent_demonstrates_its_greedy_episodes_in_every_view(tmp_path):
+    path = _saved_corridor_agent(tmp_path / "expert.zip")
+    settings = {**SETTINGS, "demonstrations.agent": str(path), "demonstrations.episodes": 2}
+    run = build_run(gym_config(make_corridor, VIEWS, label_fraction=0.1, settings=settings))
+    demos = run.task.demos
+    # Two walks right from cell 0: 9 steps each, the last one paying the goal's 1.
+    assert demos.n_episodes == 2 and len(demos) == 18 and (demos.actions == 1).all()
+    np.testing.assert_array_equal(demos.rewards, np.tile((np.arange(9) == 8).astype(float), 2))
+    np.testing.assert_array_equal(demos.observations["onehot"][:9], np.eye(LENGTH, dtype=np.float32)[:9])
+    np.testing.assert_allclose(
+        demos.next_observations["signed"][:9, 0], 2 * np.arange(1, 10) / 9 - 1, atol=1e-6
+    )
+    # As labels, its steps are the pool's first samples; every agent's margin loss reads them.
+    assert run.store.labelled[:18].all() and all(agent.n_demonstrations == 18 for agent in run.agents)
+    demos.save(tmp_path / "recorded.npz")  # a recording round-trips through the file format
+    again = Demonstrations.load(tmp_path / "recorded.npz")
+    np.testing.assert_array_equal(again.observations["signed"], demos.observations["signed"])
+    np.testing.assert_array_equal(again.rewards, demos.rewards)
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        (
+            {"demonstrations.agent_algorithm": "NoSuchAlgo"},
+            "'NoSuchAlgo' is not an SB3 or sb3-contrib algorithm",
+        ),
+        ({"demonstrations.agent_view": "lidar"}, "agent_view: the .* has no view 'lidar'"),
+        ({"demonstrations.agent_view": "signed"}, r"observes shape \(10,\), but view 'signed' gives \(1,\)"),
+        ({"demonstrations.episodes": 0}, "agent: set episodes"),
+        ({"demonstrations.file": "demos.npz"}, "give file or agent, not both"),
+        ({"demonstrations.agent": "missing.zip"}, "agent: no file 'missing.zip'"),
+        ({"demonstrations.agent": "corrupt.zip"}, "cannot load 'corrupt.zip' as DQN"),
+    ],
+)
+def test_bad_demonstrating_agents_fail_with_one_line(tmp_path, monkeypatch, override, message):
+    monkeypatch.chdir(tmp_path)
+    path = _saved_corridor_agent(tmp_path / "expert.zip")
+    (tmp_path / "corrupt.zip").write_text("not a zip")
+    settings = {**SETTINGS, "demonstrations.agent": str(path), "demonstrations.episodes": 2, **override}
+    with pytest.raises(ValueError, match=message):
+        build_run(gym_config(make_corridor, VIEWS, settings=settings))
