@@ -12,6 +12,7 @@
     python scripts/study.py paper-published-code --docs   # the same with its published code's settings
     python scripts/study.py demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
     python scripts/study.py equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
+    python scripts/study.py equal-effort-highway --docs  # the same on the fast highway, 5 seeds
     python scripts/study.py second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
     python scripts/study.py second-view-highway --docs   # its highway monitor setting x seeds 0-4
 
@@ -542,7 +543,7 @@ DEMO_TARGET = ("labels 1% + 10 demonstrations", "labels 5%")
 
 
 def _by_arm(runs: list[TrialRun], arms: dict[str, dict[str, str]]) -> dict[str, dict[int, TrialRun]]:
-    """The runs of each arm (its overrides of the preset), by seed."""
+    """The runs of each arm (its overrides of the preset), by seed; every run belongs to one."""
     by_arm: dict[str, dict[int, TrialRun]] = {}
     for run in runs:
         params = {k: v for k, v in run.trial.params.items() if k != "seed"}
@@ -551,13 +552,15 @@ def _by_arm(runs: list[TrialRun], arms: dict[str, dict[str, str]]) -> dict[str, 
     return by_arm
 
 
-def _arm_sweeps(prefix: str, arms: dict[str, dict[str, str]], shared: dict[str, str]) -> tuple[Sweep, ...]:
-    """One grid16-dospcot sweep per arm, named after it; ``shared`` names arms that another study's
+def _arm_sweeps(
+    prefix: str, arms: dict[str, dict[str, str]], shared: dict[str, str], preset: str = "grid16-dospcot"
+) -> tuple[Sweep, ...]:
+    """One sweep of ``preset`` per arm, named after it; ``shared`` names arms that another study's
     sweep already holds (the same trials: they run once)."""
     return tuple(
         Sweep(
             shared.get(arm) or prefix + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
-            ("grid16-dospcot",),
+            (preset,),
             {key: (value,) for key, value in keys.items()},
         )
         for arm, keys in arms.items()
@@ -606,39 +609,60 @@ EFFORT_ARMS: dict[str, dict[str, str]] = {  # the target's arms first: a partial
 }
 EFFORT_SHARED = {"labels 1% + 10 demonstrations": "demonstrations-labels-1-10-demonstrations"}
 EFFORT_COLUMNS = ("labelled_steps", "success", "agreement", "pseudo_accuracy")
-EFFORT_BASE = "per-step labels, 5% of keys"
 
 
-def effort_tables(runs: list[TrialRun]) -> list[str]:
+def effort_tables(
+    runs: list[TrialRun],
+    arms: dict[str, dict[str, str]] = EFFORT_ARMS,
+    columns: tuple[str, ...] = EFFORT_COLUMNS,
+    preset: str = "grid16-dospcot",
+) -> list[str]:
     """One row per arm over seeds (effort first), then each arm's paired difference in success from the
-    per-step arm."""
-    by_arm = _by_arm(runs, EFFORT_ARMS)
-    names = {**COLUMNS, "labelled_steps": "labelled steps (effort)"}
+    first arm (per-step labels); the preset's oracle, where the study ran it, as a last row."""
+    base = next(iter(arms))
+    by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
+    oracle = [run for run in runs if run.trial.config != preset]
+    names = {**COLUMNS, "labelled_steps": "labelled steps (effort)", "greedy_return": "return"}
+    if preset.startswith("fasthighway"):
+        names["success"] = "no-crash episodes"
     lines = [
-        "Every arm is `grid16-dospcot` with the overrides named. Effort is the labelled env steps a "
-        "rater watched: labelled (s, a) keys under per-step labels, the summed length of the labelled "
-        "segments under segment labels (docs/segments.md). Under segment labels the pseudo-reward "
-        "accuracy is that of the segments' sums (their quantile classes), not of single steps.",
+        f"Every arm is `{preset}` with the overrides named. Effort is the labelled env steps a "
+        "rater watched: labelled samples under per-step labels ((s, a) keys on the grid, steps on "
+        "highway), the summed length of the labelled segments under segment labels, and the "
+        "demonstrations' steps on top of their arm's labels (docs/segments.md). Under segment labels "
+        "the pseudo-reward accuracy is that of the segments' sums (their quantile classes), not of "
+        "single steps.",
         "",
-        "| arm | seeds | " + " | ".join(names[c] for c in EFFORT_COLUMNS) + " |",
-        "|---|---|" + "---|" * len(EFFORT_COLUMNS),
+        "| arm | seeds | " + " | ".join(names[c] for c in columns) + " |",
+        "|---|---|" + "---|" * len(columns),
     ]
-    for arm in EFFORT_ARMS:
+    for arm in arms:
         if arm in by_arm:
-            cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in EFFORT_COLUMNS]
+            cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in columns]
             lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
-    lines += [
-        "",
-        "n/a: runs written before the effort was recorded (the demonstrations arm is the demo-labels "
-        "study's own sweep; its effort is the 1% labelled keys plus the demonstrated steps).",
-    ]
-    if EFFORT_BASE in by_arm:
+    if oracle:
+        cells_ = [_over_seeds(oracle, c) if c != "labelled_steps" else "every step" for c in columns]
+        lines.append(f"| oracle (`{oracle[0].trial.config}`) | {len(oracle)} | " + " | ".join(cells_) + " |")
+    lines += ["", "n/a: runs written before the effort was recorded."]
+    if base in by_arm:
         lines.append("")
-        for arm in EFFORT_ARMS:
-            if arm != EFFORT_BASE and arm in by_arm:
-                diff = _paired(by_arm[arm], by_arm[EFFORT_BASE], "success")
-                lines.append(f"- success, {arm} minus {EFFORT_BASE} (paired by seed): {diff}")
+        for arm in arms:
+            if arm != base and arm in by_arm:
+                diff = _paired(by_arm[arm], by_arm[base], "success")
+                lines.append(f"- {names['success']}, {arm} minus {base} (paired by seed): {diff}")
     return lines
+
+
+# The fast-highway half: labels reveal each step with probability p, so segments at the same p cost
+# the same effort. The demonstrator is the study's own oracle run of seed 0 (its kinematics agent).
+EXPERT = "runs/sweeps/effort-highway-oracle/trials/fasthighway-oracle/seed=0/agent_kinematics.zip"
+EFFORT_HIGHWAY_ARMS: dict[str, dict[str, str]] = {
+    "per-step labels, 5% of steps": {FRACTION: "0.05"},
+    "segments of 4, 5% of segments": {FRACTION: "0.05", SEGMENT: "4"},
+    "segments of 8, 5% of segments": {FRACTION: "0.05", SEGMENT: "8"},
+    "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10", "demonstrations.agent": f'"{EXPERT}"'},
+}
+EFFORT_HIGHWAY_COLUMNS = ("labelled_steps", "greedy_return", "success", "pseudo_accuracy")
 
 
 @dataclass(frozen=True)
@@ -754,6 +778,19 @@ STUDIES = {
         effort_tables,
         "Label sources at equal effort: per-step labels, segments, demonstrations (grid16)",
         seeds=10,
+    ),
+    "equal-effort-highway": Study(
+        (
+            Sweep("effort-highway-oracle", ("fasthighway-oracle",), {}),  # first: it trains the expert
+            *_arm_sweeps("effort-highway-", EFFORT_HIGHWAY_ARMS, {}, "fasthighway-dospcot"),
+        ),
+        partial(
+            effort_tables,
+            arms=EFFORT_HIGHWAY_ARMS,
+            columns=EFFORT_HIGHWAY_COLUMNS,
+            preset="fasthighway-dospcot",
+        ),
+        "Label sources at equal effort: per-step labels, segments, demonstrations (fast highway)",
     ),
     "second-view": Study(
         _second_view_sweeps(), second_view_tables, "When does a second view help? (grid)", seeds=10

@@ -154,3 +154,31 @@ def test_the_equal_effort_table_leads_with_effort_and_pairs_each_arm_with_per_st
     names = [sweep.name for sweep in study.STUDIES["equal-effort"].sweeps]
     assert "demonstrations-labels-1-10-demonstrations" in names
     assert names[0] == "effort-per-step-labels-5-of-keys"
+
+
+def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_oracle_runs():
+    runs = []
+    for seed, (ret, crash_free) in enumerate([(20.0, 0.8), (22.0, 1.0)]):
+        for arm, shift in (("per-step labels, 5% of steps", 0.0), ("segments of 4, 5% of segments", -2.0)):
+            mean = {"greedy_return": ret + shift, "success": crash_free + shift / 10, "labelled_steps": 2000}
+            params = dict(study.EFFORT_HIGHWAY_ARMS[arm])
+            runs.append(TrialRun(Trial("fasthighway-dospcot", "x", params, seed), {"mean": mean}, [], Path()))
+        oracle = {"greedy_return": 25.0, "success": 1.0}
+        runs.append(TrialRun(Trial("fasthighway-oracle", "x", {}, seed), {"mean": oracle}, [], Path()))
+    study_ = study.STUDIES["equal-effort-highway"]
+    text = "\n".join(study_.tables(runs))
+    assert "| return | no-crash episodes |" in text
+    assert (
+        f"| segments of 4, 5% of segments | 2 | 2000.0 [2000.0, 2000.0] | {SeedSummary.of([18.0, 20.0])} |"
+        in text
+    )
+    assert (
+        "| oracle (`fasthighway-oracle`) | 2 | every step | 25.0 [25.0, 25.0] | 1.000 [1.000, 1.000] |"
+        in text
+    )
+    diff = SeedSummary.of([-0.2, -0.2])
+    pair = "segments of 4, 5% of segments minus per-step labels, 5% of steps (paired by seed)"
+    assert f"- no-crash episodes, {pair}: {diff}" in text
+    # The expert trains first; the demonstrations arm reads its seed-0 agent.
+    assert study_.sweeps[0].configs == ("fasthighway-oracle",)
+    assert study.EXPERT.startswith(f"runs/sweeps/{study_.sweeps[0].name}/")
