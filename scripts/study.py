@@ -37,7 +37,7 @@ import re
 import shlex
 import shutil
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime
 from functools import partial
@@ -567,6 +567,21 @@ def _arm_sweeps(
     )
 
 
+def _arm_rows(
+    by_arm: dict[str, dict[int, TrialRun]], arms: Sequence[str], columns: Sequence[str], names: dict[str, str]
+) -> list[str]:
+    """A table's header and one row per arm that ran: its seeds, then ``columns`` over seeds."""
+    lines = [
+        "| arm | seeds | " + " | ".join(names[c] for c in columns) + " |",
+        "|---|---|" + "---|" * len(columns),
+    ]
+    for arm in arms:
+        if arm in by_arm:
+            cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in columns]
+            lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
+    return lines
+
+
 def demonstration_tables(runs: list[TrialRun]) -> list[str]:
     """One row per arm over seeds, then the target's paired difference in success."""
     by_arm = _by_arm(runs, DEMO_ARMS)
@@ -574,13 +589,8 @@ def demonstration_tables(runs: list[TrialRun]) -> list[str]:
         "Every arm is `grid16-dospcot` with the overrides named; demonstrations are value iteration's "
         "optimal episodes, the first from the map's start (docs/demonstrations.md).",
         "",
-        "| arm | seeds | " + " | ".join(COLUMNS[c] for c in DEMO_COLUMNS) + " |",
-        "|---|---|" + "---|" * len(DEMO_COLUMNS),
+        *_arm_rows(by_arm, DEMO_ARMS, DEMO_COLUMNS, COLUMNS),
     ]
-    for arm in DEMO_ARMS:
-        if arm in by_arm:
-            cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in DEMO_COLUMNS]
-            lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
     ours, theirs = DEMO_TARGET
     if ours in by_arm and theirs in by_arm:
         diff = _paired(by_arm[ours], by_arm[theirs], "success")
@@ -633,13 +643,8 @@ def effort_tables(
         "the pseudo-reward accuracy is that of the segments' sums (their quantile classes), not of "
         "single steps.",
         "",
-        "| arm | seeds | " + " | ".join(names[c] for c in columns) + " |",
-        "|---|---|" + "---|" * len(columns),
+        *_arm_rows(by_arm, arms, columns, names),
     ]
-    for arm in arms:
-        if arm in by_arm:
-            cells_ = [_over_seeds(list(by_arm[arm].values()), c) for c in columns]
-            lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
     if oracle:
         cells_ = [_over_seeds(oracle, c) if c != "labelled_steps" else "every step" for c in columns]
         lines.append(f"| oracle (`{oracle[0].trial.config}`) | {len(oracle)} | " + " | ".join(cells_) + " |")
