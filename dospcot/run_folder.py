@@ -72,9 +72,12 @@ def write_toml(path: Path, data: dict[str, Any]) -> None:
 
 
 def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
-    """One row per dict; the columns are the first row's keys."""
+    """One row per dict; the columns are every row's keys in order of first appearance, a row's missing
+    ones left empty (a run resumed from a checkpoint written before a column existed)."""
     text = io.StringIO()
-    writer = csv.DictWriter(text, fieldnames=list(rows[0]), lineterminator="\n")
+    writer = csv.DictWriter(
+        text, fieldnames=list(dict.fromkeys(k for row in rows for k in row)), lineterminator="\n"
+    )
     writer.writeheader()
     writer.writerows(rows)
     write_text(path, text.getvalue())

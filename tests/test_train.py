@@ -26,7 +26,7 @@ from tensorboard.compat.proto.event_pb2 import SessionLog
 from dospcot.classifier import load_classifier
 from dospcot.cli import main
 from dospcot.envs import GridWorld, TabularMDP
-from dospcot.run_folder import RunFolderError, read_checkpoint
+from dospcot.run_folder import RunFolderError, read_checkpoint, write_csv
 from dospcot.train import ROUND_SCALARS, build_task, evaluate
 from dospcot.train_config import (
     DQN_DEFAULTS,
@@ -381,3 +381,16 @@ def test_a_run_killed_at_random_moments_resumes_to_the_uninterrupted_result(tmp_
     assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
     assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
     assert not list(killed.glob(".*.tmp"))
+
+
+def test_metrics_csv_holds_every_rows_columns_when_a_resumed_run_adds_one(tmp_path):
+    # Rows from a checkpoint written before a column existed, then rows that have it.
+    write_csv(
+        tmp_path / "metrics.csv",
+        [{"round": 1, "success": 0.5}, {"round": 2, "success": 1.0, "labelled_steps": 40}],
+    )
+    with (tmp_path / "metrics.csv").open() as rows:
+        assert list(csv.DictReader(rows)) == [
+            {"round": "1", "success": "0.5", "labelled_steps": ""},
+            {"round": "2", "success": "1.0", "labelled_steps": "40"},
+        ]
