@@ -860,6 +860,10 @@ def main() -> None:
         written += write_report(sweep_dir)
         runs += load_runs(sweep_dir)[1]
         sweep_dirs.append(sweep_dir)
+    if not runs:
+        sys.exit(
+            f"study.py: no finished run of this study under {args.runs_dir}; run it without --render-only"
+        )
     options = [a for a in sys.argv[2:] if a != "--render-only"]
     command = shlex.join(["python", "scripts/study.py", args.study, *options])
     missing = [f"Not run yet: sweep(s) {', '.join(f'`{d}`' for d in not_started)}."] if not_started else []

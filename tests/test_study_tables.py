@@ -1,5 +1,6 @@
 """The pre-registered second-view tables of scripts/study.py: paired differences and verdicts by hand."""
 
+import subprocess
 import sys
 from pathlib import Path
 
@@ -182,3 +183,15 @@ def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_orac
     # The expert trains first; the demonstrations arm reads its seed-0 agent.
     assert study_.sweeps[0].configs == ("fasthighway-oracle",)
     assert study.EXPERT.startswith(f"runs/sweeps/{study_.sweeps[0].name}/")
+
+
+def test_render_only_with_no_finished_run_stops_with_one_line(tmp_path):
+    script = Path(study.__file__)
+    empty = subprocess.run(
+        [sys.executable, str(script), "equal-effort", "--render-only", "--runs-dir", str(tmp_path)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert empty.returncode == 1
+    assert empty.stderr.strip() == (
+        f"study.py: no finished run of this study under {tmp_path}; run it without --render-only"
+    )
