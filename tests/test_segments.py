@@ -10,7 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
-from test_gym_task import SETTINGS, make_corridor
+from test_gym_task import LENGTH, SETTINGS, corridor_cell, make_corridor
 from test_gym_task import VIEWS as GYM_VIEWS
 from test_neural_cotraining import CONFIG, LAYOUT, VIEWS
 
@@ -257,14 +257,16 @@ def test_bad_segment_settings_fail_with_one_line(preset, override, message):
         load_config("grid16-dospcot", ["training.segment_length=0"])
 
 
-def test_on_a_gym_task_each_stored_segment_is_labelled_with_the_sum_of_its_steps_hidden_rewards():
+@pytest.mark.parametrize("keyed", [False, True])
+def test_on_a_gym_task_each_stored_segment_is_labelled_with_the_sum_of_its_steps_hidden_rewards(keyed):
     settings = {
         **SETTINGS,
         "training.rounds": 1,
         "training.steps_per_round": 800,
         "training.segment_length": 3,
     }
-    run = build_run(gym_config(make_corridor, GYM_VIEWS, label_fraction=0.5, settings=settings))
+    key = {"state_key": corridor_cell} if keyed else {}
+    run = build_run(gym_config(make_corridor, GYM_VIEWS, label_fraction=0.5, settings=settings, **key))
     run.run_round()
     store, segments = run.store, run.segments
     n = len(segments)
@@ -274,7 +276,11 @@ def test_on_a_gym_task_each_stored_segment_is_labelled_with_the_sum_of_its_steps
     assert np.array_equal(segments.hidden[:n], sums) and (sums > 0).any()  # some reached the goal
     labelled = segments.labelled[:n]
     assert np.array_equal(segments.label[:n][labelled], sums[labelled])
-    assert 0.4 < labelled.mean() < 0.6 and not store.labelled[: len(store)].any()
+    assert not store.labelled[: len(store)].any()
+    if keyed:  # a pool of (cell, action) pairs: segments repeat, and each is stored once
+        assert len(set(map(tuple, ids))) == n and len(store) <= 2 * LENGTH
+        return
+    assert 0.4 < labelled.mean() < 0.6
     # Each step is in one segment, but for the at most k - 1 of each agent that the round's end cut off.
     steps = ids[ids >= 0]
     assert np.unique(steps).size == steps.size and 0 <= len(store) - steps.size <= 2 * (3 - 1)
