@@ -49,7 +49,7 @@ from readme_block import check_readme_block, replace_readme_block
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS
 from dospcot.report import TrialRun, cells, load_runs, paper_report_tables, write_report
-from dospcot.sweep import SWEEP_FILE, SweepSpec, run_sweep
+from dospcot.sweep import SweepError, SweepSpec, run_sweep
 from dospcot.train_config import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -849,15 +849,16 @@ def main() -> None:
     runs, sweep_dirs, written, not_started = [], [], [], []
     for sweep in study.sweeps:
         sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
-        if args.render_only and not (sweep_dir / SWEEP_FILE).exists():
-            not_started.append(sweep_dir)  # a study cut short: its tables say which sweeps are missing
-            continue
         if not args.render_only:
             spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
             result = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers)
             if result.failed:
                 sys.exit(f"{len(result.failed)} trials failed: {', '.join(result.failed)}")
-        written += write_report(sweep_dir)
+        try:
+            written += write_report(sweep_dir)
+        except SweepError:  # never started, or no trial finished yet: the study was cut short there
+            not_started.append(sweep_dir)
+            continue
         runs += load_runs(sweep_dir)[1]
         sweep_dirs.append(sweep_dir)
     if not runs:
@@ -866,7 +867,8 @@ def main() -> None:
         )
     options = [a for a in sys.argv[2:] if a != "--render-only"]
     command = shlex.join(["python", "scripts/study.py", args.study, *options])
-    missing = [f"Not run yet: sweep(s) {', '.join(f'`{d}`' for d in not_started)}."] if not_started else []
+    unfinished = ", ".join(f"`{d}`" for d in not_started)
+    missing = [f"Not finished yet: sweep(s) {unfinished}."] if not_started else []
     table = "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
     print(table)
     if args.docs:
