@@ -71,6 +71,15 @@ def _permuted_grid(seed: int, monitored_states: np.ndarray | None = None) -> Gri
     return env
 
 
+def assert_same_learners(a: NeuralCoTraining, b: NeuralCoTraining) -> None:
+    """Two runs' agents hold bit-identical parameters, and their reward tables the same rewards and
+    weights: what the leakage tests ask of runs whose hidden rewards differ."""
+    for agent_a, agent_b in zip(a.agents, b.agents, strict=True):
+        for p, q in zip(agent_a.policy.parameters(), agent_b.policy.parameters(), strict=True):
+            assert th.equal(p, q)
+    assert np.array_equal(a.table.reward, b.table.reward) and np.array_equal(a.table.weight, b.table.weight)
+
+
 @pytest.mark.parametrize("kinds", [("esarsa_dqn", "dqn"), ("tabular", "tabular")])
 def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical(kinds):
     assert not np.array_equal(_permuted_grid(3).reward, GridWorld(LAYOUT).reward)
@@ -80,10 +89,7 @@ def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical(kinds):
     a.run()
     b = NeuralCoTraining(partial(_permuted_grid, 3), VIEWS, spec, CONFIG)
     b.run()
-    for agent_a, agent_b in zip(a.agents, b.agents, strict=True):
-        for p, q in zip(agent_a.policy.parameters(), agent_b.policy.parameters(), strict=True):
-            assert th.equal(p, q)
-    assert np.array_equal(a.table.reward, b.table.reward) and np.array_equal(a.table.weight, b.table.weight)
+    assert_same_learners(a, b)
 
 
 def test_leakage_under_blind_spots_and_a_monitor_agents_stay_bit_identical():
@@ -97,10 +103,7 @@ def test_leakage_under_blind_spots_and_a_monitor_agents_stay_bit_identical():
     b = NeuralCoTraining(partial(_permuted_grid, 3, monitor), views, spec, CONFIG, monitor)
     b.run()
     assert a.store.labelled[a.store.visited].mean() > 0.2  # the monitor revealed more than the share
-    for agent_a, agent_b in zip(a.agents, b.agents, strict=True):
-        for p, q in zip(agent_a.policy.parameters(), agent_b.policy.parameters(), strict=True):
-            assert th.equal(p, q)
-    assert np.array_equal(a.table.reward, b.table.reward) and np.array_equal(a.table.weight, b.table.weight)
+    assert_same_learners(a, b)
 
 
 def test_a_mix_of_tabular_and_neural_agents_cotrains_and_resumes_from_its_state():

@@ -9,10 +9,9 @@ from functools import partial
 import gymnasium as gym
 import numpy as np
 import pytest
-import torch as th
 from test_gym_task import LENGTH, SETTINGS, corridor_cell, make_corridor
 from test_gym_task import VIEWS as GYM_VIEWS
-from test_neural_cotraining import CONFIG, LAYOUT, VIEWS
+from test_neural_cotraining import CONFIG, LAYOUT, VIEWS, assert_same_learners
 
 from dospcot.classifier import ClassifierConfig
 from dospcot.cotraining import Pool
@@ -209,10 +208,7 @@ def test_leakage_rewards_that_keep_every_segment_sum_leave_the_learners_bit_iden
     # The single rewards differed; only the segment sums reached the learners, and they agree.
     assert not np.array_equal(a.store.hidden_reward, b.store.hidden_reward)
     assert a.segments.labelled.any() and np.array_equal(a.segments.label, b.segments.label)
-    for agent_a, agent_b in zip(a.agents, b.agents, strict=True):
-        for p, q in zip(agent_a.policy.parameters(), agent_b.policy.parameters(), strict=True):
-            assert th.equal(p, q)
-    assert np.array_equal(a.table.reward, b.table.reward) and np.array_equal(a.table.weight, b.table.weight)
+    assert_same_learners(a, b)
 
 
 def test_a_run_on_segment_labels_cotrains_on_segments_and_resumes_from_its_state():
