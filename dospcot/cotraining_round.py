@@ -363,7 +363,9 @@ class CoTrainingRun:
             env.seed(self.spec.seed * 1000 + k + 7919 * self.round)
             agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
             agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
-        stats = self._cotrain() if self.trainer is not None else {}  # 2-3. co-train, pseudo-rewards
+        # 2-3. co-train, pseudo-rewards. A baseline has no co-trainer, but its labels are its effort too.
+        labels_only = {"labelled_steps": int(self.store.labelled.sum())}
+        stats = self._cotrain() if self.trainer is not None else labels_only
         for agent in self.agents:  # 4. policy update on the rewards and weights just written
             agent.update(self.config.update_steps)
         pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
@@ -463,7 +465,7 @@ class CoTrainingRun:
         policy = self.evaluate_policies()
         rows = []
         for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
-            round_view = stats["views"][k] if stats else {}
+            round_view = stats["views"][k] if "views" in stats else {}
             rows.append(
                 {
                     "method": self.spec.method,

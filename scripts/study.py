@@ -648,7 +648,7 @@ def effort_tables(
     if oracle:
         cells_ = [_over_seeds(oracle, c) if c != "labelled_steps" else "every step" for c in columns]
         lines.append(f"| oracle (`{oracle[0].trial.config}`) | {len(oracle)} | " + " | ".join(cells_) + " |")
-    lines += ["", "n/a: not recorded (runs written before the effort column; the oracle has no co-trainer)."]
+    lines += ["", "n/a: not recorded (runs written before the effort column)."]
     if base in by_arm:
         lines.append("")
         for arm in arms:

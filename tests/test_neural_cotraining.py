@@ -49,8 +49,11 @@ def test_cotraining_runs_two_rounds_with_one_two_and_three_views(views):
 
 def test_baselines_follow_a_linear_schedule():
     spec = NeuralRunSpec("labels-only", ("dqn",), ("coords",), seed=0)
-    records = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG).run()
+    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG)
+    records = run.run()
     assert [r["eps"] for r in records] == pytest.approx([1.0 + (0.05 - 1.0) * 0.5, 0.05])
+    # A baseline records its effort as co-training does: the (s, a) keys whose labels it saw.
+    assert records[-1]["labelled_steps"] == (run.store.visited & run.store.labelled).sum() > 0
 
 
 def test_with_every_reward_revealed_the_pace_is_full_and_exploration_decays():
