@@ -401,7 +401,14 @@ class CoTrainingRun:
         self.stopped = bool(result.stopped[0])
         true_class = self.segment_classes.encode(segments.hidden[None, :n])[0]  # metrics only
         stats = round_stats(result, pool.unlabelled[0], true_class)
-        return {**stats, "labelled_steps": int((segments.ids[:n][labelled] >= 0).sum())}
+        # How far the decoded per-step rewards lie from the hidden ones, where the agents read them.
+        decoded = step_weight > 0
+        error = np.abs(reward - self.store.hidden_reward[: reward.size])[decoded]  # metrics only
+        return {
+            **stats,
+            "labelled_steps": int((segments.ids[:n][labelled] >= 0).sum()),
+            "step_reward_error": float(error.mean()) if decoded.any() else float("nan"),
+        }
 
     def evaluate_policies(self) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,
@@ -490,6 +497,7 @@ class CoTrainingRun:
                     "worst_class_recall": stats.get("worst_class_recall", float("nan")),
                     "worst_class_precision": stats.get("worst_class_precision", float("nan")),
                     "labelled_steps": stats.get("labelled_steps", float("nan")),
+                    "step_reward_error": stats.get("step_reward_error", float("nan")),
                     **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
                 }
             )

@@ -78,12 +78,12 @@ from dospcot.transition_cotraining import SensorTask, TransitionConfig, Transiti
 ROUND_SCALARS = (
     "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
     "worst_class_recall", "worst_class_precision", "classifier_loss", "greedy_return", "success",
-    "normalised_score", "agreement", "labelled_steps",
+    "normalised_score", "agreement", "labelled_steps", "step_reward_error",
 )  # fmt: skip
 """The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
 SUMMARY_METRICS = (
     "normalised_score", "agreement", "greedy_return", "success", "pseudo_accuracy",
-    "worst_class_recall", "worst_class_precision", "coverage", "labelled_steps",
+    "worst_class_recall", "worst_class_precision", "coverage", "labelled_steps", "step_reward_error",
 )  # fmt: skip
 
 

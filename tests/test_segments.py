@@ -222,6 +222,11 @@ def test_a_run_on_segment_labels_cotrains_on_segments_and_resumes_from_its_state
     assert 0 < records[-1]["coverage"] <= 1 and records[-1]["pseudo_accuracy"] > 0.5
     in_a_segment = np.isin(np.arange(len(full.table)), full.segments.ids[:n])
     assert (full.table.weight[~in_a_segment] == 0).all() and (full.table.weight[in_a_segment] > 0).any()
+    # The decoding error, metrics only: the mean distance of the table's rewards from the hidden
+    # ones over the steps the agents read.
+    read = full.table.weight > 0
+    error = np.abs(full.table.reward[read] - full.store.hidden_reward[read]).mean()
+    assert records[-1]["step_reward_error"] == pytest.approx(error)
     first = build()
     first.run_round()
     state = pickle.dumps(first.state_dict())
