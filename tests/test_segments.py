@@ -3,8 +3,11 @@ model's regression on sums, leakage, and a co-training run that resumes."""
 
 import json
 import pickle
+import re
+import runpy
 from dataclasses import replace
 from functools import partial
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -285,3 +288,26 @@ def test_on_a_gym_task_each_stored_segment_is_labelled_with_the_sum_of_its_steps
     # Each step is in one segment, but for the at most k - 1 of each agent that the round's end cut off.
     steps = ids[ids >= 0]
     assert np.unique(steps).size == steps.size and 0 <= len(store) - steps.size <= 2 * (3 - 1)
+
+
+def _segment_decoding(monkeypatch, *argv: str) -> None:
+    monkeypatch.setattr("sys.argv", ["segment_decoding.py", *argv])
+    script = Path(__file__).resolve().parent.parent / "scripts" / "segment_decoding.py"
+    runpy.run_path(str(script), run_name="__main__")
+
+
+def test_the_decoding_diagnostic_counts_every_step_the_agents_read_and_refuses_per_step_labels(
+    monkeypatch, capsys
+):
+    small = ["env.size=6", "env.max_episode_steps=24", "training.rounds=1", "training.steps_per_round=400",
+             "training.learn_from_round=1", "dqn.learning_starts=100", "training.segment_length=4",
+             "training.label_fraction=0.2"]  # fmt: skip
+    _segment_decoding(monkeypatch, "grid16-dospcot", *(f"--set={s}" for s in small))
+    out = capsys.readouterr().out
+    read = int(re.search(r"(\d+) steps read by the agents", out)[1])
+    rows = [line.split(" | ") for line in out.splitlines() if re.match(r"\| -?\d", line)]
+    assert read > 0 and sum(int(row[1]) for row in rows) == read
+    assert {float(row[0][2:]) for row in rows} <= {-1.0, -100.0, 0.0}  # the grid's step, lava and goal
+    with pytest.raises(SystemExit):
+        _segment_decoding(monkeypatch, "grid16-dospcot")
+    assert "the config has no segment labels" in capsys.readouterr().err
