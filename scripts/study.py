@@ -627,8 +627,9 @@ def effort_tables(
     columns: tuple[str, ...] = EFFORT_COLUMNS,
     preset: str = "grid16-dospcot",
 ) -> list[str]:
-    """One row per arm over seeds (effort first), then each arm's paired difference in success from the
-    first arm (per-step labels); the preset's oracle, where the study ran it, as a last row."""
+    """One row per arm over seeds (effort first), then each arm's paired differences from the first
+    arm (per-step labels) in the outcome columns (return, where shown, and success); the preset's
+    oracle, where the study ran it, as a last row."""
     base = next(iter(arms))
     by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
     oracle = [run for run in runs if run.trial.config != preset]
@@ -651,10 +652,12 @@ def effort_tables(
     lines += ["", "n/a: not recorded (runs written before the effort column)."]
     if base in by_arm:
         lines.append("")
+        outcomes = [c for c in ("greedy_return", "success") if c in columns]
         for arm in arms:
             if arm != base and arm in by_arm:
-                diff = _paired(by_arm[arm], by_arm[base], "success")
-                lines.append(f"- {names['success']}, {arm} minus {base} (paired by seed): {diff}")
+                for column in outcomes:
+                    diff = _paired(by_arm[arm], by_arm[base], column)
+                    lines.append(f"- {names[column]}, {arm} minus {base} (paired by seed): {diff}")
     return lines
 
 

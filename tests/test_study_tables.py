@@ -180,6 +180,7 @@ def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_orac
     diff = SeedSummary.of([-0.2, -0.2])
     pair = "segments of 4, 5% of segments minus per-step labels, 5% of steps (paired by seed)"
     assert f"- no-crash episodes, {pair}: {diff}" in text
+    assert f"- return, {pair}: {SeedSummary.of([-2.0, -2.0])}" in text  # the return is paired too
     # The expert trains first; the demonstrations arm reads its seed-0 agent.
     assert study_.sweeps[0].configs == ("fasthighway-oracle",)
     assert study.EXPERT.startswith(f"runs/sweeps/{study_.sweeps[0].name}/")
