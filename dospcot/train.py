@@ -78,9 +78,11 @@ from dospcot.transition_cotraining import SensorTask, TransitionConfig, Transiti
 ROUND_SCALARS = (
     "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
     "worst_class_recall", "worst_class_precision", "classifier_loss", "greedy_return", "success",
-    "normalised_score", "agreement", "labelled_steps", "step_reward_error",
+    "normalised_score", "agreement", "labelled_steps",
 )  # fmt: skip
 """The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
+SEGMENT_SCALARS = ("step_reward_error",)
+"""The further per-round scalars of a run on segment labels."""
 SUMMARY_METRICS = (
     "normalised_score", "agreement", "greedy_return", "success", "pseudo_accuracy",
     "worst_class_recall", "worst_class_precision", "coverage", "labelled_steps", "step_reward_error",
@@ -312,7 +314,7 @@ def _train_in(
 
 def _log_round(run: CoTrainingRun, rows: list[dict]) -> None:
     for agent, row in zip(run.agents, rows, strict=True):
-        for key in ROUND_SCALARS:
+        for key in (*ROUND_SCALARS, *SEGMENT_SCALARS):
             if math.isfinite(row[key]):
                 agent.logger.record(f"dospcot/{key}", row[key])
         agent.logger.record("dospcot/round", run.round)

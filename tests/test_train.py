@@ -27,7 +27,7 @@ from dospcot.classifier import load_classifier
 from dospcot.cli import main
 from dospcot.envs import GridWorld, TabularMDP
 from dospcot.run_folder import RunFolderError, read_checkpoint, write_csv
-from dospcot.train import ROUND_SCALARS, build_task, evaluate
+from dospcot.train import ROUND_SCALARS, SEGMENT_SCALARS, build_task, evaluate
 from dospcot.train_config import (
     DQN_DEFAULTS,
     DQN_SET_ELSEWHERE,
@@ -221,6 +221,16 @@ def test_tiny_run_writes_every_file_for_one_two_and_three_views(tmp_path, views)
         tags = EventAccumulator(str(run_dir / "tb" / f"agent_{view}")).Reload().Tags()["scalars"]
         assert {f"dospcot/{key}" for key in ROUND_SCALARS} <= set(tags)
         assert {"rollout/exploration_rate", "train/loss"} <= set(tags)  # SB3's own scalars
+
+
+def test_a_run_on_segment_labels_logs_and_summarises_its_decoding_error(tmp_path):
+    run_dir = _train(tmp_path, "training.segment_length=4", 'views=["coords"]')
+    rows = list(csv.DictReader((run_dir / "metrics.csv").open()))
+    summary = json.loads((run_dir / "summary.json").read_text())
+    error = float(rows[-1]["step_reward_error"])
+    assert error >= 0 and summary["mean"]["step_reward_error"] == pytest.approx(error)
+    tags = EventAccumulator(str(run_dir / "tb" / "agent_coords")).Reload().Tags()["scalars"]
+    assert {f"dospcot/{key}" for key in (*ROUND_SCALARS, *SEGMENT_SCALARS)} <= set(tags)
 
 
 @pytest.mark.parametrize("agent", ["esarsa_dqn", "tabular"])
