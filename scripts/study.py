@@ -649,7 +649,10 @@ def effort_tables(
     if oracle:
         cells_ = [_over_seeds(oracle, c) if c != "labelled_steps" else "every step" for c in columns]
         lines.append(f"| oracle (`{oracle[0].trial.config}`) | {len(oracle)} | " + " | ".join(cells_) + " |")
-    lines += ["", "n/a: not recorded (runs written before the effort column)."]
+    lines += [
+        "",
+        "n/a: not recorded (runs written before the effort column) or none (the oracle's pseudo-rewards).",
+    ]
     if base in by_arm:
         lines.append("")
         outcomes = [c for c in ("greedy_return", "success") if c in columns]
