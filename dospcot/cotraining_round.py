@@ -364,8 +364,8 @@ class CoTrainingRun:
             agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
             agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
         # 2-3. co-train, pseudo-rewards. A baseline has no co-trainer, but its labels are its effort too.
-        labels_only = {"labelled_steps": int(self.store.labelled.sum())}
-        stats = self._cotrain() if self.trainer is not None else labels_only
+        baseline = {"labelled_steps": int(self.store.labelled.sum())}
+        stats = self._cotrain() if self.trainer is not None else baseline
         for agent in self.agents:  # 4. policy update on the rewards and weights just written
             agent.update(self.config.update_steps)
         pace = stats.get("pace", self.round / self.config.rounds)  # 5. age

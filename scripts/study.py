@@ -651,7 +651,7 @@ def effort_tables(
         lines.append(f"| oracle (`{oracle[0].trial.config}`) | {len(oracle)} | " + " | ".join(cells_) + " |")
     lines += [
         "",
-        "n/a: not recorded (runs written before the effort column) or none (the oracle's pseudo-rewards).",
+        "n/a: not recorded before the effort column existed, or undefined (an oracle has no pseudo-rewards).",
     ]
     if base in by_arm:
         lines.append("")
