@@ -363,9 +363,10 @@ class CoTrainingRun:
             env.seed(self.spec.seed * 1000 + k + 7919 * self.round)
             agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
             agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
-        # 2-3. co-train, pseudo-rewards. A baseline has no co-trainer, but its labels are its effort too.
-        baseline = {"labelled_steps": int(self.store.labelled.sum())}
-        stats = self._cotrain() if self.trainer is not None else baseline
+        if self.trainer is not None:  # 2-3. co-train, pseudo-rewards
+            stats = self._cotrain()
+        else:  # a baseline has no co-trainer, but its labels are its effort too
+            stats = {"labelled_steps": int(self.store.labelled.sum())}
         for agent in self.agents:  # 4. policy update on the rewards and weights just written
             agent.update(self.config.update_steps)
         pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
@@ -394,9 +395,8 @@ class CoTrainingRun:
         pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class)[0], nan=0.0)
         sums = np.where(labelled, segments.label[:n], pseudo)
         weight = np.where(labelled, 1.0, result.pseudo_weight[0])
-        seeds = [self.spec.seed * 101 + j for j in range(len(steps.features))]
         model = self.config.cotraining.classifier
-        reward, step_weight = step_rewards(steps, segments, sums, weight, model, seeds)
+        reward, step_weight = step_rewards(steps, segments, sums, weight, model, self.step_model_seeds())
         self.table.set(np.arange(reward.size), reward, step_weight)
         self.stopped = bool(result.stopped[0])
         true_class = self.segment_classes.encode(segments.hidden[None, :n])[0]  # metrics only
@@ -409,6 +409,10 @@ class CoTrainingRun:
             "labelled_steps": int((segments.ids[:n][labelled] >= 0).sum()),
             "step_reward_error": float(error.mean()) if decoded.any() else float("nan"),
         }
+
+    def step_model_seeds(self) -> list[int]:
+        """One seed per view: the initial parameters of its per-step reward model under segment labels."""
+        return [self.spec.seed * 101 + j for j in range(len(self.spec.views))]
 
     def evaluate_policies(self) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,

@@ -47,11 +47,10 @@ def main() -> None:
     read = run.table.weight > 0
     hidden = run.store.hidden_reward[: len(run.table)]
     labelled = segments.labelled[:n].astype(float)
-    seeds = [run.spec.seed * 101 + j for j in range(len(run.spec.views))]  # the run's own fit seeds
     model = run.config.cotraining.classifier
-    alone = [
+    alone = [  # from the run's own initial parameters
         fit_step_rewards(f[0], segments.ids[:n], segments.label[:n], labelled, model, seed)
-        for f, seed in zip(steps.features, seeds, strict=True)
+        for f, seed in zip(steps.features, run.step_model_seeds(), strict=True)
     ]
     print(
         f"{cfg.name}, seed {cfg.seed}, after {args.rounds} round(s): {n} segments, "
