@@ -13,6 +13,7 @@ import json
 import os
 import pickle
 import platform
+import subprocess
 import tempfile
 import time
 from collections.abc import Callable, Sequence
@@ -83,12 +84,33 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
     write_text(path, text.getvalue())
 
 
+def source_commit() -> str | None:
+    """The git commit of the dospcot source that is running, ``"+dirty"`` appended when tracked files
+    differ from it; None when the package does not lie in a git checkout (an installed wheel)."""
+    source = Path(dospcot.__file__).resolve().parent
+    try:
+        commit = subprocess.run(
+            ["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
+        ).stdout.strip()
+        changed = subprocess.run(
+            ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return None
+    return commit + ("+dirty" if changed else "")
+
+
 def write_run_info(run_dir: Path, command: str, wall_time_s: float, **extra: Any) -> None:
-    """``run_info.json``: the command, the wall time (s) and what ran it (versions, machine). Kept out
-    of ``summary.json`` so that a resumed run's summary equals the uninterrupted run's."""
+    """``run_info.json``: the command, the wall time (s) and what ran it (versions, the source's git
+    commit, machine). Kept out of ``summary.json`` so that a resumed run's summary equals the
+    uninterrupted run's."""
     write_json(
         run_dir / "run_info.json",
         {"command": command, "wall_time_s": round(wall_time_s, 2), **extra, "dospcot": dospcot.__version__,
+         "commit": source_commit(),
          "torch": torch.__version__, "stable_baselines3": stable_baselines3.__version__,
          "python": platform.python_version(),
          "machine": f"{platform.machine()} {platform.system()}, {torch.get_num_threads()} torch threads"},

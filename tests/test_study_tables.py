@@ -1,5 +1,6 @@
 """The pre-registered second-view tables of scripts/study.py: paired differences and verdicts by hand."""
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -195,4 +196,20 @@ def test_render_only_with_no_finished_run_stops_with_one_line(tmp_path):
     assert empty.returncode == 1
     assert empty.stderr.strip() == (
         f"study.py: no finished run of this study under {tmp_path}; run it without --render-only"
+    )
+
+
+def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
+    """A study resumed across sessions may mix sources: the header counts the runs of each commit."""
+    runs = []
+    for seed, commit in enumerate(["a" * 40, "b" * 40 + "+dirty", None, "a" * 40]):
+        run_dir = tmp_path / str(seed)
+        run_dir.mkdir()
+        info = {"wall_time_s": 60.0} | ({} if commit is None else {"commit": commit})
+        (run_dir / "run_info.json").write_text(json.dumps(info))
+        runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
+    line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
+    assert line.endswith(
+        "; 4 CPU-minutes of training (one torch thread per run); source commits aaaaaaa (2), "
+        "bbbbbbb with uncommitted changes (1), not recorded (1)."
     )

@@ -67,6 +67,41 @@ def test_local_sweep_runs_every_trial_once_and_reruns_nothing(tmp_path):
         open_sweep(tmp_path / "sweep", SweepSpec(("tiny",), GRID, (0, 1, 2)))
 
 
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _git(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run(["git", "-C", str(ROOT), *args], capture_output=True, text=True)
+
+
+@pytest.mark.skipif(_git("rev-parse", "HEAD").returncode != 0, reason="needs the git checkout")
+def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(tmp_path):
+    """runs/README.md: the repository keeps each trial's small files under runs/sweeps, enough to
+    rebuild the tables and to skip finished trials on another machine; agents and events stay out."""
+    sweep = tmp_path / "runs" / "sweeps" / "s"
+    spec = SweepSpec(("tiny",), {"training.label_fraction": ("0.1",)}, (0,))
+    run_sweep(sweep, spec, workers=1, show_progress=False)
+    files = [path.relative_to(tmp_path) for path in sweep.rglob("*") if path.is_file()]
+    ignored = _git("check-ignore", "--no-index", *map(str, files)).stdout.split()
+    kept = [f for f in files if str(f) not in ignored]
+    assert {f.name for f in kept} == {
+        "sweep.json", "trial.json", "config.toml", "run_info.json", "metrics.csv", "summary.json",
+    }  # fmt: skip
+    assert any(f.suffix == ".zip" for f in files) and any("tb" in f.parts for f in files)
+    elsewhere = tmp_path / "elsewhere"
+    for f in kept:
+        (elsewhere / f).parent.mkdir(parents=True, exist_ok=True)
+        (elsewhere / f).write_bytes((tmp_path / f).read_bytes())
+    moved = elsewhere / "runs" / "sweeps" / "s"
+    assert _summaries(moved) == _summaries(sweep)
+    assert len(run_sweep(moved, spec, workers=1, show_progress=False).skipped) == 1
+    assert [run.summary for run in load_runs(moved)[1]] == [run.summary for run in load_runs(sweep)[1]]
+    # Each run names the source that trained it, so a study resumed at another commit shows it.
+    (run_dir,) = (moved / "trials" / "tiny").iterdir()
+    commit = json.loads((run_dir / "run_info.json").read_text())["commit"]
+    assert commit.split("+")[0] == _git("rev-parse", "HEAD").stdout.strip()
+
+
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`
 def test_ray_backend_runs_the_same_trials_to_the_same_summaries(tmp_path):
     ray = pytest.importorskip("ray", reason="the `ray` extra is not installed (pip install 'dospcot[ray]')")
