@@ -102,9 +102,9 @@ def _steps_per_second(make: Callable[..., DQN], steps: int, seed: int, net: list
         policy_kwargs={"net_arch": net},
         seed=seed,
     )
-    start = time.perf_counter()
+    start = time.process_time()  # CPU time: see NOTES
     model.learn(steps)
-    return steps / (time.perf_counter() - start)
+    return steps / (time.process_time() - start)
 
 
 def bench_esarsa_dqn(
@@ -127,8 +127,8 @@ def bench_esarsa_dqn(
         + (f", greedy={greedy!r}" if target == "expected_sarsa" else "")
         + ") vs SB3 DQN: env steps per second",
         f"CliffWalking-v1 one-hot, {steps:,} steps, MlpPolicy {net}, train_freq 4, batch {batch}",
-        Measurement.of(ours, "steps/s"),
-        Measurement.of(peer, "steps/s"),
+        Measurement.of(ours, "steps/CPU-s"),
+        Measurement.of(peer, "steps/CPU-s"),
         higher_is_better=True,
         target=0.95,
     )
@@ -509,6 +509,11 @@ NOTES = [
     "s' together it costs a wider forward and backward per gradient step, which the `greedy='online'` "
     "row measures (the trade is written up in the `ExpectedSarsaDQN` docstring). The `target='q'` row "
     "runs the same agent with DQN's max target, so it shows what relabelling and self-paced weighting cost.",
+    "- The ExpectedSarsaDQN rows count env steps per second of the process's CPU time "
+    "(`time.process_time`, on one torch thread), not of wall time: on a shared machine the wall clock also "
+    "runs while other tenants hold the core (a virtual machine's steal time), which moved the [64, 64] "
+    "row's ratio between 0.82 and 1.08 from one rerun to the next on this 2-core machine. On a machine of "
+    "one's own the two agree.",
     "- The co-training overhead row times `NeuralCoTraining.run()` (learning, the shared store, one "
     "classifier fit and scoring per view and round, relabelling and the per-round evaluation) against "
     "each agent's `learn()` over the same steps without a co-trainer, summed over the agents; the peer "
@@ -605,6 +610,8 @@ def _with_rows(text: str, rows: list[Row], command: str) -> str:
     for i in reversed(range(len(lines))):  # a note whose rows are all rerun now is out of date
         if lines[i].startswith(RERUN_NOTE) and set(lines[i].split(" UTC: ", 1)[1][:-1].split("; ")) <= rerun:
             del lines[i - 1 : i + 1]  # the note and the blank line above it
+    if "Notes:" in lines:  # the notes say how rows are measured: the code's are the current ones
+        lines[lines.index("Notes:") :] = NOTES
     header = lines.index(TABLE_HEADER)
     names = "; ".join(row.name for row in rows)
     note = f"{RERUN_NOTE} `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {names}."

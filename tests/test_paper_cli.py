@@ -228,3 +228,7 @@ def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, mon
     assert main(["bench", "--only", "B", "--out", str(out)]) == 0
     table = [line for line in out.read_text().splitlines() if line.startswith("| B | ")]
     assert len(table) == 1 and table[0].startswith("| B | new setting |") and "| 3.000 |" in table[0]
+    # The notes say how rows are measured: a rerun writes the code's notes over the file's.
+    monkeypatch.setattr(bench, "NOTES", ["Notes:", "- measured another way."])
+    assert main(["bench", "--only", "B", "--out", str(out)]) == 0
+    assert out.read_text().endswith("\nNotes:\n- measured another way.\n")

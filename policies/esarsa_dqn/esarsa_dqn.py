@@ -249,9 +249,12 @@ class ExpectedSarsaDQN(DQN):
     def _sample_action(
         self, learning_starts: int, action_noise: Any = None, n_envs: int = 1
     ) -> tuple[np.ndarray, np.ndarray]:
-        if not (self.cut_windows and self.target == "q" and self.n_steps > 1):
+        flag = self.cut_windows and self.target == "q" and self.n_steps > 1
+        if self.num_timesteps < learning_starts and not flag:  # uniform warm-up draws: no forward pass
             return super()._sample_action(learning_starts, action_noise, n_envs)
-        # The Q-network directly: policy.predict's mode switch and reshaping cost more than this.
+        # The greedy actions from the Q-network directly. policy.predict switches the network to eval
+        # mode and reshapes on every call, which costs more than the forward pass of a small network;
+        # SB3's collect_rollouts has switched it once already, for every step it collects.
         with th.no_grad():
             greedy = self.q_net(self.policy.obs_to_tensor(self._last_obs)[0]).argmax(dim=1).cpu().numpy()
         self._greedy = greedy  # predict() takes it rather than making the same forward pass again
@@ -259,7 +262,8 @@ class ExpectedSarsaDQN(DQN):
             action, buffer_action = super()._sample_action(learning_starts, action_noise, n_envs)
         finally:
             self._greedy = None
-        self._explored = np.asarray(buffer_action).reshape(n_envs) != greedy
+        if flag:
+            self._explored = np.asarray(buffer_action).reshape(n_envs) != greedy
         return action, buffer_action
 
     def predict(
@@ -269,8 +273,9 @@ class ExpectedSarsaDQN(DQN):
         episode_start: np.ndarray | None = None,
         deterministic: bool = False,
     ) -> tuple[np.ndarray, tuple[np.ndarray, ...] | None]:
-        """SB3 DQN's eps-greedy ``predict``; while collecting with cut windows, the greedy actions of
-        ``_last_obs`` come from the forward pass that flagged exploration."""
+        """SB3 DQN's eps-greedy ``predict``; while collecting, the greedy actions of ``_last_obs`` come
+        from the forward pass :meth:`_sample_action` made (which also flags exploration, where windows
+        are cut)."""
         if self._greedy is None or deterministic:
             return super().predict(observation, state, episode_start, deterministic)
         # DQN.predict's draw from the global stream SB3 seeds: one uniform for the whole batch, then a
