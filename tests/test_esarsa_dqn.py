@@ -360,6 +360,13 @@ def test_flagging_agents_act_as_dqn_predict_does():
 
     taken = actions(cut=True)
     assert np.array_equal(taken, actions(cut=False))
+    # Both act from their own forward pass, not through policy.predict: stock DQN draws the same.
+    stock = DQN(
+        "MlpPolicy", onehot_cliff(), n_steps=3, learning_starts=10, gradient_steps=0,
+        exploration_initial_eps=0.5, exploration_final_eps=0.5, seed=3,
+    )  # fmt: skip
+    stock.learn(300)
+    assert np.array_equal(taken, stock.replay_buffer.actions[:300, 0, 0])
     assert 0.2 < (taken[10:] != taken[9:-1]).mean()  # not one action repeated: both explore
 
 
