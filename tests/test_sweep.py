@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from dospcot import run_folder
 from dospcot.cli import main
 from dospcot.report import load_runs, write_report
 from dospcot.sweep import SweepError, SweepSpec, Trial, open_sweep, parse_grid, run_sweep
@@ -220,3 +221,13 @@ def test_sweep_and_report_bad_arguments_fail_with_one_line(args, message, tmp_pa
     err = capsys.readouterr().err
     assert message in err and err.count("\n") == 1
     assert not list(tmp_path.iterdir())  # nothing was written
+
+
+def test_a_run_outside_a_git_checkout_records_no_commit(monkeypatch):
+    """An installed wheel has no checkout to name: the commit is None, and nothing fails."""
+
+    def no_git(*args, **kwargs):
+        raise OSError("git: not found")
+
+    monkeypatch.setattr(run_folder.subprocess, "run", no_git)
+    assert run_folder.source_commit() is None
