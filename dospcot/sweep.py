@@ -224,6 +224,37 @@ def is_finished(sweep_dir: Path, trial: Trial) -> bool:
     return (trial_dir(sweep_dir, trial) / SUMMARY_FILE).is_file()
 
 
+def stale_trials(sweep_dir: Path, trials: Sequence[Trial]) -> list[tuple[str, str]]:
+    """The trials whose folder holds a config other than the one their config name and overrides
+    resolve to now (a preset changed since they ran), each with the first key that differs.
+
+    A sweep folder can outlive its code (the README's studies keep theirs in the repository), and
+    without this check a finished trial would be counted, and an unfinished one resumed, under
+    settings the sweep no longer means.
+    """
+    stale = []
+    for trial in trials:
+        path = trial_dir(sweep_dir, trial) / CONFIG_FILE
+        if not path.is_file():
+            continue
+        stored, current = load_config(str(path)), load_config(trial.config, trial.overrides())
+        if stored != current:
+            old, new = _flat(stored.to_dict()), _flat(current.to_dict())
+            key = next(k for k in sorted(old.keys() | new.keys()) if old.get(k) != new.get(k))
+            stale.append((trial.trial_id, f"{key} was {old.get(key)!r}, is {new.get(key)!r}"))
+    return stale
+
+
+def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            flat |= _flat(value, f"{prefix}{key}.")
+        else:
+            flat[f"{prefix}{key}"] = value
+    return flat
+
+
 def _command(trial: Trial) -> str:
     return f"dospcot train {trial.config} " + " ".join(f"--set {o}" for o in trial.overrides())
 
@@ -327,6 +358,14 @@ def run_sweep(
     else:
         trials = spec.trials()  # checked before the folder is made: a bad grid leaves nothing behind
         open_sweep(sweep_dir, spec)
+    stale = stale_trials(sweep_dir, trials)
+    if stale:
+        trial_id, key = stale[0]
+        raise SweepError(
+            f"{len(stale)} trial(s) in {sweep_dir} were trained with another config than their preset "
+            f"and overrides give now (e.g. {trial_id}: {key}); move the sweep folder away, or delete "
+            "those trials' folders, to run them again"
+        )
     todo = [t for t in trials if not is_finished(sweep_dir, t)]
     skipped = [t for t in trials if t not in todo]
     if backend == "local":

@@ -876,7 +876,10 @@ def main() -> None:
         sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
         if not args.render_only:
             spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
-            result = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers)
+            try:
+                result = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers)
+            except SweepError as err:  # e.g. trials run under a preset that has changed since
+                sys.exit(f"study.py: {err}")
             if result.failed:
                 sys.exit(f"{len(result.failed)} trials failed: {', '.join(result.failed)}")
         try:

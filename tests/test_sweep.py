@@ -231,3 +231,15 @@ def test_a_run_outside_a_git_checkout_records_no_commit(monkeypatch):
 
     monkeypatch.setattr(run_folder.subprocess, "run", no_git)
     assert run_folder.source_commit() is None
+
+
+def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(tmp_path):
+    """A sweep folder may outlive its presets (the studies keep theirs): a trial whose stored config
+    differs from what its preset gives now is neither counted nor resumed, and the sweep names it."""
+    spec = SweepSpec(("tiny",), {}, (0,))
+    run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)
+    (stored,) = (tmp_path / "s").glob("trials/tiny/*/config.toml")
+    stored.write_text(stored.read_text().replace("steps_per_round = 300", "steps_per_round = 200"))
+    message = r"1 trial\(s\) .* tiny/seed=0: training.steps_per_round was 200, is 300"
+    with pytest.raises(SweepError, match=message):
+        run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)
