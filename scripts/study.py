@@ -1,6 +1,6 @@
 """The README's neural studies, each one command: a ``dospcot sweep`` and its ``dospcot report``.
 
-    python scripts/study.py label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~1 h)
+    python scripts/study.py label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~2.5 h)
     python scripts/study.py grid16 --docs           # 6 grid16 presets x seeds 0-9
     python scripts/study.py grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
     python scripts/study.py grid32 --docs           # 4 grid32 presets x seeds 0-4
