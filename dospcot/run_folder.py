@@ -17,7 +17,7 @@ import subprocess
 import tempfile
 import time
 from collections.abc import Callable, Sequence
-from functools import partial
+from functools import cache, partial
 from pathlib import Path
 from typing import IO, Any
 
@@ -84,9 +84,14 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
     write_text(path, text.getvalue())
 
 
+@cache
 def source_commit() -> str | None:
     """The git commit of the dospcot source that is running, ``"+dirty"`` appended when tracked files
-    differ from it; None when the package does not lie in a git checkout (an installed wheel)."""
+    differ from it; None when the package does not lie in a git checkout (an installed wheel).
+
+    Asked once per process: a process runs the code it imported, whatever the checkout holds later
+    (a sweep's worker trains many trials), and a batch of seeds writes one ``run_info.json`` each.
+    """
     source = Path(dospcot.__file__).resolve().parent
     try:
         commit = subprocess.run(

@@ -230,7 +230,11 @@ def test_a_run_outside_a_git_checkout_records_no_commit(monkeypatch):
         raise OSError("git: not found")
 
     monkeypatch.setattr(run_folder.subprocess, "run", no_git)
-    assert run_folder.source_commit() is None
+    run_folder.source_commit.cache_clear()  # asked once per process: ask again
+    try:
+        assert run_folder.source_commit() is None
+    finally:
+        run_folder.source_commit.cache_clear()
 
 
 def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(tmp_path):
