@@ -102,7 +102,7 @@ def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], G
         if env.blind_spot_rate > 0
         else None
     )
-    return make_env, grid_views(layout, env.patch_size, env.compass, blind), layout
+    return make_env, grid_views(layout, env.patch_size, env.compass, blind, env.ray_encoding), layout
 
 
 def agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:

@@ -69,6 +69,8 @@ class EnvConfig:
     :param patch_size: side k of the ``patch`` view (odd).
     :param compass: every view also reads the goal's offset (a goal compass): ``"none"``, ``"axes"``
         (one-hot per axis) or ``"cell"`` (one-hot over the map's cells; :mod:`dospcot.envs.gridworld`).
+    :param ray_encoding: how the ``rays`` view reads a distance d: ``"distance"`` (d / N) or
+        ``"inverse"`` (1 / d, so a hazard next to the agent reads 1 on any map size).
     :param blind_spot_rate: the share of lava cells each terrain view (``patch``, ``rays``) reads as
         free, a persistent blind spot drawn per run seed and view (0: error-free sensors).
     :param blind_spots: ``"independent"`` (each view misses its own cells) or ``"identical"`` (every
@@ -89,6 +91,7 @@ class EnvConfig:
     train_episode_steps: int = 0
     patch_size: int = 5
     compass: Literal["none", "axes", "cell"] = "none"
+    ray_encoding: Literal["distance", "inverse"] = "distance"
     blind_spot_rate: float = 0.0
     blind_spots: Literal["independent", "identical"] = "independent"
     monitored_columns: int = 0

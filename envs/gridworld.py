@@ -12,8 +12,11 @@ Views (docs/design.md section 1):
 
 - ``coords``: (row, column) and the goal's offset (d_row, d_column), divided by N - 1; 4 values;
 - ``patch``: the k x k egocentric terrain patch, one-hot over (free, wall, lava, goal, off-grid);
-- ``rays``: along the 8 compass directions, the distance to the nearest lava, wall (or edge) and
-  goal, divided by N (1.0 where there is none); 24 values.
+- ``rays``: along the 8 compass directions, the distance d (in cells) to the nearest lava, wall (or
+  edge) and goal; 24 values, encoded (``ray_encoding``) as ``"distance"``: d / N (1.0 where there is
+  none), or ``"inverse"``: 1 / d (0 where there is none). Scaled by N, the cell next to the agent and
+  the one after it differ by 1 / N, which shrinks as the map grows (0.03 on a 32 x 32 map); inverse,
+  a hazard next to the agent reads 1 and one two cells away 0.5, on any map.
 
 A goal compass (``compass``) makes every view also read where the goal lies from the agent: a local
 sensor alone tells a cell only by its neighbourhood, so an agent that reads only it must learn the
@@ -53,6 +56,7 @@ N_TERRAIN = 5
 MOVES = np.array([(-1, 0), (0, 1), (1, 0), (0, -1)])
 DIRECTIONS_8 = [(-1, 0), (-1, 1), (0, 1), (1, 1), (1, 0), (1, -1), (0, -1), (-1, -1)]
 COMPASSES: tuple[str, ...] = ("none", "axes", "cell")
+RAY_ENCODINGS: tuple[str, ...] = ("distance", "inverse")
 _CHARS = {".": FREE, "#": WALL, "L": LAVA, "G": GOAL, "S": FREE}
 
 
@@ -306,9 +310,11 @@ def grid_views(
     patch_size: int = 5,
     compass: str = "none",
     blind_spots: Mapping[str, np.ndarray] | None = None,
+    ray_encoding: str = "distance",
 ) -> dict[str, View]:
     """The ``coords``, ``patch`` and ``rays`` views of a layout, by name; ``compass`` (one of
-    :data:`COMPASSES`) appends the goal's offset to every view (see the module docstring).
+    :data:`COMPASSES`) appends the goal's offset to every view, and ``ray_encoding`` (one of
+    :data:`RAY_ENCODINGS`) sets how ``rays`` reads a distance (see the module docstring).
 
     :param blind_spots: view name (of :data:`TERRAIN_VIEWS`) -> bool (N, N), the lava cells that view
         reads as free (see :func:`lava_blind_spots`).
@@ -317,6 +323,8 @@ def grid_views(
         raise ValueError(f"patch_size must be odd and positive, got {patch_size}")
     if compass not in COMPASSES:
         raise ValueError(f"compass must be one of {COMPASSES}, got {compass!r}")
+    if ray_encoding not in RAY_ENCODINGS:
+        raise ValueError(f"ray_encoding must be one of {RAY_ENCODINGS}, got {ray_encoding!r}")
     blind_spots = dict(blind_spots or {})
     unknown = sorted(set(blind_spots) - set(TERRAIN_VIEWS))
     if unknown:
@@ -330,7 +338,7 @@ def grid_views(
     tables = {
         "coords": coords_table,
         "patch": _patch_table(perceived.get("patch", layout), patch_size),
-        "rays": _ray_table(perceived.get("rays", layout)),
+        "rays": _ray_table(perceived.get("rays", layout), ray_encoding),
     }
     if compass == "axes":
         offsets = np.eye(2 * n - 1, dtype=np.float32)
@@ -358,23 +366,26 @@ def _patch_table(layout: GridLayout, patch_size: int) -> np.ndarray:
     return np.eye(N_TERRAIN, dtype=np.float32)[windows].reshape(n * n, -1)
 
 
-def _ray_table(layout: GridLayout) -> np.ndarray:
-    """(N*N, 24) distances / N to the nearest lava, wall-or-edge and goal along 8 directions."""
+def _ray_table(layout: GridLayout, encoding: str = "distance") -> np.ndarray:
+    """(N*N, 24) the nearest lava, wall-or-edge and goal along 8 directions, as d / N or 1 / d."""
     n = layout.size
-    table = np.ones((n * n, 8, 3), dtype=np.float32)
+    steps = np.zeros((n * n, 8, 3), dtype=np.float32)  # distance in cells, 0 where there is none
     for state in range(n * n):
         r, c = divmod(state, n)
         for d, (dr, dc) in enumerate(DIRECTIONS_8):
-            found = [False, False, False]
             for step in range(1, n + 1):
                 kind = layout.cell(r + dr * step, c + dc * step)
                 for i, wanted in enumerate((LAVA, WALL, GOAL)):
                     hit = kind == wanted or (wanted == WALL and kind == OFF_GRID)
-                    if hit and not found[i]:
-                        table[state, d, i] = step / n
-                        found[i] = True
+                    if hit and not steps[state, d, i]:
+                        steps[state, d, i] = step
                 if kind == OFF_GRID:
                     break
+    found = steps > 0
+    if encoding == "inverse":
+        table = np.divide(1.0, steps, out=np.zeros_like(steps), where=found)
+    else:
+        table = np.where(found, steps / n, 1.0).astype(np.float32)
     return table.reshape(n * n, 24)
 
 
@@ -387,6 +398,7 @@ def make_masked_gridworld(
     compass: str = "none",
     blind_spots: Mapping[str, np.ndarray] | None = None,
     monitored_columns: int = 0,
+    ray_encoding: str = "distance",
     **grid_kwargs: Any,
 ) -> gym.Env:
     """A :class:`GridWorld` with a step limit (default 4 N), state-action masking and views in ``info``.
@@ -394,7 +406,7 @@ def make_masked_gridworld(
     ``blind_spots`` go to :func:`grid_views`; with ``monitored_columns`` every reward of a state in
     the first that many columns is revealed (:func:`monitored_states`)."""
     base = GridWorld(**grid_kwargs)
-    selected = select_views(grid_views(base.layout, patch_size, compass, blind_spots), views)
+    selected = select_views(grid_views(base.layout, patch_size, compass, blind_spots, ray_encoding), views)
     env = gym.wrappers.TimeLimit(base, max_episode_steps or 4 * base.layout.size)
     monitored = monitored_states(base.layout.size, monitored_columns) if monitored_columns else None
     env = RewardMaskWrapper(

@@ -93,6 +93,13 @@ def test_views_by_hand():
     assert rays[0].tolist() == pytest.approx([1.0, 1.0, 1.0])  # up: no lava, edge after 4 cells -> 4/4
     assert rays[1].tolist() == pytest.approx([0.5, 1.0, 0.75])  # up-right: lava at 2, goal at 3, edge at 4
     assert rays[4][1] == pytest.approx(0.25)  # down: the edge right below
+    # Inverse distances: 1 / d, and 0 where the ray finds nothing.
+    inverse = grid_views(layout, patch_size=3, ray_encoding="inverse")["rays"].fn(12).reshape(8, 3)
+    assert inverse[0].tolist() == pytest.approx([0.0, 0.25, 0.0])  # up: the edge after 4 cells
+    assert inverse[1].tolist() == pytest.approx([0.5, 0.25, 1 / 3])  # up-right: lava 2, goal 3, edge 4
+    assert inverse[4][1] == pytest.approx(1.0)  # down: the edge right below
+    with pytest.raises(ValueError, match="ray_encoding must be one of"):
+        grid_views(layout, ray_encoding="log")
     # The compass "axes": the goal's offset (d_row, d_column), each one-hot over its 2N - 1 = 7 values.
     compass = grid_views(layout, patch_size=3, compass="axes")
     heading = np.zeros(14)

@@ -126,6 +126,7 @@ def test_dqn_section_is_sb3_dqns_signature_with_dospcots_defaults_where_named():
         ("tabular_agent.n_steps=0", "tabular_agent: n_steps must be >= 1, got 0"),
         ("env.compass=true", "env.compass: True is not allowed; allowed: none, axes, cell"),
         ("env.size=100", 'env: compass = "cell" needs size <= 64, got 100; use "axes"'),
+        ('env.ray_encoding="log"', "env.ray_encoding: 'log' is not allowed; allowed: distance, inverse"),
         ("env.blind_spot_rate=1.5", "env: blind_spot_rate must lie in [0, 1], got 1.5"),
         (
             'env.blind_spots="both"',
