@@ -245,6 +245,18 @@ def stale_trials(sweep_dir: Path, trials: Sequence[Trial]) -> list[tuple[str, st
     return stale
 
 
+def check_not_stale(sweep_dir: Path, trials: Sequence[Trial]) -> None:
+    """:raises SweepError: one line naming the stale trials' count and the first one's changed key."""
+    stale = stale_trials(sweep_dir, trials)
+    if stale:
+        trial_id, key = stale[0]
+        raise SweepError(
+            f"{len(stale)} trial(s) in {sweep_dir} were trained with another config than their preset "
+            f"and overrides give now (e.g. {trial_id}: {key}); move the sweep folder away, or delete "
+            "those trials' folders, to run them again"
+        )
+
+
 def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     flat: dict[str, Any] = {}
     for key, value in data.items():
@@ -358,14 +370,7 @@ def run_sweep(
     else:
         trials = spec.trials()  # checked before the folder is made: a bad grid leaves nothing behind
         open_sweep(sweep_dir, spec)
-    stale = stale_trials(sweep_dir, trials)
-    if stale:
-        trial_id, key = stale[0]
-        raise SweepError(
-            f"{len(stale)} trial(s) in {sweep_dir} were trained with another config than their preset "
-            f"and overrides give now (e.g. {trial_id}: {key}); move the sweep folder away, or delete "
-            "those trials' folders, to run them again"
-        )
+    check_not_stale(sweep_dir, trials)
     todo = [t for t in trials if not is_finished(sweep_dir, t)]
     skipped = [t for t in trials if t not in todo]
     if backend == "local":

@@ -51,7 +51,7 @@ from readme_block import check_readme_block, replace_readme_block
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS
 from dospcot.report import TrialRun, cells, load_runs, paper_report_tables, write_report
-from dospcot.sweep import SweepError, SweepSpec, run_sweep
+from dospcot.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
 from dospcot.train_config import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -874,14 +874,16 @@ def main() -> None:
     runs, sweep_dirs, written, not_started = [], [], [], []
     for sweep in study.sweeps:
         sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
-        if not args.render_only:
-            spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
-            try:
+        spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
+        try:  # trials run under a preset that has changed since are neither resumed nor tabled
+            if args.render_only:
+                check_not_stale(sweep_dir, spec.trials())
+            else:
                 result = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers)
-            except SweepError as err:  # e.g. trials run under a preset that has changed since
-                sys.exit(f"study.py: {err}")
-            if result.failed:
-                sys.exit(f"{len(result.failed)} trials failed: {', '.join(result.failed)}")
+        except SweepError as err:
+            sys.exit(f"study.py: {err}")
+        if not args.render_only and result.failed:
+            sys.exit(f"{len(result.failed)} trials failed: {', '.join(result.failed)}")
         try:
             written += write_report(sweep_dir)
         except SweepError:  # never started, or no trial finished yet: the study was cut short there

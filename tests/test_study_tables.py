@@ -213,3 +213,23 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
         "; 4 CPU-minutes of training (one torch thread per run); source commits aaaaaaa (2), "
         "bbbbbbb with uncommitted changes (1), not recorded (1)."
     )
+
+
+def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
+    """A table rebuilt from a record must not count a run under a preset that has changed since."""
+    trial = "grid16-masked-zero/training.label_fraction=0.01__seed=0"
+    record = study.ROOT / "runs/sweeps/label-fraction/trials" / trial / "config.toml"
+    stored = tmp_path / "label-fraction/trials" / trial / "config.toml"
+    stored.parent.mkdir(parents=True)
+    stored.write_text(record.read_text().replace("steps_per_round = 8000", "steps_per_round = 7000"))
+    script = Path(study.__file__)
+    stale = subprocess.run(
+        [sys.executable, str(script), "label-fraction", "--render-only", "--runs-dir", str(tmp_path)],
+        capture_output=True, text=True,
+    )  # fmt: skip
+    assert stale.returncode == 1
+    assert stale.stderr.strip() == (
+        f"study.py: 1 trial(s) in {tmp_path / 'label-fraction'} were trained with another config than "
+        f"their preset and overrides give now (e.g. {trial}: training.steps_per_round was 7000, is "
+        "8000); move the sweep folder away, or delete those trials' folders, to run them again"
+    )
