@@ -66,6 +66,7 @@ from dospcot.run_folder import (
     new_run_dir,
     read_checkpoint,
     remove_stale_temporaries,
+    source_commit,
     write_checkpoint,
     write_csv,
     write_json,
@@ -148,6 +149,7 @@ def _sensor_parts(
             "success_return": task.success_return,
             "max_return": task.max_return,
             "keyed": bool(task.state_key),
+            "read_termination": task.read_termination,
         }
     config = TransitionConfig(
         **_common_kwargs(cfg), max_episode_steps=task.episode_steps, reward_classes=task.reward_classes,
@@ -265,10 +267,13 @@ def _train_in(
     started = time.perf_counter()
     run = build_run(cfg)
     records: list[dict] = []
-    elapsed, sessions = 0.0, 1
+    elapsed, sessions, commits = 0.0, 1, [source_commit()]
     if state is not None:
         run.load_state_dict(state["run"])
         records, elapsed, sessions = state["records"], state["elapsed_s"], state["sessions"] + 1
+        # A resumed run may have been trained by other code before: each session's commit is kept (a
+        # checkpoint older than this field names none for its sessions).
+        commits = state.get("commits", [None] * (sessions - 1)) + commits
     for agent, view in zip(run.agents, cfg.views, strict=True):
         folder = str(run_dir / "tb" / f"agent_{view}")
         if state is not None:
@@ -297,13 +302,15 @@ def _train_in(
                 "records": records,
                 "elapsed_s": elapsed + time.perf_counter() - started,
                 "sessions": sessions,
+                "commits": commits,
             },
         )
     bar.close()
     for agent in run.agents:
         agent.logger.close()
     plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
-    write_run_info(run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions)
+    resumed = {"session_commits": commits} if sessions > 1 else {}
+    write_run_info(run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions, **resumed)
     # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
     write_json(run_dir / SUMMARY_FILE, run_summary(records, run))
     # A finished run is never resumed, and its checkpoint holds every replay buffer (about a GB on

@@ -183,6 +183,11 @@ class GymConfig:
         direction, what it carries, the map) or a dotted path to a function of the unwrapped env.
         The pool then holds (state key, action) pairs, each labelled with probability
         ``training.label_fraction`` for all its visits, as on the grid; empty: single steps.
+    :param read_termination: the reward classifiers also read whether a step ended its episode (the
+        env's ``terminated``, which the mask leaves visible). Where only rare steps end an episode and
+        a rare reward comes with them (MiniGrid's goal), a pseudo-reward of that class on a step that
+        goes on is then easy to rule out: such a step, taken again and again, would pay the agent a
+        loop worth more than the goal.
     """
 
     env_id: str = ""
@@ -196,6 +201,7 @@ class GymConfig:
     success_return: float = 0.0
     max_return: float = math.inf
     state_key: str = ""
+    read_termination: bool = False
 
     def __post_init__(self) -> None:
         if self.episode_steps < 1 or self.reward_classes < 1 or self.eval_episodes < 1:
@@ -456,6 +462,11 @@ class TrainConfig:
                 load_agent(demos.agent, demos.agent_algorithm)
             except ValueError as err:
                 raise ConfigError(f"demonstrations.{err}") from None
+        if (demos.file or demos.agent) and demos.labels and self.task == "gym" and self.gym.read_termination:
+            raise ConfigError(
+                "gym.read_termination: demonstrations do not record which of their steps ended an episode, "
+                "so as labels they cannot join a pool that reads it; set demonstrations.labels = false"
+            )
         if (demos.episodes or demos.file) and demos.margin_loss_weight and "tabular" in self.agent_kinds:
             raise ConfigError(
                 "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "

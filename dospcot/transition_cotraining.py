@@ -58,6 +58,9 @@ class StepStore(InPlaceState):
     :param view_shapes: the shape of each view, by name.
     """
 
+    STEP_ARRAYS = ("state_row", "next_row", "action", "labelled", "terminal", "label_value", "hidden_reward")
+    """The arrays that hold one entry per step."""
+
     def __init__(self, view_shapes: dict[str, tuple[int, ...]]) -> None:
         self.rows = {
             name: np.zeros((0, int(np.prod(shape))), np.float32) for name, shape in view_shapes.items()
@@ -68,6 +71,8 @@ class StepStore(InPlaceState):
         self.next_row = np.zeros(0, np.int64)
         self.action = np.zeros(0, np.int64)
         self.labelled = np.zeros(0, bool)
+        self.terminal = np.zeros(0, bool)
+        """Whether each step ended its episode (the env's ``terminated``, which the mask leaves visible)."""
         self.label_value = np.zeros(0)
         self.hidden_reward = np.zeros(0)
         """The true reward of each step: metrics only, never the learners."""
@@ -99,15 +104,17 @@ class StepStore(InPlaceState):
         reward: float,
         hidden: float,
         key: Hashable = None,
+        terminal: bool = False,
     ) -> int:
         """Record one step between two stored rows; return its store id (a new one: every step is its
         own sample; ``key`` is for :class:`KeyedStepStore`)."""
         if self._n == self.action.size:
             grow = max(1024, self._n)
-            for name in ("state_row", "next_row", "action", "labelled", "label_value", "hidden_reward"):
+            for name in self.STEP_ARRAYS:
                 setattr(self, name, _grow(getattr(self, name), grow))
         n = self._n
         self.state_row[n], self.action[n], self.next_row[n] = state_row, action, next_row
+        self.terminal[n] = terminal
         self.labelled[n], self.label_value[n], self.hidden_reward[n] = (
             observed,
             reward if observed else 0.0,
@@ -120,11 +127,15 @@ class StepStore(InPlaceState):
         """Whether a step of ``action`` from the state named ``key`` starts a new sample: always here."""
         return True
 
-    def features(self, view: str, n_actions: int) -> np.ndarray:
-        """(len, 2 d + A) float32: view of s, one-hot action, view of s' of every step."""
+    def features(self, view: str, n_actions: int, termination: bool = False) -> np.ndarray:
+        """(len, 2 d + A) float32: view of s, one-hot action, view of s' of every step; with
+        ``termination``, (len, 2 d + A + 1): then whether the step ended its episode (0 or 1)."""
         rows, n = self.rows[view], self._n
         onehot = np.eye(n_actions, dtype=np.float32)[self.action[:n]]
-        return np.concatenate([rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]], axis=1)
+        parts = [rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]]
+        if termination:
+            parts.append(self.terminal[:n, None].astype(np.float32))
+        return np.concatenate(parts, axis=1)
 
 
 class KeyedStepStore(StepStore):
@@ -152,12 +163,15 @@ class KeyedStepStore(StepStore):
         reward: float,
         hidden: float,
         key: Hashable = None,
+        terminal: bool = False,
     ) -> int:
-        """Record a visit of the pair (``key``, ``action``); return the pair's id. The rows are read on
-        the pair's first visit only."""
+        """Record a visit of the pair (``key``, ``action``); return the pair's id. The rows (and whether
+        the step ended its episode) are read on the pair's first visit only."""
         n = self.ids.get((key, action))
         if n is None:
-            n = self.ids[key, action] = super().add(state_row, action, next_row, observed, reward, hidden)
+            n = self.ids[key, action] = super().add(
+                state_row, action, next_row, observed, reward, hidden, terminal=terminal
+            )
             return n
         if observed:  # the mask labels every visit of a pair or none
             self.label_value[n] = reward
@@ -204,7 +218,7 @@ class SensorStoreWrapper(gym.Wrapper):
         info = dict(info)
         info["store_id"] = self.store.add(
             self._row if new else -1, action, next_row, info["reward_observed"], float(reward),
-            info["hidden_reward"], key=info.get("state_key"),
+            info["hidden_reward"], key=info.get("state_key"), terminal=terminated,
         )  # fmt: skip
         self._views, self._row = views, next_row
         return obs, reward, terminated, truncated, info
@@ -223,6 +237,7 @@ class TransitionConfig(NeuralConfig):
     :param keyed: the env names its states (``info["state_key"]``, the mask's ``"key"`` mode): the pool
         holds (state key, action) pairs (:class:`KeyedStepStore`), and every agent's env shares the
         run's mask, so a pair is labelled for all of them or for none.
+    :param read_termination: the reward classifiers also read whether a step ended its episode.
     """
 
     reward_classes: int = 5
@@ -230,6 +245,7 @@ class TransitionConfig(NeuralConfig):
     success_return: float | None = None
     max_return: float | None = None
     keyed: bool = False
+    read_termination: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -295,7 +311,8 @@ class SensorTask:
         return None  # a sensor reading never repeats exactly: no table of states
 
     def feature_dims(self) -> list[int]:
-        return [2 * int(np.prod(self.shapes[v])) + self.n_actions for v in self.spec.views]
+        extra = int(self.config.read_termination)
+        return [2 * int(np.prod(self.shapes[v])) + self.n_actions + extra for v in self.spec.views]
 
     def pool(self) -> Pool:
         store = self.store
@@ -303,7 +320,8 @@ class SensorTask:
         labelled, unlabelled = store.labelled[:n], ~store.labelled[:n]
         self.classes.fit(store.label_value[:n][labelled])
         label_class = np.where(labelled, self.classes.encode(store.label_value[:n][None])[0], -1)
-        features = [store.features(v, self.n_actions)[None] for v in self.spec.views]
+        termination = self.config.read_termination
+        features = [store.features(v, self.n_actions, termination)[None] for v in self.spec.views]
         return Pool(features, labelled[None], label_class[None], unlabelled[None], self.classes.mask)
 
     def true_class(self) -> np.ndarray:

@@ -133,10 +133,16 @@ def header(runs: list[TrialRun], command: str, sweep_dirs: list[Path]) -> list[s
 
 def _commits(info: list[dict[str, Any]]) -> str:
     """Which source trained the runs (``run_info.json``'s commit, shortened), with how many runs each:
-    a study that resumed across sessions may mix commits, and this line shows it."""
-    counts = Counter(_short_commit(i.get("commit")) for i in info)
+    a study that resumed across sessions may mix commits, and this line shows it. A run resumed
+    under other code than it started with counts under its sessions' commits in order ("a then b")."""
+    counts = Counter(_run_commits(i) for i in info)
     named = [f"{commit} ({n})" for commit, n in sorted(counts.items())]
     return f"source commit{'s' if len(named) > 1 else ''} " + ", ".join(named)
+
+
+def _run_commits(info: dict[str, Any]) -> str:
+    sessions = [_short_commit(c) for c in info.get("session_commits", [info.get("commit")])]
+    return " then ".join(dict.fromkeys(sessions))  # distinct, in order
 
 
 def _short_commit(commit: str | None) -> str:

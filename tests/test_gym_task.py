@@ -339,6 +339,28 @@ def test_a_keyed_pool_holds_each_state_action_pair_once_labelled_for_every_visit
     assert store.n_rows <= 2 * 18
 
 
+def test_read_termination_gives_the_classifiers_whether_a_step_ended_its_episode():
+    """Only the pair (cell 8, right) ends a corridor episode: its features end in 1, every other's in 0,
+    and the classifiers are one input wider."""
+    settings = {**SETTINGS, "training.rounds": 1, "gym.read_termination": True}
+    run = build_run(
+        gym_config(make_corridor, VIEWS, label_fraction=0.3, state_key=corridor_cell, settings=settings)
+    )
+    run.run()
+    store, pool = run.store, run.task.pool()
+    ended = np.array([store.ids.get((repr(LENGTH - 2), 1)) == n for n in range(len(store))])
+    assert ended.sum() == 1
+    np.testing.assert_array_equal(store.terminal[: len(store)], ended)
+    # onehot: 10 numbers of s, 2 of the action, 10 of s', then the flag; signed: 1 + 2 + 1 + 1.
+    assert [f.shape[-1] for f in pool.features] == run.task.feature_dims() == [23, 5]
+    for features in pool.features:
+        np.testing.assert_array_equal(features[0, :, -1], ended.astype(np.float32))
+    without = gym_config(
+        make_corridor, VIEWS, state_key=corridor_cell, settings={**SETTINGS, "training.rounds": 1}
+    )
+    assert build_run(without).task.feature_dims() == [22, 4]
+
+
 def test_the_key_mask_labels_a_share_of_pairs_the_same_way_in_every_process():
     labelled = [key_is_labelled((x, "door"), a, 0.1, seed=7) for x in range(5000) for a in range(4)]
     assert 0.09 < np.mean(labelled) < 0.11
@@ -555,6 +577,8 @@ def test_bad_demonstrations_files_for_a_gym_run_fail_with_one_line(tmp_path):
         ValueError, match="a file's steps name no state key, so they cannot join a keyed pool"
     ):
         build_run(gym_config(make_corridor, VIEWS, state_key=corridor_cell, settings=settings))
+    with pytest.raises(ConfigError, match=r"gym\.read_termination: demonstrations do not record which"):
+        gym_config(make_corridor, VIEWS, settings={**settings, "gym.read_termination": True})
     with pytest.raises(ConfigError, match=r"demonstrations\.file: demonstrations: cannot read"):
         gym_config(make_corridor, VIEWS, settings={"demonstrations.file": str(tmp_path / "none.npz")})
     with pytest.raises(ConfigError, match='a task = "gym" run\'s demonstrations come from a file or a saved'):

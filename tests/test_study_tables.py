@@ -202,16 +202,19 @@ def test_render_only_with_no_finished_run_stops_with_one_line(tmp_path):
 def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
     """A study resumed across sessions may mix sources: the header counts the runs of each commit."""
     runs = []
-    for seed, commit in enumerate(["a" * 40, "b" * 40 + "+dirty", None, "a" * 40]):
+    resumed = {"commit": "a" * 40, "session_commits": [None, "b" * 40, "a" * 40, "a" * 40]}
+    for seed, commit in enumerate(["a" * 40, "b" * 40 + "+dirty", None, "a" * 40, resumed]):
         run_dir = tmp_path / str(seed)
         run_dir.mkdir()
-        info = {"wall_time_s": 60.0} | ({} if commit is None else {"commit": commit})
+        info = {"wall_time_s": 48.0} | (
+            {} if commit is None else commit if isinstance(commit, dict) else {"commit": commit}
+        )
         (run_dir / "run_info.json").write_text(json.dumps(info))
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
     line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
     assert line.endswith(
         "; 4 CPU-minutes of training (one torch thread per run); source commits aaaaaaa (2), "
-        "bbbbbbb with uncommitted changes (1), not recorded (1)."
+        "bbbbbbb with uncommitted changes (1), not recorded (1), not recorded then bbbbbbb then aaaaaaa (1)."
     )
 
 

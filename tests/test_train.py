@@ -302,7 +302,9 @@ def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tm
     assert main(["train", "--resume", str(killed), "--no-progress"]) == 0
     assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
     assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
-    assert json.loads((killed / "run_info.json").read_text())["sessions"] == 2
+    info = json.loads((killed / "run_info.json").read_text())
+    assert info["sessions"] == 2 and info["session_commits"] == [info["commit"]] * 2
+    assert "session_commits" not in json.loads((full / "run_info.json").read_text())
     # TensorBoard shows the killed round's scalars once: the resumed session marks its first step
     # (TensorBoard's purge_step), and readers drop the killed session's events from there.
     for folder in (killed / "tb").iterdir():
