@@ -123,6 +123,10 @@ class StepStore(InPlaceState):
         self._n += 1
         return n
 
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        # A checkpoint from before ``terminal`` was stored: no run of that code read it.
+        super().load_state_dict({"terminal": np.zeros(state["action"].size, bool), **state})
+
     def is_new(self, key: Hashable, action: int) -> bool:
         """Whether a step of ``action`` from the state named ``key`` starts a new sample: always here."""
         return True

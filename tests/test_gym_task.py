@@ -361,6 +361,18 @@ def test_read_termination_gives_the_classifiers_whether_a_step_ended_its_episode
     assert build_run(without).task.feature_dims() == [22, 4]
 
 
+def test_a_store_from_a_checkpoint_older_than_its_terminal_flags_resumes():
+    """Such a run never read the flags: its stored steps read as not ended, and new steps are kept."""
+    store = KeyedStepStore({"cell": (1,)})
+    for cell in range(3):
+        store.add(store.add_row({"cell": np.zeros(1)}), 0, 0, True, 0.0, 0.0, key=cell)
+    old = {name: value for name, value in store.state_dict().items() if name != "terminal"}
+    resumed = KeyedStepStore({"cell": (1,)})
+    resumed.load_state_dict(old)
+    resumed.add(0, 1, 0, True, 1.0, 1.0, key=2, terminal=True)
+    np.testing.assert_array_equal(resumed.terminal[: len(resumed)], [False, False, False, True])
+
+
 def test_the_key_mask_labels_a_share_of_pairs_the_same_way_in_every_process():
     labelled = [key_is_labelled((x, "door"), a, 0.1, seed=7) for x in range(5000) for a in range(4)]
     assert 0.09 < np.mean(labelled) < 0.11
