@@ -187,12 +187,14 @@ def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_orac
     assert study.EXPERT.startswith(f"runs/sweeps/{study_.sweeps[0].name}/")
 
 
+def _render_only(name: str, runs_dir: Path) -> subprocess.CompletedProcess:
+    """``study.py <name> --render-only`` on the sweeps under ``runs_dir``, in a process of its own."""
+    command = [sys.executable, str(Path(study.__file__)), name, "--render-only", "--runs-dir", str(runs_dir)]
+    return subprocess.run(command, capture_output=True, text=True)
+
+
 def test_render_only_with_no_finished_run_stops_with_one_line(tmp_path):
-    script = Path(study.__file__)
-    empty = subprocess.run(
-        [sys.executable, str(script), "equal-effort", "--render-only", "--runs-dir", str(tmp_path)],
-        capture_output=True, text=True,
-    )  # fmt: skip
+    empty = _render_only("equal-effort", tmp_path)
     assert empty.returncode == 1
     assert empty.stderr.strip() == (
         f"study.py: no finished run of this study under {tmp_path}; run it without --render-only"
@@ -202,14 +204,12 @@ def test_render_only_with_no_finished_run_stops_with_one_line(tmp_path):
 def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
     """A study resumed across sessions may mix sources: the header counts the runs of each commit."""
     runs = []
-    resumed = {"commit": "a" * 40, "session_commits": [None, "b" * 40, "a" * 40, "a" * 40]}
-    for seed, commit in enumerate(["a" * 40, "b" * 40 + "+dirty", None, "a" * 40, resumed]):
+    a, b = "a" * 40, "b" * 40
+    resumed = {"commit": a, "session_commits": [None, b, a, a]}  # a run trained in four sessions
+    for seed, info in enumerate([{"commit": a}, {"commit": b + "+dirty"}, {}, {"commit": a}, resumed]):
         run_dir = tmp_path / str(seed)
         run_dir.mkdir()
-        info = {"wall_time_s": 48.0} | (
-            {} if commit is None else commit if isinstance(commit, dict) else {"commit": commit}
-        )
-        (run_dir / "run_info.json").write_text(json.dumps(info))
+        (run_dir / "run_info.json").write_text(json.dumps({"wall_time_s": 48.0, **info}))
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
     line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
     assert line.endswith(
@@ -225,11 +225,7 @@ def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
     stored = tmp_path / "label-fraction/trials" / trial / "config.toml"
     stored.parent.mkdir(parents=True)
     stored.write_text(record.read_text().replace("steps_per_round = 8000", "steps_per_round = 7000"))
-    script = Path(study.__file__)
-    stale = subprocess.run(
-        [sys.executable, str(script), "label-fraction", "--render-only", "--runs-dir", str(tmp_path)],
-        capture_output=True, text=True,
-    )  # fmt: skip
+    stale = _render_only("label-fraction", tmp_path)
     assert stale.returncode == 1
     assert stale.stderr.strip() == (
         f"study.py: 1 trial(s) in {tmp_path / 'label-fraction'} were trained with another config than "
