@@ -108,14 +108,28 @@ def source_commit() -> str | None:
     return commit + ("+dirty" if changed else "")
 
 
+@cache
+def cpu_description() -> str:
+    """The CPU's model and the instruction set torch's CPU kernels use (e.g. ``AVX512``). Runs are
+    deterministic for a seed on one kind of CPU; kernels for another instruction set round otherwise,
+    and an RL run amplifies the smallest difference, so the same seed may end elsewhere there."""
+    model = platform.processor() or platform.machine()
+    try:
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+        model = next(line.split(":", 1)[1].strip() for line in lines if line.startswith("model name"))
+    except (OSError, StopIteration):
+        pass
+    return f"{model}, torch kernels {torch.backends.cpu.get_cpu_capability()}"
+
+
 def write_run_info(run_dir: Path, command: str, wall_time_s: float, **extra: Any) -> None:
     """``run_info.json``: the command, the wall time (s) and what ran it (versions, the source's git
-    commit, machine). Kept out of ``summary.json`` so that a resumed run's summary equals the
+    commit, machine and CPU). Kept out of ``summary.json`` so that a resumed run's summary equals the
     uninterrupted run's."""
     write_json(
         run_dir / "run_info.json",
         {"command": command, "wall_time_s": round(wall_time_s, 2), **extra, "dospcot": dospcot.__version__,
-         "commit": source_commit(),
+         "commit": source_commit(), "cpu": cpu_description(),
          "torch": torch.__version__, "stable_baselines3": stable_baselines3.__version__,
          "python": platform.python_version(),
          "machine": f"{platform.machine()} {platform.system()}, {torch.get_num_threads()} torch threads"},

@@ -218,6 +218,22 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
     )
 
 
+def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
+    """Runs are deterministic on one kind of CPU: a study trained on two shows it."""
+    cpus = ["Xeon, torch kernels AVX512", "EPYC, torch kernels AVX2", None]
+    runs = []
+    for seed, cpu in enumerate(cpus):
+        run_dir = tmp_path / str(seed)
+        run_dir.mkdir()
+        info = {"wall_time_s": 60.0, "commit": "a" * 40} | ({"cpu": cpu} if cpu else {})
+        (run_dir / "run_info.json").write_text(json.dumps(info))
+        runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
+    line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
+    assert line.endswith(
+        "source commit aaaaaaa (3); torch CPU kernels AVX2 (1), AVX512 (1), not recorded (1)."
+    )
+
+
 def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
     """A table rebuilt from a record must not count a run under a preset that has changed since."""
     trial = "grid16-masked-zero/training.label_fraction=0.01__seed=0"
