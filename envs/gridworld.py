@@ -403,8 +403,9 @@ def make_masked_gridworld(
 ) -> gym.Env:
     """A :class:`GridWorld` with a step limit (default 4 N), state-action masking and views in ``info``.
 
-    ``blind_spots`` go to :func:`grid_views`; with ``monitored_columns`` every reward of a state in
-    the first that many columns is revealed (:func:`monitored_states`)."""
+    ``compass``, ``blind_spots`` and ``ray_encoding`` go to :func:`grid_views`; with
+    ``monitored_columns`` every reward of a state in the first that many columns is revealed
+    (:func:`monitored_states`)."""
     base = GridWorld(**grid_kwargs)
     selected = select_views(grid_views(base.layout, patch_size, compass, blind_spots, ray_encoding), views)
     env = gym.wrappers.TimeLimit(base, max_episode_steps or 4 * base.layout.size)
