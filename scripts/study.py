@@ -136,8 +136,7 @@ def _commits(info: list[dict[str, Any]]) -> str:
     a study that resumed across sessions may mix commits, and this line shows it. A run resumed
     under other code than it started with counts under its sessions' commits in order ("a then b")."""
     counts = Counter(_run_commits(i) for i in info)
-    named = [f"{commit} ({n})" for commit, n in sorted(counts.items())]
-    return f"source commit{'s' if len(named) > 1 else ''} " + ", ".join(named)
+    return f"source commit{'s' if len(counts) > 1 else ''} {_counted(counts)}"
 
 
 def _cpus(info: list[dict[str, Any]]) -> str:
@@ -146,7 +145,12 @@ def _cpus(info: list[dict[str, Any]]) -> str:
     if not any("cpu" in i for i in info):
         return ""
     counts = Counter(i["cpu"].rpartition("torch kernels ")[2] if "cpu" in i else "not recorded" for i in info)
-    return "; torch CPU kernels " + ", ".join(f"{kernels} ({n})" for kernels, n in sorted(counts.items()))
+    return f"; torch CPU kernels {_counted(counts)}"
+
+
+def _counted(counts: Counter[str]) -> str:
+    """``"a (2), b (1)"``: each value with its number of runs, in sorted order."""
+    return ", ".join(f"{value} ({n})" for value, n in sorted(counts.items()))
 
 
 def _run_commits(info: dict[str, Any]) -> str:
@@ -894,11 +898,11 @@ def main() -> None:
             if args.render_only:
                 check_not_stale(sweep_dir, spec.trials())
             else:
-                result = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers)
+                failed = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers).failed
+                if failed:
+                    sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
         except SweepError as err:
             sys.exit(f"study.py: {err}")
-        if not args.render_only and result.failed:
-            sys.exit(f"{len(result.failed)} trials failed: {', '.join(result.failed)}")
         try:
             written += write_report(sweep_dir)
         except SweepError:  # never started, or no trial finished yet: the study was cut short there
