@@ -81,6 +81,11 @@ class TrainingConfig:
     :param label_fraction: share of (s, a) keys whose reward is revealed, in (0, 1].
     :param eps_start: exploration at pace 0.
     :param eps_end: exploration at pace 1.
+    :param exploration: what sets the pace that moves exploration from ``eps_start`` to ``eps_end``
+        after each round. ``"pace"``: a co-trained run's admitted share of U (a fast self-paced
+        schedule ends exploration after a round or two), baselines the share of rounds done.
+        ``"rounds"``: the share of rounds done for every method, so co-trained agents and baselines
+        explore alike.
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.
@@ -100,6 +105,7 @@ class TrainingConfig:
     label_fraction: float = 0.05
     eps_start: float = 1.0
     eps_end: float = 0.05
+    exploration: str = "pace"
     update_steps: int = 0
     learn_from_round: int = 1
     segment_length: int = 1
@@ -113,6 +119,8 @@ class TrainingConfig:
             )
         if self.update_steps < 0:
             raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
+        if self.exploration not in ("pace", "rounds"):
+            raise ValueError(f"exploration must be 'pace' or 'rounds', got {self.exploration!r}")
         if not 1 <= self.learn_from_round <= self.rounds:
             raise ValueError(
                 f"learn_from_round must lie in [1, rounds = {self.rounds}], got {self.learn_from_round}"
@@ -369,7 +377,9 @@ class CoTrainingRun:
             stats = {"labelled_steps": int(self.store.labelled.sum())}
         for agent in self.agents:  # 4. policy update on the rewards and weights just written
             agent.update(self.config.update_steps)
-        pace = stats.get("pace", self.round / self.config.rounds)  # 5. age
+        pace = self.round / self.config.rounds  # 5. age
+        if self.config.exploration == "pace":
+            pace = stats.get("pace", pace)
         for agent in self.agents:
             agent.set_pace(min(pace, 1.0))
         return self._records(stats)  # 6. record

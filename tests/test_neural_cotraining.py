@@ -65,6 +65,17 @@ def test_with_every_reward_revealed_the_pace_is_full_and_exploration_decays():
     assert [r["eps"] for r in records] == pytest.approx([0.05, 0.05])
 
 
+def test_exploration_by_rounds_ignores_the_pace():
+    # Every reward revealed: the pace is full after round 1, yet eps follows the rounds as a baseline's.
+    spec = NeuralRunSpec("cotrain", ("esarsa_dqn",), ("coords",), seed=0)
+    config = replace(CONFIG, label_fraction=1.0, exploration="rounds")
+    records = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, config).run()
+    assert [r["pace"] for r in records] == [1.0, 1.0]
+    assert [r["eps"] for r in records] == pytest.approx([1.0 + (0.05 - 1.0) * 0.5, 0.05])
+    with pytest.raises(ValueError, match="exploration must be 'pace' or 'rounds', got 'steps'"):
+        replace(CONFIG, exploration="steps")
+
+
 def _permuted_grid(seed: int, monitored_states: np.ndarray | None = None) -> GridWorld:
     env = GridWorld(LAYOUT)
     masked = ~StateActionMask(
