@@ -12,7 +12,8 @@ sweep resumes by running the same command again (or ``dospcot sweep --resume SWE
 killed part-way resumes from its last finished round's checkpoint, or starts again if it finished none
 (as ``dospcot train --resume`` does).
 
-Backends: ``local`` runs the trials in a pool of ``workers`` processes; ``ray`` runs the same trials as
+Backends: ``local`` runs the trials in a pool of ``workers`` processes, which exit when the sweep's
+process dies, even by SIGKILL; ``ray`` runs the same trials as
 Ray Tune trials (the ``ray`` extra), one CPU each, on a local Ray instance or on a cluster by address.
 On a cluster every node must see the sweep folder (a shared filesystem), since trials write there.
 
@@ -26,13 +27,17 @@ from __future__ import annotations
 
 import json
 import multiprocessing
+import os
 import re
 import shutil
+import threading
+import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 from dataclasses import asdict, dataclass, field, replace
 from functools import partial
 from itertools import product
+from multiprocessing.managers import SyncManager
 from pathlib import Path
 from typing import Any, Literal
 
@@ -389,9 +394,13 @@ def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_prog
     # spawn, not fork: a forked child inherits torch's thread pools and locks from the parent.
     context = multiprocessing.get_context("spawn")
     total = sum(len(job) for job in jobs)
+    manager = SyncManager(ctx=context)
+    manager.start(exit_with_parent, (os.getpid(),))
     with (
-        context.Manager() as manager,
-        ProcessPoolExecutor(min(workers, len(jobs)), mp_context=context) as pool,
+        manager,
+        ProcessPoolExecutor(
+            min(workers, len(jobs)), mp_context=context, initializer=exit_with_parent, initargs=(os.getpid(),)
+        ) as pool,
         tqdm(
             total=total,
             unit="trial",
@@ -422,6 +431,24 @@ def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_prog
             bar.n = sum(shown)
             bar.set_postfix(failed=len(failed))  # refreshes the bar
     return failed
+
+
+def exit_with_parent(parent: int, interval: float = 1.0) -> None:
+    """Start a daemon thread that ends this process once ``parent`` is no longer its parent. A sweep
+    killed by a signal it cannot catch (``kill``, a scheduler's SIGKILL) would otherwise leave its
+    workers training on, unseen, beside a resumed sweep; a half-trained trial resumes from its last
+    checkpoint.
+
+    :param parent: the process id of the sweep.
+    :param interval: seconds between checks.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(interval)
+        os._exit(1)  # no cleanup: the trial's folder holds what a resume needs
+
+    threading.Thread(target=watch, name="exit-with-parent", daemon=True).start()
 
 
 def _report_progress(reports: Any, index: int, share: float) -> None:

@@ -144,6 +144,48 @@ def test_a_killed_sweep_resumes_by_running_only_the_missing_trials(tmp_path):
     assert not result.ran and len(result.skipped) == 4
 
 
+def _descendants(pid: int) -> set[int]:
+    """The process ids below ``pid`` (Linux: /proc)."""
+    found: set[int] = set()
+    for task in Path(f"/proc/{pid}/task").glob("*/children"):
+        for child in map(int, task.read_text().split()):
+            found |= {child, *_descendants(child)}
+    return found
+
+
+@pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="reads the process tree from /proc")
+def test_the_workers_of_a_sweep_killed_alone_exit_with_it(tmp_path):
+    cmd = [sys.executable, "-m", "dospcot", "sweep", "tiny", "--seeds", "8", "--workers", "1"]
+    cmd += ["--runs-dir", str(tmp_path), "--name", "orphans", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:  # the pool's worker, the manager that carries progress reports, multiprocessing's tracker
+        deadline = time.monotonic() + 180
+        while not list(tmp_path.glob("orphans/trials/*/*/summary.json")):
+            assert proc.poll() is None and time.monotonic() < deadline, "the sweep ended before the kill"
+            time.sleep(0.05)
+        children = _descendants(proc.pid)
+        assert children, "the sweep has no worker to watch"
+        proc.kill()  # the parent only, as `kill -9 PID` does: its workers see it gone
+        proc.wait()
+        deadline = time.monotonic() + 60
+        while alive := {c for c in children if Path(f"/proc/{c}").exists() and _state(c) != "Z"}:
+            assert time.monotonic() < deadline, f"processes {sorted(alive)} outlived their sweep"
+            time.sleep(0.2)
+    finally:
+        try:
+            os.killpg(proc.pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+
+
+def _state(pid: int) -> str:
+    """A process's state letter ("Z": a zombie, gone but not yet reaped); "" once it is gone."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (FileNotFoundError, IndexError):
+        return ""
+
+
 def _synthetic_sweep(root: Path, scores: dict[str, list[float]]) -> Path:
     """A sweep folder written by hand: config `a`, grid over the label fraction, seeds 0-3."""
     sweep_dir = root / "synthetic"
