@@ -74,6 +74,8 @@ class QuantileRewardClasses(_ClassValues):
         super().__init__(1, n_classes)  # values (1, K): each class's bin mean, NaN where it has none
         self.edges = np.zeros(0)
         """(k - 1,) the inner bin edges: class c holds rewards in [edges[c - 1], edges[c])."""
+        self.only_value: float | None = None
+        """The labels' one value while they hold a single one (every label 0, no goal yet), else None."""
 
     def fit(self, rewards: np.ndarray) -> None:
         """Set the bins from every labelled reward so far, (n,) float."""
@@ -81,9 +83,10 @@ class QuantileRewardClasses(_ClassValues):
         n_classes = self.values.shape[1]
         self.values[:] = np.nan
         if rewards.size == 0:
-            self.edges = np.zeros(0)
+            self.edges, self.only_value = np.zeros(0), None
             return
         distinct = np.unique(rewards)
+        self.only_value = float(distinct[0]) if distinct.size == 1 else None
         if distinct.size <= n_classes:  # a reward of few values: one class each, however rare
             self.edges = distinct[1:]
         else:
@@ -97,7 +100,11 @@ class QuantileRewardClasses(_ClassValues):
             self.values[0, c] = rewards[bins == c].mean()
 
     def encode(self, rewards: np.ndarray) -> np.ndarray:
-        """Class (bin) index of each reward, (1, N) from (1, N); -1 before any label was seen."""
+        """Class (bin) index of each reward, (1, N) from (1, N); -1 before any label was seen, and,
+        while every label holds one value, for any other reward: a value no label has shown (a goal
+        reward when no goal step is labelled), which the one class cannot stand for."""
         if not self.mask.any():
             return np.full(np.shape(rewards), -1)
+        if self.only_value is not None:
+            return np.where(np.asarray(rewards) == self.only_value, 0, -1)
         return np.searchsorted(self.edges, rewards, side="right")

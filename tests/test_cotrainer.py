@@ -4,9 +4,10 @@ round after another, each against figures worked out by hand."""
 import numpy as np
 import pytest
 
-from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
+from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.cotraining_round import round_stats
 from dospcot.key_pool import key_features
-from dospcot.reward_classes import RewardClasses
+from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
 
 
 def test_reward_classes_keep_the_order_of_first_appearance_and_round_trip():
@@ -24,6 +25,23 @@ def test_reward_classes_keep_the_order_of_first_appearance_and_round_trip():
     assert decoded[0, :3].tolist() == [-100.0, 0.0, -1.0] and np.isnan(decoded[0, 3])
     with pytest.raises(ValueError, match="run 1 saw more than 3 distinct reward values; raise max_classes"):
         classes.observe(1, np.array([1.0, 2.0, 3.0]))
+
+
+def test_while_every_label_is_0_a_goal_reward_is_a_value_no_label_has_shown():
+    # No goal step among the labels: the one class (0) cannot stand for a goal reward, so the metrics
+    # count a goal step given 0 as wrong, not as right.
+    classes = QuantileRewardClasses(2)
+    classes.fit(np.zeros(12))
+    np.testing.assert_array_equal(classes.encode(np.array([[0.0, 0.93, -0.5]])), [[0, -1, -1]])
+    result = RoundResult(
+        pseudo_class=np.array([[0, 0, 0]]), pseudo_weight=np.ones((1, 3)), view_weight=np.ones((1, 1, 3)),
+        view_class=np.zeros((1, 1, 3), int), threshold=np.ones((1, 1, 2)), classifier_loss=np.zeros((1, 1)),
+        pace=np.ones(1), changed=np.ones(1, bool), stopped=np.zeros(1, bool),
+    )  # fmt: skip
+    stats = round_stats(result, np.ones(3, bool), classes.encode(np.array([[0.0, 0.0, 0.93]]))[0])
+    assert stats["pseudo_accuracy"] == pytest.approx(2 / 3) and stats["worst_class_recall"] == 0.0
+    classes.fit(np.array([0.0] * 11 + [0.9]))  # a goal label: its class takes every goal reward
+    np.testing.assert_array_equal(classes.encode(np.array([[0.0, 0.93]])), [[0, 1]])
 
 
 def test_key_features_by_hand():
