@@ -123,9 +123,10 @@ def cpu_description() -> str:
 
 
 def write_run_info(run_dir: Path, command: str, wall_time_s: float, **extra: Any) -> None:
-    """``run_info.json``: the command, the wall time (s) and what ran it (versions, the source's git
-    commit, machine and CPU). Kept out of ``summary.json`` so that a resumed run's summary equals the
-    uninterrupted run's."""
+    """``run_info.json``: the command, the wall time (s), any ``extra`` fields (a training run's
+    ``cpu_time_s``: its process's CPU seconds, every session summed, which other processes on the
+    machine do not inflate) and what ran it (versions, the source's git commit, machine and CPU). Kept
+    out of ``summary.json`` so that a resumed run's summary equals the uninterrupted run's."""
     write_json(
         run_dir / "run_info.json",
         {"command": command, "wall_time_s": round(wall_time_s, 2), **extra, "dospcot": dospcot.__version__,

@@ -264,13 +264,14 @@ def _run_config(run_dir: Path) -> TrainConfig | PaperConfig:
 def _train_in(
     run_dir: Path, cfg: TrainConfig, state: dict[str, Any] | None, show_progress: bool, command: str
 ) -> Path:
-    started = time.perf_counter()
+    started, started_cpu = time.perf_counter(), time.process_time()
     run = build_run(cfg)
     records: list[dict] = []
-    elapsed, sessions, commits = 0.0, 1, [source_commit()]
+    elapsed, cpu, sessions, commits = 0.0, 0.0, 1, [source_commit()]
     if state is not None:
         run.load_state_dict(state["run"])
         records, elapsed, sessions = state["records"], state["elapsed_s"], state["sessions"] + 1
+        cpu = state.get("cpu_s", float("nan"))  # a checkpoint older than this field: unknown
         # A resumed run may have been trained by other code before: each session's commit is kept (a
         # checkpoint older than this field names none for its sessions).
         commits = state.get("commits", [None] * (sessions - 1)) + commits
@@ -301,6 +302,7 @@ def _train_in(
                 "run": run.state_dict(),
                 "records": records,
                 "elapsed_s": elapsed + time.perf_counter() - started,
+                "cpu_s": cpu + time.process_time() - started_cpu,
                 "sessions": sessions,
                 "commits": commits,
             },
@@ -310,7 +312,11 @@ def _train_in(
         agent.logger.close()
     plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
     resumed = {"session_commits": commits} if sessions > 1 else {}
-    write_run_info(run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions, **resumed)
+    cpu += time.process_time() - started_cpu
+    times = {"cpu_time_s": round(cpu, 2)} if cpu == cpu else {}  # NaN: a session's CPU time unknown
+    write_run_info(
+        run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions, **times, **resumed
+    )
     # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
     write_json(run_dir / SUMMARY_FILE, run_summary(records, run))
     # A finished run is never resumed, and its checkpoint holds every replay buffer (about a GB on

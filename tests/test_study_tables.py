@@ -213,9 +213,15 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
     line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
     assert line.endswith(
-        "; 4 CPU-minutes of training (one torch thread per run); source commits aaaaaaa (2), "
+        "; 4 minutes of training, the runs' wall times summed (one torch thread per run); source commits "
+        "aaaaaaa (2), "
         "bbbbbbb with uncommitted changes (1), not recorded (1), not recorded then bbbbbbb then aaaaaaa (1)."
     )
+    for run in runs:  # every run with its CPU time: the header counts that, not the wall time
+        info = json.loads((run.run_dir / "run_info.json").read_text())
+        (run.run_dir / "run_info.json").write_text(json.dumps({**info, "cpu_time_s": 36.0}))
+    line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
+    assert "; 3 CPU-minutes of training (one torch thread per run); " in line
 
 
 def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):

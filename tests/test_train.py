@@ -299,11 +299,13 @@ def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tm
         proc.wait()
     (killed,) = (tmp_path / "killed" / "tiny").iterdir()
     assert read_checkpoint(killed)["run"]["round"] == 1 and not (killed / "summary.json").exists()
+    first_session_cpu = read_checkpoint(killed)["cpu_s"]
     assert main(["train", "--resume", str(killed), "--no-progress"]) == 0
     assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
     assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
     info = json.loads((killed / "run_info.json").read_text())
     assert info["sessions"] == 2 and info["session_commits"] == [info["commit"]] * 2
+    assert 0 < first_session_cpu < info["cpu_time_s"]  # both sessions' CPU time, summed
     assert "session_commits" not in json.loads((full / "run_info.json").read_text())
     # TensorBoard shows the killed round's scalars once: the resumed session marks its first step
     # (TensorBoard's purge_step), and readers drop the killed session's events from there.
