@@ -84,21 +84,35 @@ def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
     write_text(path, text.getvalue())
 
 
+PACKAGE_DIR = Path(dospcot.__file__).resolve().parent
+"""Where the running dospcot package lies."""
+
+
 @cache
-def source_commit() -> str | None:
-    """The git commit of the dospcot source that is running, ``"+dirty"`` appended when tracked files
-    differ from it; None when the package does not lie in a git checkout (an installed wheel).
+def source_commit(source: Path = PACKAGE_DIR) -> str | None:
+    """The git commit of the checkout holding ``source`` (the dospcot package that is running),
+    ``"+dirty"`` appended when tracked files other than the run records under ``runs/`` differ from
+    it (a study rerun into its record rewrites tracked records, not code); None when ``source`` does
+    not lie in a git checkout (an installed wheel).
 
     Asked once per process: a process runs the code it imported, whatever the checkout holds later
     (a sweep's worker trains many trials), and a batch of seeds writes one ``run_info.json`` each.
     """
-    source = Path(dospcot.__file__).resolve().parent
     try:
         commit = subprocess.run(
             ["git", "-C", str(source), "rev-parse", "HEAD"], capture_output=True, text=True, check=True
         ).stdout.strip()
         changed = subprocess.run(
-            ["git", "-C", str(source), "status", "--porcelain", "--untracked-files=no"],
+            [
+                "git",
+                "-C",
+                str(source),
+                "status",
+                "--porcelain",
+                "--untracked-files=no",
+                "--",
+                ":(top,exclude)runs",
+            ],
             capture_output=True,
             text=True,
             check=True,

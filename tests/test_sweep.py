@@ -282,6 +282,29 @@ def test_a_run_outside_a_git_checkout_records_no_commit(monkeypatch):
         run_folder.source_commit.cache_clear()
 
 
+def test_changed_run_records_do_not_mark_the_source_dirty(tmp_path):
+    """A study rerun into its record rewrites tracked files under runs/: the code is still clean."""
+
+    def git(*args: str) -> str:
+        return subprocess.run(
+            ["git", "-C", str(tmp_path), *args], capture_output=True, text=True, check=True
+        ).stdout
+
+    (tmp_path / "runs").mkdir()
+    (tmp_path / "code.py").write_text("x = 1\n")
+    (tmp_path / "runs" / "summary.json").write_text("{}\n")
+    git("init", "-q")
+    git("add", ".")
+    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "record")
+    head = git("rev-parse", "HEAD").strip()
+    (tmp_path / "runs" / "summary.json").write_text('{"success": 1.0}\n')
+    assert run_folder.source_commit(tmp_path) == head
+    (tmp_path / "code.py").write_text("x = 2\n")
+    run_folder.source_commit.cache_clear()
+    assert run_folder.source_commit(tmp_path) == head + "+dirty"
+    run_folder.source_commit.cache_clear()
+
+
 def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(tmp_path):
     """A sweep folder may outlive its presets (the studies keep theirs): a trial whose stored config
     differs from what its preset gives now is neither counted nor resumed, and the sweep names it."""
