@@ -313,7 +313,7 @@ def _train_in(
     plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
     resumed = {"session_commits": commits} if sessions > 1 else {}
     cpu += time.process_time() - started_cpu
-    times = {"cpu_time_s": round(cpu, 2)} if cpu == cpu else {}  # NaN: a session's CPU time unknown
+    times = {} if np.isnan(cpu) else {"cpu_time_s": round(cpu, 2)}  # NaN: a session's CPU time unknown
     write_run_info(
         run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions, **times, **resumed
     )
