@@ -242,11 +242,15 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
 
 def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
     """A table rebuilt from a record must not count a run under a preset that has changed since."""
+    from dospcot.run_folder import write_toml
+    from dospcot.train_config import load_config
+
     trial = "grid16-masked-zero/training.label_fraction=0.01__seed=0"
-    record = study.ROOT / "runs/sweeps/label-fraction/trials" / trial / "config.toml"
     stored = tmp_path / "label-fraction/trials" / trial / "config.toml"
     stored.parent.mkdir(parents=True)
-    stored.write_text(record.read_text().replace("steps_per_round = 8000", "steps_per_round = 7000"))
+    current = load_config("grid16-masked-zero", ["training.label_fraction=0.01", "seed=0"])
+    write_toml(stored, current.to_dict())
+    stored.write_text(stored.read_text().replace("steps_per_round = 8000", "steps_per_round = 7000"))
     stale = _render_only("label-fraction", tmp_path)
     assert stale.returncode == 1
     assert stale.stderr.strip() == (

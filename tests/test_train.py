@@ -67,7 +67,7 @@ def test_grid32_presets_are_the_grid16_ones_on_a_32_map(method):
     small, large = load_config(f"grid16-{method}"), load_config(f"grid32-{method}")
     assert (large.env.size, large.env.train_episode_steps, large.env.max_episode_steps) == (32, 32, 128)
     assert large.training.steps_per_round == 2 * small.training.steps_per_round
-    assert (small.env.ray_encoding, large.env.ray_encoding) == ("distance", "inverse")
+    assert (small.env.ray_encoding, large.env.ray_encoding) == ("inverse", "inverse")
     assert (large.method, large.views, large.dqn, large.cotraining) == (
         small.method, small.views, small.dqn, small.cotraining,
     )  # fmt: skip
