@@ -284,25 +284,22 @@ def test_a_run_outside_a_git_checkout_records_no_commit(monkeypatch):
 
 def test_changed_run_records_do_not_mark_the_source_dirty(tmp_path):
     """A study rerun into its record rewrites tracked files under runs/: the code is still clean."""
-
-    def git(*args: str) -> str:
-        return subprocess.run(
-            ["git", "-C", str(tmp_path), *args], capture_output=True, text=True, check=True
-        ).stdout
-
     (tmp_path / "runs").mkdir()
     (tmp_path / "code.py").write_text("x = 1\n")
     (tmp_path / "runs" / "summary.json").write_text("{}\n")
-    git("init", "-q")
-    git("add", ".")
-    git("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "record")
-    head = git("rev-parse", "HEAD").strip()
+    here = ("-C", str(tmp_path))  # a later -C wins over _git's checkout
+    commit = ("-c", "user.name=t", "-c", "user.email=t@t", "commit", "-qm", "record")
+    for args in (("init", "-q"), ("add", "."), commit):
+        assert _git(*here, *args).returncode == 0
+    head = _git(*here, "rev-parse", "HEAD").stdout.strip()
     (tmp_path / "runs" / "summary.json").write_text('{"success": 1.0}\n')
-    assert run_folder.source_commit(tmp_path) == head
-    (tmp_path / "code.py").write_text("x = 2\n")
-    run_folder.source_commit.cache_clear()
-    assert run_folder.source_commit(tmp_path) == head + "+dirty"
-    run_folder.source_commit.cache_clear()
+    try:
+        assert run_folder.source_commit(tmp_path) == head
+        (tmp_path / "code.py").write_text("x = 2\n")
+        run_folder.source_commit.cache_clear()  # asked once per process: ask again
+        assert run_folder.source_commit(tmp_path) == head + "+dirty"
+    finally:
+        run_folder.source_commit.cache_clear()
 
 
 def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(tmp_path):
