@@ -49,15 +49,15 @@ import numpy as np
 import torch as th
 from stable_baselines3.common.type_aliases import MaybeCallback
 
-from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
 from dospcot.demonstrations import DemonstrationsConfig
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
+from dospcot.round_records import VIEW_STATS, record_head, round_stats
 from dospcot.run_spec import RunSpec
 from dospcot.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 
-VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
 AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
 """Agent kinds and their TD target: ExpectedSarsaDQN with its Expected-SARSA target or DQN's max target,
 and the tabular Expected-SARSA agent."""
@@ -196,46 +196,6 @@ class CoTrainingTask(Protocol):
     def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
         """(N, d) the demonstrated states in ``view`` and (N,) the demonstrated actions, for the
         agents' large-margin loss (read only when it is on); None: the run has no demonstrations."""
-
-
-def _view_stats(result: RoundResult, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
-    """View j's round (run 0 of ``result``): coverage of U, accuracy of what it admitted, mean lambda
-    and classifier loss. ``correct`` (N,) says where its predicted class matches the hidden truth."""
-    taken = result.view_weight[j, 0] > 0
-    lam = result.threshold[j, 0]
-    return {
-        "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
-        "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
-        "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
-        "classifier_loss": float(result.classifier_loss[j, 0]),
-    }
-
-
-def round_stats(result: RoundResult, unlabelled: np.ndarray, true_class: np.ndarray) -> dict[str, Any]:
-    """Run 0's round for the metrics: pace, coverage of U (N,) bool, accuracy of the admitted
-    pseudo-rewards with its worst class, and each view's figures. ``true_class`` (N,) is each
-    sample's hidden class (-1: a value no label showed, never a right prediction; metrics only).
-
-    The worst-class figures show what the mean hides: a rare class (lava) admitted on ordinary steps,
-    or a class no label showed (the goal) read as another. ``worst_class_recall`` is the lowest share
-    of the admitted samples of one hidden class given that class (samples of an unseen value count as
-    one class, always wrong); ``worst_class_precision`` the lowest share of the samples given one
-    class that truly are of it. NaN when nothing is admitted.
-    """
-    admitted = result.pseudo_weight[0] > 0
-    right = (result.view_class[:, 0] == true_class) & (true_class >= 0)  # (m, N) per view
-    given, truth = result.pseudo_class[0][admitted], true_class[admitted]
-    correct = (given == truth) & (truth >= 0)
-    recall = [correct[truth == c].mean() for c in np.unique(truth)]
-    precision = [correct[given == c].mean() for c in np.unique(given)]
-    return {
-        "pace": float(result.pace[0]),
-        "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
-        "pseudo_accuracy": float(correct.mean()) if admitted.any() else float("nan"),
-        "worst_class_recall": float(min(recall, default=float("nan"))),
-        "worst_class_precision": float(min(precision, default=float("nan"))),
-        "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(right)],
-    }
 
 
 def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
@@ -485,20 +445,11 @@ class CoTrainingRun:
     def _records(self, stats: dict) -> list[dict]:
         policy = self.evaluate_policies()
         rows = []
-        for k, (kind, view) in enumerate(zip(self.spec.agents, self.spec.views, strict=True)):
+        for k in range(len(self.agents)):
             round_view = stats["views"][k] if "views" in stats else {}
             rows.append(
                 {
-                    "method": self.spec.method,
-                    "agents": "-".join(self.spec.agents),
-                    "views": "-".join(self.spec.views),
-                    "m": len(self.spec.agents),
-                    "gamma": self.spec.gamma,
-                    "seed": self.spec.seed,
-                    "round": self.round,
-                    "agent": k,
-                    "kind": kind,
-                    "view": view,
+                    **record_head(self.spec, self.round, k),
                     "env_steps": int(self.agents[k].num_timesteps),
                     "agreement": float(policy["agreement"][k]),
                     "greedy_return": float(policy["greedy_return"][k]),

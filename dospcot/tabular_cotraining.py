@@ -33,12 +33,13 @@ from itertools import groupby
 import numpy as np
 
 from dospcot import metrics
-from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
 from dospcot.envs.masking import StateActionMask, check_label_fraction
 from dospcot.envs.tabular import TabularMDP
 from dospcot.key_pool import key_features
 from dospcot.policies.tabular import TabularAgents, check_agent_kind
 from dospcot.reward_classes import RewardClasses
+from dospcot.round_records import VIEW_STATS, record_head, round_stats
 from dospcot.run_spec import RunSpec
 
 
@@ -181,10 +182,10 @@ class TabularCoTraining:
         records: list[dict] = []
         for round_index in range(1, self.config.rounds + 1):
             self._collect(progress)  # 1. collect, learning online from the current table
-            round_stats = {}
+            stats_by_run = {}
             for runs, trainer, classes in self.groups:  # 2-3. co-train, pseudo-rewards
                 if self.active[runs].any():
-                    round_stats.update(self._cotrain(runs, trainer, classes))
+                    stats_by_run.update(self._cotrain(runs, trainer, classes))
             reward, weight = self._effective_table()
             slot_eps = self.eps()[self.slot_run]
             live_slots = self.active[self.slot_run][:, None, None]
@@ -197,11 +198,11 @@ class TabularCoTraining:
                     weight[self.slot_run],
                     slot_eps,
                 )
-            for r, stats in round_stats.items():  # 5. age: the pace drives exploration
+            for r, stats in stats_by_run.items():  # 5. age: the pace drives exploration
                 self.pace[r] = stats["pace"]
                 if stats.pop("stopped"):
                     self.active[r] = False
-            records.extend(self._records(round_index, round_stats))
+            records.extend(self._records(round_index, stats_by_run))
         return TabularResult(records, self.agents.q.copy())
 
     def _collect(self, progress: Callable[[int], None] | None) -> None:
@@ -279,44 +280,12 @@ class TabularCoTraining:
         live_runs = np.asarray(runs)[live]
         self.table_reward[live_runs] = np.nan_to_num(pseudo, nan=0.0).reshape(shape)
         self.table_weight[live_runs] = result.pseudo_weight[live].reshape(shape)
-        stats = self._pseudo_stats(runs, pool, result, classes)
-        return {r: stats[r] for r in live_runs}
-
-    def _pseudo_stats(
-        self, runs: list[int], pool: Pool, result: RoundResult, classes: RewardClasses
-    ) -> dict[int, dict]:
-        """Pseudo-reward accuracy and coverage per run and view (reads the hidden truth: metrics only)."""
-        truth = self.mdp.reward.reshape(-1)
-        consensus_correct = classes.decode(result.pseudo_class) == truth
-        view_correct = [classes.decode(c) == truth for c in result.view_class]
-        stats = {}
-        for b, r in enumerate(runs):
-            u = pool.unlabelled[b]
-            admitted = result.pseudo_weight[b] > 0
-            per_view = []
-            for j in range(result.view_weight.shape[0]):
-                taken = result.view_weight[j, b] > 0
-                lam = result.threshold[j, b]
-                per_view.append(
-                    {
-                        "coverage": float(taken[u].mean()) if u.any() else 0.0,
-                        "pseudo_accuracy": float(view_correct[j][b, taken].mean())
-                        if taken.any()
-                        else float("nan"),
-                        "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
-                        "classifier_loss": float(result.classifier_loss[j, b]),
-                    }
-                )
-            stats[r] = {
-                "pace": float(result.pace[b]),
-                "coverage": float(admitted[u].mean()) if u.any() else 0.0,
-                "pseudo_accuracy": float(consensus_correct[b, admitted].mean())
-                if admitted.any()
-                else float("nan"),
-                "stopped": bool(result.stopped[b]),
-                "views": per_view,
-            }
-        return stats
+        truth = classes.encode(np.broadcast_to(self.mdp.reward.reshape(-1), labelled.shape))  # metrics only
+        return {
+            r: round_stats(result, pool.unlabelled[b], truth[b], run=b)
+            for b, r in enumerate(runs)
+            if self.active[r]
+        }
 
     def _effective_table(self) -> tuple[np.ndarray, np.ndarray]:
         """Reward and weight of every key per run: revealed labels, else the run's table."""
@@ -326,7 +295,7 @@ class TabularCoTraining:
             np.where(known, 1.0, self.table_weight),
         )
 
-    def _records(self, round_index: int, round_stats: dict[int, dict]) -> list[dict]:
+    def _records(self, round_index: int, stats_by_run: dict[int, dict]) -> list[dict]:
         greedy = self.agents.greedy_actions()
         policy = self.policy_metrics(greedy)
         paper = (
@@ -338,20 +307,11 @@ class TabularCoTraining:
         rows = []
         for slot, (r, k) in enumerate(zip(self.slot_run, self.slot_agent, strict=True)):
             spec = self.specs[r]
-            stats = round_stats.get(r)
+            stats = stats_by_run.get(r)
             view_stats = stats["views"][k] if stats else {}
             rows.append(
                 {
-                    "method": spec.method,
-                    "agents": "-".join(spec.agents),
-                    "views": "-".join(spec.views),
-                    "m": len(spec.agents),
-                    "gamma": spec.gamma,
-                    "seed": spec.seed,
-                    "round": round_index,
-                    "agent": int(k),
-                    "kind": spec.agents[k],
-                    "view": spec.views[k],
+                    **record_head(spec, round_index, k),
                     "paper_accuracy": float(paper[slot]),
                     "agreement": float(policy["agreement"][slot]),
                     "greedy_return": float(policy["greedy_return"][slot]),
@@ -361,10 +321,7 @@ class TabularCoTraining:
                     "pace": float(self.pace[r]),
                     "coverage": stats["coverage"] if stats else float("nan"),
                     "pseudo_accuracy": stats["pseudo_accuracy"] if stats else float("nan"),
-                    "view_coverage": view_stats.get("coverage", float("nan")),
-                    "view_pseudo_accuracy": view_stats.get("pseudo_accuracy", float("nan")),
-                    "lambda": view_stats.get("lambda", float("nan")),
-                    "classifier_loss": view_stats.get("classifier_loss", float("nan")),
+                    **{key: view_stats.get(key, float("nan")) for key in VIEW_STATS},
                     "active": bool(self.active[r]),
                 }
             )

@@ -5,9 +5,10 @@ import numpy as np
 import pytest
 
 from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
-from dospcot.cotraining_round import round_stats
 from dospcot.key_pool import key_features
 from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
+from dospcot.round_records import record_head, round_stats
+from dospcot.run_spec import RunSpec
 
 
 def test_reward_classes_keep_the_order_of_first_appearance_and_round_trip():
@@ -42,6 +43,41 @@ def test_while_every_label_is_0_a_goal_reward_is_a_value_no_label_has_shown():
     assert stats["pseudo_accuracy"] == pytest.approx(2 / 3) and stats["worst_class_recall"] == 0.0
     classes.fit(np.array([0.0] * 11 + [0.9]))  # a goal label: its class takes every goal reward
     np.testing.assert_array_equal(classes.encode(np.array([[0.0, 0.93]])), [[0, 1]])
+
+
+def test_round_stats_read_the_run_they_are_given_in_a_batch():
+    # Two runs of one view, four samples; run 1 admits samples 1-3 and gets sample 3 wrong.
+    result = RoundResult(
+        pseudo_class=np.array([[0, 1, -1, -1], [-1, 1, 0, 0]]),
+        pseudo_weight=np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.5, 0.5]]),
+        view_weight=np.array([[[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.5, 0.5]]]),
+        view_class=np.array([[[0, 1, 0, 0], [0, 1, 0, 0]]]),
+        threshold=np.array([[[0.2, 0.4], [0.6, np.nan]]]), classifier_loss=np.array([[0.3, 0.7]]),
+        pace=np.array([0.5, 0.75]), changed=np.ones(2, bool), stopped=np.array([False, True]),
+    )  # fmt: skip
+    truth = np.array([0, 1, 0, 1])
+    unlabelled = np.array([False, True, True, True])
+    stats = round_stats(result, unlabelled, truth, run=1)
+    assert stats["pace"] == 0.75 and stats["stopped"] is True
+    assert stats["coverage"] == 1.0  # samples 1-3 of U, all admitted
+    assert stats["pseudo_accuracy"] == pytest.approx(2 / 3)  # sample 3: class 0, truly 1
+    assert stats["worst_class_recall"] == 0.5  # class 1: samples 1 (right) and 3 (wrong)
+    assert stats["worst_class_precision"] == 0.5  # given 0: samples 2 (right) and 3 (wrong)
+    view = stats["views"][0]
+    assert view["view_coverage"] == 1.0 and view["view_pseudo_accuracy"] == pytest.approx(2 / 3)
+    assert view["lambda"] == 0.6 and view["classifier_loss"] == 0.7
+    first = round_stats(result, unlabelled, truth, run=0)
+    assert first["coverage"] == pytest.approx(1 / 3) and first["pseudo_accuracy"] == 1.0
+    assert first["stopped"] is False and first["views"][0]["lambda"] == pytest.approx(0.3)
+
+
+def test_record_head_names_the_run_and_the_agent():
+    spec = RunSpec("cotrain", ("esarsa", "q"), ("coords", "patch"), gamma=0.3, seed=4)
+    assert record_head(spec, 2, np.int64(1)) == {
+        "method": "cotrain", "agents": "esarsa-q", "views": "coords-patch", "m": 2, "gamma": 0.3,
+        "seed": 4, "round": 2, "agent": 1, "kind": "q", "view": "patch",
+    }  # fmt: skip
+    assert type(record_head(spec, 2, np.int64(1))["agent"]) is int
 
 
 def test_key_features_by_hand():

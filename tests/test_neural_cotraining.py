@@ -12,7 +12,6 @@ import pytest
 import torch as th
 
 from dospcot.cotraining import RoundResult
-from dospcot.cotraining_round import round_stats
 from dospcot.envs import (
     FiniteCheckWrapper,
     GridWorld,
@@ -23,6 +22,7 @@ from dospcot.envs import (
     view_blind_spots,
 )
 from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
+from dospcot.round_records import round_stats
 
 LAYOUT = GridWorld(size=6, layout_seed=0).layout
 VIEWS = grid_views(LAYOUT, patch_size=3)
