@@ -91,14 +91,15 @@ class BatchedRewardClassifier(nn.Module):
         """Outputs (logits or decision values) of shape (n_models, N, K); absent classes get -1e9.
 
         :param x: inputs of shape (n_models, N, n_features).
-        :param class_mask: bool (n_models, K), the classes each model may predict.
+        :param class_mask: bool (n_models, K), the classes each model may predict, or (n_models, N, K),
+            those each sample may take.
         """
         h = x
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
             h = torch.baddbmm(b, h, w)
             if i < len(self.weights) - 1:
                 h = torch.relu(h)
-        return h.masked_fill(~class_mask[:, None, :], _MASKED)
+        return h.masked_fill(~_per_sample(class_mask), _MASKED)
 
     def class_losses(self, outputs: torch.Tensor, class_mask: torch.Tensor) -> torch.Tensor:
         """Loss L(y, g(x)) for every candidate label y: shape (n_models, N, K); +inf for absent classes."""
@@ -107,9 +108,9 @@ class BatchedRewardClassifier(nn.Module):
         else:
             # Weston-Watkins: L(y) = sum over present c != y of max(0, 1 - f_y + f_c).
             margins = torch.relu(1.0 - outputs[..., :, None] + outputs[..., None, :])
-            present = class_mask[:, None, None, :].to(outputs.dtype)
+            present = _per_sample(class_mask)[:, :, None, :].to(outputs.dtype)
             losses = (margins * present).sum(-1) - 1.0  # drops the c == y term, which is exactly 1
-        return losses.masked_fill(~class_mask[:, None, :], float("inf"))
+        return losses.masked_fill(~_per_sample(class_mask), float("inf"))
 
     def scores(self, x: torch.Tensor, class_mask: torch.Tensor) -> torch.Tensor:
         """Confidence of every class in [0, 1]: softmax of the outputs; shape (n_models, N, K)."""
@@ -126,7 +127,7 @@ class BatchedRewardClassifier(nn.Module):
         :param x: (n_models, N, n_features).
         :param y: int (n_models, N), class index of each sample (any value where ``weight`` is 0).
         :param weight: (n_models, N) sample weights in [0, 1].
-        :param class_mask: bool (n_models, K).
+        :param class_mask: bool (n_models, K) or (n_models, N, K), as in :meth:`forward`.
         :return: the final weighted loss of each model, shape (n_models,).
         """
         optimiser = torch.optim.Adam(self.parameters(), lr=self.config.lr)
@@ -143,6 +144,11 @@ class BatchedRewardClassifier(nn.Module):
             loss.sum().backward()
             optimiser.step()
         return loss.detach()
+
+
+def _per_sample(class_mask: torch.Tensor) -> torch.Tensor:
+    """A class mask as (n_models, N or 1, K): one per model broadcasts over its samples."""
+    return class_mask[:, None, :] if class_mask.dim() == 2 else class_mask
 
 
 def save_classifier(clf: BatchedRewardClassifier, path: str | Path) -> None:

@@ -73,7 +73,9 @@ class Pool:
     :param labelled: (B, N) bool, samples whose true reward was revealed.
     :param label_class: (B, N) int class index of the revealed reward (-1 elsewhere).
     :param unlabelled: (B, N) bool, the unlabelled pool U (disjoint from ``labelled``).
-    :param class_mask: (B, K) bool, the classes each run has seen.
+    :param class_mask: (B, K) bool, the classes each run has seen; or (B, N, K), the classes each
+        sample may take (e.g. :func:`~dospcot.reward_classes.episode_end_class_mask`): a class it may
+        not take gets no score, so no view predicts it there and no consensus gives it.
     """
 
     features: list[np.ndarray]
@@ -219,7 +221,7 @@ class SelfPacedCoTrainer:
 
 def _label_share(pool: Pool) -> np.ndarray:
     """(B, K) share of each class among each run's labels."""
-    n_classes = pool.class_mask.shape[1]
+    n_classes = pool.class_mask.shape[-1]
     onehot = (pool.label_class[..., None] == np.arange(n_classes)) & pool.labelled[..., None]
     counts = onehot.sum(axis=1).astype(np.float64)
     return counts / np.maximum(counts.sum(axis=1, keepdims=True), 1.0)

@@ -108,3 +108,29 @@ class QuantileRewardClasses(_ClassValues):
         if self.only_value is not None:
             return np.where(np.asarray(rewards) == self.only_value, 0, -1)
         return np.searchsorted(self.edges, rewards, side="right")
+
+
+def episode_end_class_mask(
+    label_class: np.ndarray, labelled: np.ndarray, terminal: np.ndarray, class_mask: np.ndarray
+) -> np.ndarray:
+    """The classes each sample may take when a class shown only on episode ends stays there.
+
+    A reward class whose every label fell on a step that ended its episode (a goal, a crash) is
+    open only to samples that ended theirs; every other class the run has stays open to every
+    sample. A pseudo-reward of such a class on a step that goes on would pay an agent for repeating
+    it, a loop worth more than the episode end. A sample left with no class (every class the run has
+    is shown only on episode ends, and the sample's episode goes on) keeps them all.
+
+    :param label_class: (N,) int, each sample's labelled class (any value where not labelled).
+    :param labelled: (N,) bool.
+    :param terminal: (N,) bool, whether each sample's step ended its episode (``terminated``).
+    :param class_mask: (K,) bool, the classes the run has.
+    :return: (N, K) bool.
+    """
+    n_classes = class_mask.size
+    known = labelled & (label_class >= 0)
+    on_end = np.bincount(label_class[known & terminal], minlength=n_classes)[:n_classes] > 0
+    elsewhere = np.bincount(label_class[known & ~terminal], minlength=n_classes)[:n_classes] > 0
+    end_only = on_end & ~elsewhere
+    mask = np.where(terminal[:, None], class_mask, class_mask & ~end_only)
+    return np.where(mask.any(axis=1, keepdims=True), mask, class_mask)

@@ -150,6 +150,7 @@ def _sensor_parts(
             "max_return": task.max_return,
             "keyed": bool(task.state_key),
             "read_termination": task.read_termination,
+            "episode_end_classes": task.episode_end_classes,
         }
     config = TransitionConfig(
         **_common_kwargs(cfg), max_episode_steps=task.episode_steps, reward_classes=task.reward_classes,

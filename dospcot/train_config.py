@@ -188,6 +188,10 @@ class GymConfig:
         a rare reward comes with them (MiniGrid's goal), a pseudo-reward of that class on a step that
         goes on is then easy to rule out: such a step, taken again and again, would pay the agent a
         loop worth more than the goal.
+    :param episode_end_classes: a reward class the labels show only on steps that ended their
+        episode (MiniGrid's goal) is given only to such steps: no view predicts it on a step that goes
+        on, so no pseudo-reward pays a loop (:func:`dospcot.reward_classes.episode_end_class_mask`).
+        A class also labelled on a step that goes on stays open everywhere.
     """
 
     env_id: str = ""
@@ -202,6 +206,7 @@ class GymConfig:
     max_return: float = math.inf
     state_key: str = ""
     read_termination: bool = False
+    episode_end_classes: bool = False
 
     def __post_init__(self) -> None:
         if self.episode_steps < 1 or self.reward_classes < 1 or self.eval_episodes < 1:
@@ -462,9 +467,10 @@ class TrainConfig:
                 load_agent(demos.agent, demos.agent_algorithm)
             except ValueError as err:
                 raise ConfigError(f"demonstrations.{err}") from None
-        if (demos.file or demos.agent) and demos.labels and self.task == "gym" and self.gym.read_termination:
+        reads_ends = [k for k in ("read_termination", "episode_end_classes") if getattr(self.gym, k)]
+        if (demos.file or demos.agent) and demos.labels and self.task == "gym" and reads_ends:
             raise ConfigError(
-                "gym.read_termination: demonstrations do not record which of their steps ended an episode, "
+                f"gym.{reads_ends[0]}: demonstrations do not record which of their steps ended an episode, "
                 "so as labels they cannot join a pool that reads it; set demonstrations.labels = false"
             )
         if (demos.episodes or demos.file) and demos.margin_loss_weight and "tabular" in self.agent_kinds:

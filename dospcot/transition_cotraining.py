@@ -40,7 +40,7 @@ from dospcot.cotraining import Pool
 from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
 from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, load_agent, record_demonstrations
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.reward_classes import QuantileRewardClasses
+from dospcot.reward_classes import QuantileRewardClasses, episode_end_class_mask
 
 EVAL_SEED = 1_000_003
 """Evaluation episodes start from seeds ``EVAL_SEED + i``, apart from every training seed."""
@@ -242,6 +242,8 @@ class TransitionConfig(NeuralConfig):
         holds (state key, action) pairs (:class:`KeyedStepStore`), and every agent's env shares the
         run's mask, so a pair is labelled for all of them or for none.
     :param read_termination: the reward classifiers also read whether a step ended its episode.
+    :param episode_end_classes: a reward class the labels show only on steps that ended their
+        episode is given only to such steps (:func:`~dospcot.reward_classes.episode_end_class_mask`).
     """
 
     reward_classes: int = 5
@@ -250,6 +252,7 @@ class TransitionConfig(NeuralConfig):
     max_return: float | None = None
     keyed: bool = False
     read_termination: bool = False
+    episode_end_classes: bool = False
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -326,7 +329,11 @@ class SensorTask:
         label_class = np.where(labelled, self.classes.encode(store.label_value[:n][None])[0], -1)
         termination = self.config.read_termination
         features = [store.features(v, self.n_actions, termination)[None] for v in self.spec.views]
-        return Pool(features, labelled[None], label_class[None], unlabelled[None], self.classes.mask)
+        class_mask = self.classes.mask
+        if self.config.episode_end_classes:
+            terminal = store.terminal[:n]
+            class_mask = episode_end_class_mask(label_class, labelled, terminal, class_mask[0])[None]
+        return Pool(features, labelled[None], label_class[None], unlabelled[None], class_mask)
 
     def true_class(self) -> np.ndarray:
         return self.classes.encode(self.store.hidden_reward[: len(self.store)][None])[0]  # the true bin

@@ -6,7 +6,7 @@ import pytest
 
 from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
 from dospcot.key_pool import key_features
-from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
+from dospcot.reward_classes import QuantileRewardClasses, RewardClasses, episode_end_class_mask
 from dospcot.round_records import record_head, round_stats
 from dospcot.run_spec import RunSpec
 
@@ -78,6 +78,37 @@ def test_record_head_names_the_run_and_the_agent():
         "seed": 4, "round": 2, "agent": 1, "kind": "q", "view": "patch",
     }  # fmt: skip
     assert type(record_head(spec, 2, np.int64(1))["agent"]) is int
+
+
+def test_a_class_labelled_only_on_episode_ends_is_open_only_to_episode_ends():
+    # Classes: 0 (labelled on a step that goes on and on an end: open everywhere), 1 (labelled only on
+    # ends: a goal), 2 (labelled only on steps that go on), 3 (the run has none yet).
+    label_class = np.array([0, 0, 1, 2, -1, -1, 9])
+    labelled = np.array([True, True, True, True, False, False, False])
+    terminal = np.array([False, True, True, False, False, True, False])
+    class_mask = np.array([True, True, True, False])
+    mask = episode_end_class_mask(label_class, labelled, terminal, class_mask)
+    expected_on = [True, True, True, False]  # an episode end may take any class the run has
+    expected_off = [True, False, True, False]  # a step that goes on may not take the goal class
+    np.testing.assert_array_equal(mask, [expected_on if t else expected_off for t in terminal])
+    # Every class the run has is shown only on ends: a step that goes on keeps them all.
+    only_ends = episode_end_class_mask(np.array([1, 0]), np.array([True, False]), np.array([True, False]),
+                                       np.array([False, True]))  # fmt: skip
+    np.testing.assert_array_equal(only_ends, [[False, True], [False, True]])
+
+
+def test_a_class_a_sample_may_not_take_is_never_its_pseudo_label():
+    # One view whose classifier separates the labels cleanly; sample 3 looks like class 1, but its mask
+    # forbids class 1, so it is given class 0 or nothing, never 1.
+    x = np.array([[[0.0], [1.0], [0.1], [0.9], [0.95]]])
+    labelled = np.array([[True, True, False, False, False]])
+    label_class = np.array([[0, 1, -1, -1, -1]])
+    mask = np.ones((1, 5, 2), bool)
+    mask[0, 3, 1] = False
+    trainer = SelfPacedCoTrainer([1], 1, CoTrainingConfig(add_fraction_start=1.0, max_classes=2), [0])
+    result = trainer.step(Pool([x], labelled, label_class, ~labelled, mask))
+    assert result.pseudo_class[0, 4] == 1 and result.pseudo_class[0, 2] == 0
+    assert result.pseudo_class[0, 3] != 1 and result.view_class[0, 0, 3] != 1
 
 
 def test_key_features_by_hand():

@@ -361,6 +361,32 @@ def test_read_termination_gives_the_classifiers_whether_a_step_ended_its_episode
     assert build_run(without).task.feature_dims() == [22, 4]
 
 
+def test_episode_end_classes_keep_the_goal_class_off_steps_that_go_on():
+    """The corridor's goal class is labelled only on the pair that ends an episode: with the flag, the
+    pool lets every other pair take class 0 alone, and no admitted pair that goes on gets the goal."""
+    settings = {**SETTINGS, "training.rounds": 2, "gym.reward_classes": 2, "gym.episode_end_classes": True}
+    cfg = gym_config(make_corridor, VIEWS, label_fraction=1.0, state_key=corridor_cell, settings=settings)
+    assert build_run(cfg).task.config.episode_end_classes
+    run = build_run(
+        gym_config(
+            make_corridor, VIEWS, label_fraction=0.5, seed=3, state_key=corridor_cell, settings=settings
+        )
+    )
+    records = run.run()
+    store, pool = run.store, run.task.pool()
+    n = len(store)
+    goal = int(run.classes.encode(np.array([[1.0]]))[0, 0])
+    assert goal == 1 and store.labelled[:n][store.terminal[:n]].all()  # seed 3 labels the goal pair
+    assert pool.class_mask.shape == (1, n, 2)
+    np.testing.assert_array_equal(pool.class_mask[0, :, goal], store.terminal[:n])
+    assert pool.class_mask[0, :, 0].all()
+    result = run.trainer.step(pool)
+    goes_on = ~store.terminal[:n] & pool.unlabelled[0]
+    assert goes_on.any() and (result.pseudo_class[0][goes_on] != goal).all()
+    assert (result.view_class[:, 0][:, goes_on] != goal).all()
+    assert {record["round"] for record in records} == {1, 2}
+
+
 def test_a_store_from_a_checkpoint_older_than_its_terminal_flags_resumes():
     """Such a run never read the flags: its stored steps read as not ended, and new steps are kept."""
     store = KeyedStepStore({"cell": (1,)})
@@ -591,6 +617,8 @@ def test_bad_demonstrations_files_for_a_gym_run_fail_with_one_line(tmp_path):
         build_run(gym_config(make_corridor, VIEWS, state_key=corridor_cell, settings=settings))
     with pytest.raises(ConfigError, match=r"gym\.read_termination: demonstrations do not record which"):
         gym_config(make_corridor, VIEWS, settings={**settings, "gym.read_termination": True})
+    with pytest.raises(ConfigError, match=r"gym\.episode_end_classes: demonstrations do not record which"):
+        gym_config(make_corridor, VIEWS, settings={**settings, "gym.episode_end_classes": True})
     with pytest.raises(ConfigError, match=r"demonstrations\.file: demonstrations: cannot read"):
         gym_config(make_corridor, VIEWS, settings={"demonstrations.file": str(tmp_path / "none.npz")})
     with pytest.raises(ConfigError, match='a task = "gym" run\'s demonstrations come from a file or a saved'):
