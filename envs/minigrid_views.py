@@ -8,6 +8,9 @@ the env itself, as an agent with another sensor would:
 - ``"minigrid.full"``: the whole map, 3 numbers per cell with the agent drawn in (what MiniGrid's
   ``FullyObsWrapper`` observes), W x H x 3;
 - ``"minigrid.full_one_hot"``: the same map as indicators, W x H x 15 (:func:`full_one_hot`);
+- ``"minigrid.egocentric_map"``: those indicators turned and shifted into the agent's frame (the
+  agent at the centre, facing up), (2 M - 1) x (2 M - 1) x 15 for a map of longer side M
+  (:func:`egocentric_map`);
 - ``"minigrid.position"``: the agent's column, row and direction, each one-hot (W + H + 4), with
   nothing of the map: an agent on it must learn the map by heart, as the grid's ``coords`` agent.
 
@@ -84,6 +87,23 @@ def full_one_hot(env: gym.Env) -> np.ndarray:
     return _INDICATORS[grid[..., 0]] + _INDICATORS[OBJECT_TYPES + grid[..., 2]]
 
 
+def egocentric_map(env: gym.Env) -> np.ndarray:
+    """(2 M - 1, 2 M - 1, 15) the whole map as indicators (:func:`full_one_hot`) in the agent's frame,
+    M the map's longer side: the agent's cell at the centre (M - 1, M - 1), the map turned so that
+    the agent faces up (the cell ahead at (M - 1, M - 2), as in MiniGrid's image); cells beyond the
+    map are all 0. Unlike the image nothing is hidden behind walls or out of range, and unlike the
+    full map a situation (lava ahead, the goal two cells to the left) reads the same wherever on the
+    map it happens, which a network need not learn once per cell."""
+    indicators = full_one_hot(env)
+    width, height = indicators.shape[:2]
+    side = max(width, height)
+    canvas = np.zeros((2 * side - 1, 2 * side - 1, indicators.shape[2]), np.float32)
+    x, y = env.agent_pos
+    canvas[side - 1 - x : side - 1 - x + width, side - 1 - y : side - 1 - y + height] = indicators
+    # Directions: 0 +x, 1 +y, 2 -x, 3 -y (up); k quarter turns from axis 0 towards 1 bring each up.
+    return np.ascontiguousarray(np.rot90(canvas, (3 - int(env.agent_dir)) % 4, axes=(0, 1)))
+
+
 def position(env: gym.Env) -> np.ndarray:
     """(W + H + 4,) the agent's column, row and direction, each one-hot."""
     x, y = env.agent_pos
@@ -104,6 +124,7 @@ def state_key(env: gym.Env) -> Hashable:
 ENV_VIEWS: dict[str, Callable[[gym.Env], np.ndarray]] = {
     "minigrid.full": full_grid,
     "minigrid.full_one_hot": full_one_hot,
+    "minigrid.egocentric_map": egocentric_map,
     "minigrid.position": position,
 }
 """Views that read the unwrapped env, by name."""

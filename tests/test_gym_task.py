@@ -460,6 +460,29 @@ def test_the_minigrid_views_read_the_map_and_the_agents_pose():
     assert info["views"]["pose"][10 + (unwrapped.agent_dir)] == 1.0
 
 
+def test_the_egocentric_map_puts_the_agent_at_its_centre_facing_up():
+    pytest.importorskip("minigrid")
+    env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
+    env.reset(seed=0)
+    unwrapped = env.unwrapped
+    indicators = minigrid_views.full_one_hot(unwrapped)
+    centre = 4  # a 5 x 5 map: 9 x 9 cells, the agent at (4, 4)
+    # Direction -> (the cell ahead, the cell on the agent's right), as MiniGrid moves: 0 +x, 1 +y, ...
+    ahead = {0: (1, 0), 1: (0, 1), 2: (-1, 0), 3: (0, -1)}
+    for direction in range(4):
+        unwrapped.agent_dir = direction
+        view = minigrid_views.egocentric_map(unwrapped)
+        assert view.shape == (9, 9, 15) and view.flags.c_contiguous
+        x, y = unwrapped.agent_pos
+        assert view[centre, centre, 10] == 1  # the agent
+        dx, dy = ahead[direction]
+        right_x, right_y = -dy, dx  # a quarter turn clockwise on screen (y grows downwards)
+        np.testing.assert_array_equal(view[centre, centre - 1], indicators[x + dx, y + dy])
+        np.testing.assert_array_equal(view[centre + 1, centre], indicators[x + right_x, y + right_y])
+        # Every map cell appears once, the rest of the canvas is empty.
+        assert view.sum() == indicators.sum() and (view.sum(axis=-1) > 0).sum() == 25
+
+
 def test_a_keyed_run_resumed_from_its_checkpoint_ends_as_the_uninterrupted_run():
     settings = {**SETTINGS, "training.rounds": 2, "training.steps_per_round": 600}
     cfg = gym_config(make_corridor, VIEWS, label_fraction=0.3, state_key=corridor_cell, settings=settings)
