@@ -369,7 +369,7 @@ class CoTrainingRun:
         reward, step_weight = step_rewards(steps, segments, sums, weight, model, self.step_model_seeds())
         self.table.set(np.arange(reward.size), reward, step_weight)
         self.stopped = bool(result.stopped[0])
-        true_class = self.segment_classes.encode(segments.hidden[None, :n])[0]  # metrics only
+        true_class = self.segment_classes.encode_hidden(segments.hidden[None, :n])[0]  # metrics only
         stats = round_stats(result, pool.unlabelled[0], true_class)
         # How far the decoded per-step rewards lie from the hidden ones, where the agents read them.
         decoded = step_weight > 0

@@ -76,6 +76,9 @@ class QuantileRewardClasses(_ClassValues):
         """(k - 1,) the inner bin edges: class c holds rewards in [edges[c - 1], edges[c])."""
         self.only_value: float | None = None
         """The labels' one value while they hold a single one (every label 0, no goal yet), else None."""
+        self.hidden_edges = np.zeros(0)
+        """(k - 1,) the edges :meth:`encode_hidden` reads: each midway between the largest label below
+        an edge of ``edges`` and the smallest above it."""
 
     def fit(self, rewards: np.ndarray) -> None:
         """Set the bins from every labelled reward so far, (n,) float."""
@@ -83,7 +86,7 @@ class QuantileRewardClasses(_ClassValues):
         n_classes = self.values.shape[1]
         self.values[:] = np.nan
         if rewards.size == 0:
-            self.edges, self.only_value = np.zeros(0), None
+            self.edges, self.only_value, self.hidden_edges = np.zeros(0), None, np.zeros(0)
             return
         distinct = np.unique(rewards)
         self.only_value = float(distinct[0]) if distinct.size == 1 else None
@@ -98,6 +101,10 @@ class QuantileRewardClasses(_ClassValues):
         bins = np.searchsorted(self.edges, rewards, side="right")
         for c in range(self.edges.size + 1):
             self.values[0, c] = rewards[bins == c].mean()
+        # Each edge has labels on both sides: distinct[0] below the first, the largest label above the last.
+        self.hidden_edges = np.array(
+            [(rewards[bins <= c].max() + rewards[bins > c].min()) / 2 for c in range(self.edges.size)]
+        )
 
     def encode(self, rewards: np.ndarray) -> np.ndarray:
         """Class (bin) index of each reward, (1, N) from (1, N); -1 before any label was seen, and,
@@ -108,6 +115,16 @@ class QuantileRewardClasses(_ClassValues):
         if self.only_value is not None:
             return np.where(np.asarray(rewards) == self.only_value, 0, -1)
         return np.searchsorted(self.edges, rewards, side="right")
+
+    def encode_hidden(self, rewards: np.ndarray) -> np.ndarray:
+        """The class of each hidden reward, (1, N) from (1, N), for the metrics: the class of the
+        nearest label. It equals :meth:`encode` on every labelled value and differs only between two
+        classes' labels, where :meth:`encode`'s edge, a quantile, may sit at the upper class's
+        smallest label: a goal reached later than any labelled one (MiniGrid pays ``1 - 0.9 t / T``)
+        pays less than every goal label, and :meth:`encode` would call it class 0, "nothing"."""
+        if not self.mask.any() or self.only_value is not None:
+            return self.encode(rewards)
+        return np.searchsorted(self.hidden_edges, rewards, side="right")
 
 
 def episode_end_class_mask(

@@ -336,7 +336,8 @@ class SensorTask:
         return Pool(features, labelled[None], label_class[None], unlabelled[None], class_mask)
 
     def true_class(self) -> np.ndarray:
-        return self.classes.encode(self.store.hidden_reward[: len(self.store)][None])[0]  # the true bin
+        hidden = self.store.hidden_reward[: len(self.store)]  # metrics only
+        return self.classes.encode_hidden(hidden[None])[0]
 
     def _returns(self, policy: Any, env: DummyVecEnv) -> tuple[np.ndarray, np.ndarray]:
         env.seed(EVAL_SEED)

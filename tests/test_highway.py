@@ -112,6 +112,28 @@ def test_a_rare_reward_keeps_its_own_quantile_class():
     assert classes.mask[0].sum() == 2
 
 
+def test_a_hidden_reward_between_two_classes_labels_takes_the_nearest_labels_class():
+    classes = QuantileRewardClasses(2)
+    # Goal labels 0.4-1.0 among zeros: encode's edge is the smallest goal label, 0.4, so a goal reached
+    # later than any labelled one (0.3) would read as class 0; the metrics' edge is midway, 0.2.
+    labels = np.array([0.0] * 16 + [0.4, 0.6, 0.8, 1.0])
+    classes.fit(labels)
+    np.testing.assert_allclose(classes.hidden_edges, [0.2])
+    hidden = np.array([[0.0, 0.15, 0.25, 0.3, 0.4, 0.9]])
+    np.testing.assert_array_equal(classes.encode(hidden), [[0, 0, 0, 0, 1, 1]])
+    np.testing.assert_array_equal(classes.encode_hidden(hidden), [[0, 0, 1, 1, 1, 1]])
+    np.testing.assert_array_equal(classes.encode_hidden(labels[None]), classes.encode(labels[None]))
+    # Quartiles of 0.0-0.7 in steps of 0.1 (edges 0.175, 0.35, 0.525): midway 0.15, 0.35, 0.55.
+    classes = QuantileRewardClasses(4)
+    labels = np.arange(8) / 10
+    classes.fit(labels)
+    np.testing.assert_allclose(classes.hidden_edges, [0.15, 0.35, 0.55])
+    np.testing.assert_array_equal(classes.encode_hidden(labels[None]), classes.encode(labels[None]))
+    # One labelled value: as encode, any other reward is a value no label has shown.
+    classes.fit(np.zeros(5))
+    np.testing.assert_array_equal(classes.encode_hidden(np.array([[0.0, 0.3]])), [[0, -1]])
+
+
 def _train(tmp_path, preset: str, *overrides: str):
     args = ["train", preset, "--runs-dir", str(tmp_path), "--no-progress"]
     assert main([*args, *(a for o in (*TINY, *overrides) for a in ("--set", o))]) == 0
