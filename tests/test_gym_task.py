@@ -420,10 +420,17 @@ def test_the_key_mask_labels_a_share_of_pairs_the_same_way_in_every_process():
     assert fresh.stdout.strip() == str([key_is_labelled(("k", x), 1, 0.5, 3) for x in range(20)])
 
 
-def test_the_minigrid_state_key_names_the_agents_pose_load_and_map():
+@pytest.fixture
+def doorkey() -> gym.Env:
+    """MiniGrid-DoorKey-5x5, reset with seed 0 (skipped without the ``minigrid`` extra)."""
     pytest.importorskip("minigrid")
     env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
     env.reset(seed=0)
+    return env
+
+
+def test_the_minigrid_state_key_names_the_agents_pose_load_and_map(doorkey):
+    env = doorkey
     cell, direction, held, grid = minigrid_views.state_key(env.unwrapped)
     assert cell == tuple(int(v) for v in env.unwrapped.agent_pos) and direction == env.unwrapped.agent_dir
     assert held is None and grid == env.unwrapped.grid.encode().tobytes()
@@ -460,10 +467,8 @@ def test_the_minigrid_views_read_the_map_and_the_agents_pose():
     assert info["views"]["pose"][10 + (unwrapped.agent_dir)] == 1.0
 
 
-def test_the_egocentric_map_puts_the_agent_at_its_centre_facing_up():
-    pytest.importorskip("minigrid")
-    env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
-    env.reset(seed=0)
+def test_the_egocentric_map_puts_the_agent_at_its_centre_facing_up(doorkey):
+    env = doorkey
     unwrapped = env.unwrapped
     indicators = minigrid_views.full_one_hot(unwrapped)
     centre = 4  # a 5 x 5 map: 9 x 9 cells, the agent at (4, 4)
@@ -574,10 +579,8 @@ def test_exploring_starts_move_training_episodes_only_and_follow_the_envs_seed()
         assert tuple(int(v) for v in env.envs[0].unwrapped.agent_pos) == (1, 1)
 
 
-def test_the_map_encoding_is_read_once_per_step_and_follows_every_change():
-    pytest.importorskip("minigrid")
-    env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0")
-    env.reset(seed=0)
+def test_the_map_encoding_is_read_once_per_step_and_follows_every_change(doorkey):
+    env = doorkey
     u = env.unwrapped
     first = minigrid_views.map_encoding(u)
     assert minigrid_views.map_encoding(u) is first  # the same step: encoded once
