@@ -361,20 +361,23 @@ MINIGRID_ID = "MiniGrid-LavaGapS7-v0"
 
 def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     """Env steps per second with random actions: MiniGrid through what the ``minigrid-lavagap-dospcot``
-    preset adds to every training step (the keyed reward mask, the image view observed, the pool
-    store, which reads the full map on a pair's first visit) against the bare MiniGrid env."""
+    preset adds to every training step (the keyed reward mask, the first view observed, the pool
+    store, which reads every view on a pair's first visit) against the bare MiniGrid env."""
     import minigrid  # noqa: F401  (registers the MiniGrid ids)
 
     from dospcot.envs.gym_sensors import make_masked_gym
     from dospcot.transition_cotraining import KeyedStepStore, SensorStoreWrapper
 
     steps = 2_000 if quick else 20_000
-    views = {"image": "image", "full": "minigrid.full_one_hot"}
+    cfg = load_config("minigrid-lavagap-dospcot")
+    assert isinstance(cfg, TrainConfig) and cfg.gym.env_id.endswith(MINIGRID_ID)
+    views = {name: cfg.gym.views[name] for name in cfg.views}
 
     def ours(rep: int) -> gym.Env:
         env = make_masked_gym(
-            MINIGRID_ID, "image", tuple(views), 0.1, rep, view_specs=views, state_key="minigrid"
-        )
+            MINIGRID_ID, cfg.views[0], tuple(views), cfg.training.label_fraction, rep, view_specs=views,
+            state_key=cfg.gym.state_key,
+        )  # fmt: skip
         shapes = {v: env.get_wrapper_attr("view_space")(v).shape for v in views}
         return SensorStoreWrapper(env, KeyedStepStore(shapes))
 
@@ -386,8 +389,9 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     return Row(
         f"{MINIGRID_ID} through dospcot's wrappers vs bare: env steps per second",
         f"random actions, resets included, {steps} steps; ours: reward mask over (state key, action) "
-        "pairs (10%), image view (7 x 7 x 3) observed, a fresh keyed pool store recording both views "
-        "(image and the full map as indicators, 7 x 7 x 15) of each new pair",
+        f"pairs ({cfg.training.label_fraction:.0%}), the {cfg.views[0]} view observed, a fresh keyed "
+        f"pool store recording every view ({', '.join(f'{n}: {v}' for n, v in views.items())}) of each "
+        "new pair",
         Measurement.of(ours_rate, "steps/s"),
         Measurement.of(peer, "steps/s"),
         higher_is_better=True,

@@ -85,7 +85,7 @@ METHODS.update(
             "oracle": "oracle (all rewards)",
             "masked-zero": "masked-zero",
             "self-training": "self-training (m = 1, image)",
-            "dospcot": "DOSPCoT (m = 2, image + full map)",
+            "dospcot": "DOSPCoT (m = 2, image + egocentric map)",
         }.items()
     }
 )
@@ -301,6 +301,7 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
             mean = SeedSummary.of([r.summary["mean"]["success"] for r in members]).mean
             share = f"{mean / oracle_mean:.0%}" if oracle_mean > 0 else "n/a (oracle 0)"
             lines.append(f"| {env_id} | {METHODS[name]} | `{name}` | " + " | ".join(stats) + f" | {share} |")
+    lines += ["", *_goal_label_lines(grouped)]
     lines += [
         "",
         "Per view (the same runs; each cell over seeds):",
@@ -311,6 +312,28 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
     return lines + _per_view_rows(
         grouped, ["success", "greedy_return"], lambda name: MINIGRID_TASKS[name.split("-")[1]]
     )
+
+
+def _goal_label_lines(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> list[str]:
+    """Per task, the seeds whose labelled pairs include one that reaches the goal, read from the
+    DOSPCoT runs' ``reward_classes.json`` (a second class exists only if a goal pair is labelled;
+    every method of a seed draws the same labels). Without one no co-trained method can learn the goal."""
+    lines = []
+    for task, env_id in MINIGRID_TASKS.items():
+        members = [r for (name, _), rs in grouped.items() if name == f"minigrid-{task}-dospcot" for r in rs]
+        if not members:
+            continue
+        seeds = sorted(r.trial.seed for r in members)
+        labelled = sorted(
+            r.trial.seed
+            for r in members
+            if len(json.loads((r.run_dir / "reward_classes.json").read_text())["rewards"]) > 1
+        )
+        lines.append(
+            f"- {env_id}: seeds whose labels include a goal pair: {', '.join(map(str, labelled)) or 'none'} "
+            f"(of {', '.join(map(str, seeds))})."
+        )
+    return lines
 
 
 def grid16_tables(runs: list[TrialRun]) -> list[str]:

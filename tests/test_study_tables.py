@@ -82,18 +82,23 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
     from dospcot.run_folder import write_toml
     from dospcot.train_config import load_config
 
-    write_toml(tmp_path / "config.toml", load_config("minigrid-lavagap-oracle").to_dict())
+    config = load_config("minigrid-lavagap-oracle").to_dict()
 
-    def run(preset: str, seed: int, success: float) -> TrialRun:
+    def run(preset: str, seed: int, success: float, rewards: tuple[float, ...] = (0.0, 0.9)) -> TrialRun:
         view = {"success": success, "greedy_return": success / 2}
         summary = {"mean": dict(view), "views": ["image"], "per_view": {"image": view}, "rounds": 5}
-        return TrialRun(Trial(preset, preset, {}, seed), summary, [], tmp_path)
+        run_dir = tmp_path / preset / str(seed)
+        run_dir.mkdir(parents=True)
+        write_toml(run_dir / "config.toml", config)
+        (run_dir / "reward_classes.json").write_text(json.dumps({"rewards": rewards}))
+        return TrialRun(Trial(preset, preset, {}, seed), summary, [], run_dir)
 
     runs = [
         *(run("minigrid-lavagap-oracle", s, v) for s, v in enumerate((1.0, 0.8))),
         *(run("minigrid-lavagap-dospcot", s, v) for s, v in enumerate((0.45, 0.45))),
         *(run("minigrid-doorkey-oracle", s, 0.0) for s in range(2)),
-        *(run("minigrid-doorkey-dospcot", s, 0.5) for s in range(2)),
+        run("minigrid-doorkey-dospcot", 0, 0.5, (0.0,)),  # its labels hold no goal pair
+        run("minigrid-doorkey-dospcot", 1, 0.5),
     ]
     rows = {
         line.split(" | ")[2]: line for line in study.minigrid_tables(runs) if line.startswith("| MiniGrid")
@@ -103,7 +108,10 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
     assert rows["`minigrid-doorkey-dospcot`"].endswith("| n/a (oracle 0) |")
     lines = study.minigrid_tables(runs)
     assert "20 greedy episodes per agent" in lines[0]
-    assert "| MiniGrid-DoorKey-5x5-v0 | DOSPCoT (m = 2, image + full map) | image | 0.500" in "\n".join(lines)
+    text = "\n".join(lines)
+    assert "| MiniGrid-DoorKey-5x5-v0 | DOSPCoT (m = 2, image + egocentric map) | image | 0.500" in text
+    assert "- MiniGrid-LavaGapS7-v0: seeds whose labels include a goal pair: 0, 1 (of 0, 1)." in text
+    assert "- MiniGrid-DoorKey-5x5-v0: seeds whose labels include a goal pair: 1 (of 0, 1)." in text
 
 
 def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
