@@ -88,6 +88,7 @@ def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(tmp_pa
     kept = [f for f in files if str(f) not in ignored]
     assert {f.name for f in kept} == {
         "sweep.json", "trial.json", "config.toml", "run_info.json", "metrics.csv", "summary.json",
+        "reward_classes.json",
     }  # fmt: skip
     assert any(f.suffix == ".zip" for f in files) and any("tb" in f.parts for f in files)
     elsewhere = tmp_path / "elsewhere"
