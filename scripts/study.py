@@ -315,9 +315,9 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
 
 
 def _goal_label_lines(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> list[str]:
-    """Per task, the seeds whose labelled pairs include one that reaches the goal, read from the
-    DOSPCoT runs' ``reward_classes.json`` (a second class exists only if a goal pair is labelled;
-    every method of a seed draws the same labels). Without one no co-trained method can learn the goal."""
+    """Per task, the seeds whose DOSPCoT run met a labelled pair that reaches the goal, read from its
+    ``reward_classes.json`` (a second class exists only then). The labelled pairs are fixed by the
+    seed, and on a seed whose runs meet none no co-trained method can learn the goal."""
     lines = []
     for task, env_id in MINIGRID_TASKS.items():
         members = [r for (name, _), rs in grouped.items() if name == f"minigrid-{task}-dospcot" for r in rs]
@@ -329,8 +329,9 @@ def _goal_label_lines(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> list[
             for r in members
             if len(json.loads((r.run_dir / "reward_classes.json").read_text())["rewards"]) > 1
         )
+        met = ", ".join(map(str, labelled)) or "none"
         lines.append(
-            f"- {env_id}: seeds whose labels include a goal pair: {', '.join(map(str, labelled)) or 'none'} "
+            f"- {env_id}: seeds whose DOSPCoT run met a labelled goal pair: {met} "
             f"(of {', '.join(map(str, seeds))})."
         )
     return lines
