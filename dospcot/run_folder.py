@@ -30,6 +30,7 @@ import dospcot
 CONFIG_FILE = "config.toml"
 METRICS_FILE = "metrics.csv"
 SUMMARY_FILE = "summary.json"
+REWARD_CLASSES_FILE = "reward_classes.json"
 CHECKPOINT_FILE = "checkpoint.pkl"
 CHECKPOINT_FORMAT = 1
 

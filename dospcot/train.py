@@ -60,6 +60,7 @@ from dospcot.run_folder import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
     METRICS_FILE,
+    REWARD_CLASSES_FILE,
     SUMMARY_FILE,
     RunFolderError,
     atomic_write,
@@ -343,7 +344,7 @@ def _write_round_files(run_dir: Path, run: CoTrainingRun, cfg: TrainConfig, reco
         for clf, view in zip(run.trainer.classifiers, cfg.views, strict=True):
             atomic_write(run_dir / f"classifier_{view}.pt", partial(save_classifier, clf))
         rewards = run.classes.values[0][run.classes.mask[0]]
-        write_json(run_dir / "reward_classes.json", {"rewards": [float(v) for v in rewards]})
+        write_json(run_dir / REWARD_CLASSES_FILE, {"rewards": [float(v) for v in rewards]})
 
 
 def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:

@@ -51,6 +51,7 @@ from readme_block import check_readme_block, replace_readme_block
 from dospcot.metrics import SeedSummary
 from dospcot.paper import PRESETS
 from dospcot.report import TrialRun, cells, load_runs, paper_report_tables, write_report
+from dospcot.run_folder import REWARD_CLASSES_FILE
 from dospcot.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
 from dospcot.train_config import load_config
 
@@ -327,7 +328,7 @@ def _goal_label_lines(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> list[
         labelled = sorted(
             r.trial.seed
             for r in members
-            if len(json.loads((r.run_dir / "reward_classes.json").read_text())["rewards"]) > 1
+            if len(json.loads((r.run_dir / REWARD_CLASSES_FILE).read_text())["rewards"]) > 1
         )
         met = ", ".join(map(str, labelled)) or "none"
         lines.append(
