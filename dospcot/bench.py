@@ -30,6 +30,7 @@ from dospcot.envs import CLIFF_VIEWS, StateActionMask, ViewObservationWrapper
 from dospcot.neural_cotraining import NeuralCoTraining
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.tabular import TABULAR_KINDS, expected_value
+from dospcot.seeding import agent_seed
 from dospcot.sweep import SweepSpec, run_sweep
 from dospcot.tabular_cotraining import TabularConfig, TabularCoTraining
 from dospcot.train import agent_kwargs, build_run, build_task
@@ -247,7 +248,7 @@ def _independent_seconds(cfg: TrainConfig) -> float:
     for k, view in enumerate(cfg.views):
         env = ViewObservationWrapper(gym.wrappers.TimeLimit(make_env(), limit), views[view])
         model = ExpectedSarsaDQN(
-            "MlpPolicy", env, seed=cfg.seed * 1000 + k, exploration_horizon=total,
+            "MlpPolicy", env, seed=agent_seed(cfg.seed, k), exploration_horizon=total,
             exploration_initial_eps=cfg.training.eps_start, exploration_final_eps=cfg.training.eps_end,
             exploration_fraction=1.0, **agent_kwargs(cfg),
         )  # fmt: skip
@@ -356,26 +357,23 @@ def bench_fast_highway(quick: bool, repeats: int) -> Row:
     )
 
 
-MINIGRID_ID = "MiniGrid-LavaGapS7-v0"
-
-
 def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     """Env steps per second with random actions: MiniGrid through what the ``minigrid-lavagap-dospcot``
     preset adds to every training step (the keyed reward mask, the first view observed, the pool
     store, which reads every view on a pair's first visit) against the bare MiniGrid env."""
-    import minigrid  # noqa: F401  (registers the MiniGrid ids)
-
     from dospcot.envs.gym_sensors import make_masked_gym
     from dospcot.transition_cotraining import KeyedStepStore, SensorStoreWrapper
 
     steps = 2_000 if quick else 20_000
     cfg = load_config("minigrid-lavagap-dospcot")
-    assert isinstance(cfg, TrainConfig) and cfg.gym.env_id.endswith(MINIGRID_ID)
+    assert isinstance(cfg, TrainConfig)
+    # "module:id": gymnasium imports minigrid, which registers its ids, for both envs alike.
+    env_id = cfg.gym.env_id
     views = {name: cfg.gym.views[name] for name in cfg.views}
 
     def ours(rep: int) -> gym.Env:
         env = make_masked_gym(
-            MINIGRID_ID, cfg.views[0], tuple(views), cfg.training.label_fraction, rep, view_specs=views,
+            env_id, cfg.views[0], tuple(views), cfg.training.label_fraction, rep, view_specs=views,
             state_key=cfg.gym.state_key,
         )  # fmt: skip
         shapes = {v: env.get_wrapper_attr("view_space")(v).shape for v in views}
@@ -384,10 +382,10 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     ours_rate, peer = _alternating(
         repeats,
         lambda rep: _random_steps_per_second(ours(rep), steps, rep),
-        lambda rep: _random_steps_per_second(gym.make(MINIGRID_ID), steps, rep),
+        lambda rep: _random_steps_per_second(gym.make(env_id), steps, rep),
     )
     return Row(
-        f"{MINIGRID_ID} through dospcot's wrappers vs bare: env steps per second",
+        f"{env_id.split(':')[-1]} through dospcot's wrappers vs bare: env steps per second",
         f"random actions, resets included, {steps} steps; ours: reward mask over (state key, action) "
         f"pairs ({cfg.training.label_fraction:.0%}), the {cfg.views[0]} view observed, a fresh keyed "
         f"pool store recording every view ({', '.join(f'{n}: {v}' for n, v in views.items())}) of each "
@@ -415,7 +413,7 @@ def _filled_run(n: int, seed: int) -> NeuralCoTraining:
 
 def _store_bytes(run: NeuralCoTraining) -> int:
     """Bytes the shared store and the reward table hold."""
-    arrays = [*vars(run.store).values(), run.table._reward, run.table._weight]
+    arrays = [*run.store.state_dict().values(), *run.table.state_dict().values()]
     return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
 
 
@@ -457,7 +455,7 @@ def bench_cotraining_scaling(quick: bool, repeats: int) -> Row:
         for n in sizes:
             run = _filled_run(n, rep)
             start = time.perf_counter()
-            run._cotrain()
+            run.cotrain()
             seconds[n].append(time.perf_counter() - start)
     small, large = sizes[0], sizes[-1]
     growth = [seconds[large][r] / seconds[small][r] for r in range(repeats)]
@@ -532,7 +530,7 @@ NOTES = [
     "store keeps per-key arrays only (the pool is deduplicated by (s, a) key, each view's features are "
     "computed per key when the classifiers need them, and the reward table is indexed by key), so its "
     "size does not grow with the steps; the steps themselves live in the agents' SB3 replay buffers. "
-    "The peer is the raw arrays a store of observations would hold. The scaling row times `_cotrain()` "
+    "The peer is the raw arrays a store of observations would hold. The scaling row times `cotrain()` "
     "(classes, features, select, fit, score, Eq. 9, writing the table) at each size; the peer "
     "column is the n log n growth over the same sizes, so a ratio at most 1 means no faster growth.",
 ]

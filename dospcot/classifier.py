@@ -24,6 +24,8 @@ from typing import Literal
 import torch
 from torch import nn
 
+from dospcot.seeding import layer_seed
+
 ModelKind = Literal["mlp", "linear"]
 LossKind = Literal["cross_entropy", "hinge"]
 MODEL_KINDS: tuple[str, ...] = ("mlp", "linear")
@@ -81,7 +83,7 @@ class BatchedRewardClassifier(nn.Module):
             bound = 1.0 / fan_in**0.5
             w, b = [], []
             for seed in seeds:
-                gen = torch.Generator().manual_seed(int(seed) * 7919 + fan_in * 31 + fan_out)
+                gen = torch.Generator().manual_seed(layer_seed(seed, fan_in, fan_out))
                 w.append((torch.rand(fan_in, fan_out, generator=gen, dtype=torch.float64) * 2 - 1) * bound)
                 b.append((torch.rand(fan_out, generator=gen, dtype=torch.float64) * 2 - 1) * bound)
             self.weights.append(nn.Parameter(torch.stack(w)))

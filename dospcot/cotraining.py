@@ -19,6 +19,7 @@ import torch
 
 from dospcot.classifier import BatchedRewardClassifier, ClassifierConfig
 from dospcot.consensus import consensus_labels
+from dospcot.seeding import classifier_seed
 from dospcot.selection import QUOTAS, WEIGHTINGS, Quota, Weighting, spamco_select
 
 
@@ -127,7 +128,7 @@ class SelfPacedCoTrainer:
             raise ValueError("co-training needs at least one view")
         self.classifiers = [
             BatchedRewardClassifier(
-                n_runs, dim, config.max_classes, config.classifier, [s * 101 + j for s in seeds]
+                n_runs, dim, config.max_classes, config.classifier, [classifier_seed(s, j) for s in seeds]
             )
             for j, dim in enumerate(view_dims)
         ]

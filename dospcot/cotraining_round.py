@@ -56,6 +56,7 @@ from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
 from dospcot.round_records import VIEW_STATS, record_head, round_stats
 from dospcot.run_spec import RunSpec
+from dospcot.seeding import agent_seed, classifier_seed, round_reset_seed
 from dospcot.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 
 AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
@@ -224,7 +225,7 @@ def make_agent(
     """
     env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
     common = dict(
-        target=AGENT_TARGETS[kind], seed=spec.seed * 1000 + k, exploration_initial_eps=config.eps_start,
+        target=AGENT_TARGETS[kind], seed=agent_seed(spec.seed, k), exploration_initial_eps=config.eps_start,
         exploration_final_eps=config.eps_end, replay_buffer_kwargs=buffer_kwargs,
     )  # fmt: skip
     if kind == "tabular":
@@ -328,11 +329,11 @@ class CoTrainingRun:
             # Every round starts from fresh episodes with seeded resets, so a run resumed from the
             # checkpoint of the last round continues exactly as the uninterrupted run would.
             env = agent.get_env()
-            env.seed(self.spec.seed * 1000 + k + 7919 * self.round)
+            env.seed(round_reset_seed(self.spec.seed, k, self.round))
             agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
             agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
         if self.trainer is not None:  # 2-3. co-train, pseudo-rewards
-            stats = self._cotrain()
+            stats = self.cotrain()
         else:  # a baseline has no co-trainer, but its labels are its effort too
             stats = {"labelled_steps": int(self.store.labelled.sum())}
         for agent in self.agents:  # 4. policy update on the rewards and weights just written
@@ -344,7 +345,9 @@ class CoTrainingRun:
             agent.set_pace(min(pace, 1.0))
         return self._records(stats)  # 6. record
 
-    def _cotrain(self) -> dict:
+    def cotrain(self) -> dict:
+        """Steps 2-3 of a round: co-train on the task's pool and write the pseudo-rewards and their
+        weights into the reward table; returns the round's co-training figures."""
         pool = self.task.pool()
         if self.segments is not None:
             return self._cotrain_segments(pool)
@@ -382,7 +385,7 @@ class CoTrainingRun:
 
     def step_model_seeds(self) -> list[int]:
         """One seed per view: the initial parameters of its per-step reward model under segment labels."""
-        return [self.spec.seed * 101 + j for j in range(len(self.spec.views))]
+        return [classifier_seed(self.spec.seed, j) for j in range(len(self.spec.views))]
 
     def evaluate_policies(self) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,

@@ -41,6 +41,7 @@ from dospcot.policies.tabular import TabularAgents, check_agent_kind
 from dospcot.reward_classes import RewardClasses
 from dospcot.round_records import VIEW_STATS, record_head, round_stats
 from dospcot.run_spec import RunSpec
+from dospcot.seeding import tabular_agent_seed
 
 
 class TabularRunSpec(RunSpec):
@@ -125,7 +126,7 @@ class TabularCoTraining:
         self.slot_agent = np.array([k for spec in self.specs for k in range(len(spec.agents))])
         kinds = [kind for spec in self.specs for kind in spec.agents]
         seeds = [
-            int(np.random.SeedSequence([self.specs[r].seed, k]).generate_state(1)[0])
+            tabular_agent_seed(self.specs[r].seed, k)
             for r, k in zip(self.slot_run, self.slot_agent, strict=True)
         ]
         self.agents = TabularAgents(kinds, n_s, n_a, config.learning_rate, config.discount, seeds)

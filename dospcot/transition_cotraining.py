@@ -41,12 +41,7 @@ from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
 from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, load_agent, record_demonstrations
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.reward_classes import QuantileRewardClasses, episode_end_class_mask
-
-EVAL_SEED = 1_000_003
-"""Evaluation episodes start from seeds ``EVAL_SEED + i``, apart from every training seed."""
-DEMO_SEED = 3_000_017
-"""A saved agent's demonstrations of run seed s start from seeds ``DEMO_SEED + 10,000 s + i``, apart
-from the evaluation episodes."""
+from dospcot.seeding import EVAL_SEED, agent_seed, demonstration_seed
 
 
 class StepStore(InPlaceState):
@@ -298,7 +293,7 @@ class SensorTask:
         self.spec, self.config = spec, config
         fraction = 1.0 if spec.method == "oracle" else config.label_fraction
         # A keyed pool holds each pair once: its agents must agree on whether it is labelled.
-        seeds = [spec.seed if config.keyed else spec.seed * 1000 + k for k in range(len(spec.views))]
+        seeds = [spec.seed if config.keyed else agent_seed(spec.seed, k) for k in range(len(spec.views))]
         envs = [make_env(v, spec.views, fraction, seed) for v, seed in zip(spec.views, seeds, strict=True)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
         self.store = (KeyedStepStore if config.keyed else StepStore)(self.shapes)
@@ -433,7 +428,7 @@ class SensorTask:
                 "trained on"
             )
         env = gym.wrappers.TimeLimit(env, self.config.max_episode_steps)
-        return record_demonstrations(agent, env, wanted.episodes, DEMO_SEED + 10_000 * self.spec.seed)
+        return record_demonstrations(agent, env, wanted.episodes, demonstration_seed(self.spec.seed))
 
     def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
         if self.demos is None:
