@@ -2,7 +2,9 @@
 
 A run takes one integer seed (its config's ``seed``). Each random stream in it (an agent's network
 and exploration, the resets of every round, a classifier's initial parameters, the evaluation and
-demonstration episodes) starts from a seed derived here, so that no two streams of a run share one.
+demonstration episodes) starts from a seed derived here. Within one stream no seed repeats (one per
+agent, round or view); streams that feed different generators may share a value (seed 0's first
+agent and first classifier both get 0), which is harmless since they never draw from each other.
 
 The tabular agents' seeds come from :class:`numpy.random.SeedSequence`. The other derivations are
 the integer arithmetic the committed study records were produced with; moving them to
