@@ -524,33 +524,39 @@ def second_view_tables(runs: list[TrialRun], columns: tuple[str, ...] = SECOND_V
             for method in sorted(methods, key=lambda m: (SECOND_VIEW_ORDER.index(m.split(" (")[0]), m)):
                 cells = [_over_seeds(list(methods[method].values()), c) for c in columns]
                 lines.append(f"| {SECOND_VIEW_WORDS.get(method, method)} | " + " | ".join(cells) + " |")
-            lines += ["", *_hypothesis_lines(setting, methods, columns[0])]
+            lines += ["", *_hypothesis_lines(setting, methods, columns[0], titles)]
     return lines
 
 
-def _hypothesis_lines(setting: str, methods: dict[str, dict[int, TrialRun]], outcome: str) -> list[str]:
-    """The paired differences of a setting and the verdict of its hypothesis."""
-    dospcot = methods.get("dospcot")
+def _hypothesis_lines(
+    setting: str, methods: dict[str, dict[int, TrialRun]], outcome: str, titles: dict[str, str]
+) -> list[str]:
+    """The paired differences of a setting and the verdict of its hypothesis; under a monitor, also
+    DOSPCoT minus the better self-training view, which no hypothesis tests there."""
     lines, verdicts = [], []
     if setting in ("monitor", "highway monitor"):
         zero = _better_view(methods, "masked-zero", outcome)
         best = _better_view(methods, "self-training", outcome)
-        for name, seeds in ((best, methods.get(best or "")), ("DOSPCoT", dospcot)):
+        for name, seeds in ((best, methods.get(best or "")), ("DOSPCoT", methods.get("dospcot"))):
             if seeds is None or zero is None:
                 verdicts.append(None)
                 continue
             diff = _paired(seeds, methods[zero], outcome)
-            lines.append(f"- {outcome.replace('_', ' ')}, {name} minus {zero} (paired by seed): {diff}")
+            lines.append(f"- {titles[outcome]}, {name} minus {zero} (paired by seed): {diff}")
             verdicts.append(diff.low > 0)
         ok = None if None in verdicts else all(verdicts)
-        return [*lines, f"- H3 (masked-zero below self-training and DOSPCoT): {_verdict(ok)}"]
+        lines.append(f"- H3 (masked-zero below self-training and DOSPCoT): {_verdict(ok)}")
+        for metric in ("pseudo_accuracy", outcome):
+            if (found := _versus_self_training(methods, metric, titles)) is not None:
+                lines.append(found[0] + " (no hypothesis)")
+        return lines
     for metric in ("pseudo_accuracy", "success"):
-        best = _better_view(methods, "self-training", metric)
-        if best is None or dospcot is None:
+        found = _versus_self_training(methods, metric, titles)
+        if found is None:
             verdicts.append(None)
             continue
-        diff = _paired(dospcot, methods[best], metric)
-        lines.append(f"- {COLUMNS[metric]}, DOSPCoT minus {best} (the better view, paired by seed): {diff}")
+        line, diff = found
+        lines.append(line)
         if setting == "independent errors":
             verdicts.append(diff.low > 0 and diff.mean >= SMALLEST_EFFECT[metric])
         else:
@@ -559,6 +565,19 @@ def _hypothesis_lines(setting: str, methods: dict[str, dict[int, TrialRun]], out
     if setting == "independent errors":
         return [*lines, f"- H1 (DOSPCoT above the better self-training view in both): {_verdict(ok)}"]
     return [*lines, f"- H2 (no difference: both intervals hold 0): {_verdict(ok)}"]
+
+
+def _versus_self_training(
+    methods: dict[str, dict[int, TrialRun]], metric: str, titles: dict[str, str]
+) -> tuple[str, SeedSummary] | None:
+    """``metric`` of DOSPCoT minus the better self-training view, paired by seed, as a line and the
+    difference; None while either has not run."""
+    best = _better_view(methods, "self-training", metric)
+    dospcot = methods.get("dospcot")
+    if best is None or dospcot is None:
+        return None
+    diff = _paired(dospcot, methods[best], metric)
+    return f"- {titles[metric]}, DOSPCoT minus {best} (the better view, paired by seed): {diff}", diff
 
 
 def _second_view_sweeps() -> tuple[Sweep, ...]:

@@ -72,6 +72,20 @@ def test_h3_compares_masked_zero_with_the_better_self_training_view_and_dospcot(
     assert "success, DOSPCoT minus masked-zero (paired by seed)" in text
 
 
+def test_a_monitor_setting_also_reports_dospcot_against_the_better_self_training_view():
+    patch = [(1.0, 0.90)] * 4
+    rays = [(0.5, 0.96)] * 4
+    dospcot = [(1.0, 0.95), (0.5, 0.94), (1.0, 0.95), (1.0, 0.94)]
+    text = "\n".join(study.second_view_tables(_setting(MONITOR, dospcot, patch, rays)))
+    accuracy = SeedSummary.of([-0.01, -0.02, -0.01, -0.02])  # against rays, the more accurate view
+    success = SeedSummary.of([0.0, -0.5, 0.0, 0.0])  # against patch, the more successful one
+    minus = "DOSPCoT minus self-training"
+    better = "(the better view, paired by seed)"
+    assert f"pseudo-reward accuracy, {minus} (rays) {better}: {accuracy} (no hypothesis)" in text
+    assert f"success, {minus} (patch) {better}: {success} (no hypothesis)" in text
+    assert text.index("H3 (") < text.index("(no hypothesis)")
+
+
 def test_a_setting_with_a_method_not_yet_run_says_so():
     runs = [r for r in _setting(INDEPENDENT, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4)]
     text = "\n".join(study.second_view_tables([r for r in runs if r.trial.name != "grid16-dospcot"]))
