@@ -41,7 +41,7 @@ from dospcot.policies.tabular import TabularAgents, check_agent_kind
 from dospcot.reward_classes import RewardClasses
 from dospcot.round_records import VIEW_STATS, record_head, round_stats
 from dospcot.run_spec import RunSpec
-from dospcot.seeding import tabular_agent_seed
+from dospcot.seeding import agent_seed
 
 
 class TabularRunSpec(RunSpec):
@@ -126,8 +126,7 @@ class TabularCoTraining:
         self.slot_agent = np.array([k for spec in self.specs for k in range(len(spec.agents))])
         kinds = [kind for spec in self.specs for kind in spec.agents]
         seeds = [
-            tabular_agent_seed(self.specs[r].seed, k)
-            for r, k in zip(self.slot_run, self.slot_agent, strict=True)
+            agent_seed(self.specs[r].seed, k) for r, k in zip(self.slot_run, self.slot_agent, strict=True)
         ]
         self.agents = TabularAgents(kinds, n_s, n_a, config.learning_rate, config.discount, seeds)
         self.labelled = np.stack(

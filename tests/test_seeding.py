@@ -1,38 +1,56 @@
-"""The seeds a run derives (dospcot/seeding.py): pinned, because every committed record was trained
-with them, and distinct where two streams of one run would otherwise share one."""
+"""The seeds a run derives (dospcot/seeding.py): SeedSequence's, pinned because every record trained
+since the derivation moved to SeedSequence depends on them, and distinct where two streams of one
+run, or of the studies' runs, would otherwise share one."""
 
 import numpy as np
+import pytest
 
 from dospcot.seeding import (
-    DEMO_SEED,
+    EVAL_SEED,
     agent_seed,
     classifier_seed,
     demonstration_seed,
     layer_seed,
     round_reset_seed,
-    tabular_agent_seed,
 )
 
 
-def test_derivations_are_the_ones_the_records_were_trained_with():
-    assert agent_seed(3, 1) == 3001
-    assert round_reset_seed(3, 1, 2) == 3001 + 2 * 7919
-    assert classifier_seed(3, 1) == 304
-    assert layer_seed(304, 10, 3) == 304 * 7919 + 310 + 3
-    assert demonstration_seed(2) == DEMO_SEED + 20_000
-    assert tabular_agent_seed(3, 1) == int(np.random.SeedSequence([3, 1]).generate_state(1)[0])
+def _sequence_word(seed: int, *spawn_key: int) -> int:
+    return int(np.random.SeedSequence(seed, spawn_key=spawn_key).generate_state(1)[0])
 
 
-def test_one_run_never_reuses_a_seed_within_a_stream():
-    for seed in (0, 7, 123):
-        resets = [round_reset_seed(seed, k, r) for k in range(3) for r in range(1, 101)]
-        assert len(set(resets)) == len(resets)
-        assert len({agent_seed(seed, k) for k in range(3)}) == 3
-        assert len({classifier_seed(seed, j) for j in range(3)}) == 3
-        assert len({tabular_agent_seed(seed, k) for k in range(37)}) == 37
+def test_every_derivation_is_the_first_word_of_a_seed_sequence_with_its_stream_tag():
+    assert agent_seed(3, 1) == _sequence_word(3, 0, 1) == 3271219438
+    assert round_reset_seed(3, 1, 2) == _sequence_word(3, 1, 1, 2) == 3114215830
+    assert classifier_seed(3, 1) == _sequence_word(3, 2, 1) == 4074753535
+    assert layer_seed(304, 10, 3) == _sequence_word(304, 3, 10, 3) == 836832709
+    assert demonstration_seed(2) == _sequence_word(2, 4) == 2478801236
 
 
-def test_runs_of_different_seeds_get_different_agents():
-    agents = [agent_seed(s, k) for s in range(50) for k in range(3)]
-    classifiers = [classifier_seed(s, j) for s in range(50) for j in range(3)]
-    assert len(set(agents)) == len(agents) and len(set(classifiers)) == len(classifiers)
+def test_streams_are_told_apart_by_their_tag_not_only_by_their_index():
+    # Agent 1 and classifier 1 of one run, or round 0 of agent 1 and agent 1 itself, must not share a
+    # seed just because their indices match.
+    assert agent_seed(5, 1) != classifier_seed(5, 1)
+    assert round_reset_seed(5, 1, 0) != agent_seed(5, 1)
+
+
+def test_no_seed_repeats_across_the_studies_runs_or_meets_an_evaluation_episode():
+    runs, agents, rounds = range(50), range(3), range(1, 31)
+    streams = [
+        [agent_seed(s, k) for s in runs for k in agents],
+        [round_reset_seed(s, k, r) for s in runs for k in agents for r in rounds],
+        [classifier_seed(s, j) for s in runs for j in agents],
+        [demonstration_seed(s) for s in runs],
+    ]
+    for stream in streams:
+        assert len(set(stream)) == len(stream)
+    every = [x for stream in streams for x in stream]
+    assert len(set(every)) == len(every)
+    evaluation = set(range(EVAL_SEED, EVAL_SEED + 1000))
+    assert not evaluation & set(every)
+    assert all(0 <= x < 2**32 for x in every)  # numpy's legacy seeding, which SB3 calls, needs this
+
+
+def test_a_negative_seed_is_refused_with_one_line():
+    with pytest.raises(ValueError, match="a seed must be >= 0, got -1"):
+        agent_seed(-1, 0)
