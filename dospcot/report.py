@@ -6,6 +6,9 @@ the report gives the number of seeds, the mean, the 95% percentile-bootstrap int
 the interquartile mean (IQM, as rliable). It writes into the sweep folder (or ``out``):
 
 - ``report.md`` and ``report.csv``: one table per metric; the CSV has one row per cell and metric;
+- ``report_per_view.csv`` and the last table of ``report.md``: each view's agent on its own (success,
+  greedy return, optimal-action agreement), for the cells whose runs train more than one agent, since
+  a mean over agents hides which view's agent failed;
 - ``learning_curves.png``: normalised score against env steps per agent, one panel per config,
   one line per cell, a band for the 95% interval over seeds;
 - ``pseudo_accuracy.png``: pseudo-reward accuracy against round, likewise (co-training cells only);
@@ -104,19 +107,52 @@ def cells(runs: Sequence[TrialRun]) -> dict[tuple[str, tuple[tuple[str, str], ..
     return grouped
 
 
+PER_VIEW_METRICS = ("success", "greedy_return", "agreement")
+"""The per-view table's metrics: each agent's own outcome (``summary.json``'s ``per_view``). The
+pseudo-reward figures are left out: the views' agents share their consensus pseudo-rewards."""
+
+
+def _row(
+    name: str, params: tuple, members: Sequence[TrialRun], metric: str, values: list[float], **labels: str
+) -> dict[str, Any]:
+    stat = SeedSummary.of(values)
+    return {
+        "config": name, **dict(params), **labels, "metric": metric, "n": stat.n, "mean": stat.mean,
+        "ci_low": stat.low, "ci_high": stat.high, "iqm": stat.iqm,
+        "seeds": " ".join(str(run.trial.seed) for run in members),
+    }  # fmt: skip
+
+
+def _summary(row: dict[str, Any]) -> SeedSummary:
+    """A row of :func:`aggregate` or :func:`aggregate_per_view` back as its summary."""
+    return SeedSummary(row["mean"], row["ci_low"], row["ci_high"], row["iqm"], row["n"])
+
+
 def aggregate(
     runs: Sequence[TrialRun], metrics: Sequence[str] = tuple(REPORT_METRICS)
 ) -> list[dict[str, Any]]:
     """One row per cell and metric: config, grid values, metric, n, mean, ci_low, ci_high, iqm, seeds."""
+    return [
+        _row(name, params, members, metric, [run.summary["mean"][metric] for run in members])
+        for (name, params), members in cells(runs).items()
+        for metric in metrics
+    ]
+
+
+def aggregate_per_view(runs: Sequence[TrialRun]) -> list[dict[str, Any]]:
+    """One row per cell of more than one view, per view and per :data:`PER_VIEW_METRICS` metric:
+    config, grid values, view, metric, n, mean, ci_low, ci_high, iqm, seeds (over the cell's seeds,
+    each seed contributing that view's agent at the last round)."""
     rows = []
     for (name, params), members in cells(runs).items():
-        for metric in metrics:
-            stat = SeedSummary.of([run.summary["mean"][metric] for run in members])
-            rows.append(
-                {"config": name, **dict(params), "metric": metric, "n": stat.n, "mean": stat.mean,
-                 "ci_low": stat.low, "ci_high": stat.high, "iqm": stat.iqm,
-                 "seeds": " ".join(str(run.trial.seed) for run in members)}
-            )  # fmt: skip
+        views = list(dict.fromkeys(v for run in members for v in run.summary.get("per_view", {})))
+        if len(views) < 2:
+            continue
+        for view in views:
+            holding = [run for run in members if view in run.summary["per_view"]]
+            for metric in PER_VIEW_METRICS:
+                values = [run.summary["per_view"][view][metric] for run in holding]
+                rows.append(_row(name, params, holding, metric, values, view=view))
     return rows
 
 
@@ -134,8 +170,14 @@ def _sweep_line(spec: SweepSpec, runs: Sequence[TrialRun]) -> str:
     )
 
 
-def render_markdown(spec: SweepSpec, runs: Sequence[TrialRun], rows: Sequence[dict[str, Any]]) -> str:
-    """``report.md``: a header naming the sweep, then one table per metric."""
+def render_markdown(
+    spec: SweepSpec,
+    runs: Sequence[TrialRun],
+    rows: Sequence[dict[str, Any]],
+    view_rows: Sequence[dict[str, Any]] = (),
+) -> str:
+    """``report.md``: a header naming the sweep, one table per metric, then (where ``view_rows``,
+    :func:`aggregate_per_view`'s, has any) the per-view table."""
     lines = [
         _sweep_line(spec, runs),
         "Each cell: over seeds, each seed's mean over its agents at the last round; mean "
@@ -151,14 +193,43 @@ def render_markdown(spec: SweepSpec, runs: Sequence[TrialRun], rows: Sequence[di
             "|---|" + "---|" * len(keys) + "---|---|---|",
         ]
         for row in (r for r in rows if r["metric"] == metric):
-            stat = SeedSummary(row["mean"], row["ci_low"], row["ci_high"], row["iqm"], row["n"])
+            stat = _summary(row)
             iqm_text = "n/a" if stat.n == 0 else f"{stat.iqm:.3f}"
             lines.append(
                 f"| {row['config']} | "
                 + "".join(f"{row[k]} | " for k in keys)
                 + f"{stat.n} | {stat} | {iqm_text} |"
             )
+    if view_rows:
+        lines += _per_view_table(keys, view_rows)
     return "\n".join(lines) + "\n"
+
+
+def _per_view_table(keys: Sequence[str], view_rows: Sequence[dict[str, Any]]) -> list[str]:
+    titles = {"greedy_return": "greedy return", **REPORT_METRICS}
+    lines = [
+        "",
+        "### Per view: each agent on its own",
+        "",
+        "Cells with more than one view only. Each cell: mean over seeds [95% bootstrap interval] of "
+        "that view's agent at the last round.",
+        "",
+        "| "
+        + " | ".join(
+            ["config", *map(short_key, keys), "view", "seeds", *(titles[m] for m in PER_VIEW_METRICS)]
+        )
+        + " |",
+        "|---|" + "---|" * len(keys) + "---|---|" + "---|" * len(PER_VIEW_METRICS),
+    ]
+    by_line: dict[tuple, dict[str, dict[str, Any]]] = {}
+    for row in view_rows:
+        line = (row["config"], *(row[k] for k in keys), row["view"])
+        by_line.setdefault(line, {})[row["metric"]] = row
+    for (config, *values, view), by_metric in by_line.items():
+        stats = [_summary(by_metric[m]) for m in PER_VIEW_METRICS]
+        columns = [config, *map(str, values), view, str(stats[0].n), *map(str, stats)]
+        lines.append("| " + " | ".join(columns) + " |")
+    return lines
 
 
 def round_bands(members: Sequence[TrialRun], metric: str, x_key: str) -> Band | None:
@@ -188,10 +259,13 @@ def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
     out_dir.mkdir(parents=True, exist_ok=True)
     if runs[0].summary.get("task") == "paper":  # a sweep holds one kind of config (SweepSpec.trials)
         return _write_paper_report(spec, runs, out_dir)
-    rows = aggregate(runs)
+    rows, view_rows = aggregate(runs), aggregate_per_view(runs)
     written = [out_dir / "report.md", out_dir / "report.csv"]
-    write_text(written[0], render_markdown(spec, runs, rows))
+    write_text(written[0], render_markdown(spec, runs, rows, view_rows))
     write_csv(written[1], rows)
+    if view_rows:
+        written.append(out_dir / "report_per_view.csv")
+        write_csv(written[-1], view_rows)
     grouped = cells(runs)
     for metric, x_key, name in (
         ("normalised_score", "env_steps", "learning_curves.png"),

@@ -244,6 +244,45 @@ def test_report_on_synthetic_summaries_gives_hand_checked_figures(tmp_path):
     ]  # fmt: skip
 
 
+def test_the_per_view_table_shows_which_views_agent_failed_where_the_mean_hides_it(tmp_path):
+    sweep_dir = _synthetic_sweep(tmp_path, {"0.1": [1.0] * 4, "0.5": [1.0] * 4})
+    # Fraction 0.1: the patch agent reaches the goal on every seed, the rays agent on seeds 1 and 3,
+    # so the mean over agents (0.75) names no culprit. Fraction 0.5 trains one view: no per-view rows.
+    for seed in range(4):
+        for fraction, views in (("0.1", ("patch", "rays")), ("0.5", ("patch",))):
+            path = (
+                sweep_dir / "trials" / Trial("a", "a", {"training.label_fraction": fraction}, seed).trial_id
+            )
+            summary = json.loads((path / "summary.json").read_text())
+            agent = {"patch": (1.0, -17.0, 0.9), "rays": (float(seed % 2), -17.0 - 47 * (1 - seed % 2), 0.8)}
+            summary["per_view"] = {
+                v: dict(zip(("success", "greedy_return", "agreement"), agent[v], strict=True)) for v in views
+            }
+            (path / "summary.json").write_text(json.dumps(summary))
+    paths = write_report(sweep_dir)
+    assert sweep_dir / "report_per_view.csv" in paths
+    with (sweep_dir / "report_per_view.csv").open() as handle:
+        rows = {(r["training.label_fraction"], r["view"], r["metric"]): r for r in csv.DictReader(handle)}
+    assert {fraction for fraction, _, _ in rows} == {"0.1"}
+    assert float(rows[("0.1", "patch", "success")]["mean"]) == 1.0
+    assert (
+        float(rows[("0.1", "rays", "success")]["mean"]) == 0.5
+        and rows[("0.1", "rays", "success")]["n"] == "4"
+    )
+    # Greedy returns -64, -17, -64, -17: mean -40.5.
+    assert float(rows[("0.1", "rays", "greedy_return")]["mean"]) == -40.5
+    text = (sweep_dir / "report.md").read_text()
+    assert (
+        "| config | label_fraction | view | seeds | success | greedy return | optimal-action agreement |"
+        in text
+    )
+    assert (
+        "| a | 0.1 | patch | 4 | 1.000 [1.000, 1.000] | -17.000 [-17.000, -17.000] | 0.900 [0.900, 0.900] |"
+        in text
+    )
+    assert "| a | 0.1 | rays | 4 | 0.500 [" in text and "| a | 0.5 | patch |" not in text
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
