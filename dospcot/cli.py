@@ -120,8 +120,8 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument(
         "--seeds",
         type=parse_seeds,
-        default=[0],
-        help="a count (5 means seeds 0-4) or a comma list (default 1)",
+        help="a count (5 means seeds 0-4) or a comma list (default 1); with --resume, seeds to add "
+        "to the sweep (a count or list that holds its own seeds): only the new seeds' trials run",
     )
     sweep.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -319,12 +319,17 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
                 "--resume SWEEP_DIR takes no CONFIG, --grid, --set or --name: the folder holds them"
             )
         sweep_dir, spec = args.resume, None
+        if args.seeds is not None:
+            from dospcot.sweep import add_seeds
+
+            spec = add_seeds(sweep_dir, args.seeds)
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
         from dospcot.sweep import parse_grid
 
-        spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), tuple(args.seeds), tuple(args.overrides))
+        seeds = tuple(args.seeds or (0,))
+        spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), seeds, tuple(args.overrides))
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
     result = run_sweep(
         sweep_dir, spec, backend=args.backend, workers=args.workers, ray_address=args.ray_address,

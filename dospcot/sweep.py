@@ -204,7 +204,7 @@ def open_sweep(sweep_dir: Path, spec: SweepSpec | None) -> SweepSpec:
             raise SweepError(
                 f"{sweep_dir} holds another sweep ({', '.join(stored.configs)}, grid "
                 f"{_grid_text(stored.grid)}, {len(stored.seeds)} seeds); pick another --name or resume "
-                f"it with --resume {sweep_dir}"
+                f"it with --resume {sweep_dir} (add --seeds to give it more seeds)"
             )
         return stored
     if spec is None:
@@ -214,6 +214,24 @@ def open_sweep(sweep_dir: Path, spec: SweepSpec | None) -> SweepSpec:
     except OSError as err:  # a file on the way, or a folder that cannot be created
         raise SweepError(f"cannot make the sweep folder {sweep_dir}: {err.strerror}") from None
     write_json(path, spec.to_dict())
+    return spec
+
+
+def add_seeds(sweep_dir: Path, seeds: Sequence[int]) -> SweepSpec:
+    """Give the sweep in ``sweep_dir`` the seeds ``seeds``, a superset of its own, keeping its finished
+    trials: its ``sweep.json`` is rewritten, and a resume then runs only the new seeds' trials.
+
+    :raises SweepError: no sweep there, or ``seeds`` lacks some of the sweep's seeds.
+    """
+    stored = open_sweep(sweep_dir, None)
+    dropped = [seed for seed in stored.seeds if seed not in seeds]
+    if dropped:
+        raise SweepError(
+            f"--seeds would drop seed(s) {', '.join(map(str, dropped))} of the sweep in {sweep_dir}: "
+            f"give all of its seeds ({', '.join(map(str, stored.seeds))}) and the new ones"
+        )
+    spec = replace(stored, seeds=tuple(stored.seeds) + tuple(s for s in seeds if s not in stored.seeds))
+    write_json(sweep_dir / SWEEP_FILE, spec.to_dict())
     return spec
 
 

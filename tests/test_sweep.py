@@ -283,6 +283,27 @@ def test_the_per_view_table_shows_which_views_agent_failed_where_the_mean_hides_
     assert "| a | 0.1 | rays | 4 | 0.500 [" in text and "| a | 0.5 | patch |" not in text
 
 
+def test_resume_with_more_seeds_runs_only_the_new_seeds_and_refuses_to_drop_one(tmp_path, capsys):
+    sweep_dir, quiet = tmp_path / "tiny", ["--workers", "1", "--no-progress"]
+    one_round = ["--set", "training.rounds=1", "--runs-dir", str(tmp_path)]
+    assert main(["sweep", "tiny", *one_round, *quiet]) == 0
+    first = _summaries(sweep_dir)
+    assert len(first) == 1
+    capsys.readouterr()
+    assert main(["sweep", "--resume", str(sweep_dir), "--seeds", "2", *quiet]) == 0
+    assert "2 trials; 1 already finished, 1 run now, 0 failed" in capsys.readouterr().out
+    assert json.loads((sweep_dir / "sweep.json").read_text())["seeds"] == [0, 1]
+    summaries = _summaries(sweep_dir)
+    assert len(summaries) == 2 and {k: summaries[k] for k in first} == first
+    added = json.loads(next(v for k, v in summaries.items() if k not in first))
+    assert added["seed"] == 1
+    before = (sweep_dir / "sweep.json").read_text()
+    assert main(["sweep", "--resume", str(sweep_dir), "--seeds", "1,2"]) == 2
+    err = capsys.readouterr().err
+    assert "--seeds would drop seed(s) 0 of the sweep in" in err and err.count("\n") == 1
+    assert (sweep_dir / "sweep.json").read_text() == before
+
+
 @pytest.mark.parametrize(
     ("args", "message"),
     [
