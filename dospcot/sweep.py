@@ -201,10 +201,16 @@ def open_sweep(sweep_dir: Path, spec: SweepSpec | None) -> SweepSpec:
                 f"{path} is damaged ({type(err).__name__}); start the sweep in a new folder"
             ) from None
         if spec is not None and spec != stored:
+            if replace(spec, seeds=stored.seeds) == stored and set(stored.seeds) <= set(spec.seeds):
+                raise SweepError(
+                    f"{sweep_dir} holds another sweep (these configs and grid, with seeds "
+                    f"{', '.join(map(str, stored.seeds))}); to add seeds to it: dospcot sweep --resume "
+                    f"{sweep_dir} --seeds {','.join(map(str, spec.seeds))}"
+                )
             raise SweepError(
                 f"{sweep_dir} holds another sweep ({', '.join(stored.configs)}, grid "
                 f"{_grid_text(stored.grid)}, {len(stored.seeds)} seeds); pick another --name or resume "
-                f"it with --resume {sweep_dir} (add --seeds to give it more seeds)"
+                f"it with --resume {sweep_dir}"
             )
         return stored
     if spec is None:

@@ -302,6 +302,9 @@ def test_resume_with_more_seeds_runs_only_the_new_seeds_and_refuses_to_drop_one(
     err = capsys.readouterr().err
     assert "--seeds would drop seed(s) 0 of the sweep in" in err and err.count("\n") == 1
     assert (sweep_dir / "sweep.json").read_text() == before
+    # The same sweep with more seeds, named as a new one, says how to add them.
+    assert main(["sweep", "tiny", *one_round, "--seeds", "3"]) == 2
+    assert f"to add seeds to it: dospcot sweep --resume {sweep_dir} --seeds 0,1,2" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
