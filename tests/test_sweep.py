@@ -277,8 +277,7 @@ def test_the_per_view_table_shows_which_views_agent_failed_where_the_mean_hides_
         in text
     )
     assert (
-        "| a | 0.1 | patch | 4 | 1.000 [1.000, 1.000] | -17.000 [-17.000, -17.000] | 0.900 [0.900, 0.900] |"
-        in text
+        "| a | 0.1 | patch | 4 | 1.000 [1.000, 1.000] | -17.0 [-17.0, -17.0] | 0.900 [0.900, 0.900] |" in text
     )
     assert "| a | 0.1 | rays | 4 | 0.500 [" in text and "| a | 0.5 | patch |" not in text
 
