@@ -63,7 +63,9 @@ class OneLineParser(argparse.ArgumentParser):
 
 
 def build_parser() -> argparse.ArgumentParser:
-    from dospcot.paper import PRESETS
+    """The parser of every command; building it imports neither torch nor stable-baselines3, so that
+    ``--help`` and usage errors answer at once."""
+    from dospcot.config.presets import PAPER_PRESETS
 
     parser = OneLineParser(prog="dospcot", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
@@ -115,7 +117,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         default=[],
         metavar="KEY=V1,V2",
-        help="a config key and its values, e.g. training.label_fraction=0.01,0.1 cotraining.gamma=0,0.3",
+        help="a config key and its values, e.g. training.label_fraction=0.01,0.1 "
+        "cotraining.consensus_weight=0,0.3",
     )
     sweep.add_argument(
         "--seeds",
@@ -158,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     paper.add_argument(
         "--preset",
-        choices=sorted(PRESETS),
+        choices=sorted(PAPER_PRESETS),
         default="paper-text",
         help="paper-text: the paper's stated hyperparameters; published-code: its code's "
         "(the config presets paper-text and paper-published-code)",
@@ -222,11 +225,16 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     command = shlex.join(["dospcot", *argv])
+    if args.command == "train" and args.list:  # before any import of torch: a list answers at once
+        from dospcot.config.presets import preset_names
+
+        print("\n".join(preset_names()))
+        return 0
     if args.command in RUN_COMMANDS:
+        from dospcot.config.errors import ConfigError
         from dospcot.envs import NonFiniteError
-        from dospcot.run_folder import RunFolderError
-        from dospcot.sweep import SweepError
-        from dospcot.train_config import ConfigError
+        from dospcot.experiment.run_folder import RunFolderError
+        from dospcot.experiment.sweep import SweepError
 
         try:
             return RUN_COMMANDS[args.command](args, command)
@@ -237,7 +245,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
             return 1
     if args.command == "bench":
-        from dospcot.bench import run_benchmarks
+        from dospcot.experiment.bench import run_benchmarks
 
         if args.out is None:
             args.out = QUICK_BENCH_OUT if args.quick else Path("BENCHMARKS.md")
@@ -264,12 +272,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 def _train(args: argparse.Namespace, command: str) -> int:
     import torch
 
-    from dospcot.train import resume, train
-    from dospcot.train_config import ConfigError, load_config, preset_names
+    from dospcot.config.errors import ConfigError
+    from dospcot.config.loading import load_config
+    from dospcot.config.presets import preset_names
+    from dospcot.experiment.train import resume, run_config, train
 
-    if args.list:
-        print("\n".join(preset_names()))
-        return 0
     torch.set_num_threads(args.threads)
     if args.resume is not None:
         if args.config or args.overrides:
@@ -281,23 +288,12 @@ def _train(args: argparse.Namespace, command: str) -> int:
         cfg = load_config(args.config, args.overrides)
         run_dir = train(cfg, args.runs_dir, show_progress=not args.no_progress, command=command)
     summary = json.loads((run_dir / "summary.json").read_text())
-    mean = summary["mean"]
-    if summary.get("task") == "paper":
-        print(
-            f"{run_dir}: ESARSA-ESARSA DOSPCoT agreement {mean['dospcot_agreement']:.3f}, oracle "
-            f"{mean['oracle_agreement']:.3f} (seed {summary['seed']}, {summary['runs']} runs, round "
-            f"{summary['rounds']}; every run in metrics.csv)"
-        )
-        return 0
-    print(
-        f"{run_dir}: normalised score {mean['normalised_score']:.3f}, agreement {mean['agreement']:.3f}, "
-        f"success {mean['success']:.2f} (mean over {summary['m']} agent(s), round {summary['rounds']})"
-    )
+    print(run_config(run_dir).task_definition.result_line(run_dir, summary))
     return 0
 
 
 def _evaluate(args: argparse.Namespace, command: str) -> int:
-    from dospcot.train import evaluate
+    from dospcot.experiment.train import evaluate
 
     result = evaluate(args.run_dir)
     for view, row in result["per_view"].items():
@@ -310,8 +306,8 @@ def _evaluate(args: argparse.Namespace, command: str) -> int:
 
 
 def _sweep(args: argparse.Namespace, command: str) -> int:
-    from dospcot.sweep import SweepSpec, default_sweep_dir, run_sweep
-    from dospcot.train_config import ConfigError
+    from dospcot.config.errors import ConfigError
+    from dospcot.experiment.sweep import SweepSpec, default_sweep_dir, run_sweep
 
     if args.resume is not None:
         if args.configs or args.grid or args.overrides or args.name:
@@ -320,13 +316,13 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
             )
         sweep_dir, spec = args.resume, None
         if args.seeds is not None:
-            from dospcot.sweep import add_seeds
+            from dospcot.experiment.sweep import add_seeds
 
             spec = add_seeds(sweep_dir, args.seeds)
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
-        from dospcot.sweep import parse_grid
+        from dospcot.experiment.sweep import parse_grid
 
         seeds = tuple(args.seeds or (0,))
         spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), seeds, tuple(args.overrides))
@@ -348,7 +344,7 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
 
 
 def _report(args: argparse.Namespace, command: str) -> int:
-    from dospcot.report import write_report
+    from dospcot.experiment.report import write_report
 
     paths = write_report(args.sweep_dir, args.out)
     print(paths[0].read_text())
@@ -359,17 +355,17 @@ def _report(args: argparse.Namespace, command: str) -> int:
 def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
     import time
 
-    from dospcot.paper import PRESETS
-    from dospcot.report import write_report
-    from dospcot.run_folder import new_run_dir
-    from dospcot.sweep import SweepError, SweepSpec, run_sweep
+    from dospcot.config.presets import PAPER_PRESETS
+    from dospcot.experiment.report import write_report
+    from dospcot.experiment.run_folder import new_run_dir
+    from dospcot.experiment.sweep import SweepError, SweepSpec, run_sweep
 
     overrides = [
         *([f"tabular.label_fraction={args.label_fraction}"] if args.label_fraction is not None else []),
         *([f"tabular.episodes_per_round={args.episodes}"] if args.episodes is not None else []),
         *args.overrides,
     ]
-    spec = SweepSpec((PRESETS[args.preset],), {}, tuple(args.seeds), tuple(overrides))
+    spec = SweepSpec((PAPER_PRESETS[args.preset],), {}, tuple(args.seeds), tuple(overrides))
     spec.trials()  # a bad --set fails here, before the folder is made
     sweep_dir = new_run_dir(args.out, "")
     started = time.perf_counter()

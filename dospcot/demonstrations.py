@@ -38,51 +38,6 @@ from dospcot.envs.tabular import TabularMDP
 
 
 @dataclass(frozen=True)
-class DemonstrationsConfig:
-    """The ``[demonstrations]`` section of a config: expert episodes and the roles they play.
-
-    :param episodes: on the grid, expert episodes of value iteration's optimal policy (the first from
-        the task's start, the others from random states, :func:`expert_demonstrations`); with
-        ``file``, the first this many episodes of the file; 0: none (with ``file``: all of them).
-    :param file: a gym task's demonstrations, an ``.npz`` file (:meth:`Demonstrations.save`) holding
-        every view of the run; empty: none.
-    :param labels: the episodes' rewards are labels. On the grid each demonstrated (s, a) key is
-        revealed, to the reward classifiers and to the agents' own steps on it; from a file each
-        step joins the classifiers' labelled samples. False: the rewards are not read, so the
-        demonstrations reach the agents through the margin loss only.
-    :param margin_loss_weight: lambda of the large-margin loss on the demonstrated actions in every
-        neural agent's gradient steps (:func:`~dospcot.policies.esarsa_dqn.large_margin_loss`); 0: off.
-    :param margin: that loss's margin, in reward units (DQfD's 0.8).
-    :param agent: a sensor task's (highway, gym) demonstrations recorded from a saved SB3 agent (a
-        ``.zip``): ``episodes`` greedy episodes of it on the run's task, every reward known
-        (:func:`record_demonstrations`); empty: none.
-    :param agent_algorithm: the SB3 (or sb3-contrib) class that loads ``agent``, e.g. ``DQN``, ``PPO``.
-    :param agent_view: the view ``agent`` observes; empty: the run's first view.
-    """
-
-    episodes: int = 0
-    file: str = ""
-    agent: str = ""
-    agent_algorithm: str = "DQN"
-    agent_view: str = ""
-    labels: bool = True
-    margin_loss_weight: float = 1.0
-    margin: float = 0.8
-
-    def __post_init__(self) -> None:
-        if self.episodes < 0:
-            raise ValueError(f"episodes must be >= 0, got {self.episodes}")
-        if self.file and self.agent:
-            raise ValueError("give file or agent, not both: each is a source of demonstrations")
-        if self.agent and not self.episodes:
-            raise ValueError("agent: set episodes, the number of episodes to record from it")
-        if self.margin_loss_weight < 0 or self.margin < 0:
-            raise ValueError(
-                f"margin_loss_weight and margin must be >= 0, got {self.margin_loss_weight}, {self.margin}"
-            )
-
-
-@dataclass(frozen=True)
 class Demonstrations:
     """N demonstrated steps, grouped into episodes.
 
@@ -304,7 +259,6 @@ def record_demonstrations(policy: Policy, env: gym.Env, n_episodes: int, seed: i
 
 __all__ = [
     "Demonstrations",
-    "DemonstrationsConfig",
     "expert_demonstrations",
     "load_agent",
     "record_demonstrations",

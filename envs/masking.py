@@ -127,7 +127,7 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         drawn ones, e.g. the steps of demonstrations whose rewards a rater gave; None: none.
     :param segment_length: k; above 1, whole k-step segments are labelled with their summed reward,
         each with probability ``label_fraction``, and no single reward is revealed (settable later,
-        as :class:`dospcot.segments.SegmentLabelWrapper` does).
+        as :class:`dospcot.core.segments.SegmentLabelWrapper` does).
     """
 
     def __init__(

@@ -73,9 +73,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"wrote {DIGESTS} ({', '.join(names)})")
         return 0
     stored = json.loads(DIGESTS.read_text())
-    differ = [
-        f"{name}/{file}" for name in names for file in FILES if stored[name][file] != found[name][file]
-    ]
+    differ = [f"{name}/{file}" for name in names for file in FILES if stored[name][file] != found[name][file]]
     for name in names:
         print(f"{name}: {'differs' if any(d.startswith(name + '/') for d in differ) else 'identical'}")
     if differ:

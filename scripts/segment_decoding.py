@@ -17,9 +17,10 @@ import argparse
 
 import numpy as np
 
-from dospcot.segments import fit_step_rewards
-from dospcot.train import build_run
-from dospcot.train_config import ConfigError, load_config
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.core.segments import fit_step_rewards
+from dospcot.experiment.train import build_run
 
 
 def _cells(decoded: np.ndarray, hidden: np.ndarray, value: float) -> str:
@@ -40,16 +41,15 @@ def main() -> None:
     if cfg.training.segment_length < 2:
         parser.error("the config has no segment labels: set training.segment_length to 2 or more")
     run = build_run(cfg)
-    for _ in range(args.rounds):
-        run.run_round()
+    run.run(until_round=args.rounds)
     segments, n = run.segments, len(run.segments)
     steps = run.task.pool()
     read = run.table.weight > 0
     hidden = run.store.hidden_reward[: len(run.table)]
     labelled = segments.labelled[:n].astype(float)
-    model = run.config.cotraining.classifier
+    model = run.cfg.cotraining.classifier
     alone = [  # from the run's own initial parameters
-        fit_step_rewards(f[0], segments.ids[:n], segments.label[:n], labelled, model, seed)
+        fit_step_rewards(f, segments.ids[:n], segments.label[:n], labelled, model, seed)
         for f, seed in zip(steps.features, run.step_model_seeds(), strict=True)
     ]
     print(
@@ -57,7 +57,7 @@ def main() -> None:
         f"{int(labelled.sum())} labelled; {int(read.sum())} steps read by the agents.\n"
         "Each cell: the mean decoded reward (the mean absolute error) over the steps the agents read.\n"
     )
-    views = [f"fit on labelled segments alone, {view}" for view in run.spec.views]
+    views = [f"fit on labelled segments alone, {view}" for view in run.cfg.views]
     print("| hidden reward | steps | reward table (what the agents read) | " + " | ".join(views) + " |")
     print("|---" * (3 + len(views)) + "|")
     for value in np.unique(hidden[read]):

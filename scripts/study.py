@@ -48,12 +48,12 @@ from typing import Any
 import numpy as np
 from readme_block import check_readme_block, replace_readme_block
 
+from dospcot.config.loading import load_config
+from dospcot.config.presets import PAPER_PRESETS
+from dospcot.experiment.report import TrialRun, cells, load_runs, paper_report_tables, write_report
+from dospcot.experiment.run_folder import REWARD_CLASSES_FILE
+from dospcot.experiment.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
 from dospcot.metrics import SeedSummary
-from dospcot.paper import PRESETS
-from dospcot.report import TrialRun, cells, load_runs, paper_report_tables, write_report
-from dospcot.run_folder import REWARD_CLASSES_FILE
-from dospcot.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
-from dospcot.train_config import load_config
 
 ROOT = Path(__file__).resolve().parent.parent
 GRID_METHODS = {
@@ -911,7 +911,7 @@ STUDIES = {
             readme=paper_readme if preset == "paper-text" else None,
             plot=("paper_agreement.png", f"{preset}-agreement.png"),
         )
-        for preset in PRESETS.values()
+        for preset in PAPER_PRESETS.values()
     },
 }
 

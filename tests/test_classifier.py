@@ -3,7 +3,7 @@
 import numpy as np
 import torch
 
-from dospcot.classifier import BatchedRewardClassifier, ClassifierConfig
+from dospcot.core.classifier import BatchedRewardClassifier, ClassifierConfig
 
 
 def _separable(seed):

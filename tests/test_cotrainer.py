@@ -4,11 +4,11 @@ round after another, each against figures worked out by hand."""
 import numpy as np
 import pytest
 
-from dospcot.cotraining import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
-from dospcot.key_pool import key_features
-from dospcot.reward_classes import QuantileRewardClasses, RewardClasses, episode_end_class_mask
-from dospcot.round_records import record_head, round_stats
-from dospcot.run_spec import RunSpec
+from dospcot.core.cotrainer import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.core.key_pool import key_features
+from dospcot.core.reward_classes import QuantileRewardClasses, RewardClasses, episode_end_class_mask
+from dospcot.core.round_records import record_head, round_stats
+from dospcot.core.run_spec import RunSpec
 
 
 def test_reward_classes_keep_the_order_of_first_appearance_and_round_trip():

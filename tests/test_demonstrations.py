@@ -15,15 +15,15 @@ import torch as th
 from stable_baselines3 import DQN
 from test_neural_cotraining import CONFIG, LAYOUT, VIEWS  # the small grid of the co-training tests
 
+from dospcot.config.loading import ConfigError, load_config
 from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, expert_demonstrations
 from dospcot.envs import GridWorld, StateActionMask, View, ViewObservationWrapper
 from dospcot.envs.highway import FAST_HIGHWAY_ID, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper
-from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
+from dospcot.experiment.train import build_run
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn import large_margin_loss
-from dospcot.train import build_run
-from dospcot.train_config import ConfigError, load_config
+from dospcot.tasks.grid import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 
 
 def test_the_large_margin_loss_by_hand():

@@ -11,7 +11,12 @@ import torch as th
 from stable_baselines3 import DQN
 from stable_baselines3.common.evaluation import evaluate_policy
 
-from dospcot.classifier import BatchedRewardClassifier, ClassifierConfig, load_classifier, save_classifier
+from dospcot.core.classifier import (
+    BatchedRewardClassifier,
+    ClassifierConfig,
+    load_classifier,
+    save_classifier,
+)
 from dospcot.envs import CLIFF_VIEWS, ViewObservationWrapper
 from dospcot.policies import ExpectedSarsaDQN, RelabellingReplayBuffer, RewardTable
 from dospcot.policies.esarsa_dqn import epsilon_greedy_expectation, weighted_huber_loss

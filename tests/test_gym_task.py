@@ -17,6 +17,7 @@ import pytest
 import stable_baselines3
 import torch
 
+from dospcot.config.loading import ConfigError, load_config
 from dospcot.demonstrations import Demonstrations
 from dospcot.envs import minigrid_views
 from dospcot.envs.gym_sensors import (
@@ -26,11 +27,10 @@ from dospcot.envs.gym_sensors import (
     make_masked_gym,
 )
 from dospcot.envs.masking import key_is_labelled
-from dospcot.gym_task import gym_config, train_env
-from dospcot.run_folder import RunFolderError
-from dospcot.train import build_run, evaluate, resume
-from dospcot.train_config import ConfigError, load_config
-from dospcot.transition_cotraining import KeyedStepStore, TransitionCoTraining
+from dospcot.experiment.python_api import gym_config, train_env
+from dospcot.experiment.run_folder import RunFolderError
+from dospcot.experiment.train import build_run, evaluate, resume
+from dospcot.tasks.sensor import KeyedStepStore, TransitionCoTraining
 
 LENGTH = 10
 

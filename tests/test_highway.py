@@ -12,11 +12,11 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from dospcot.cli import main
+from dospcot.config.loading import ConfigError, load_config
+from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.envs.highway import make_masked_highway
-from dospcot.reward_classes import QuantileRewardClasses
-from dospcot.train import build_run, evaluate
-from dospcot.train_config import ConfigError, load_config
-from dospcot.transition_cotraining import TransitionCoTraining
+from dospcot.experiment.train import build_run, evaluate
+from dospcot.tasks.sensor import TransitionCoTraining
 
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
 
@@ -154,7 +154,7 @@ def test_short_cotraining_on_the_fast_env_writes_every_run_file_and_evaluates(tm
     classes = json.loads((run_dir / "reward_classes.json").read_text())["rewards"]
     assert 1 <= len(classes) <= 5 and classes == sorted(classes)
     # Evaluating the saved agents builds the task's evaluator, not a training run with fresh agents.
-    monkeypatch.setattr("dospcot.cotraining_round.make_agent", _no_new_agents)
+    monkeypatch.setattr("dospcot.core.cotraining_run.make_agent", _no_new_agents)
     evaluation = evaluate(run_dir)
     for view in ("kinematics", "occupancy"):
         assert evaluation["per_view"][view]["greedy_return"] == summary["per_view"][view]["greedy_return"]

@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 import torch as th
 
-from dospcot.cotraining import RoundResult
+from dospcot.core.cotrainer import RoundResult
+from dospcot.core.round_records import round_stats
 from dospcot.envs import (
     FiniteCheckWrapper,
     GridWorld,
@@ -21,8 +22,7 @@ from dospcot.envs import (
     monitored_states,
     view_blind_spots,
 )
-from dospcot.neural_cotraining import NeuralConfig, NeuralCoTraining, NeuralRunSpec
-from dospcot.round_records import round_stats
+from dospcot.tasks.grid import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 
 LAYOUT = GridWorld(size=6, layout_seed=0).layout
 VIEWS = grid_views(LAYOUT, patch_size=3)

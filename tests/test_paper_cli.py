@@ -9,13 +9,13 @@ import sys
 import numpy as np
 import pytest
 
-from dospcot import bench
 from dospcot.cli import main
+from dospcot.config.loading import ConfigError, load_config
+from dospcot.experiment import bench
+from dospcot.experiment.report import write_report
+from dospcot.experiment.sweep import SweepError, SweepSpec, Trial, plan_jobs, run_sweep
 from dospcot.metrics import SeedSummary
-from dospcot.paper import PRESETS, cell_summary, protocol_specs, train_protocol_at
-from dospcot.report import write_report
-from dospcot.sweep import SweepError, SweepSpec, Trial, plan_jobs, run_sweep
-from dospcot.train_config import ConfigError, load_config
+from dospcot.paper.protocol import PRESETS, cell_summary, protocol_specs, train_protocol_at
 
 # Five episodes a round and short classifier fits: every file and figure of the protocol in seconds.
 QUICK = ["tabular.episodes_per_round=5", "tabular.cotraining.classifier.epochs=10"]

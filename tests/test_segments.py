@@ -16,15 +16,21 @@ from test_gym_task import LENGTH, SETTINGS, corridor_cell, make_corridor
 from test_gym_task import VIEWS as GYM_VIEWS
 from test_neural_cotraining import CONFIG, LAYOUT, VIEWS, assert_same_learners
 
-from dospcot.classifier import ClassifierConfig
-from dospcot.cotraining import Pool
+from dospcot.config.loading import ConfigError, load_config
+from dospcot.core.classifier import ClassifierConfig
+from dospcot.core.cotrainer import Pool
+from dospcot.core.reward_classes import QuantileRewardClasses
+from dospcot.core.segments import (
+    SegmentLabelWrapper,
+    SegmentStore,
+    fit_step_rewards,
+    segment_pool,
+    step_rewards,
+)
 from dospcot.envs import GridWorld, RewardMaskWrapper
-from dospcot.gym_task import gym_config
-from dospcot.neural_cotraining import NeuralCoTraining, NeuralRunSpec
-from dospcot.reward_classes import QuantileRewardClasses
-from dospcot.segments import SegmentLabelWrapper, SegmentStore, fit_step_rewards, segment_pool, step_rewards
-from dospcot.train import build_run
-from dospcot.train_config import ConfigError, load_config
+from dospcot.experiment.python_api import gym_config
+from dospcot.experiment.train import build_run
+from dospcot.tasks.grid import NeuralCoTraining, NeuralRunSpec
 
 REWARDS = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0]
 

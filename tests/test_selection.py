@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from dospcot.consensus import consensus_labels
-from dospcot.selection import class_counts, spamco_select
+from dospcot.core.consensus import consensus_labels
+from dospcot.core.selection import class_counts, spamco_select
 
 
 def _select(scores, **kw):

@@ -5,6 +5,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
+from dospcot.config.loading import load_config
 from dospcot.envs import (
     GridLayout,
     GridWorld,
@@ -17,8 +18,7 @@ from dospcot.envs import (
     view_blind_spots,
 )
 from dospcot.envs.gridworld import FREE, LAVA, N_TERRAIN, misread
-from dospcot.train import build_run, build_task
-from dospcot.train_config import load_config
+from dospcot.experiment.train import build_run, build_task
 
 # Lava at (0, 2), (1, 1), (2, 0) and (3, 3); start (3, 0), goal (1, 3).
 MAP = """

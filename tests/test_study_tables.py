@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
+from dospcot.experiment.report import TrialRun
+from dospcot.experiment.sweep import Trial
 from dospcot.metrics import SeedSummary
-from dospcot.report import TrialRun
-from dospcot.sweep import Trial
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
 import study
@@ -93,8 +93,8 @@ def test_a_setting_with_a_method_not_yet_run_says_so():
 
 
 def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_success(tmp_path):
-    from dospcot.run_folder import write_toml
-    from dospcot.train_config import load_config
+    from dospcot.config.loading import load_config
+    from dospcot.experiment.run_folder import write_toml
 
     config = load_config("minigrid-lavagap-oracle").to_dict()
 
@@ -266,8 +266,8 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
 
 def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
     """A table rebuilt from a record must not count a run under a preset that has changed since."""
-    from dospcot.run_folder import write_toml
-    from dospcot.train_config import load_config
+    from dospcot.config.loading import load_config
+    from dospcot.experiment.run_folder import write_toml
 
     trial = "grid16-masked-zero/training.label_fraction=0.01__seed=0"
     stored = tmp_path / "label-fraction/trials" / trial / "config.toml"

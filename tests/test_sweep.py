@@ -13,13 +13,13 @@ from pathlib import Path
 import pytest
 import torch
 
-from dospcot import run_folder
 from dospcot.cli import main
-from dospcot.report import load_runs, write_report
-from dospcot.sweep import SweepError, SweepSpec, Trial, open_sweep, parse_grid, run_sweep
-from dospcot.train_config import ConfigError, load_config
+from dospcot.config.loading import ConfigError, load_config
+from dospcot.experiment import run_folder
+from dospcot.experiment.report import load_runs, write_report
+from dospcot.experiment.sweep import SweepError, SweepSpec, Trial, open_sweep, parse_grid, run_sweep
 
-GRID = {"training.label_fraction": ("0.1", "0.5"), "cotraining.gamma": ("0", "0.3")}
+GRID = {"training.label_fraction": ("0.1", "0.5"), "cotraining.consensus_weight": ("0", "0.3")}
 
 
 def _summaries(sweep_dir: Path) -> dict[str, str]:
@@ -44,7 +44,7 @@ def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
         with pytest.raises(ConfigError, match=message):
             parse_grid([bad])
     with pytest.raises(ConfigError, match="given twice"):
-        parse_grid(["cotraining.gamma=0", "cotraining.gamma=0.3"])
+        parse_grid(["cotraining.consensus_weight=0", "cotraining.consensus_weight=0.3"])
     with pytest.raises(ConfigError, match="label_fraction"):
         SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}).trials()
 
@@ -57,9 +57,9 @@ def test_local_sweep_runs_every_trial_once_and_reruns_nothing(tmp_path):
     assert len(summaries) == 8
     for trial in result.trials:
         cfg = load_config(str(tmp_path / "sweep" / "trials" / trial.trial_id / "config.toml"))
-        assert (cfg.training.label_fraction, cfg.cotraining.gamma, cfg.seed) == (
+        assert (cfg.training.label_fraction, cfg.cotraining.consensus_weight, cfg.seed) == (
             float(trial.params["training.label_fraction"]),
-            float(trial.params["cotraining.gamma"]),
+            float(trial.params["cotraining.consensus_weight"]),
             trial.seed,
         )
     again = run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False)

@@ -23,12 +23,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
 from tensorboard.compat.proto.event_pb2 import SessionLog
 
-from dospcot.classifier import load_classifier
 from dospcot.cli import main
-from dospcot.envs import GridWorld, TabularMDP
-from dospcot.run_folder import RunFolderError, read_checkpoint, write_csv
-from dospcot.train import ROUND_SCALARS, SEGMENT_SCALARS, build_task, evaluate
-from dospcot.train_config import (
+from dospcot.config.loading import (
     DQN_DEFAULTS,
     DQN_SET_ELSEWHERE,
     ConfigError,
@@ -36,6 +32,10 @@ from dospcot.train_config import (
     load_config,
     preset_names,
 )
+from dospcot.core.classifier import load_classifier
+from dospcot.envs import GridWorld, TabularMDP
+from dospcot.experiment.run_folder import RunFolderError, read_checkpoint, write_csv
+from dospcot.experiment.train import ROUND_SCALARS, SEGMENT_SCALARS, build_task, evaluate
 
 ISSUE_PRESETS = [
     "grid16-dospcot", "grid16-oracle", "grid16-masked-zero", "grid16-labels-only", "grid16-self-training",

@@ -25,16 +25,19 @@ import torch
 from stable_baselines3 import DQN
 from tqdm.auto import tqdm
 
-from dospcot import paper
+from dospcot.config.learning_sections import TabularConfig
+from dospcot.config.loading import load_config
+from dospcot.config.run_configs import TrainConfig
+from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.envs import CLIFF_VIEWS, StateActionMask, ViewObservationWrapper
-from dospcot.neural_cotraining import NeuralCoTraining
+from dospcot.experiment.sweep import SweepSpec, run_sweep
+from dospcot.experiment.train import build_run
+from dospcot.paper import protocol as paper
+from dospcot.paper.tabular_cotraining import TabularCoTraining
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.tabular import TABULAR_KINDS, expected_value
 from dospcot.seeding import agent_seed
-from dospcot.sweep import SweepSpec, run_sweep
-from dospcot.tabular_cotraining import TabularConfig, TabularCoTraining
-from dospcot.train import agent_kwargs, build_run, build_task
-from dospcot.train_config import TrainConfig, load_config
+from dospcot.tasks.grid import grid_world
 
 
 @dataclass(frozen=True)
@@ -241,7 +244,7 @@ def _cotraining_seconds(cfg: TrainConfig) -> float:
 
 def _independent_seconds(cfg: TrainConfig) -> float:
     """The peer: each view's agent alone, the same env stack, DQN kwargs and steps, no co-training."""
-    make_env, views, _ = build_task(cfg)
+    make_env, views, _ = grid_world(cfg)
     total = cfg.training.rounds * cfg.training.steps_per_round
     limit = cfg.env.train_episode_steps or cfg.env.episode_steps
     seconds = 0.0
@@ -250,7 +253,7 @@ def _independent_seconds(cfg: TrainConfig) -> float:
         model = ExpectedSarsaDQN(
             "MlpPolicy", env, seed=agent_seed(cfg.seed, k), exploration_horizon=total,
             exploration_initial_eps=cfg.training.eps_start, exploration_final_eps=cfg.training.eps_end,
-            exploration_fraction=1.0, **agent_kwargs(cfg),
+            exploration_fraction=1.0, **{**cfg.dqn.sb3_kwargs(), "buffer_size": cfg.buffer_size},
         )  # fmt: skip
         model.learning_starts = max(model.learning_starts, cfg.training.collect_only_steps)
         start = time.perf_counter()
@@ -294,7 +297,8 @@ def bench_sweep_throughput(quick: bool, repeats: int) -> Row:
     steps = 300 if quick else 4_000
     gammas = ("0", "0.3") if quick else ("0", "0.1", "0.3", "1")
     seeds = (0,) if quick else (0, 1)
-    spec = SweepSpec(("tiny",), {"cotraining.gamma": gammas}, seeds, (f"training.steps_per_round={steps}",))
+    grid = {"cotraining.consensus_weight": gammas}
+    spec = SweepSpec(("tiny",), grid, seeds, (f"training.steps_per_round={steps}",))
     ours, peer = _alternating(
         repeats, lambda _: _trials_per_minute(spec, 2), lambda _: _trials_per_minute(spec, 1)
     )
@@ -362,7 +366,7 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     preset adds to every training step (the keyed reward mask, the first view observed, the pool
     store, which reads every view on a pair's first visit) against the bare MiniGrid env."""
     from dospcot.envs.gym_sensors import make_masked_gym
-    from dospcot.transition_cotraining import KeyedStepStore, SensorStoreWrapper
+    from dospcot.tasks.sensor import KeyedStepStore, SensorStoreWrapper
 
     steps = 2_000 if quick else 20_000
     cfg = load_config("minigrid-lavagap-dospcot")
@@ -397,12 +401,12 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     )
 
 
-def _filled_run(n: int, seed: int) -> NeuralCoTraining:
+def _filled_run(n: int, seed: int) -> CoTrainingRun:
     """A `grid16-dospcot` co-trainer whose shared store holds ``n`` steps of a uniform random policy
     from uniformly drawn states, revealed by the run's mask."""
     cfg = load_config("grid16-dospcot", [f"seed={seed}"])
     run = build_run(cfg)
-    mdp, rng = run.mdp, np.random.default_rng(seed)
+    mdp, rng = run.task.mdp, np.random.default_rng(seed)
     labelled = StateActionMask(mdp.n_states, mdp.n_actions, cfg.training.label_fraction, seed).labelled
     states, actions = rng.integers(0, mdp.n_states, n), rng.integers(0, mdp.n_actions, n)
     for s, a in zip(states.tolist(), actions.tolist(), strict=True):
@@ -411,16 +415,16 @@ def _filled_run(n: int, seed: int) -> NeuralCoTraining:
     return run
 
 
-def _store_bytes(run: NeuralCoTraining) -> int:
+def _store_bytes(run: CoTrainingRun) -> int:
     """Bytes the shared store and the reward table hold."""
     arrays = [*run.store.state_dict().values(), *run.table.state_dict().values()]
     return sum(a.nbytes for a in arrays if isinstance(a, np.ndarray))
 
 
-def _raw_bytes(run: NeuralCoTraining, n: int) -> int:
+def _raw_bytes(run: CoTrainingRun, n: int) -> int:
     """Bytes of the raw arrays of ``n`` steps: each view's observation and next observation
     (float32), the action, the reward and the done flag."""
-    width = sum(run.mdp.views[v].shape[1] for v in run.spec.views)
+    width = sum(run.task.mdp.views[v].shape[1] for v in run.cfg.views)
     return n * (2 * width * 4 + 8 + 4 + 1)
 
 
@@ -432,7 +436,7 @@ def bench_store_memory(quick: bool, repeats: int) -> Row:
         run = _filled_run(n, rep)
         ours.append(_store_bytes(run) / n * 1e6 / 2**20)
         peer.append(_raw_bytes(run, n) / n * 1e6 / 2**20)
-    views = " + ".join(f"{v} ({run.mdp.views[v].shape[1]} floats)" for v in run.spec.views)
+    views = " + ".join(f"{v} ({run.task.mdp.views[v].shape[1]} floats)" for v in run.cfg.views)
     return Row(
         "Shared transition store vs the raw arrays: memory per million steps",
         f"16 x 16 grid, views {views}, {n:,} steps measured",
@@ -499,7 +503,8 @@ NOTES = [
     "Notes:",
     "- The tabular row times the collection phase of the paper protocol (each agent's epsilon-greedy "
     "episodes with an online weighted TD update per step) inside full co-training runs. Ours steps every "
-    "agent of every run at once in numpy; the reference (`PerStepTabularCoTraining` in `dospcot/bench.py`) "
+    "agent of every run at once in numpy; the reference (`PerStepTabularCoTraining` in "
+    "`dospcot/experiment/bench.py`) "
     "loops over agents and steps in Python with the same update and random streams, and ends with the "
     "same Q-tables (`tests/test_tabular.py`). The loop's cost per step does not depend on how many runs "
     "follow, so it is timed on one seed's runs; ours gains from batching, so it runs the protocol's "
@@ -516,7 +521,7 @@ NOTES = [
     "runs while other tenants hold the core (a virtual machine's steal time), which moved the [64, 64] "
     "row's ratio between 0.82 and 1.08 from one rerun to the next on this 2-core machine. On a machine of "
     "one's own the two agree.",
-    "- The co-training overhead row times `NeuralCoTraining.run()` (learning, the shared store, one "
+    "- The co-training overhead row times `CoTrainingRun.run()` (learning, the shared store, one "
     "classifier fit and scoring per view and round, relabelling and the per-round evaluation) against "
     "each agent's `learn()` over the same steps without a co-trainer, summed over the agents; the peer "
     "also takes no gradient step before the preset's `training.learn_from_round`.",

@@ -8,12 +8,13 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
 1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
    rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
    time, so what earlier rounds admitted drives this round's updates.
-2. **Co-train** (method ``"cotrain"``): the task turns its store into a :class:`Pool` (labelled
-   samples and the unlabelled pool U, each view's classifier inputs), which goes to the
-   :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
+2. **Co-train** (method ``"cotrain"``): the task turns its store into a
+   :class:`~dospcot.core.cotrainer.RunPool` (labelled samples and the unlabelled pool U, each view's
+   classifier inputs), which goes to the run's :class:`~dospcot.core.cotrainer.RunCoTrainer` (select,
+   fit, score per view; Eq. 9).
 3. **Pseudo-reward**: each admitted sample's consensus reward and weight go into the reward table,
    whose ids are the pool's samples, so every stored step of a sample reads them.
-   Under segment labels (``segment_length`` k > 1, :mod:`dospcot.segments`) the pool's samples are
+   Under segment labels (``segment_length`` k > 1, :mod:`dospcot.core.segments`) the pool's samples are
    k-step segments labelled with their summed reward, and each view's per-step reward model turns
    the labelled and admitted sums back into per-step rewards for the table.
 4. **Policy update**: every agent takes ``update_steps`` gradient steps on its replay buffer, which
@@ -22,13 +23,17 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
    Baselines, which have no pace, follow the share of rounds done, a plain linear schedule.
 6. **Record**: the task measures every agent's greedy policy.
 
-What a task supplies (:class:`CoTrainingTask`): each agent's env (masked, writing the store), its
-reward classes, the pool, each sample's true class (metrics only) and the evaluator. The
-grid adapter (:mod:`dospcot.neural_cotraining`) pools (s, a) keys and measures against the exact
-optimum; the sensor adapter (:mod:`dospcot.transition_cotraining`) pools every step and runs
-evaluation episodes.
+:meth:`CoTrainingRun.run` is the only loop over rounds; whoever drives a run (``dospcot train``'s run
+folder, TensorBoard and checkpoints) hangs on its ``on_round`` hook. The run reads its config
+(:class:`~dospcot.config.run_configs.TrainConfig`) directly.
 
-Agents (``spec.agents``): ExpectedSarsaDQN with its Expected-SARSA target (``esarsa_dqn``) or DQN's max
+What a task supplies (:class:`CoTrainingTask`, built by the task registry, :mod:`dospcot.tasks`):
+each agent's env (masked, writing the store), its reward classes, the pool, each sample's true class
+(metrics only) and the evaluator. The grid adapter (:mod:`dospcot.tasks.grid`) pools (s, a) keys and
+measures against the exact optimum; the sensor adapter (:mod:`dospcot.tasks.sensor`) pools every step
+and runs evaluation episodes.
+
+Agents (``cfg.agent_kinds``): ExpectedSarsaDQN with its Expected-SARSA target (``esarsa_dqn``) or DQN's max
 target (``dqn``), or a Q-table over the view's observations (``tabular``,
 :class:`~dospcot.policies.TabularExpectedSarsa`); any mix works, since all three are SB3 ``DQN`` models.
 
@@ -38,127 +43,31 @@ Baselines: ``oracle`` (every reward revealed), ``masked-zero`` (masked rewards r
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import random
-from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
-from typing import Any, Protocol
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any, Protocol
 
 import gymnasium as gym
 import numpy as np
 import torch as th
 from stable_baselines3.common.type_aliases import MaybeCallback
 
-from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
-from dospcot.demonstrations import DemonstrationsConfig
+from dospcot.core.cotrainer import RunCoTrainer, RunPool
+from dospcot.core.reward_classes import QuantileRewardClasses, RewardClasses
+from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
+from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
-from dospcot.reward_classes import QuantileRewardClasses, RewardClasses
-from dospcot.round_records import VIEW_STATS, record_head, round_stats
-from dospcot.run_spec import RunSpec
 from dospcot.seeding import agent_seed, classifier_seed, round_reset_seed
-from dospcot.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
+
+if TYPE_CHECKING:
+    from dospcot.config.run_configs import TrainConfig
 
 AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
 """Agent kinds and their TD target: ExpectedSarsaDQN with its Expected-SARSA target or DQN's max target,
 and the tabular Expected-SARSA agent."""
-
-
-class NeuralRunSpec(RunSpec):
-    """A run of SB3 agents; agent kinds from :data:`AGENT_TARGETS`."""
-
-    def check_agent(self, kind: str) -> None:
-        if kind not in AGENT_TARGETS:
-            raise ValueError(f"unknown agent kind {kind!r}; allowed: {sorted(AGENT_TARGETS)}")
-
-
-@dataclass(frozen=True)
-class TrainingConfig:
-    """The rounds of one run: the ``[training]`` section of a config, and the first fields of
-    :class:`NeuralConfig`.
-
-    :param rounds: co-training rounds.
-    :param steps_per_round: env steps each agent takes per round.
-    :param label_fraction: share of (s, a) keys whose reward is revealed, in (0, 1].
-    :param eps_start: exploration at pace 0.
-    :param eps_end: exploration at pace 1.
-    :param exploration: what sets the pace that moves exploration from ``eps_start`` to ``eps_end``
-        after each round. ``"pace"``: a co-trained run's admitted share of U (a fast self-paced
-        schedule ends exploration after a round or two), baselines the share of rounds done.
-        ``"rounds"``: the share of rounds done for every method, so co-trained agents and baselines
-        explore alike.
-    :param update_steps: gradient steps each agent takes at the end of every round, after the
-        co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
-        update), so the last round's pseudo-rewards are learned too; 0: none.
-    :param learn_from_round: the first round (1-based) in which agents learn while they collect:
-        before it they act uniformly at random and take no gradient step during collection (SB3's
-        ``learning_starts``, raised to ``(learn_from_round - 1) * steps_per_round``), so a
-        co-trained agent's first values come from pseudo-rewards, not from the labels alone. The
-        policy update (``update_steps``) still runs at the end of every round. In [1, ``rounds``].
-    :param segment_length: k; 1: the labels are single rewards (``label_fraction`` of the (s, a)
-        keys or steps). Above 1, co-training only: the labels are the summed rewards of k-step
-        segments of the agents' episodes, a share ``label_fraction`` of the segments, so the same
-        rater effort in labelled steps (:mod:`dospcot.segments`).
-    """
-
-    rounds: int = 5
-    steps_per_round: int = 5_000
-    label_fraction: float = 0.05
-    eps_start: float = 1.0
-    eps_end: float = 0.05
-    exploration: str = "pace"
-    update_steps: int = 0
-    learn_from_round: int = 1
-    segment_length: int = 1
-
-    def __post_init__(self) -> None:
-        if self.segment_length < 1:
-            raise ValueError(f"segment_length must be >= 1, got {self.segment_length}")
-        if self.rounds < 1 or self.steps_per_round < 1:
-            raise ValueError(
-                f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
-            )
-        if self.update_steps < 0:
-            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
-        if self.exploration not in ("pace", "rounds"):
-            raise ValueError(f"exploration must be 'pace' or 'rounds', got {self.exploration!r}")
-        if not 1 <= self.learn_from_round <= self.rounds:
-            raise ValueError(
-                f"learn_from_round must lie in [1, rounds = {self.rounds}], got {self.learn_from_round}"
-            )
-        if not 0 < self.label_fraction <= 1:
-            raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
-        for name in ("eps_start", "eps_end"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
-
-    @property
-    def collect_only_steps(self) -> int:
-        """Env steps per agent before ``learn_from_round``: the agents learn nothing while they take
-        them (every agent's ``learning_starts`` is at least this)."""
-        return (self.learn_from_round - 1) * self.steps_per_round
-
-
-@dataclass(frozen=True)
-class NeuralConfig(TrainingConfig):
-    """Hyperparameters of a run: :class:`TrainingConfig`'s, and
-
-    :param max_episode_steps: the episode length limit of the evaluation (greedy rollouts).
-    :param train_episode_steps: the episode length limit while training (0: ``max_episode_steps``).
-        Short training episodes with exploring starts scatter the agents over the map.
-    :param dqn: further keyword arguments of every neural agent (SB3 DQN's).
-    :param tabular: further keyword arguments of every ``tabular`` agent
-        (:class:`~dospcot.policies.TabularExpectedSarsa`'s).
-    :param cotraining: the self-paced schedule (its gamma is replaced by the run's).
-    :param demonstrations: expert episodes and their roles (a task without them ignores it).
-    """
-
-    max_episode_steps: int = 64
-    train_episode_steps: int = 0
-    dqn: dict[str, Any] = field(default_factory=dict)
-    tabular: dict[str, Any] = field(default_factory=dict)
-    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
-    demonstrations: DemonstrationsConfig = field(default_factory=DemonstrationsConfig)
 
 
 class CoTrainingTask(Protocol):
@@ -169,6 +78,8 @@ class CoTrainingTask(Protocol):
     ``load_state_dict(state)`` checkpoint it in place."""
     classes: RewardClasses | QuantileRewardClasses
     """The reward classes of the run's labels (one run)."""
+    n_classes: int
+    """K, the most reward classes the run may hold (the classifiers' outputs)."""
 
     def agent_env(self, k: int, view: str) -> gym.Env:
         """Agent ``k``'s env: masked, observing ``view``, writing every step into the store with its
@@ -180,8 +91,8 @@ class CoTrainingTask(Protocol):
     def feature_dims(self) -> list[int]:
         """Each view's classifier input width."""
 
-    def pool(self) -> Pool:
-        """This round's pool (one run), after the classes have seen every label so far."""
+    def pool(self) -> RunPool:
+        """This round's pool, after the classes have seen every label so far."""
 
     def true_class(self) -> np.ndarray:
         """(N,) each pool sample's hidden reward as a class of the run, -1 where the reward is a value
@@ -213,8 +124,7 @@ def make_agent(
     k: int,
     kind: str,
     view: str,
-    spec: RunSpec,
-    config: NeuralConfig,
+    cfg: TrainConfig,
     buffer_kwargs: dict[str, Any],
     observations: np.ndarray | None = None,
 ) -> ExpectedSarsaDQN:
@@ -224,9 +134,13 @@ def make_agent(
         over; None for a task whose observations are not known in advance.
     """
     env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
+    training = cfg.training
+    # Steps beyond a run's total never enter the buffer: capping it changes nothing but memory and the
+    # size of every checkpoint.
+    steps = training.rounds * training.steps_per_round
     common = dict(
-        target=AGENT_TARGETS[kind], seed=agent_seed(spec.seed, k), exploration_initial_eps=config.eps_start,
-        exploration_final_eps=config.eps_end, replay_buffer_kwargs=buffer_kwargs,
+        target=AGENT_TARGETS[kind], seed=agent_seed(cfg.seed, k), exploration_initial_eps=training.eps_start,
+        exploration_final_eps=training.eps_end, replay_buffer_kwargs=buffer_kwargs,
     )  # fmt: skip
     if kind == "tabular":
         if observations is None:
@@ -234,14 +148,18 @@ def make_agent(
                 "agent kind 'tabular' needs a discrete task whose observations are known in advance "
                 "(a grid world); use esarsa_dqn or dqn"
             )
-        agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **config.tabular)
+        kwargs = dataclasses.asdict(cfg.tabular_agent)
+        kwargs["buffer_size"] = min(kwargs["buffer_size"], steps)
+        agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **kwargs)
     else:
-        demos = config.demonstrations
+        kwargs = cfg.dqn.sb3_kwargs()
+        kwargs["buffer_size"] = min(kwargs["buffer_size"], steps)
+        demos = cfg.demonstrations
         agent = ExpectedSarsaDQN(
-            "MlpPolicy", env, **common, **config.dqn,
+            "MlpPolicy", env, **common, **kwargs,
             demo_margin=demos.margin, demo_loss_weight=demos.margin_loss_weight,
         )  # fmt: skip
-    agent.learning_starts = max(agent.learning_starts, config.collect_only_steps)
+    agent.learning_starts = max(agent.learning_starts, training.collect_only_steps)
     agent.set_pace(0.0)
     return agent
 
@@ -249,42 +167,31 @@ def make_agent(
 class CoTrainingRun:
     """One run of SB3 agents on a masked task, round by round.
 
-    :param task: the task adapter (store, pool, evaluator).
-    :param spec: the run.
-    :param config: its hyperparameters.
-    :param n_classes: the most reward classes a run may hold (the classifiers' outputs).
+    :param task: the task adapter (store, pool, evaluator), e.g. ``get_task(cfg.task).build(cfg)``.
+    :param cfg: the run's config, read directly: its method, views and agent kinds, seed, ``[training]``,
+        ``[dqn]``, ``[tabular_agent]``, ``[cotraining]`` and ``[demonstrations]``.
     """
 
-    def __init__(
-        self, task: CoTrainingTask, spec: NeuralRunSpec, config: NeuralConfig, n_classes: int
-    ) -> None:
-        self.task, self.spec, self.config = task, spec, config
+    def __init__(self, task: CoTrainingTask, cfg: TrainConfig) -> None:
+        self.task, self.cfg = task, cfg
         self.table = RewardTable()
         self.segments: SegmentStore | None = None
         """The labelled and unlabelled segments under segment labels (``segment_length`` > 1), or None."""
-        self.segment_classes = QuantileRewardClasses(n_classes)
+        self.segment_classes = QuantileRewardClasses(task.n_classes)
         """The quantile classes of the segments' summed rewards (segment labels only)."""
-        if config.segment_length > 1:
-            if spec.method != "cotrain":
-                raise ValueError(
-                    f"segment_length {config.segment_length}: segment labels need co-training (method "
-                    f"'cotrain'; one view is self-training), got method {spec.method!r}"
-                )
-            self.segments = SegmentStore(config.segment_length)
-        buffer_kwargs = relabelling_kwargs(spec.method, self.table)
+        if cfg.training.segment_length > 1:
+            self.segments = SegmentStore(cfg.training.segment_length)
+        buffer_kwargs = relabelling_kwargs(cfg.method, self.table)
         self.agents: list[ExpectedSarsaDQN] = [
-            make_agent(
-                self._agent_env(k, view), k, kind, view, spec, config, buffer_kwargs, task.observations(view)
-            )
-            for k, (kind, view) in enumerate(zip(spec.agents, spec.views, strict=True))
+            make_agent(self._agent_env(k, view), k, kind, view, cfg, buffer_kwargs, task.observations(view))
+            for k, (kind, view) in enumerate(zip(cfg.agent_kinds, cfg.views, strict=True))
         ]
         for k in range(len(self.agents)):
             self._give_demonstrations(k)
-        self.trainer: SelfPacedCoTrainer | None = None
-        if spec.method == "cotrain":
-            cfg = replace(config.cotraining, gamma=spec.gamma, max_classes=n_classes)
-            # A segment's input is the sum of its steps' (dospcot.segments.segment_pool).
-            self.trainer = SelfPacedCoTrainer(task.feature_dims(), 1, cfg, [spec.seed])
+        self.trainer: RunCoTrainer | None = None
+        if cfg.method == "cotrain":
+            # A segment's input is the sum of its steps' (dospcot.core.segments.segment_pool).
+            self.trainer = RunCoTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
         self.round = 0
         self.stopped = False
         """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
@@ -296,9 +203,9 @@ class CoTrainingRun:
     def _give_demonstrations(self, k: int) -> None:
         """Agent ``k``'s large-margin loss reads the task's demonstrations in its own view (a neural
         agent's, with the loss on; a saved agent holds none, so a loaded one gets them again)."""
-        if self.spec.agents[k] == "tabular" or self.config.demonstrations.margin_loss_weight == 0:
+        if self.cfg.agent_kinds[k] == "tabular" or self.cfg.demonstrations.margin_loss_weight == 0:
             return
-        demos = self.task.demonstrations(self.spec.views[k])
+        demos = self.task.demonstrations(self.cfg.views[k])
         if demos is not None:
             self.agents[k].set_demonstrations(*demos)
 
@@ -312,11 +219,27 @@ class CoTrainingRun:
         """The task's reward classes."""
         return self.task.classes
 
-    def run(self) -> list[dict]:
-        """All rounds, or until the stopping rule fires; returns one record per round and agent."""
+    def run(
+        self,
+        on_round: Callable[[CoTrainingRun, list[dict]], None] | None = None,
+        callback: MaybeCallback = None,
+        until_round: int | None = None,
+    ) -> list[dict]:
+        """Every round left, or until the stopping rule fires: the only loop over rounds.
+
+        :param on_round: called after each round with the run and that round's records (one per
+            agent): where a driver logs, writes files and checkpoints.
+        :param callback: passed to every agent's ``learn()`` (SB3 callbacks, e.g. a progress bar).
+        :param until_round: stop after this round (1-based) even if the config has more; None: its last.
+        :return: one record per round run now and agent.
+        """
+        last = self.cfg.training.rounds if until_round is None else min(until_round, self.cfg.training.rounds)
         records: list[dict] = []
-        while self.round < self.config.rounds and not self.stopped:
-            records += self.run_round()
+        while self.round < last and not self.stopped:
+            rows = self.run_round(callback)
+            records += rows
+            if on_round is not None:
+                on_round(self, rows)
         return records
 
     def run_round(self, callback: MaybeCallback = None) -> list[dict]:
@@ -329,17 +252,18 @@ class CoTrainingRun:
             # Every round starts from fresh episodes with seeded resets, so a run resumed from the
             # checkpoint of the last round continues exactly as the uninterrupted run would.
             env = agent.get_env()
-            env.seed(round_reset_seed(self.spec.seed, k, self.round))
+            env.seed(round_reset_seed(self.cfg.seed, k, self.round))
             agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
-            agent.learn(self.config.steps_per_round, callback=callback, reset_num_timesteps=False)
+            agent.learn(self.cfg.training.steps_per_round, callback=callback, reset_num_timesteps=False)
         if self.trainer is not None:  # 2-3. co-train, pseudo-rewards
             stats = self.cotrain()
         else:  # a baseline has no co-trainer, but its labels are its effort too
             stats = {"labelled_steps": int(self.store.labelled.sum())}
+        training = self.cfg.training
         for agent in self.agents:  # 4. policy update on the rewards and weights just written
-            agent.update(self.config.update_steps)
-        pace = self.round / self.config.rounds  # 5. age
-        if self.config.exploration == "pace":
+            agent.update(training.update_steps)
+        pace = self.round / training.rounds  # 5. age
+        if training.exploration == "pace":
             pace = stats.get("pace", pace)
         for agent in self.agents:
             agent.set_pace(min(pace, 1.0))
@@ -352,28 +276,29 @@ class CoTrainingRun:
         if self.segments is not None:
             return self._cotrain_segments(pool)
         result = self.trainer.step(pool)
-        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class)[0], nan=0.0)
-        self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight[0])
-        self.stopped = bool(result.stopped[0])
-        stats = round_stats(result, pool.unlabelled[0], self.task.true_class())  # metrics only
-        return {**stats, "labelled_steps": int(pool.labelled[0].sum())}
+        # The reward classes are batched over runs (the tabular path's); this run is their only one.
+        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class[None])[0], nan=0.0)
+        self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight)
+        self.stopped = result.stopped
+        stats = round_stats(result, pool.unlabelled, self.task.true_class())  # metrics only
+        return {**stats, "labelled_steps": int(pool.labelled.sum())}
 
-    def _cotrain_segments(self, steps: Pool) -> dict:
+    def _cotrain_segments(self, steps: RunPool) -> dict:
         """Steps 2-3 under segment labels: co-train on segments, then turn the labelled and admitted
-        segment sums into per-step rewards (:mod:`dospcot.segments`)."""
+        segment sums into per-step rewards (:mod:`dospcot.core.segments`)."""
         segments, n = self.segments, len(self.segments)
         pool = segment_pool(steps, segments, self.segment_classes)
         result = self.trainer.step(pool)
-        labelled = pool.labelled[0]
-        pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class)[0], nan=0.0)
+        labelled = pool.labelled
+        pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class[None])[0], nan=0.0)
         sums = np.where(labelled, segments.label[:n], pseudo)
-        weight = np.where(labelled, 1.0, result.pseudo_weight[0])
-        model = self.config.cotraining.classifier
+        weight = np.where(labelled, 1.0, result.pseudo_weight)
+        model = self.cfg.cotraining.classifier
         reward, step_weight = step_rewards(steps, segments, sums, weight, model, self.step_model_seeds())
         self.table.set(np.arange(reward.size), reward, step_weight)
-        self.stopped = bool(result.stopped[0])
+        self.stopped = result.stopped
         true_class = self.segment_classes.encode_hidden(segments.hidden[None, :n])[0]  # metrics only
-        stats = round_stats(result, pool.unlabelled[0], true_class)
+        stats = round_stats(result, pool.unlabelled, true_class)
         # How far the decoded per-step rewards lie from the hidden ones, where the agents read them.
         decoded = step_weight > 0
         error = np.abs(reward - self.store.hidden_reward[: reward.size])[decoded]  # metrics only
@@ -385,7 +310,7 @@ class CoTrainingRun:
 
     def step_model_seeds(self) -> list[int]:
         """One seed per view: the initial parameters of its per-step reward model under segment labels."""
-        return [classifier_seed(self.spec.seed, j) for j in range(len(self.spec.views))]
+        return [classifier_seed(self.cfg.seed, j) for j in range(len(self.cfg.views))]
 
     def evaluate_policies(self) -> dict[str, np.ndarray]:
         """Each agent's greedy policy: (m,) arrays ``greedy_return``, ``success``,
@@ -447,12 +372,14 @@ class CoTrainingRun:
 
     def _records(self, stats: dict) -> list[dict]:
         policy = self.evaluate_policies()
+        cfg = self.cfg
+        head = (cfg.method, cfg.agent_kinds, cfg.views, cfg.cotraining.consensus_weight, cfg.seed)
         rows = []
         for k in range(len(self.agents)):
             round_view = stats["views"][k] if "views" in stats else {}
             rows.append(
                 {
-                    **record_head(self.spec, self.round, k),
+                    **record_head(*head, self.round, k),
                     "env_steps": int(self.agents[k].num_timesteps),
                     "agreement": float(policy["agreement"][k]),
                     "greedy_return": float(policy["greedy_return"][k]),

@@ -25,10 +25,11 @@ import gymnasium as gym
 import numpy as np
 import torch
 
-from dospcot.checkpointing import InPlaceState
-from dospcot.classifier import BatchedRewardClassifier, ClassifierConfig
-from dospcot.cotraining import Pool
-from dospcot.reward_classes import QuantileRewardClasses
+from dospcot.config.learning_sections import ClassifierConfig
+from dospcot.core.classifier import BatchedRewardClassifier
+from dospcot.core.cotrainer import RunPool
+from dospcot.core.in_place_state import InPlaceState
+from dospcot.core.reward_classes import QuantileRewardClasses
 
 
 class SegmentStore(InPlaceState):
@@ -112,7 +113,7 @@ class SegmentLabelWrapper(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-def segment_pool(steps: Pool, store: SegmentStore, classes: QuantileRewardClasses) -> Pool:
+def segment_pool(steps: RunPool, store: SegmentStore, classes: QuantileRewardClasses) -> RunPool:
     """The co-trainer's pool of segments (one run), after ``classes`` are refitted to every label.
 
     :param steps: the task's pool of single steps (its features; its labels are empty under segment
@@ -128,10 +129,11 @@ def segment_pool(steps: Pool, store: SegmentStore, classes: QuantileRewardClasse
     classes.fit(store.label[:n][labelled])
     features = []
     for f in steps.features:
-        padded = np.concatenate([f[0], np.zeros((1, f.shape[2]), f.dtype)])  # row -1: no step
-        features.append(padded[ids].sum(axis=1)[None])
-    label_class = np.where(labelled, classes.encode(store.label[None, :n]), -1)
-    return Pool(features, labelled[None], label_class, ~labelled[None], classes.mask)
+        padded = np.concatenate([f, np.zeros((1, f.shape[1]), f.dtype)])  # row -1: no step
+        features.append(padded[ids].sum(axis=1))
+    # The quantile classes keep a runs' axis of one.
+    label_class = np.where(labelled, classes.encode(store.label[None, :n])[0], -1)
+    return RunPool(features, labelled, label_class, ~labelled, classes.mask[0])
 
 
 def fit_step_rewards(
@@ -178,7 +180,7 @@ def fit_step_rewards(
 
 
 def step_rewards(
-    steps: Pool,
+    steps: RunPool,
     store: SegmentStore,
     sums: np.ndarray,
     weight: np.ndarray,
@@ -198,10 +200,10 @@ def step_rewards(
     """
     ids = store.ids[: len(store)]
     per_view = [
-        fit_step_rewards(f[0], ids, sums, weight, config, seed)
+        fit_step_rewards(f, ids, sums, weight, config, seed)
         for f, seed in zip(steps.features, seeds, strict=True)
     ]
-    n_steps = steps.features[0].shape[1]
+    n_steps = steps.features[0].shape[0]
     step_weight = np.zeros(n_steps + 1)
     np.maximum.at(step_weight, np.where(ids >= 0, ids, n_steps), np.repeat(weight[:, None], ids.shape[1], 1))
     return np.mean(per_view, axis=0), step_weight[:n_steps]

@@ -16,7 +16,7 @@ the interquartile mean (IQM, as rliable). It writes into the sweep folder (or ``
   fraction study), one line per config and remaining grid values.
 
 A sweep of paper-protocol runs (``task = "paper"``, as ``dospcot reproduce-paper`` makes) gets the seed
-paper's tables instead (:mod:`dospcot.paper`), per cell: ``report.md`` (the target line, Tables 1-4
+paper's tables instead (:mod:`dospcot.paper.protocol`), per cell: ``report.md`` (the target line, Tables 1-4
 for paper accuracy, optimal-action agreement and greedy return, pseudo-reward accuracy and coverage),
 ``report.csv`` (long format: one row per table, row, gamma column and metric) and
 ``paper_agreement.png`` (optimal-action agreement against round, per agent kind and method).
@@ -27,6 +27,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,12 +35,14 @@ from typing import Any
 
 import numpy as np
 
-from dospcot import metrics, paper
+from dospcot import metrics
+from dospcot.config.loading import load_config
+from dospcot.experiment.plots import Band, plot_bands
+from dospcot.experiment.run_folder import CONFIG_FILE, METRICS_FILE, SUMMARY_FILE, write_csv, write_text
+from dospcot.experiment.sweep import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
 from dospcot.metrics import SeedSummary
-from dospcot.plots import Band, plot_bands
-from dospcot.run_folder import CONFIG_FILE, METRICS_FILE, SUMMARY_FILE, write_csv, write_text
-from dospcot.sweep import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
-from dospcot.train_config import load_config
+from dospcot.paper import protocol as paper
+from dospcot.tasks.registry import get_task
 
 REPORT_METRICS = {
     "normalised_score": "normalised score",
@@ -253,12 +256,20 @@ def _band(label: str, points: dict[float, SeedSummary]) -> Band:
 
 
 def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
-    """Write ``report.md``, ``report.csv`` and the plots; return their paths."""
+    """Write the sweep's report (its task's: :meth:`~dospcot.tasks.registry.Task.write_report`);
+    return the files."""
     spec, runs = load_runs(sweep_dir)
     out_dir = out_dir or sweep_dir
     out_dir.mkdir(parents=True, exist_ok=True)
-    if runs[0].summary.get("task") == "paper":  # a sweep holds one kind of config (SweepSpec.trials)
-        return _write_paper_report(spec, runs, out_dir)
+    # A sweep holds one kind of config (SweepSpec.trials); its task is read, not the whole config, so
+    # that a record trained under older keys still reports.
+    task = tomllib.loads((runs[0].run_dir / CONFIG_FILE).read_text()).get("task", "grid")
+    return get_task(task).write_report(spec, runs, out_dir)
+
+
+def write_cotraining_report(spec: SweepSpec, runs: Sequence[TrialRun], out_dir: Path) -> list[Path]:
+    """A sweep of co-training runs: ``report.md``, ``report.csv``, ``report_per_view.csv`` where a cell
+    has several views, and the plots."""
     rows, view_rows = aggregate(runs), aggregate_per_view(runs)
     written = [out_dir / "report.md", out_dir / "report.csv"]
     write_text(written[0], render_markdown(spec, runs, rows, view_rows))
@@ -342,7 +353,8 @@ def _cell_title(name: str, params: tuple[tuple[str, str], ...]) -> str:
     return ", ".join([name, *(f"{short_key(k)}={v}" for k, v in params)])
 
 
-def _write_paper_report(spec: SweepSpec, runs: Sequence[TrialRun], out_dir: Path) -> list[Path]:
+def write_paper_report(spec: SweepSpec, runs: Sequence[TrialRun], out_dir: Path) -> list[Path]:
+    """A sweep of paper-protocol runs: the seed paper's tables over seeds and the agreement plots."""
     info = [json.loads((run.run_dir / "run_info.json").read_text()) for run in runs]
     lines, rows = paper_report_tables(runs)
     header = [

@@ -12,7 +12,7 @@ One round, top to bottom (docs/design.md section 2), in :meth:`TabularCoTraining
    where admitted, weight 0 elsewhere. Every transition enters the run's store, deduplicated by
    (s, a) key.
 2. **Co-train** (method ``"cotrain"``): the store's labelled keys and unlabelled pool U go to the
-   :class:`~dospcot.cotraining.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
+   :class:`~dospcot.core.cotrainer.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
 3. **Pseudo-reward**: the consensus classes become the run's reward table.
 4. **Policy update**: ``replay_sweeps`` synchronous weighted TD sweeps over the stored transitions.
 5. **Age**: the pace (admitted share of U) sets the next round's exploration rate.
@@ -27,65 +27,56 @@ The hidden reward of a masked key reaches only :mod:`dospcot.metrics`.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from itertools import groupby
 
 import numpy as np
 
 from dospcot import metrics
-from dospcot.cotraining import CoTrainingConfig, Pool, SelfPacedCoTrainer
-from dospcot.envs.masking import StateActionMask, check_label_fraction
+from dospcot.config.learning_sections import TabularConfig
+from dospcot.core.cotrainer import Pool, SelfPacedCoTrainer
+from dospcot.core.key_pool import key_features
+from dospcot.core.reward_classes import RewardClasses
+from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
+from dospcot.envs.masking import StateActionMask
 from dospcot.envs.tabular import TabularMDP
-from dospcot.key_pool import key_features
 from dospcot.policies.tabular import TabularAgents, check_agent_kind
-from dospcot.reward_classes import RewardClasses
-from dospcot.round_records import VIEW_STATS, record_head, round_stats
-from dospcot.run_spec import RunSpec
 from dospcot.seeding import agent_seed
 
-
-class TabularRunSpec(RunSpec):
-    """A tabular run; agent kinds from :data:`dospcot.policies.tabular.TABULAR_KINDS`."""
-
-    def check_agent(self, kind: str) -> None:
-        check_agent_kind(kind)
+METHODS: tuple[str, ...] = ("oracle", "masked-zero", "labels-only", "cotrain")
+"""``oracle``: every key labelled; ``masked-zero``: masked rewards read as 0; ``labels-only``: masked
+steps drive no update; ``cotrain``: DOSPCoT with the run's views (m = 1 is self-training)."""
 
 
 @dataclass(frozen=True)
-class TabularConfig:
-    """Hyperparameters shared by every run of a study.
+class TabularRunSpec:
+    """One tabular run of a batch.
 
-    :param rounds: co-training rounds (each one a collection of ``episodes_per_round`` episodes).
-    :param episodes_per_round: episodes each agent plays per round.
-    :param learning_rate: TD step size.
-    :param discount: discount factor (also the one value iteration uses for the optimum).
-    :param eps_start: exploration rate at pace 0.
-    :param eps_end: exploration rate at pace 1; eps(p) = eps_start + (eps_end - eps_start) * p.
-    :param label_fraction: share of labelled (s, a) keys, in (0, 1].
-    :param replay_sweeps: synchronous TD sweeps over the store after each round's co-training.
-    :param cotraining: the self-paced schedule (its gamma is replaced by each run's).
+    :param method: one of :data:`METHODS`.
+    :param agents: agent kind of each view, from :data:`dospcot.policies.tabular.TABULAR_KINDS`.
+    :param views: the view of each agent (its reward classifier's input).
+    :param gamma: the consensus weight (``cotraining.consensus_weight``, the paper's gamma; co-training
+        only).
+    :param seed: seeds the mask, the exploration and the classifiers; runs of different methods
+        with the same seed share the labelled key set.
     """
 
-    rounds: int = 5
-    episodes_per_round: int = 500
-    learning_rate: float = 0.8
-    discount: float = 0.95
-    eps_start: float = 0.1
-    eps_end: float = 0.1
-    label_fraction: float = 0.1
-    replay_sweeps: int = 1
-    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+    method: str
+    agents: tuple[str, ...]
+    views: tuple[str, ...]
+    gamma: float = 0.3
+    seed: int = 0
 
     def __post_init__(self) -> None:
-        check_label_fraction(self.label_fraction)
-        if self.rounds < 1 or self.episodes_per_round < 1 or self.replay_sweeps < 0:
+        if self.method not in METHODS:
+            raise ValueError(f"method must be one of {METHODS}, got {self.method!r}")
+        if len(self.agents) < 1 or len(self.agents) != len(self.views):
             raise ValueError(
-                f"rounds and episodes_per_round must be >= 1 and replay_sweeps >= 0; got {self.rounds}, "
-                f"{self.episodes_per_round}, {self.replay_sweeps}"
+                "need one view per agent and at least one agent; "
+                f"got agents={self.agents}, views={self.views}"
             )
-        for name in ("eps_start", "eps_end"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+        for kind in self.agents:
+            check_agent_kind(kind)
 
 
 @dataclass
@@ -163,9 +154,10 @@ class TabularCoTraining:
         groups = []
         for (views, gamma), members in groupby(sorted(cotrain, key=signature), key=signature):
             runs = list(members)
-            cfg = replace(self.config.cotraining, gamma=gamma)
+            cfg = replace(self.config.cotraining, consensus_weight=gamma)
             dims = [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in views]
-            trainer = SelfPacedCoTrainer(dims, len(runs), cfg, [self.specs[r].seed for r in runs])
+            seeds = [self.specs[r].seed for r in runs]
+            trainer = SelfPacedCoTrainer(dims, len(runs), cfg, seeds, cfg.max_classes)
             groups.append((runs, trainer, RewardClasses(len(runs), cfg.max_classes)))
         return groups
 
@@ -282,7 +274,7 @@ class TabularCoTraining:
         self.table_weight[live_runs] = result.pseudo_weight[live].reshape(shape)
         truth = classes.encode(np.broadcast_to(self.mdp.reward.reshape(-1), labelled.shape))  # metrics only
         return {
-            r: round_stats(result, pool.unlabelled[b], truth[b], run=b)
+            r: round_stats(result.of_run(b), pool.unlabelled[b], truth[b])
             for b, r in enumerate(runs)
             if self.active[r]
         }
@@ -311,7 +303,9 @@ class TabularCoTraining:
             view_stats = stats["views"][k] if stats else {}
             rows.append(
                 {
-                    **record_head(spec, round_index, k),
+                    **record_head(
+                        spec.method, spec.agents, spec.views, spec.gamma, spec.seed, round_index, k
+                    ),
                     "paper_accuracy": float(paper[slot]),
                     "agreement": float(policy["agreement"][slot]),
                     "greedy_return": float(policy["greedy_return"][slot]),

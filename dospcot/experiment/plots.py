@@ -12,7 +12,7 @@ matplotlib.use("Agg")  # headless: runs write PNGs on machines without a display
 import matplotlib.pyplot as plt
 import numpy as np
 
-from dospcot.run_folder import atomic_write
+from dospcot.experiment.run_folder import atomic_write
 
 PANELS = (
     ("greedy_return", "greedy return"),

@@ -1,7 +1,7 @@
 """Co-train on your own gymnasium env from Python (docs/your_env.md).
 
 :func:`gym_config` turns an env, its views and any config keys into the ``task = "gym"``
-:class:`~dospcot.train_config.TrainConfig` that ``dospcot train`` would read from a TOML file, and
+:class:`~dospcot.config.loading.TrainConfig` that ``dospcot train`` would read from a TOML file, and
 :func:`train_env` trains it in a run folder. Functions are stored in the run's ``config.toml`` by
 their dotted paths, so the run resumes (``dospcot train --resume``), evaluates (``dospcot evaluate``)
 and sweeps (``dospcot sweep <run>/config.toml``) like any other, wherever their module is importable.
@@ -9,7 +9,7 @@ and sweeps (``dospcot sweep <run>/config.toml``) like any other, wherever their 
 Example (CartPole, two views: the whole state, and the pole alone)::
 
     import numpy as np
-    from dospcot.gym_task import train_env
+    from dospcot.experiment.python_api import train_env
 
     def pole(obs: np.ndarray) -> np.ndarray:  # at module level: it is saved by name
         return obs[2:]
@@ -27,9 +27,10 @@ from typing import Any
 import gymnasium as gym
 import torch as th
 
+from dospcot.config.loading import from_mapping, set_key
+from dospcot.config.run_configs import TrainConfig
 from dospcot.envs.gym_sensors import dotted_path
-from dospcot.train import train
-from dospcot.train_config import TrainConfig, from_mapping, set_key
+from dospcot.experiment.train import train
 
 ViewSpec = str | Callable[[Any], Any]
 """A view: a function of the observation (defined at module level), or a name: ``"observation"``, a
@@ -99,7 +100,9 @@ def train_env(
     """
     cfg = gym_config(env, views, **kwargs)
     th.set_num_threads(threads)
-    return train(cfg, Path(runs_dir), show_progress=show_progress, command="dospcot.gym_task.train_env")
+    return train(
+        cfg, Path(runs_dir), show_progress=show_progress, command="dospcot.experiment.python_api.train_env"
+    )
 
 
 __all__ = ["gym_config", "train_env"]

@@ -3,7 +3,7 @@
 This file holds steps 2 (select, fit, score per view, serially), 3 (the Eq. 9 pseudo-reward) and 5
 (ageing and stopping) for any number of views m and any agent kind: it sees only a pool of samples
 (features per view, labels, the unlabelled set), never an agent or the hidden rewards. The drivers
-that own the agents (the tabular one in :mod:`dospcot.tabular_cotraining`) collect the pool and
+that own the agents (the tabular one in :mod:`dospcot.paper.tabular_cotraining`) collect the pool and
 apply steps 1 and 4.
 
 Everything is batched over B independent runs; each run has its own classifiers, labels, pool and
@@ -12,58 +12,16 @@ schedule, and nothing crosses between runs.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import torch
 
-from dospcot.classifier import BatchedRewardClassifier, ClassifierConfig
-from dospcot.consensus import consensus_labels
+from dospcot.config.learning_sections import CoTrainingConfig
+from dospcot.core.classifier import BatchedRewardClassifier
+from dospcot.core.consensus import consensus_labels
+from dospcot.core.selection import spamco_select
 from dospcot.seeding import classifier_seed
-from dospcot.selection import QUOTAS, WEIGHTINGS, Quota, Weighting, spamco_select
-
-
-@dataclass(frozen=True)
-class CoTrainingConfig:
-    """Hyperparameters of the self-paced schedule.
-
-    :param gamma: co-regularisation weight (SPaMCo default 0.3).
-    :param weighting: ``"hard"`` (SPaMCo default) or ``"soft"`` self-paced weights.
-    :param add_fraction_start: add_num in round 1, as a share of the unlabelled pool.
-    :param add_fraction_step: growth of that share per round (lambda falls as it grows). It is not
-        capped at 1: under ``quota = "label-share"`` the per-class quotas ``ceil(share_c * add_num)``
-        keep a class from taking more than its share, so only an add_num beyond |U| lets every
-        class's candidates in, and U be fully admitted.
-    :param quota: how add_num splits over the classes: ``"label-share"`` (SPaMCo: in proportion to
-        the labels) or ``"candidates"`` (each class the same share of the samples predicted as it;
-        :mod:`dospcot.selection`).
-    :param tol: stop once under this share of pseudo-labels changed in a round (0 disables).
-    :param stop_when_fully_admitted: stop once every unlabelled sample is admitted.
-    :param max_classes: the most distinct reward values a run may see.
-    :param classifier: the reward classifiers' hyperparameters.
-    """
-
-    gamma: float = 0.3
-    weighting: Weighting = "hard"
-    add_fraction_start: float = 0.2
-    add_fraction_step: float = 0.4
-    quota: Quota = "label-share"
-    tol: float = 0.0
-    stop_when_fully_admitted: bool = False
-    max_classes: int = 16
-    classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
-
-    def __post_init__(self) -> None:
-        if self.gamma < 0:
-            raise ValueError(f"gamma must be >= 0, got {self.gamma}")
-        if self.weighting not in WEIGHTINGS:
-            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
-        if self.quota not in QUOTAS:
-            raise ValueError(f"quota must be one of {QUOTAS}, got {self.quota!r}")
-        if self.add_fraction_start <= 0:
-            raise ValueError(f"add_fraction_start must be > 0, got {self.add_fraction_start}")
-        if self.add_fraction_step < 0:
-            raise ValueError(f"add_fraction_step must be >= 0, got {self.add_fraction_step}")
 
 
 @dataclass(frozen=True)
@@ -75,7 +33,7 @@ class Pool:
     :param label_class: (B, N) int class index of the revealed reward (-1 elsewhere).
     :param unlabelled: (B, N) bool, the unlabelled pool U (disjoint from ``labelled``).
     :param class_mask: (B, K) bool, the classes each run has seen; or (B, N, K), the classes each
-        sample may take (e.g. :func:`~dospcot.reward_classes.episode_end_class_mask`): a class it may
+        sample may take (e.g. :func:`~dospcot.core.reward_classes.episode_end_class_mask`): a class it may
         not take gets no score, so no view predicts it there and no consensus gives it.
     """
 
@@ -111,6 +69,58 @@ class RoundResult:
     changed: np.ndarray
     stopped: np.ndarray
 
+    def of_run(self, b: int) -> RunRound:
+        """Run ``b``'s part of the round."""
+        return RunRound(
+            self.pseudo_class[b], self.pseudo_weight[b], self.view_weight[:, b], self.view_class[:, b],
+            self.threshold[:, b], self.classifier_loss[:, b], float(self.pace[b]), float(self.changed[b]),
+            bool(self.stopped[b]),
+        )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class RunPool:
+    """The samples of one round of one run, over N pool slots: :class:`Pool` without the runs' axis.
+
+    :param features: per view, (N, d_j) classifier inputs.
+    :param labelled: (N,) bool, samples whose true reward was revealed.
+    :param label_class: (N,) int class index of the revealed reward (-1 elsewhere).
+    :param unlabelled: (N,) bool, the unlabelled pool U.
+    :param class_mask: (K,) bool, the classes the run has seen; or (N, K), the classes each sample may take.
+    """
+
+    features: list[np.ndarray]
+    labelled: np.ndarray
+    label_class: np.ndarray
+    unlabelled: np.ndarray
+    class_mask: np.ndarray
+
+
+@dataclass(frozen=True)
+class RunRound:
+    """What one co-training round decided for one run: :class:`RoundResult` without the runs' axis.
+
+    :param pseudo_class: (N,) consensus class of each sample of U, -1 if no view admitted it.
+    :param pseudo_weight: (N,) its self-paced weight.
+    :param view_weight: (m, N) the weights v_j of each view.
+    :param view_class: (m, N) the class each view predicts.
+    :param threshold: (m, K) lambda_{j,c}.
+    :param classifier_loss: (m,) final training loss of each classifier.
+    :param pace: admitted share of U, in [0, 1].
+    :param changed: share of U whose pseudo-label changed since the previous round.
+    :param stopped: whether the stopping rule fired.
+    """
+
+    pseudo_class: np.ndarray
+    pseudo_weight: np.ndarray
+    view_weight: np.ndarray
+    view_class: np.ndarray
+    threshold: np.ndarray
+    classifier_loss: np.ndarray
+    pace: float
+    changed: float
+    stopped: bool
+
 
 class SelfPacedCoTrainer:
     """m reward classifiers co-trained by serial SPaMCo over B independent runs.
@@ -119,16 +129,19 @@ class SelfPacedCoTrainer:
     :param n_runs: B.
     :param config: the schedule's hyperparameters.
     :param seeds: one seed per run; view j of run b initialises from ``(seeds[b], j)``.
+    :param n_classes: K, the most reward classes a run may hold (the classifiers' outputs).
     """
 
-    def __init__(self, view_dims: list[int], n_runs: int, config: CoTrainingConfig, seeds: list[int]) -> None:
-        self.config = config
+    def __init__(
+        self, view_dims: list[int], n_runs: int, config: CoTrainingConfig, seeds: list[int], n_classes: int
+    ) -> None:
+        self.config, self.n_classes = config, n_classes
         self.n_views = len(view_dims)
         if self.n_views < 1:
             raise ValueError("co-training needs at least one view")
         self.classifiers = [
             BatchedRewardClassifier(
-                n_runs, dim, config.max_classes, config.classifier, [classifier_seed(s, j) for s in seeds]
+                n_runs, dim, n_classes, config.classifier, [classifier_seed(s, j) for s in seeds]
             )
             for j, dim in enumerate(view_dims)
         ]
@@ -163,13 +176,13 @@ class SelfPacedCoTrainer:
             n = min(n_samples, self._weights.shape[2])
             weights[:, :, :n] = self._weights[:, :, :n] * pool.unlabelled[None, :, :n]
         view_class = np.zeros((m, n_runs, n_samples), dtype=np.int64)
-        threshold = np.zeros((m, n_runs, cfg.max_classes))
+        threshold = np.zeros((m, n_runs, self.n_classes))
         fit_loss = np.zeros((m, n_runs))
 
         for j in range(m):
             others = [k for k in range(m) if k != j]
             if others:
-                boost = cfg.gamma * weights[others].mean(axis=0)
+                boost = cfg.consensus_weight * weights[others].mean(axis=0)
                 consensus = consensus_labels(losses[others], weights[others])
             else:
                 boost, consensus = np.zeros((n_runs, n_samples)), np.full((n_runs, n_samples), -1)
@@ -180,7 +193,7 @@ class SelfPacedCoTrainer:
                 add_num,
                 boost,
                 consensus,
-                cfg.gamma,
+                cfg.consensus_weight,
                 cfg.weighting,
                 cfg.quota,
             )
@@ -220,6 +233,38 @@ class SelfPacedCoTrainer:
         return differs.sum(axis=1) / np.maximum(unlabelled.sum(axis=1), 1)
 
 
+class RunCoTrainer:
+    """The co-trainer of one run (the SB3 runs of :mod:`dospcot.core.cotraining_run`): a
+    :class:`SelfPacedCoTrainer` whose pools and results hold one run, so its callers never index a
+    batch.
+
+    :param view_dims: input width of each view's classifier (m entries).
+    :param config: the schedule's hyperparameters.
+    :param seed: the run's seed; view j's classifier initialises from ``(seed, j)``.
+    :param n_classes: K, the most reward classes the run may hold.
+    """
+
+    def __init__(self, view_dims: list[int], config: CoTrainingConfig, seed: int, n_classes: int) -> None:
+        self._batch = SelfPacedCoTrainer(view_dims, 1, config, [seed], n_classes)
+
+    @property
+    def classifiers(self) -> list[BatchedRewardClassifier]:
+        """Each view's reward classifier (a batch of one model, as
+        :func:`~dospcot.core.classifier.save_classifier` writes it)."""
+        return self._batch.classifiers
+
+    def step(self, pool: RunPool) -> RunRound:
+        """One round (:meth:`SelfPacedCoTrainer.step`) on the run's pool."""
+        batched = Pool(
+            [f[None] for f in pool.features],
+            pool.labelled[None],
+            pool.label_class[None],
+            pool.unlabelled[None],
+            pool.class_mask[None],
+        )
+        return self._batch.step(batched).of_run(0)
+
+
 def _label_share(pool: Pool) -> np.ndarray:
     """(B, K) share of each class among each run's labels."""
     n_classes = pool.class_mask.shape[-1]
@@ -233,4 +278,4 @@ def _class_losses(clf: BatchedRewardClassifier, x: torch.Tensor, mask: torch.Ten
         return clf.class_losses(clf(x, mask), mask).numpy()
 
 
-__all__ = ["CoTrainingConfig", "Pool", "RoundResult", "SelfPacedCoTrainer"]
+__all__ = ["Pool", "RoundResult", "RunCoTrainer", "RunPool", "RunRound", "SelfPacedCoTrainer"]

@@ -1,16 +1,16 @@
 """The sensor adapter: DOSPCoT on a sensor task (highway driving, or any gymnasium env with discrete
 actions: docs/your_env.md), m sensor views.
 
-The round itself is :class:`~dospcot.cotraining_round.CoTrainingRun`'s; this adapter supplies what
+The round itself is :class:`~dospcot.core.cotraining_run.CoTrainingRun`'s; this adapter supplies what
 a continuous task does differently (docs/design.md section 3):
 
 - **the store**: a state is a sensor reading that never repeats exactly, so every stored step is one
   pool sample, with every view of s and s' (:class:`StepStore`; each reading stored once); an env
-  that names its states (a state key, ``TransitionConfig.keyed``) pools (key, action) pairs instead
+  that names its states (a state key, ``gym.state_key``) pools (key, action) pairs instead
   (:class:`KeyedStepStore`);
 - **the pool**: every sample, its classifier input under view j being (view j of s, one-hot action,
   view j of s'); the reward is binned into K classes of the labels
-  (:class:`~dospcot.reward_classes.QuantileRewardClasses`), and an admitted sample's reward is the
+  (:class:`~dospcot.core.reward_classes.QuantileRewardClasses`), and an admitted sample's reward is the
   mean of its consensus class;
 - **the evaluator**: greedy evaluation episodes (below).
 
@@ -26,8 +26,7 @@ no exact optimum, so no optimal-action agreement (NaN).
 from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Mapping, Sequence
-from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
@@ -35,13 +34,22 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
-from dospcot.checkpointing import InPlaceState
-from dospcot.cotraining import Pool
-from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
-from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, load_agent, record_demonstrations
+from dospcot.config.errors import ConfigError
+from dospcot.config.task_sections import DemonstrationsConfig, GymConfig, HighwayConfig
+from dospcot.core.cotrainer import RunPool
+from dospcot.core.in_place_state import InPlaceState
+from dospcot.core.reward_classes import QuantileRewardClasses, episode_end_class_mask
+from dospcot.demonstrations import Demonstrations, load_agent, record_demonstrations
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.reward_classes import QuantileRewardClasses, episode_end_class_mask
 from dospcot.seeding import EVAL_SEED, agent_seed, demonstration_seed
+
+if TYPE_CHECKING:
+    from dospcot.config.run_configs import TrainConfig
+
+SensorSection = HighwayConfig | GymConfig
+"""The section that sets up a sensor task: each has the fields and properties :class:`SensorTask` reads
+(``episode_steps``, ``reward_classes``, ``eval_episodes``, ``success_return``, ``max_return``,
+``keyed``, ``read_termination``, ``episode_end_classes``)."""
 
 
 class StepStore(InPlaceState):
@@ -223,41 +231,6 @@ class SensorStoreWrapper(gym.Wrapper):
         return obs, reward, terminated, truncated, info
 
 
-@dataclass(frozen=True)
-class TransitionConfig(NeuralConfig):
-    """A continuous run: :class:`~dospcot.neural_cotraining.NeuralConfig` plus
-
-    :param reward_classes: K, the quantile bins of the continuous reward.
-    :param eval_episodes: greedy evaluation episodes per agent and round.
-    :param success_return: an evaluation episode whose true return exceeds this is a success; None:
-        one that lasts ``max_episode_steps`` is (highway: no crash).
-    :param max_return: ``R_max`` of the normalised score; None: ``max_episode_steps`` (highway-env's
-        rewards are at most 1 a step); ``inf``: not known, the normalised score is NaN.
-    :param keyed: the env names its states (``info["state_key"]``, the mask's ``"key"`` mode): the pool
-        holds (state key, action) pairs (:class:`KeyedStepStore`), and every agent's env shares the
-        run's mask, so a pair is labelled for all of them or for none.
-    :param read_termination: the reward classifiers also read whether a step ended its episode.
-    :param episode_end_classes: a reward class the labels show only on steps that ended their
-        episode is given only to such steps (:func:`~dospcot.reward_classes.episode_end_class_mask`).
-    """
-
-    reward_classes: int = 5
-    eval_episodes: int = 10
-    success_return: float | None = None
-    max_return: float | None = None
-    keyed: bool = False
-    read_termination: bool = False
-    episode_end_classes: bool = False
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if self.reward_classes < 1 or self.eval_episodes < 1:
-            raise ValueError(
-                "reward_classes and eval_episodes must be >= 1, "
-                f"got {self.reward_classes}, {self.eval_episodes}"
-            )
-
-
 class _RandomPolicy:
     """A uniformly random policy with SB3's ``predict`` signature (the normalised score's floor)."""
 
@@ -271,13 +244,13 @@ class _RandomPolicy:
 
 
 class SensorTask:
-    """The sensor adapter of a run (:class:`~dospcot.cotraining_round.CoTrainingTask`).
+    """The sensor adapter of a run (:class:`~dospcot.core.cotraining_run.CoTrainingTask`).
 
+    :param cfg: the run's config: its views, method, seed, label fraction and demonstrations.
+    :param section: the task's section (:data:`SensorSection`); its ``episode_steps`` bound evaluation
+        episodes and are ``R_max`` of the normalised score where ``max_return`` is None.
     :param make_env: ``make_env(view, views, label_fraction, mask_seed)`` builds a masked sensor env
         observing ``view`` and recording ``views`` (:func:`dospcot.envs.highway.make_masked_highway`).
-    :param spec: the run.
-    :param config: its hyperparameters; ``max_episode_steps`` bounds evaluation episodes and is
-        ``R_max`` of the normalised score.
     :param make_eval_env: builds the evaluation envs, with ``make_env``'s arguments; None:
         ``make_env`` (they differ where training episodes have their own wrappers, e.g. exploring
         starts).
@@ -285,25 +258,26 @@ class SensorTask:
 
     def __init__(
         self,
+        cfg: TrainConfig,
+        section: SensorSection,
         make_env: Callable[..., gym.Env],
-        spec: NeuralRunSpec,
-        config: TransitionConfig,
         make_eval_env: Callable[..., gym.Env] | None = None,
     ) -> None:
-        self.spec, self.config = spec, config
-        fraction = 1.0 if spec.method == "oracle" else config.label_fraction
+        self.cfg, self.section = cfg, section
+        fraction = 1.0 if cfg.method == "oracle" else cfg.training.label_fraction
         # A keyed pool holds each pair once: its agents must agree on whether it is labelled.
-        seeds = [spec.seed if config.keyed else agent_seed(spec.seed, k) for k in range(len(spec.views))]
-        envs = [make_env(v, spec.views, fraction, seed) for v, seed in zip(spec.views, seeds, strict=True)]
-        self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in spec.views}
-        self.store = (KeyedStepStore if config.keyed else StepStore)(self.shapes)
-        self.demos = self._read_demonstrations(config.demonstrations, make_env)
+        seeds = [cfg.seed if section.keyed else agent_seed(cfg.seed, k) for k in range(len(cfg.views))]
+        envs = [make_env(v, cfg.views, fraction, seed) for v, seed in zip(cfg.views, seeds, strict=True)]
+        self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in cfg.views}
+        self.store = (KeyedStepStore if section.keyed else StepStore)(self.shapes)
+        self.demos = self._read_demonstrations(cfg.demonstrations, make_env)
         self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
         self.n_actions = int(envs[0].action_space.n)
-        self.classes = QuantileRewardClasses(config.reward_classes)
+        self.n_classes = section.reward_classes
+        self.classes = QuantileRewardClasses(section.reward_classes)
         build_eval = make_eval_env or make_env
-        self.eval_envs = [_eval_env(build_eval, v, config.max_episode_steps) for v in spec.views]
-        returns = self._returns(_RandomPolicy(envs[0].action_space, spec.seed), self.eval_envs[0])[0]
+        self.eval_envs = [_eval_env(build_eval, v, section.episode_steps) for v in cfg.views]
+        returns = self._returns(_RandomPolicy(envs[0].action_space, cfg.seed), self.eval_envs[0])[0]
         self.random_return = float(np.mean(returns))
 
     def agent_env(self, k: int, view: str) -> gym.Env:
@@ -313,22 +287,21 @@ class SensorTask:
         return None  # a sensor reading never repeats exactly: no table of states
 
     def feature_dims(self) -> list[int]:
-        extra = int(self.config.read_termination)
-        return [2 * int(np.prod(self.shapes[v])) + self.n_actions + extra for v in self.spec.views]
+        extra = int(self.section.read_termination)
+        return [2 * int(np.prod(self.shapes[v])) + self.n_actions + extra for v in self.cfg.views]
 
-    def pool(self) -> Pool:
+    def pool(self) -> RunPool:
         store = self.store
         n = len(store)
         labelled, unlabelled = store.labelled[:n], ~store.labelled[:n]
         self.classes.fit(store.label_value[:n][labelled])
         label_class = np.where(labelled, self.classes.encode(store.label_value[:n][None])[0], -1)
-        termination = self.config.read_termination
-        features = [store.features(v, self.n_actions, termination)[None] for v in self.spec.views]
-        class_mask = self.classes.mask
-        if self.config.episode_end_classes:
-            terminal = store.terminal[:n]
-            class_mask = episode_end_class_mask(label_class, labelled, terminal, class_mask[0])[None]
-        return Pool(features, labelled[None], label_class[None], unlabelled[None], class_mask)
+        termination = self.section.read_termination
+        features = [store.features(v, self.n_actions, termination) for v in self.cfg.views]
+        class_mask = self.classes.mask[0]  # the quantile classes keep a runs' axis of one
+        if self.section.episode_end_classes:
+            class_mask = episode_end_class_mask(label_class, labelled, store.terminal[:n], class_mask)
+        return RunPool(features, labelled, label_class, unlabelled, class_mask)
 
     def true_class(self) -> np.ndarray:
         hidden = self.store.hidden_reward[: len(self.store)]  # metrics only
@@ -339,7 +312,7 @@ class SensorTask:
         returns, lengths = evaluate_policy(
             policy,
             env,
-            n_eval_episodes=self.config.eval_episodes,
+            n_eval_episodes=self.section.eval_episodes,
             deterministic=True,
             return_episode_rewards=True,
         )
@@ -347,10 +320,11 @@ class SensorTask:
 
     def evaluate(self, agents: Sequence[ExpectedSarsaDQN]) -> dict[str, np.ndarray]:
         """Greedy evaluation episodes of every agent: (m,) ``greedy_return`` (mean true return),
-        ``success`` (share of successful episodes, :class:`TransitionConfig`), ``normalised_score``;
+        ``success`` (share of successful episodes: those whose return exceeds ``success_return``, or
+        where it is None those that last ``episode_steps``), ``normalised_score``;
         ``agreement`` is NaN."""
         r_max = self.reference_returns()["max_return"]
-        threshold = self.config.success_return
+        threshold = self.section.success_return
         out: dict[str, list[float]] = {
             "greedy_return": [],
             "success": [],
@@ -360,7 +334,7 @@ class SensorTask:
         for agent, env in zip(agents, self.eval_envs, strict=True):
             returns, lengths = self._returns(agent, env)
             out["greedy_return"].append(float(returns.mean()))
-            won = lengths >= self.config.max_episode_steps if threshold is None else returns > threshold
+            won = lengths >= self.section.episode_steps if threshold is None else returns > threshold
             out["success"].append(float(won.mean()))
             out["normalised_score"].append(
                 (returns.mean() - self.random_return) / (r_max - self.random_return)
@@ -371,9 +345,9 @@ class SensorTask:
         return {key: np.asarray(values) for key, values in out.items()}
 
     def reference_returns(self) -> dict[str, float]:
-        r_max = self.config.max_return
+        r_max = self.section.max_return
         return {
-            "max_return": float(self.config.max_episode_steps if r_max is None else r_max),
+            "max_return": float(self.section.episode_steps if r_max is None else r_max),
             "random_return": self.random_return,
         }
 
@@ -404,8 +378,8 @@ class SensorTask:
                 )
         if not wanted.labels or demos.rewards is None:
             return demos.without_rewards()
-        if self.config.keyed:
-            raise ValueError(
+        if self.section.keyed:
+            raise ConfigError(
                 "demonstrations.labels: a file's steps name no state key, so they cannot join a keyed "
                 "pool; set demonstrations.labels = false to use them in the margin loss only"
             )
@@ -419,37 +393,21 @@ class SensorTask:
     def _record(self, wanted: DemonstrationsConfig, make_env: Callable[..., gym.Env]) -> Demonstrations:
         """``wanted.episodes`` greedy episodes of the saved agent on an unmasked copy of the task."""
         agent = load_agent(wanted.agent, wanted.agent_algorithm)
-        view = wanted.agent_view or self.spec.views[0]
-        env = make_env(view, tuple(dict.fromkeys([*self.spec.views, view])), 1.0, self.spec.seed)
+        view = wanted.agent_view or self.cfg.views[0]
+        env = make_env(view, tuple(dict.fromkeys([*self.cfg.views, view])), 1.0, self.cfg.seed)
         if agent.observation_space.shape != env.observation_space.shape:
             raise ValueError(
                 f"demonstrations.agent observes shape {agent.observation_space.shape}, but view {view!r} "
                 f"gives {env.observation_space.shape}; set demonstrations.agent_view to the view it was "
                 "trained on"
             )
-        env = gym.wrappers.TimeLimit(env, self.config.max_episode_steps)
-        return record_demonstrations(agent, env, wanted.episodes, demonstration_seed(self.spec.seed))
+        env = gym.wrappers.TimeLimit(env, self.section.episode_steps)
+        return record_demonstrations(agent, env, wanted.episodes, demonstration_seed(self.cfg.seed))
 
     def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
         if self.demos is None:
             return None
         return self.demos.observations[view].reshape(-1, *self.shapes[view]), self.demos.actions
-
-
-class TransitionCoTraining(CoTrainingRun):
-    """One run on a continuous sensor task: :class:`CoTrainingRun` with the :class:`SensorTask`
-    adapter, whose parameters it takes."""
-
-    def __init__(
-        self,
-        make_env: Callable[..., gym.Env],
-        spec: NeuralRunSpec,
-        config: TransitionConfig,
-        make_eval_env: Callable[..., gym.Env] | None = None,
-    ) -> None:
-        super().__init__(
-            SensorTask(make_env, spec, config, make_eval_env), spec, config, config.reward_classes
-        )
 
 
 def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> DummyVecEnv:
@@ -461,11 +419,38 @@ def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> Du
     return DummyVecEnv([build])
 
 
+def validate_sensor_demonstrations(cfg: TrainConfig) -> None:
+    """A sensor task's demonstrations come from a file or a saved agent (no I/O)."""
+    demos = cfg.demonstrations
+    if demos.episodes and not (demos.file or demos.agent):
+        raise ConfigError(
+            f'demonstrations.episodes: a task = "{cfg.task}" run\'s demonstrations come from a file '
+            "or a saved agent: set demonstrations.file or demonstrations.agent (docs/demonstrations.md)"
+        )
+
+
+def check_sensor_demonstrations(cfg: TrainConfig) -> None:
+    """The check step of a sensor task's demonstrations: a file must load and a saved agent must load
+    with its algorithm."""
+    demos = cfg.demonstrations
+    try:
+        if demos.file:
+            Demonstrations.load(demos.file)
+    except ValueError as err:
+        raise ConfigError(f"demonstrations.file: {err}") from None
+    try:
+        if demos.agent:
+            load_agent(demos.agent, demos.agent_algorithm)
+    except ValueError as err:
+        raise ConfigError(f"demonstrations.{err}") from None
+
+
 __all__ = [
     "KeyedStepStore",
+    "SensorSection",
     "SensorStoreWrapper",
     "SensorTask",
     "StepStore",
-    "TransitionCoTraining",
-    "TransitionConfig",
+    "check_sensor_demonstrations",
+    "validate_sensor_demonstrations",
 ]

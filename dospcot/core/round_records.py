@@ -1,5 +1,5 @@
 """What a co-training round reports, for every kind of run (the SB3 runs of
-:mod:`dospcot.cotraining_round` and the batched tabular runs of :mod:`dospcot.tabular_cotraining`):
+:mod:`dospcot.core.cotraining_run` and the batched tabular runs of :mod:`dospcot.paper.tabular_cotraining`):
 the co-trainer's figures for the round and the head that names each record (one row of
 ``metrics.csv`` per run, round and agent).
 
@@ -8,53 +8,58 @@ The figures read the hidden truth: they are metrics, never an input of training.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 
-from dospcot.cotraining import RoundResult
-from dospcot.run_spec import RunSpec
+from dospcot.core.cotrainer import RunRound
 
 VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
 """The per-view figures of :func:`round_stats`, under the names a record gives them."""
 
 
-def record_head(spec: RunSpec, round_index: int, k: int) -> dict[str, Any]:
-    """The first columns of agent ``k``'s record of round ``round_index`` (1-based) of run ``spec``:
-    what the run is and which agent the row describes."""
+def record_head(
+    method: str,
+    agents: Sequence[str],
+    views: Sequence[str],
+    gamma: float,
+    seed: int,
+    round_index: int,
+    k: int,
+) -> dict[str, Any]:
+    """The first columns of agent ``k``'s record of round ``round_index`` (1-based) of a run: what the
+    run is (its method, agent kinds, views, consensus weight ``gamma`` and seed) and which agent the row
+    describes. The column ``gamma`` holds ``cotraining.consensus_weight``, the paper's gamma."""
     return {
-        "method": spec.method,
-        "agents": "-".join(spec.agents),
-        "views": "-".join(spec.views),
-        "m": len(spec.agents),
-        "gamma": spec.gamma,
-        "seed": spec.seed,
+        "method": method,
+        "agents": "-".join(agents),
+        "views": "-".join(views),
+        "m": len(agents),
+        "gamma": gamma,
+        "seed": seed,
         "round": round_index,
         "agent": int(k),
-        "kind": spec.agents[k],
-        "view": spec.views[k],
+        "kind": agents[k],
+        "view": views[k],
     }
 
 
-def _view_stats(
-    result: RoundResult, j: int, run: int, unlabelled: np.ndarray, correct: np.ndarray
-) -> dict[str, float]:
-    """View j's round in run ``run`` of ``result``: coverage of U, accuracy of what it admitted, mean
+def _view_stats(result: RunRound, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
+    """View j's round: coverage of U, accuracy of what it admitted, mean
     lambda and classifier loss. ``correct`` (N,) says where its predicted class matches the truth."""
-    taken = result.view_weight[j, run] > 0
-    lam = result.threshold[j, run]
+    taken = result.view_weight[j] > 0
+    lam = result.threshold[j]
     return {
         "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
         "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
         "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
-        "classifier_loss": float(result.classifier_loss[j, run]),
+        "classifier_loss": float(result.classifier_loss[j]),
     }
 
 
-def round_stats(
-    result: RoundResult, unlabelled: np.ndarray, true_class: np.ndarray, run: int = 0
-) -> dict[str, Any]:
-    """Run ``run``'s round (an index into ``result``'s runs): pace, coverage of U (``unlabelled``,
+def round_stats(result: RunRound, unlabelled: np.ndarray, true_class: np.ndarray) -> dict[str, Any]:
+    """A run's round: pace, coverage of U (``unlabelled``,
     (N,) bool), accuracy of the admitted pseudo-rewards with its worst class, whether the stopping rule
     fired, and each view's figures (:data:`VIEW_STATS`). ``true_class`` (N,) is each sample's hidden
     class (-1: a value no label showed, never a right prediction).
@@ -65,18 +70,18 @@ def round_stats(
     one class, always wrong); ``worst_class_precision`` the lowest share of the samples given one
     class that truly are of it. NaN when nothing is admitted.
     """
-    admitted = result.pseudo_weight[run] > 0
-    right = (result.view_class[:, run] == true_class) & (true_class >= 0)  # (m, N) per view
-    given, truth = result.pseudo_class[run][admitted], true_class[admitted]
+    admitted = result.pseudo_weight > 0
+    right = (result.view_class == true_class) & (true_class >= 0)  # (m, N) per view
+    given, truth = result.pseudo_class[admitted], true_class[admitted]
     correct = (given == truth) & (truth >= 0)
     recall = [correct[truth == c].mean() for c in np.unique(truth)]
     precision = [correct[given == c].mean() for c in np.unique(given)]
     return {
-        "pace": float(result.pace[run]),
+        "pace": result.pace,
         "coverage": float(admitted[unlabelled].mean()) if unlabelled.any() else 0.0,
         "pseudo_accuracy": float(correct.mean()) if admitted.any() else float("nan"),
         "worst_class_recall": float(min(recall, default=float("nan"))),
         "worst_class_precision": float(min(precision, default=float("nan"))),
-        "stopped": bool(result.stopped[run]),
-        "views": [_view_stats(result, j, run, unlabelled, c) for j, c in enumerate(right)],
+        "stopped": result.stopped,
+        "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(right)],
     }

@@ -1,12 +1,13 @@
-"""The grid adapter: DOSPCoT on a deterministic discrete task (a grid world), m views.
+"""The grid task (``task = "grid"``, the ``[env]`` section): DOSPCoT on the masked grid world, and the
+grid adapter it builds, which serves any deterministic discrete task (a toy-text env with ``P`` and ``s``).
 
-The round itself is :class:`~dospcot.cotraining_round.CoTrainingRun`'s; this adapter supplies what
+The round itself is :class:`~dospcot.core.cotraining_run.CoTrainingRun`'s; this adapter supplies what
 a discrete task does differently (docs/design.md section 3):
 
 - **the store** pools (s, a) keys: a key's id is ``s * A + a``, so the reward table is indexed by
   key, and a step of a key admitted in an earlier round reads its pseudo-reward at once;
 - **the pool**: every seen key, its classifier input under view j being (view j of s, one-hot a,
-  view j of the stored s') (:func:`~dospcot.key_pool.key_features`); classes are the distinct
+  view j of the stored s') (:func:`~dospcot.core.key_pool.key_features`); classes are the distinct
   labelled reward values;
 - **the evaluator**: value iteration gives the exact optimum, and each agent's greedy action in every
   state (read through its own view) is measured against it.
@@ -15,22 +16,30 @@ a discrete task does differently (docs/design.md section 3):
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from typing import Any
+from functools import partial
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 
 from dospcot import metrics
-from dospcot.checkpointing import InPlaceState
-from dospcot.cotraining import Pool
-from dospcot.cotraining_round import CoTrainingRun, NeuralConfig, NeuralRunSpec
+from dospcot.config.errors import ConfigError
+from dospcot.core.cotrainer import RunPool
+from dospcot.core.in_place_state import InPlaceState
+from dospcot.core.key_pool import key_features
+from dospcot.core.reward_classes import RewardClasses
 from dospcot.demonstrations import expert_demonstrations
+from dospcot.envs import GridLayout, GridWorld, grid_views, monitored_states, view_blind_spots
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import View, ViewObservationWrapper
-from dospcot.key_pool import key_features
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.reward_classes import RewardClasses
+from dospcot.tasks.registry import Task, register
+
+if TYPE_CHECKING:
+    from dospcot.config.run_configs import TrainConfig
+
+GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
 
 
 class KeyStore(InPlaceState):
@@ -105,38 +114,38 @@ MakeEnv = Callable[[], gym.Env]
 
 
 class GridTask:
-    """The grid adapter of a run (:class:`~dospcot.cotraining_round.CoTrainingTask`).
+    """The grid adapter of a run (:class:`~dospcot.core.cotraining_run.CoTrainingTask`).
 
+    :param cfg: the run's config: its views, method, seed, label fraction, episode lengths
+        (``env.episode_steps``, ``env.train_episode_steps``), reward classes and demonstrations.
     :param make_env: builds a fresh copy of the task (a toy-text env with ``P`` and ``s``).
     :param views: every view the task offers, by name.
-    :param spec: the run.
-    :param config: its hyperparameters.
     :param monitored_states: bool (S,), states whose every reward a monitor reveals
         (:class:`~dospcot.envs.RewardMaskWrapper`); None: none.
     """
 
     def __init__(
         self,
+        cfg: TrainConfig,
         make_env: MakeEnv,
         views: dict[str, View],
-        spec: NeuralRunSpec,
-        config: NeuralConfig,
         monitored_states: np.ndarray | None = None,
     ) -> None:
-        missing = sorted(set(spec.views) - set(views))
+        missing = sorted(set(cfg.views) - set(views))
         if missing:
             raise ValueError(f"unknown view(s) {missing}; this task has {sorted(views)}")
-        self.make_env, self.views, self.spec, self.config = make_env, views, spec, config
+        self.cfg, self.make_env, self.views = cfg, make_env, views
         self.monitored_states = monitored_states
         self.mdp = TabularMDP.from_env(
-            make_env(), {name: views[name] for name in spec.views}, config.max_episode_steps
+            make_env(), {name: views[name] for name in cfg.views}, cfg.env.episode_steps
         )
         self.store = KeyStore(self.mdp.n_states, self.mdp.n_actions)
-        self.classes = RewardClasses(1, config.cotraining.max_classes)
+        self.n_classes = cfg.cotraining.max_classes
+        self.classes = RewardClasses(1, self.n_classes)
         self.policy_metrics = metrics.GreedyPolicyMetrics(self.mdp, discount=1.0)
-        wanted = config.demonstrations
+        wanted = cfg.demonstrations
         self.demos = (
-            expert_demonstrations(self.mdp, wanted.episodes, spec.seed, with_rewards=wanted.labels)
+            expert_demonstrations(self.mdp, wanted.episodes, cfg.seed, with_rewards=wanted.labels)
             if wanted.episodes
             else None
         )
@@ -154,15 +163,14 @@ class GridTask:
                 self.store.add(int(s), int(a), int(s2), True, float(r), float(r))
 
     def agent_env(self, k: int, view: str) -> gym.Env:
-        fraction = 1.0 if self.spec.method == "oracle" else self.config.label_fraction
-        env = gym.wrappers.TimeLimit(
-            self.make_env(), self.config.train_episode_steps or self.config.max_episode_steps
-        )
+        cfg = self.cfg
+        fraction = 1.0 if cfg.method == "oracle" else cfg.training.label_fraction
+        env = gym.wrappers.TimeLimit(self.make_env(), cfg.env.train_episode_steps or cfg.env.episode_steps)
         env = RewardMaskWrapper(
             env,
             fraction,
             mode="state-action",
-            mask_seed=self.spec.seed,
+            mask_seed=cfg.seed,
             monitored_states=self.monitored_states,
             revealed_keys=self.revealed_keys,
         )
@@ -172,19 +180,22 @@ class GridTask:
         return self.mdp.views[view]
 
     def feature_dims(self) -> list[int]:
-        return [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in self.spec.views]
+        return [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in self.cfg.views]
 
-    def pool(self) -> Pool:
+    def pool(self) -> RunPool:
         store = self.store
-        labelled = (store.visited & store.labelled)[None]
-        unlabelled = (store.visited & ~store.labelled)[None]
-        self.classes.observe(0, np.unique(store.label_value[labelled[0]]))
-        label_class = np.where(labelled, self.classes.encode(store.label_value[None]), -1)
+        labelled = store.visited & store.labelled
+        unlabelled = store.visited & ~store.labelled
+        # The reward classes are batched over runs (the tabular path's); this run is their only one.
+        self.classes.observe(0, np.unique(store.label_value[labelled]))
+        label_class = np.where(labelled, self.classes.encode(store.label_value[None])[0], -1)
         features = [
-            key_features(self.mdp.views[v], store.next_state[None], store.visited[None], self.mdp.n_actions)
-            for v in self.spec.views
+            key_features(self.mdp.views[v], store.next_state[None], store.visited[None], self.mdp.n_actions)[
+                0
+            ]
+            for v in self.cfg.views
         ]
-        return Pool(features, labelled, label_class, unlabelled, self.classes.mask)
+        return RunPool(features, labelled, label_class, unlabelled, self.classes.mask[0])
 
     def true_class(self) -> np.ndarray:
         return self.classes.encode(self.store.hidden_reward[None])[0]
@@ -194,7 +205,7 @@ class GridTask:
         return np.stack(
             [
                 agent.predict(self.mdp.views[v], deterministic=True)[0]
-                for agent, v in zip(agents, self.spec.views, strict=True)
+                for agent, v in zip(agents, self.cfg.views, strict=True)
             ]
         )
 
@@ -213,29 +224,54 @@ class GridTask:
         return None if self.demos is None else (self.demos.observations[view], self.demos.actions)
 
 
-class NeuralCoTraining(CoTrainingRun):
-    """One run on a deterministic discrete task: :class:`CoTrainingRun` with the :class:`GridTask`
-    adapter, whose parameters it takes."""
-
-    def __init__(
-        self,
-        make_env: MakeEnv,
-        views: dict[str, View],
-        spec: NeuralRunSpec,
-        config: NeuralConfig,
-        monitored_states: np.ndarray | None = None,
-    ) -> None:
-        task = GridTask(make_env, views, spec, config, monitored_states)
-        super().__init__(task, spec, config, config.cotraining.max_classes)
-
-    @property
-    def mdp(self) -> TabularMDP:
-        """The task's exact MDP (metrics only)."""
-        return self.task.mdp
-
-    def greedy_actions(self) -> np.ndarray:
-        """(m, S) each agent's greedy action in every state, read through its own view."""
-        return self.task.greedy_actions(self.agents)
+def grid_world(cfg: TrainConfig) -> tuple[Callable[[], GridWorld], dict[str, View], GridLayout]:
+    """The env factory, the views (with the run's blind spots, if any) and the map of a grid config."""
+    env = cfg.env
+    layout = GridLayout.random(env.size, env.layout_seed, env.lava_density, env.wall_density)
+    make_env = partial(
+        GridWorld, layout, step_cost=env.step_cost, lava_penalty=env.lava_penalty,
+        goal_reward=env.goal_reward, exploring_starts=env.exploring_starts,
+    )  # fmt: skip
+    blind = (
+        view_blind_spots(layout, env.blind_spot_rate, cfg.seed, identical=env.blind_spots == "identical")
+        if env.blind_spot_rate > 0
+        else None
+    )
+    return make_env, grid_views(layout, env.patch_size, env.compass, blind, env.ray_encoding), layout
 
 
-__all__ = ["GridTask", "KeyStore", "NeuralCoTraining", "NeuralConfig", "NeuralRunSpec", "StoreWrapper"]
+@register
+class GridWorldTask(Task):
+    """The masked grid world of :class:`dospcot.envs.GridWorld`: a map from a seed, (s, a) keys labelled
+    at random (and, with ``env.monitored_columns``, every key of the first columns), value iteration's
+    optimum for the metrics and for the grid's demonstrations."""
+
+    name = "grid"
+    section = "env"
+    discrete_states = True
+
+    def title(self, cfg: TrainConfig) -> str:
+        return "grid world"
+
+    def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
+        return GRID_VIEWS
+
+    def validate(self, cfg: TrainConfig) -> None:
+        demos = cfg.demonstrations
+        if demos.file or demos.agent:
+            source = "file" if demos.file else "agent"
+            raise ConfigError(
+                f"demonstrations.{source}: a grid run's demonstrations come from value iteration "
+                '(demonstrations.episodes); a file or a saved agent serves task = "highway" or "gym"'
+            )
+
+    def has_monitor(self, cfg: TrainConfig) -> bool:
+        return cfg.env.monitored_columns > 0
+
+    def build(self, cfg: TrainConfig) -> GridTask:
+        make_env, views, layout = grid_world(cfg)
+        columns = cfg.env.monitored_columns
+        return GridTask(cfg, make_env, views, monitored_states(layout.size, columns) if columns else None)
+
+
+__all__ = ["GRID_VIEWS", "GridTask", "GridWorldTask", "KeyStore", "StoreWrapper", "grid_world"]

@@ -16,47 +16,17 @@ has seen in its labels; the others get no score and can never be predicted.
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from itertools import pairwise
 from pathlib import Path
-from typing import Literal
 
 import torch
 from torch import nn
 
+from dospcot.config.learning_sections import ClassifierConfig
 from dospcot.seeding import layer_seed
 
-ModelKind = Literal["mlp", "linear"]
-LossKind = Literal["cross_entropy", "hinge"]
-MODEL_KINDS: tuple[str, ...] = ("mlp", "linear")
-LOSS_KINDS: tuple[str, ...] = ("cross_entropy", "hinge")
 _MASKED = -1e9
-
-
-@dataclass(frozen=True)
-class ClassifierConfig:
-    """Hyperparameters of a reward classifier.
-
-    :param model: ``"mlp"`` or ``"linear"``.
-    :param loss: ``"cross_entropy"`` or ``"hinge"``.
-    :param hidden: width of the MLP's hidden layer.
-    :param epochs: full-batch Adam steps per fit.
-    :param lr: Adam learning rate.
-    :param l2: weight of the penalty 1/2 ||theta||^2, divided by the number of training samples.
-    """
-
-    model: ModelKind = "mlp"
-    loss: LossKind = "cross_entropy"
-    hidden: int = 32
-    epochs: int = 150
-    lr: float = 0.02
-    l2: float = 1e-3
-
-    def __post_init__(self) -> None:
-        if self.model not in MODEL_KINDS:
-            raise ValueError(f"classifier model must be one of {MODEL_KINDS}, got {self.model!r}")
-        if self.loss not in LOSS_KINDS:
-            raise ValueError(f"classifier loss must be one of {LOSS_KINDS}, got {self.loss!r}")
 
 
 class BatchedRewardClassifier(nn.Module):

@@ -5,7 +5,7 @@ rounds; Table 4: Expected SARSA paired with Expected SARSA, SARSA and Q at gamma
 co-training cell stand the baselines of the same agent kind at the same round (oracle, masked-zero,
 labels-only, self-training with each view) and the paper's printed figure.
 
-A paper run is one seed of the protocol (a :class:`~dospcot.train_config.PaperConfig`, presets
+A paper run is one seed of the protocol (a :class:`~dospcot.config.run_configs.PaperConfig`, presets
 ``paper-text`` and ``paper-published-code``): its 26 tabular runs train in one vectorised batch and
 write an ordinary run folder. ``dospcot reproduce-paper`` is a ``dospcot sweep`` of such a preset
 over seeds (its local backend batches each worker's seeds, :func:`train_protocol_at`) followed by
@@ -27,9 +27,9 @@ from typing import Any
 import numpy as np
 
 from dospcot import metrics
+from dospcot.config.run_configs import PaperConfig
 from dospcot.envs import CLIFF_VIEWS, TabularMDP, make_masked_cliffwalking
-from dospcot.metrics import SeedSummary
-from dospcot.run_folder import (
+from dospcot.experiment.run_folder import (
     CONFIG_FILE,
     METRICS_FILE,
     SUMMARY_FILE,
@@ -38,8 +38,8 @@ from dospcot.run_folder import (
     write_run_info,
     write_toml,
 )
-from dospcot.tabular_cotraining import TabularCoTraining, TabularRunSpec
-from dospcot.train_config import PaperConfig
+from dospcot.metrics import SeedSummary
+from dospcot.paper.tabular_cotraining import TabularCoTraining, TabularRunSpec
 
 KINDS: tuple[str, ...] = ("q", "sarsa", "esarsa")
 KIND_NAMES = {"q": "Q", "sarsa": "SARSA", "esarsa": "ESARSA"}
@@ -54,11 +54,6 @@ BASELINES: tuple[tuple[str, str, str], ...] = (
     ("self-training (patch)", "cotrain", "patch"),
 )
 """(row label, method, view) of the single-agent rows."""
-
-PRESETS: dict[str, str] = {"paper-text": "paper-text", "published-code": "paper-published-code"}
-"""``reproduce-paper --preset`` -> the config preset: the hyperparameters the paper's text states
-(learning rate 0.8, discount 0.95), or those its published code used (0.5, 1.0). Both: 5 rounds of 500
-episodes of at most 100 steps, exploration 0.1."""
 
 
 def protocol_specs(seeds: Sequence[int]) -> list[TabularRunSpec]:

@@ -1,4 +1,7 @@
-"""``dospcot train`` and ``dospcot evaluate``: one neural run of a config, with its run folder.
+"""``dospcot train`` and ``dospcot evaluate``: one run of a config, with its run folder.
+
+What a run is comes from its task (:mod:`dospcot.tasks`); this module writes the folder of a
+co-training run of SB3 agents, the default of every task but the paper protocol's.
 
 A run writes ``runs/<name>/<stamp>/`` (docs/design.md section 5):
 
@@ -9,7 +12,7 @@ A run writes ``runs/<name>/<stamp>/`` (docs/design.md section 5):
 - ``metrics.csv``: one row per round and view; ``summary.json``: the last round, per view and averaged;
 - ``agent_<view>.zip`` (loads with plain ``stable_baselines3.DQN.load``; a ``tabular`` agent's where
   dospcot is importable), ``classifier_<view>.pt``
-  (:func:`dospcot.classifier.load_classifier`) and ``reward_classes.json`` (class index -> reward);
+  (:func:`dospcot.core.classifier.load_classifier`) and ``reward_classes.json`` (class index -> reward);
 - ``learning_curves.png``; ``run_info.json`` (command, versions, wall time);
 - ``summary.json`` is written last: a folder that has it holds a finished run;
 - ``checkpoint.pkl``: the state after the last finished round, for ``dospcot train --resume``;
@@ -24,16 +27,13 @@ uninterrupted run. ``dospcot evaluate`` adds ``evaluation.json``.
 from __future__ import annotations
 
 import csv
-import dataclasses
 import math
 import shutil
 import time
-from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 import stable_baselines3
 from stable_baselines3.common.callbacks import BaseCallback
@@ -41,22 +41,12 @@ from stable_baselines3.common.logger import configure
 from torch.utils.tensorboard import SummaryWriter
 from tqdm.auto import tqdm
 
-from dospcot.classifier import save_classifier
-from dospcot.cotraining_round import CoTrainingRun
-from dospcot.envs import (
-    GridLayout,
-    GridWorld,
-    grid_views,
-    make_masked_gym,
-    make_masked_highway,
-    monitored_states,
-    view_blind_spots,
-)
-from dospcot.envs.views import View
-from dospcot.neural_cotraining import GridTask, MakeEnv, NeuralConfig, NeuralCoTraining, NeuralRunSpec
-from dospcot.paper import episodes_per_seed, train_protocol_at
-from dospcot.plots import plot_learning_curves
-from dospcot.run_folder import (
+from dospcot.config.loading import load_config
+from dospcot.config.run_configs import RunConfig, TrainConfig
+from dospcot.core.classifier import save_classifier
+from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.experiment.plots import plot_learning_curves
+from dospcot.experiment.run_folder import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
     METRICS_FILE,
@@ -74,8 +64,6 @@ from dospcot.run_folder import (
     write_run_info,
     write_toml,
 )
-from dospcot.train_config import PaperConfig, TrainConfig, load_config
-from dospcot.transition_cotraining import SensorTask, TransitionConfig, TransitionCoTraining
 
 ROUND_SCALARS = (
     "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
@@ -91,106 +79,10 @@ SUMMARY_METRICS = (
 )  # fmt: skip
 
 
-def build_task(cfg: TrainConfig) -> tuple[partial[GridWorld], dict[str, View], GridLayout]:
-    """The env factory, the views (with the run's blind spots, if any) and the map of a config."""
-    env = cfg.env
-    layout = GridLayout.random(env.size, env.layout_seed, env.lava_density, env.wall_density)
-    make_env = partial(
-        GridWorld, layout, step_cost=env.step_cost, lava_penalty=env.lava_penalty,
-        goal_reward=env.goal_reward, exploring_starts=env.exploring_starts,
-    )  # fmt: skip
-    blind = (
-        view_blind_spots(layout, env.blind_spot_rate, cfg.seed, identical=env.blind_spots == "identical")
-        if env.blind_spot_rate > 0
-        else None
-    )
-    return make_env, grid_views(layout, env.patch_size, env.compass, blind, env.ray_encoding), layout
-
-
-def agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
-    """The SB3 ``DQN`` arguments of every neural agent of a config."""
-    return _capped_buffer(cfg.dqn.sb3_kwargs(), cfg)
-
-
-def tabular_agent_kwargs(cfg: TrainConfig) -> dict[str, Any]:
-    """The :class:`~dospcot.policies.TabularExpectedSarsa` arguments of every tabular agent of a config."""
-    return _capped_buffer(dataclasses.asdict(cfg.tabular_agent), cfg)
-
-
-def _capped_buffer(kwargs: dict[str, Any], cfg: TrainConfig) -> dict[str, Any]:
-    # Steps beyond a run's total never enter the buffer: capping it changes nothing but memory and
-    # the size of every checkpoint.
-    kwargs["buffer_size"] = min(kwargs["buffer_size"], cfg.training.rounds * cfg.training.steps_per_round)
-    return kwargs
-
-
-def _sensor_parts(
-    cfg: TrainConfig,
-) -> tuple[Callable[..., gym.Env], NeuralRunSpec, TransitionConfig, Callable[..., gym.Env]]:
-    """A sensor task's parts (one pool sample per step), a highway's or any gymnasium env's: the
-    training env's builder, the run, its hyperparameters and the evaluation env's builder."""
-    extra: dict[str, Any] = {}
-    if cfg.task == "highway":
-        task = cfg.highway
-        make_env = make_eval_env = partial(
-            make_masked_highway, task.env_id, config=task.config, reveal_first_steps=task.reveal_first_steps
-        )
-    else:
-        task = cfg.gym
-        make_eval_env = partial(
-            make_masked_gym,
-            task.env_id,
-            view_specs=task.views,
-            env_kwargs=task.env_kwargs,
-            wrappers=task.wrappers,
-            state_key=task.state_key,
-        )
-        make_env = partial(make_eval_env, train_wrappers=task.train_wrappers)
-        extra = {
-            "success_return": task.success_return,
-            "max_return": task.max_return,
-            "keyed": bool(task.state_key),
-            "read_termination": task.read_termination,
-            "episode_end_classes": task.episode_end_classes,
-        }
-    config = TransitionConfig(
-        **_common_kwargs(cfg), max_episode_steps=task.episode_steps, reward_classes=task.reward_classes,
-        eval_episodes=task.eval_episodes, **extra,
-    )  # fmt: skip
-    return make_env, _spec(cfg), config, make_eval_env
-
-
-def _grid_parts(
-    cfg: TrainConfig,
-) -> tuple[MakeEnv, dict[str, View], NeuralRunSpec, NeuralConfig, np.ndarray | None]:
-    make_env, views, layout = build_task(cfg)
-    config = NeuralConfig(
-        **_common_kwargs(cfg), max_episode_steps=cfg.env.episode_steps,
-        train_episode_steps=cfg.env.train_episode_steps,
-    )  # fmt: skip
-    columns = cfg.env.monitored_columns
-    return make_env, views, _spec(cfg), config, monitored_states(layout.size, columns) if columns else None
-
-
-def _common_kwargs(cfg: TrainConfig) -> dict[str, Any]:
-    return {
-        **dataclasses.asdict(cfg.training),
-        "dqn": agent_kwargs(cfg), "tabular": tabular_agent_kwargs(cfg), "cotraining": cfg.cotraining,
-        "demonstrations": cfg.demonstrations,
-    }  # fmt: skip
-
-
-def _spec(cfg: TrainConfig) -> NeuralRunSpec:
-    return NeuralRunSpec(cfg.method, cfg.agent_kinds, cfg.views, gamma=cfg.cotraining.gamma, seed=cfg.seed)
-
-
 def build_run(cfg: TrainConfig) -> CoTrainingRun:
-    """The co-trainer of a config, before its first round: the grid adapter's on a grid
-    (:class:`~dospcot.neural_cotraining.NeuralCoTraining`), the sensor adapter's on a highway or any
-    gymnasium env (:class:`~dospcot.transition_cotraining.TransitionCoTraining`)."""
-    if cfg.task == "grid":
-        return NeuralCoTraining(*_grid_parts(cfg))
-    return TransitionCoTraining(*_sensor_parts(cfg))
+    """The co-training run of a config, before its first round: its task's adapter
+    (``cfg.task_definition.build``) driven by :class:`~dospcot.core.cotraining_run.CoTrainingRun`."""
+    return CoTrainingRun(cfg.task_definition.build(cfg), cfg)
 
 
 class _StepBar(BaseCallback):
@@ -205,62 +97,73 @@ class _StepBar(BaseCallback):
         return True
 
 
+def check_config(cfg: RunConfig) -> None:
+    """The task's check step (:meth:`~dospcot.tasks.registry.Task.check`): what only files, imports or
+    the env can tell, before any run folder is made."""
+    cfg.task_definition.check(cfg)
+
+
 def train(
-    cfg: TrainConfig | PaperConfig,
+    cfg: RunConfig,
     runs_root: Path = Path("runs"),
     *,
     show_progress: bool = True,
     command: str = "",
 ) -> Path:
     """Train ``cfg`` in a new folder ``runs_root/<name>/<stamp>/``; return that folder."""
+    check_config(cfg)
     return train_at(new_run_dir(runs_root, cfg.name), cfg, show_progress=show_progress, command=command)
 
 
-def train_at(
-    run_dir: Path, cfg: TrainConfig | PaperConfig, *, show_progress: bool = True, command: str = ""
-) -> Path:
+def train_at(run_dir: Path, cfg: RunConfig, *, show_progress: bool = True, command: str = "") -> Path:
     """Train ``cfg`` in ``run_dir`` (created if missing, as ``dospcot sweep`` names its trials)."""
     run_dir.mkdir(parents=True, exist_ok=True)
-    if isinstance(cfg, PaperConfig):  # writes its own config.toml, as a batch of seeds does
-        return _train_paper(run_dir, cfg, show_progress, command)
-    write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
-    return _train_in(run_dir, cfg, None, show_progress, command)
-
-
-def _train_paper(run_dir: Path, cfg: PaperConfig, show_progress: bool, command: str) -> Path:
-    """One seed of the paper protocol, in one go: its tabular runs take seconds and keep no checkpoint."""
-    with tqdm(
-        total=episodes_per_seed(cfg), unit="ep", desc=f"{cfg.name} seed {cfg.seed}",
-        disable=not show_progress, mininterval=1.0, dynamic_ncols=True,
-    ) as bar:  # fmt: skip
-        train_protocol_at(cfg, {cfg.seed: run_dir}, commands={cfg.seed: command}, progress=bar.update)
-    return run_dir
+    return cfg.task_definition.train_at(run_dir, cfg, show_progress=show_progress, command=command)
 
 
 def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> Path:
     """Continue a killed run from the checkpoint of its last finished round, or from the start if it
     finished none (a paper-protocol run always starts again: it keeps no checkpoint)."""
-    cfg = _run_config(run_dir)
+    cfg = run_config(run_dir)
     if (run_dir / SUMMARY_FILE).is_file():  # resuming it would train past its last round
         raise RunFolderError(
             f"{run_dir} is a finished run (it has {SUMMARY_FILE}): nothing to resume; to train its "
             f"config again: dospcot train {run_dir / CONFIG_FILE}"
         )
     remove_stale_temporaries(run_dir)
-    if isinstance(cfg, PaperConfig):
-        return _train_paper(run_dir, cfg, show_progress, command)
+    return cfg.task_definition.resume(run_dir, cfg, show_progress=show_progress, command=command)
+
+
+def evaluate(run_dir: Path) -> dict[str, Any]:
+    """Re-evaluate a run's saved agents on its task (:meth:`~dospcot.tasks.registry.Task.evaluate`).
+
+    :return: per view and averaged: greedy return, success, normalised score and agreement.
+    """
+    cfg = run_config(run_dir)
+    return cfg.task_definition.evaluate(run_dir, cfg)
+
+
+def run_config(run_dir: Path) -> RunConfig:
+    """The config a run folder holds."""
+    config_path = run_dir / CONFIG_FILE
+    if not config_path.is_file():
+        raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
+    return load_config(str(config_path))
+
+
+def train_cotraining_run(run_dir: Path, cfg: TrainConfig, *, show_progress: bool, command: str) -> Path:
+    """Train a co-training run of SB3 agents in ``run_dir``, which holds nothing yet."""
+    write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
+    return _train_in(run_dir, cfg, None, show_progress, command)
+
+
+def resume_cotraining_run(run_dir: Path, cfg: TrainConfig, *, show_progress: bool, command: str) -> Path:
+    """Continue a co-training run from the checkpoint of its last finished round."""
     if not (run_dir / CHECKPOINT_FILE).is_file():
         # Killed in its first round: only the config is worth keeping, and old events would repeat.
         shutil.rmtree(run_dir / "tb", ignore_errors=True)
         return _train_in(run_dir, cfg, None, show_progress, command)
     return _train_in(run_dir, cfg, read_checkpoint(run_dir), show_progress, command)
-
-
-def _run_config(run_dir: Path) -> TrainConfig | PaperConfig:
-    config_path = run_dir / CONFIG_FILE
-    if not config_path.is_file():
-        raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
-    return load_config(str(config_path))
 
 
 def _train_in(
@@ -284,19 +187,20 @@ def _train_in(
             # from this step on in the files before this marker, so each step appears once.
             SummaryWriter(folder, purge_step=agent.num_timesteps).close()
         agent.set_logger(configure(folder, ["tensorboard"]))
+    rounds = cfg.training.rounds
     per_round = cfg.training.steps_per_round * len(run.agents)
     bar = tqdm(
-        total=cfg.training.rounds * per_round, initial=run.round * per_round, unit="step",
-        desc=f"{cfg.name} round {run.round + 1}/{cfg.training.rounds}", disable=not show_progress,
-        dynamic_ncols=True,
+        total=rounds * per_round, initial=run.round * per_round, unit="step",
+        desc=f"{cfg.name} round {run.round + 1}/{rounds}", disable=not show_progress, dynamic_ncols=True,
     )  # fmt: skip
-    while run.round < cfg.training.rounds and not run.stopped:
-        bar.set_description(f"{cfg.name} round {run.round + 1}/{cfg.training.rounds}")
-        rows = run.run_round(callback=_StepBar(bar))
-        records += rows
+
+    def after_round(run: CoTrainingRun, rows: list[dict]) -> None:
+        """Log the round, write its files and checkpoint it."""
+        records.extend(rows)
         _log_round(run, rows)
         score = np.mean([r["normalised_score"] for r in rows])
         bar.set_postfix(score=f"{score:.2f}", pace=f"{rows[0]['pace']:.2f}")
+        bar.set_description(f"{cfg.name} round {min(run.round + 1, rounds)}/{rounds}")
         _write_round_files(run_dir, run, cfg, records)
         write_checkpoint(
             run_dir,
@@ -309,6 +213,8 @@ def _train_in(
                 "commits": commits,
             },
         )
+
+    run.run(on_round=after_round, callback=_StepBar(bar))
     bar.close()
     for agent in run.agents:
         agent.logger.close()
@@ -351,12 +257,13 @@ def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:
     """The last round's metrics per view and averaged over the views (no timings: a resumed run
     ends with the summary of the uninterrupted one)."""
     last = [r for r in records if r["round"] == run.round]
+    cfg = run.cfg
     return {
-        "method": run.spec.method,
-        "views": list(run.spec.views),
-        "agents": list(run.spec.agents),
-        "m": len(run.spec.views),
-        "seed": run.spec.seed,
+        "method": cfg.method,
+        "views": list(cfg.views),
+        "agents": list(cfg.agent_kinds),
+        "m": len(cfg.views),
+        "seed": cfg.seed,
         "rounds": run.round,
         "stopped_early": run.stopped,
         "env_steps_per_agent": int(last[0]["env_steps"]),
@@ -366,20 +273,12 @@ def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:
     }
 
 
-def evaluate(run_dir: Path) -> dict[str, Any]:
-    """Re-evaluate a run's saved agents (loaded with plain ``stable_baselines3.DQN.load``) on its task.
-
-    :return: per view and averaged: greedy return, success, normalised score and agreement.
-    """
-    cfg = _run_config(run_dir)
-    if isinstance(cfg, PaperConfig):
-        raise RunFolderError(
-            f"{run_dir} is a paper-protocol run: it keeps no agents (its figures are in {METRICS_FILE})"
-        )
+def evaluate_cotraining_run(run_dir: Path, cfg: TrainConfig) -> dict[str, Any]:
+    """Re-evaluate a co-training run's saved agents (loaded with plain ``stable_baselines3.DQN.load``)
+    with its task adapter's evaluator, as during training (no training run, no fresh agents); writes
+    ``evaluation.json``."""
     agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
-    # The task adapter's evaluator, as during training: no training run, no fresh agents.
-    task = GridTask(*_grid_parts(cfg)) if cfg.task == "grid" else SensorTask(*_sensor_parts(cfg))
-    policy = task.evaluate(agents)
+    policy = cfg.task_definition.build(cfg).evaluate(agents)
     per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
     result = {"per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()}}
     write_json(run_dir / "evaluation.json", result)

@@ -43,8 +43,9 @@ from typing import Any, Literal
 
 from tqdm.auto import tqdm
 
-from dospcot.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
-from dospcot.train_config import ConfigError, PaperConfig, load_config
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.experiment.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
 
 SWEEP_FILE = "sweep.json"
 TRIAL_FILE = "trial.json"
@@ -86,7 +87,8 @@ class SweepSpec:
         )
 
     def trials(self) -> list[Trial]:
-        """Every trial, each config's checked now so that a bad grid fails before anything runs.
+        """Every trial, each config's checked now so that a bad grid fails before anything runs: its
+        fields, and once per combination of grid values its task's check step (files, imports, the env).
 
         :raises ConfigError: a combination the config rejects (naming the key).
         """
@@ -95,9 +97,11 @@ class SweepSpec:
         for config in self.configs:
             for values in product(*self.grid.values()):
                 params = dict(zip(keys, values, strict=True))
-                for seed in self.seeds:
+                for index, seed in enumerate(self.seeds):
                     trial = Trial(config, "", params, seed, self.overrides)
                     cfg = load_config(config, trial.overrides())
+                    if index == 0:  # the seed changes nothing the check step reads
+                        cfg.task_definition.check(cfg)
                     trials.append(replace(trial, name=cfg.name))
                     kinds.add(type(cfg))
         ids = [t.trial_id for t in trials]
@@ -312,7 +316,7 @@ def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
     """Run (or finish) one trial in its folder; return its ``summary.json``."""
     import torch
 
-    from dospcot.train import resume, train_at
+    from dospcot.experiment.train import resume, train_at
 
     # One thread per trial: the pool's processes share the cores, and more threads oversubscribe them.
     torch.set_num_threads(1)
@@ -333,7 +337,7 @@ def plan_jobs(trials: Sequence[Trial], workers: int) -> list[list[Trial]]:
     jobs: list[list[Trial]] = []
     cells: dict[tuple[str, tuple[tuple[str, str], ...]], list[Trial]] = {}
     for trial in trials:
-        if isinstance(load_config(trial.config, trial.overrides()), PaperConfig):
+        if load_config(trial.config, trial.overrides()).task_definition.seeds_train_together:
             cells.setdefault((trial.config, tuple(trial.params.items())), []).append(trial)
         else:
             jobs.append([trial])
@@ -343,7 +347,7 @@ def plan_jobs(trials: Sequence[Trial], workers: int) -> list[list[Trial]]:
 
 
 def run_job(sweep_dir: Path, trials: list[Trial], progress: Callable[[float], None] | None = None) -> None:
-    """Run one job of :func:`plan_jobs`: a trial, or a batch of one paper cell's seeds trained together.
+    """Run one job of :func:`plan_jobs`: a trial, or a batch of one cell's seeds trained together.
 
     :param progress: called with the share of a trial just done (a batch reports as it trains).
     """
@@ -352,16 +356,13 @@ def run_job(sweep_dir: Path, trials: list[Trial], progress: Callable[[float], No
         return
     import torch
 
-    from dospcot.paper import episodes_per_seed, train_protocol_at
-
     torch.set_num_threads(1)
     cfg = load_config(trials[0].config, trials[0].overrides())
-    episodes = episodes_per_seed(cfg)
-    train_protocol_at(
+    cfg.task_definition.train_seeds_at(
         cfg,
         {trial.seed: _fresh_trial_dir(sweep_dir, trial) for trial in trials},
-        commands={trial.seed: _command(trial) for trial in trials},
-        progress=None if progress is None else lambda done: progress(done / episodes),
+        {trial.seed: _command(trial) for trial in trials},
+        progress,
     )
 
 

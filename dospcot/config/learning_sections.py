@@ -1,0 +1,323 @@
+"""The sections that set up the learners: ``[training]`` (the rounds), ``[dqn]`` and
+``[tabular_agent]`` (the agents), ``[cotraining]`` with ``[cotraining.classifier]`` (the self-paced
+co-trainer and its reward classifiers), and the paper protocol's ``[tabular]``."""
+
+from __future__ import annotations
+
+import dataclasses
+import inspect
+from dataclasses import dataclass, field
+from typing import Any, ClassVar, Literal
+
+from stable_baselines3 import DQN
+
+from dospcot.core.selection import QUOTAS, WEIGHTINGS, Quota, Weighting
+from dospcot.envs.masking import check_label_fraction
+from dospcot.policies import ExpectedSarsaDQN
+
+ModelKind = Literal["mlp", "linear"]
+LossKind = Literal["cross_entropy", "hinge"]
+MODEL_KINDS: tuple[str, ...] = ("mlp", "linear")
+LOSS_KINDS: tuple[str, ...] = ("cross_entropy", "hinge")
+
+
+@dataclass(frozen=True)
+class TrainingConfig:
+    """The rounds of one run: the ``[training]`` section of a config, and the first fields of
+    :class:`~dospcot.config.run_configs.TrainConfig`.
+
+    :param rounds: co-training rounds.
+    :param steps_per_round: env steps each agent takes per round.
+    :param label_fraction: share of (s, a) keys whose reward is revealed, in (0, 1].
+    :param eps_start: exploration at pace 0.
+    :param eps_end: exploration at pace 1.
+    :param exploration: what sets the pace that moves exploration from ``eps_start`` to ``eps_end``
+        after each round. ``"pace"``: a co-trained run's admitted share of U (a fast self-paced
+        schedule ends exploration after a round or two), baselines the share of rounds done.
+        ``"rounds"``: the share of rounds done for every method, so co-trained agents and baselines
+        explore alike.
+    :param update_steps: gradient steps each agent takes at the end of every round, after the
+        co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
+        update), so the last round's pseudo-rewards are learned too; 0: none.
+    :param learn_from_round: the first round (1-based) in which agents learn while they collect:
+        before it they act uniformly at random and take no gradient step during collection (SB3's
+        ``learning_starts``, raised to ``(learn_from_round - 1) * steps_per_round``), so a
+        co-trained agent's first values come from pseudo-rewards, not from the labels alone. The
+        policy update (``update_steps``) still runs at the end of every round. In [1, ``rounds``].
+    :param segment_length: k; 1: the labels are single rewards (``label_fraction`` of the (s, a)
+        keys or steps). Above 1, co-training only: the labels are the summed rewards of k-step
+        segments of the agents' episodes, a share ``label_fraction`` of the segments, so the same
+        rater effort in labelled steps (:mod:`dospcot.core.segments`).
+    """
+
+    rounds: int = 5
+    steps_per_round: int = 5_000
+    label_fraction: float = 0.05
+    eps_start: float = 1.0
+    eps_end: float = 0.05
+    exploration: str = "pace"
+    update_steps: int = 0
+    learn_from_round: int = 1
+    segment_length: int = 1
+
+    def __post_init__(self) -> None:
+        if self.segment_length < 1:
+            raise ValueError(f"segment_length must be >= 1, got {self.segment_length}")
+        if self.rounds < 1 or self.steps_per_round < 1:
+            raise ValueError(
+                f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
+            )
+        if self.update_steps < 0:
+            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
+        if self.exploration not in ("pace", "rounds"):
+            raise ValueError(f"exploration must be 'pace' or 'rounds', got {self.exploration!r}")
+        if not 1 <= self.learn_from_round <= self.rounds:
+            raise ValueError(
+                f"learn_from_round must lie in [1, rounds = {self.rounds}], got {self.learn_from_round}"
+            )
+        if not 0 < self.label_fraction <= 1:
+            raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
+        for name in ("eps_start", "eps_end"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+
+    @property
+    def collect_only_steps(self) -> int:
+        """Env steps per agent before ``learn_from_round``: the agents learn nothing while they take
+        them (every agent's ``learning_starts`` is at least this)."""
+        return (self.learn_from_round - 1) * self.steps_per_round
+
+
+DQN_DEFAULTS: dict[str, Any] = {
+    # SB3's defaults suit Atari's millions of steps; dospcot's runs take tens of thousands of steps on
+    # small tasks with short horizons: a faster learner that starts sooner, moves its target network
+    # more often and discounts more.
+    "learning_rate": 1e-3,
+    "buffer_size": 100_000,
+    "learning_starts": 500,
+    "batch_size": 64,
+    "gamma": 0.97,
+    "target_update_interval": 500,
+}
+"""Where a ``[dqn]`` default differs from stable-baselines3's ``DQN``; every other default is SB3's."""
+
+DQN_SET_ELSEWHERE: dict[str, str] = {
+    "exploration_initial_eps": "training.eps_start",
+    "exploration_final_eps": "training.eps_end",
+    "exploration_fraction": "training.eps_start and eps_end (the co-trainer's pace moves eps)",
+    "policy_kwargs": "dqn.net_arch",
+    "seed": "the run's seed",
+    "tensorboard_log": "the run folder",
+    "verbose": "the run (its progress bar and TensorBoard)",
+}
+"""SB3 ``DQN`` arguments a ``[dqn]`` section may not hold, and what sets them instead."""
+
+
+def _sb3_dqn_fields() -> list[tuple[str, type, Any]]:
+    """SB3 ``DQN``'s keyword arguments that a TOML value can hold (a bool, an int or a float), read from
+    its signature: (name, type, default), with dospcot's default where :data:`DQN_DEFAULTS` has one."""
+    fields = []
+    for name, param in inspect.signature(DQN.__init__).parameters.items():
+        # learning_rate may be a schedule and train_freq a tuple: a config gives the plain number.
+        hint = param.annotation if param.annotation in (bool, int, float) else type(param.default)
+        if name.startswith("_") or name in DQN_SET_ELSEWHERE or hint not in (bool, int, float):
+            continue
+        fields.append((name, hint, field(default=hint(DQN_DEFAULTS.get(name, param.default)))))
+    return fields
+
+
+class _DQNChecks:
+    def __post_init__(self) -> None:
+        for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.learning_starts < 0:
+            raise ValueError(f"learning_starts must be >= 0, got {self.learning_starts}")
+        if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1:
+            raise ValueError(f"gamma and tau must lie in (0, 1], got {self.gamma}, {self.tau}")
+        if self.learning_rate <= 0:
+            raise ValueError(f"learning_rate must be > 0, got {self.learning_rate}")
+        if not self.net_arch or any(width < 1 for width in self.net_arch):
+            raise ValueError(
+                f"net_arch needs one or more hidden layer widths, each >= 1, got {list(self.net_arch)}"
+            )
+
+    def sb3_kwargs(self) -> dict[str, Any]:
+        """The agents' keyword arguments: SB3 ``DQN``'s and ``cut_windows``."""
+        kwargs = dataclasses.asdict(self)
+        kwargs["policy_kwargs"] = {"net_arch": list(kwargs.pop("net_arch"))}
+        return kwargs
+
+
+DQNConfig = dataclasses.make_dataclass(
+    "DQNConfig",
+    [
+        *_sb3_dqn_fields(),
+        ("net_arch", tuple[int, ...], field(default=(128, 128))),
+        (
+            "cut_windows",
+            bool,
+            field(default=inspect.signature(ExpectedSarsaDQN.__init__).parameters["cut_windows"].default),
+        ),
+    ],
+    bases=(_DQNChecks,),
+    frozen=True,
+)
+DQNConfig.__module__ = __name__  # so pickle and the docs find it here
+DQNConfig.__doc__ = f"""Keyword arguments of every neural agent: each of stable-baselines3 ``DQN``'s that a
+TOML value can hold, under its own name and with its own default except {", ".join(DQN_DEFAULTS)}
+(:data:`DQN_DEFAULTS`); the fields are read from ``DQN``'s signature, not written out again. Two
+fields are dospcot's:
+
+:param net_arch: hidden layer widths of the Q-network (SB3's ``policy_kwargs["net_arch"]``).
+:param cut_windows: :class:`~dospcot.policies.ExpectedSarsaDQN`'s own: under the max target
+    (``agent = "dqn"``), end n-step windows before the first exploratory action.
+"""
+DQNConfig.set_elsewhere = DQN_SET_ELSEWHERE
+
+
+@dataclass(frozen=True)
+class TabularAgentConfig:
+    """Keyword arguments of every ``tabular`` agent (:class:`dospcot.policies.TabularExpectedSarsa`):
+    a Q-table over the view's observations, updated by replayed Expected-SARSA steps.
+
+    :param learning_rate: the step size alpha in (0, 1].
+    :param gamma: the discount.
+    :param batch_size: replayed samples per update.
+    :param train_freq: env steps between updates.
+    :param gradient_steps: updates each time.
+    :param learning_starts: env steps before the first update.
+    :param buffer_size: replay capacity, in steps.
+    :param n_steps: the longest n-step window a replayed sample spans (1: one-step updates).
+    """
+
+    learning_rate: float = 0.5
+    gamma: float = 0.97
+    batch_size: int = 32
+    train_freq: int = 1
+    gradient_steps: int = 1
+    learning_starts: int = 0
+    buffer_size: int = 100_000
+    n_steps: int = 1
+
+    def __post_init__(self) -> None:
+        if not 0 < self.learning_rate <= 1 or not 0 < self.gamma <= 1:
+            raise ValueError(
+                f"learning_rate and gamma must lie in (0, 1], got {self.learning_rate}, {self.gamma}"
+            )
+        for name in ("batch_size", "train_freq", "gradient_steps", "buffer_size", "n_steps"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if self.learning_starts < 0:
+            raise ValueError(f"learning_starts must be >= 0, got {self.learning_starts}")
+
+
+@dataclass(frozen=True)
+class ClassifierConfig:
+    """Hyperparameters of a reward classifier.
+
+    :param model: ``"mlp"`` or ``"linear"``.
+    :param loss: ``"cross_entropy"`` or ``"hinge"``.
+    :param hidden: width of the MLP's hidden layer.
+    :param epochs: full-batch Adam steps per fit.
+    :param lr: Adam learning rate.
+    :param l2: weight of the penalty 1/2 ||theta||^2, divided by the number of training samples.
+    """
+
+    model: ModelKind = "mlp"
+    loss: LossKind = "cross_entropy"
+    hidden: int = 32
+    epochs: int = 150
+    lr: float = 0.02
+    l2: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if self.model not in MODEL_KINDS:
+            raise ValueError(f"classifier model must be one of {MODEL_KINDS}, got {self.model!r}")
+        if self.loss not in LOSS_KINDS:
+            raise ValueError(f"classifier loss must be one of {LOSS_KINDS}, got {self.loss!r}")
+
+
+@dataclass(frozen=True)
+class CoTrainingConfig:
+    """Hyperparameters of the self-paced schedule.
+
+    :param consensus_weight: the co-regularisation weight, SPaMCo's gamma (default 0.3): before
+        ranking, a sample's score for its consensus class is raised by this times the mean weight the
+        other views give it (0: the views select alone). Not the agents' discount, ``dqn.gamma``.
+    :param weighting: ``"hard"`` (SPaMCo default) or ``"soft"`` self-paced weights.
+    :param add_fraction_start: add_num in round 1, as a share of the unlabelled pool.
+    :param add_fraction_step: growth of that share per round (lambda falls as it grows). It is not
+        capped at 1: under ``quota = "label-share"`` the per-class quotas ``ceil(share_c * add_num)``
+        keep a class from taking more than its share, so only an add_num beyond |U| lets every
+        class's candidates in, and U be fully admitted.
+    :param quota: how add_num splits over the classes: ``"label-share"`` (SPaMCo: in proportion to
+        the labels) or ``"candidates"`` (each class the same share of the samples predicted as it;
+        :mod:`dospcot.core.selection`).
+    :param tol: stop once under this share of pseudo-labels changed in a round (0 disables).
+    :param stop_when_fully_admitted: stop once every unlabelled sample is admitted.
+    :param max_classes: the most distinct reward values a run may see.
+    :param classifier: the reward classifiers' hyperparameters.
+    """
+
+    consensus_weight: float = 0.3
+    weighting: Weighting = "hard"
+    add_fraction_start: float = 0.2
+    add_fraction_step: float = 0.4
+    quota: Quota = "label-share"
+    tol: float = 0.0
+    stop_when_fully_admitted: bool = False
+    max_classes: int = 16
+    classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
+
+    renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
+    """Keys of older configs and their names now."""
+
+    def __post_init__(self) -> None:
+        if self.consensus_weight < 0:
+            raise ValueError(f"consensus_weight must be >= 0, got {self.consensus_weight}")
+        if self.weighting not in WEIGHTINGS:
+            raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
+        if self.quota not in QUOTAS:
+            raise ValueError(f"quota must be one of {QUOTAS}, got {self.quota!r}")
+        if self.add_fraction_start <= 0:
+            raise ValueError(f"add_fraction_start must be > 0, got {self.add_fraction_start}")
+        if self.add_fraction_step < 0:
+            raise ValueError(f"add_fraction_step must be >= 0, got {self.add_fraction_step}")
+
+
+@dataclass(frozen=True)
+class TabularConfig:
+    """Hyperparameters shared by every run of a study.
+
+    :param rounds: co-training rounds (each one a collection of ``episodes_per_round`` episodes).
+    :param episodes_per_round: episodes each agent plays per round.
+    :param learning_rate: TD step size.
+    :param discount: discount factor (also the one value iteration uses for the optimum).
+    :param eps_start: exploration rate at pace 0.
+    :param eps_end: exploration rate at pace 1; eps(p) = eps_start + (eps_end - eps_start) * p.
+    :param label_fraction: share of labelled (s, a) keys, in (0, 1].
+    :param replay_sweeps: synchronous TD sweeps over the store after each round's co-training.
+    :param cotraining: the self-paced schedule (its consensus weight is replaced by each run's gamma).
+    """
+
+    rounds: int = 5
+    episodes_per_round: int = 500
+    learning_rate: float = 0.8
+    discount: float = 0.95
+    eps_start: float = 0.1
+    eps_end: float = 0.1
+    label_fraction: float = 0.1
+    replay_sweeps: int = 1
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+
+    def __post_init__(self) -> None:
+        check_label_fraction(self.label_fraction)
+        if self.rounds < 1 or self.episodes_per_round < 1 or self.replay_sweeps < 0:
+            raise ValueError(
+                f"rounds and episodes_per_round must be >= 1 and replay_sweeps >= 0; got {self.rounds}, "
+                f"{self.episodes_per_round}, {self.replay_sweeps}"
+            )
+        for name in ("eps_start", "eps_end"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")

@@ -1,0 +1,158 @@
+"""Reading a config: TOML presets and files, ``extends`` chains, ``--set`` overrides, and the checked
+conversion of the resulting table into the config tree (:mod:`dospcot.config.run_configs`).
+
+A config is a TOML table read with the stdlib's :mod:`tomllib`. Its keys mirror
+:class:`~dospcot.config.run_configs.TrainConfig`; sections (``[env]``, ``[training]``, ``[dqn]``,
+``[tabular_agent]``, ``[cotraining]``, ``[cotraining.classifier]``, ``[demonstrations]``, ...) mirror
+its nested dataclasses. A config with ``task = "paper"`` is a
+:class:`~dospcot.config.run_configs.PaperConfig` instead. Every key is checked against the dataclass
+fields and their type hints before anything is built, so a typo or a wrong type stops the run with one
+line (:class:`~dospcot.config.errors.ConfigError`) naming the key and what is allowed; a key that was
+renamed names its new name.
+
+Presets ship in ``dospcot/presets/*.toml``; a name without ``.toml`` is looked up there, anything
+else is read as a path. A config may start from another with ``extends = "<preset or path>"``: its
+tables are merged key by key over the base's.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+import typing
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, Literal
+
+from dospcot.config.errors import ConfigError
+from dospcot.config.presets import read_config_text
+from dospcot.config.run_configs import RunConfig
+from dospcot.tasks.registry import get_task
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """``"training.rounds=3"`` -> (["training", "rounds"], 3); values are TOML, bare words strings."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip():
+        raise ConfigError(f"--set takes key=value, got {text!r}")
+    try:
+        value = tomllib.loads(f"v = {raw}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw
+    return key.strip().split("."), value
+
+
+def read_config_data(config: str, _seen: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The TOML table of a preset or a path, with its ``extends`` chain merged in."""
+    if config in _seen:
+        raise ConfigError(f"extends: a cycle through {' -> '.join([*_seen, config])}")
+    text, origin = read_config_text(config)
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{origin} is not valid TOML: {err}") from None
+    base = data.pop("extends", None)
+    if base is None:
+        return data
+    if not isinstance(base, str):
+        raise ConfigError(f"extends: expected a preset name or a path, got {base!r}")
+    if "/" in base and not Path(base).is_absolute() and "/" in config:
+        base = str(Path(config).parent / base)
+    return _merge(read_config_data(base, (*_seen, config)), data)
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    merged = dict(base)
+    for key, value in over.items():
+        if isinstance(value, dict) and isinstance(merged.get(key), dict):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
+    """Read a preset or a TOML file, apply ``--set`` overrides and validate the result (no I/O beyond
+    the file): the root dataclass of its task (``task``, default ``"grid"``): a
+    :class:`~dospcot.config.run_configs.PaperConfig` for ``"paper"``, else a
+    :class:`~dospcot.config.run_configs.TrainConfig`."""
+    data = read_config_data(config)
+    for override in overrides:
+        path, value = parse_override(override)
+        if path == ["extends"]:
+            raise ConfigError(
+                f"--set {override}: extends is read with the file, before any --set; write a .toml "
+                f'holding extends = "{value}" and your keys, and pass its path as CONFIG'
+            )
+        set_key(data, path, value, f"--set {override}")
+    return from_mapping(get_task(data.get("task", "grid")).config_type(), data)
+
+
+def set_key(data: dict[str, Any], path: Sequence[str], value: Any, where: str) -> None:
+    """Set the key ``path`` (sections, then the key) of the config table ``data`` to ``value``,
+    making missing sections; ``where`` names the override in the error for a key that is no section."""
+    table = data
+    for part in path[:-1]:
+        table = table.setdefault(part, {})
+        if not isinstance(table, dict):
+            raise ConfigError(f"{where}: {part!r} is not a section")
+    table[path[-1]] = value
+
+
+def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
+    """Build the dataclass ``cls`` from ``data``, checking every key and type (recursively)."""
+    if not isinstance(data, Mapping):
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: expected a table, got {data!r}")
+    fields = {f.name: f for f in dataclasses.fields(cls) if f.init}
+    set_elsewhere: dict[str, str] = getattr(cls, "set_elsewhere", {})
+    renamed: dict[str, str] = getattr(cls, "renamed_keys", {})
+    for key in data:
+        if key in renamed:
+            raise ConfigError(f"{prefix}{key}: renamed; the key is now {prefix}{renamed[key]}")
+        if key in set_elsewhere:
+            raise ConfigError(f"{prefix}{key}: not a config key here; it is set by {set_elsewhere[key]}")
+        if key not in fields:
+            raise ConfigError(f"unknown key '{prefix}{key}'; allowed: {', '.join(fields)}")
+    hints = typing.get_type_hints(cls)
+    kwargs = {key: _convert(hints[key], value, f"{prefix}{key}") for key, value in data.items()}
+    try:
+        return cls(**kwargs)
+    except ConfigError:
+        raise
+    except (ValueError, TypeError) as err:
+        raise ConfigError(f"{prefix.rstrip('.') or 'config'}: {err}") from None
+
+
+def _convert(hint: Any, value: Any, key: str) -> Any:
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if dataclasses.is_dataclass(hint):
+        return from_mapping(hint, value, f"{key}.")
+    if origin is Literal:
+        if value not in args:
+            raise ConfigError(f"{key}: {value!r} is not allowed; allowed: {', '.join(map(str, args))}")
+        return value
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            raise ConfigError(f"{key}: expected a list, got {value!r}")
+        return tuple(_convert(args[0], item, key) for item in value)
+    if origin is dict:
+        if not isinstance(value, Mapping):
+            raise ConfigError(f"{key}: expected a table, got {value!r}")
+        return dict(value)
+    if hint is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{key}: expected true or false, got {value!r}")
+        return value
+    if hint is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{key}: expected an integer, got {value!r}")
+        return value
+    if hint is float:
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise ConfigError(f"{key}: expected a number, got {value!r}")
+        return float(value)
+    if hint is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{key}: expected a string, got {value!r}")
+        return value
+    raise ConfigError(f"{key}: cannot be set from a config")  # pragma: no cover - a field type we never use

@@ -1,0 +1,222 @@
+"""The root of a config: :class:`TrainConfig` (one run of SB3 agents on a task) and
+:class:`PaperConfig` (one seed of the seed paper's tabular protocol).
+
+Every field is checked without I/O when the dataclass is built. What a task adds to that (its views,
+what its sections allow together) is asked of the task registry (:mod:`dospcot.tasks.registry`), so
+no check here names a task.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any, Literal
+
+from dospcot.config.errors import ConfigError
+from dospcot.config.learning_sections import (
+    CoTrainingConfig,
+    DQNConfig,
+    TabularAgentConfig,
+    TabularConfig,
+    TrainingConfig,
+)
+from dospcot.config.task_sections import DemonstrationsConfig, EnvConfig, GymConfig, HighwayConfig
+from dospcot.tasks.registry import Task, get_task, task_sections
+
+RUN_AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """One ``dospcot train`` run.
+
+    :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
+    :param seed: seeds the mask, the agents and the classifiers.
+    :param method: ``oracle``, ``masked-zero``, ``labels-only`` or ``cotrain`` (DOSPCoT; one view is
+        self-training).
+    :param views: one view per agent, from the task's views (the grid's ``coords``, ``patch``, ``rays``).
+    :param agents: the agent kind of each view (``esarsa_dqn``, ``dqn`` or, on a grid, ``tabular``);
+        empty: ``agent`` for every view.
+    :param agent: the agent kind of every view when ``agents`` is empty (``--set agent=tabular``
+        switches a preset's agents whatever its number of views).
+    :param task: a registered task (:mod:`dospcot.tasks`): ``grid`` (the ``[env]`` section), ``highway``
+        (``[highway]``) or ``gym`` (any gymnasium env, ``[gym]``); a config with ``task = "paper"`` is a
+        :class:`PaperConfig`.
+    """
+
+    name: str = "run"
+    seed: int = 0
+    method: Literal["oracle", "masked-zero", "labels-only", "cotrain"] = "cotrain"
+    views: tuple[str, ...] = ("coords", "patch")
+    agents: tuple[str, ...] = ()
+    agent: str = "esarsa_dqn"
+    task: str = "grid"
+    env: EnvConfig = field(default_factory=EnvConfig)
+    highway: HighwayConfig = field(default_factory=HighwayConfig)
+    gym: GymConfig = field(default_factory=GymConfig)
+    training: TrainingConfig = field(default_factory=TrainingConfig)
+    dqn: DQNConfig = field(default_factory=DQNConfig)
+    tabular_agent: TabularAgentConfig = field(default_factory=TabularAgentConfig)
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+    demonstrations: DemonstrationsConfig = field(default_factory=DemonstrationsConfig)
+
+    def __post_init__(self) -> None:
+        check_name_and_seed(self.name, self.seed)
+        task = self.task_definition  # an unknown task fails here, naming the registered ones
+        task.validate(self)
+        allowed = ", ".join(self.view_names)
+        if not self.views:
+            raise ConfigError(f"views: need at least one view; allowed: {allowed}")
+        for view in self.views:
+            if view not in self.view_names:
+                raise ConfigError(f"views: the {self.task_name} has no view {view!r}; allowed: {allowed}")
+        if len(set(self.views)) != len(self.views):
+            raise ConfigError(f"views: each view may appear once, got {list(self.views)}")
+        if self.agents and len(self.agents) != len(self.views):
+            raise ConfigError(
+                f"agents: need one agent kind per view ({len(self.views)}), got {len(self.agents)}"
+            )
+        allowed_kinds = ", ".join(RUN_AGENT_KINDS)
+        for key, kinds in (("agents", self.agents), ("agent", (self.agent,))):
+            unknown = [kind for kind in kinds if kind not in RUN_AGENT_KINDS]
+            if unknown:
+                raise ConfigError(f"{key}: unknown agent kind {unknown[0]!r}; allowed: {allowed_kinds}")
+        # Another task's section would be accepted and change nothing; at its defaults (as in the
+        # config.toml of a run folder written before it was left out) it says nothing either.
+        for unread in self._unread_sections:
+            if getattr(self, unread) != type(getattr(self, unread))():
+                raise ConfigError(
+                    f'{unread}: a task = "{self.task}" run does not read the [{unread}] section; its task '
+                    f"is set in [{task.section}]"
+                )
+        if not task.discrete_states and "tabular" in self.agent_kinds:
+            key = "agents" if self.agents else "agent"
+            neural = ", ".join(kind for kind in RUN_AGENT_KINDS if kind != "tabular")
+            raise ConfigError(
+                f"{key}: 'tabular' needs a task whose states are known in advance (task = \"grid\"); "
+                f"allowed on {self.task_name}: {neural}"
+            )
+        self._check_demonstrations()
+        self._check_segments()
+
+    def _check_demonstrations(self) -> None:
+        demos = self.demonstrations
+        if demos.margin_loss_weight and (demos.episodes or demos.file) and "tabular" in self.agent_kinds:
+            raise ConfigError(
+                "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "
+                "to use the demonstrations as labels only"
+            )
+        if demos.agent and demos.agent_view and demos.agent_view not in self.view_names:
+            raise ConfigError(
+                f"demonstrations.agent_view: the {self.task_name} has no view {demos.agent_view!r}; "
+                f"allowed: {', '.join(self.view_names)}"
+            )
+
+    def _check_segments(self) -> None:
+        if self.training.segment_length == 1:
+            return
+        if self.method != "cotrain":
+            raise ConfigError(
+                f'training.segment_length: segment labels need co-training (method = "cotrain"; one '
+                f'view is self-training), got method = "{self.method}"'
+            )
+        if self.demonstrations.labels and (self.demonstrations.episodes or self.demonstrations.file):
+            raise ConfigError(
+                "training.segment_length: segment labels reveal no single reward, so demonstrations "
+                "cannot be labels too; set demonstrations.labels = false"
+            )
+        if self.task_definition.has_monitor(self):
+            raise ConfigError(
+                "training.segment_length: segment labels reveal no single reward, so they cannot be "
+                "combined with a reward monitor"
+            )
+
+    @property
+    def task_definition(self) -> Task:
+        """The registered task this run trains on."""
+        return get_task(self.task)
+
+    @property
+    def _unread_sections(self) -> list[str]:
+        return [section for section in task_sections() if section != self.task_definition.section]
+
+    @property
+    def task_name(self) -> str:
+        """The task, in words."""
+        return self.task_definition.title(self)
+
+    @property
+    def view_names(self) -> tuple[str, ...]:
+        """The views the task offers."""
+        return self.task_definition.view_names(self)
+
+    @property
+    def agent_kinds(self) -> tuple[str, ...]:
+        """The agent kind of each view."""
+        return self.agents or (self.agent,) * len(self.views)
+
+    @property
+    def buffer_size(self) -> int:
+        """Every agent's replay capacity: steps beyond a run's total never enter the buffer, so capping
+        it changes nothing but memory and the size of every checkpoint."""
+        return min(self.dqn.buffer_size, self.training.rounds * self.training.steps_per_round)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The config as plain TOML-ready values (tuples become lists), without the sections of the
+        other tasks, which this run does not read."""
+        data = plain(dataclasses.asdict(self))
+        for unread in self._unread_sections:
+            del data[unread]
+        return data
+
+
+@dataclass(frozen=True)
+class PaperConfig:
+    """One seed of the seed paper's protocol on masked CliffWalking (``task = "paper"``).
+
+    The protocol fixes its runs (:func:`dospcot.paper.protocol.protocol_specs`: 26 tabular runs, 37
+    agents, per seed: every agent kind alone under each baseline, homogeneous pairs at three gammas,
+    Expected SARSA with the other kinds); a config sets the seed and the hyperparameters every run shares.
+
+    :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
+    :param seed: draws the labelled keys, the exploration streams and the classifiers.
+    :param tabular: the hyperparameters every run of the protocol shares.
+    """
+
+    name: str = "paper"
+    seed: int = 0
+    task: Literal["paper"] = "paper"
+    tabular: TabularConfig = field(default_factory=TabularConfig)
+
+    def __post_init__(self) -> None:
+        check_name_and_seed(self.name, self.seed)
+
+    @property
+    def task_definition(self) -> Task:
+        """The registered task this run trains on."""
+        return get_task(self.task)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The config as plain TOML-ready values."""
+        return plain(dataclasses.asdict(self))
+
+
+def check_name_and_seed(name: str, seed: int) -> None:
+    """The checks every config's ``name`` and ``seed`` pass."""
+    if not name or "/" in name or name.startswith("."):
+        raise ConfigError(f"name: must be a plain folder name, got {name!r}")
+    if seed < 0:
+        raise ConfigError(f"seed: must be >= 0, got {seed}")
+
+
+def plain(value: Any) -> Any:
+    """``value`` with tuples as lists, as TOML holds them."""
+    if isinstance(value, dict):
+        return {key: plain(item) for key, item in value.items()}
+    if isinstance(value, tuple | list):
+        return [plain(item) for item in value]
+    return value
+
+
+RunConfig = TrainConfig | PaperConfig
+"""Any config a run folder holds."""

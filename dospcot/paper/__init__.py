@@ -1,0 +1,1 @@
+"""The seed paper's protocol on masked CliffWalking, with the batched tabular co-training it runs."""

@@ -1,0 +1,66 @@
+"""The highway task (``task = "highway"``, the ``[highway]`` section): highway-env's driving tasks
+(the ``highway`` extra) or the project's fast numpy highway, with sensor views and rewards revealed per
+step; the sensor adapter (:mod:`dospcot.tasks.sensor`) pools every step."""
+
+from __future__ import annotations
+
+from functools import partial
+from typing import TYPE_CHECKING
+
+from dospcot.config.errors import ConfigError
+from dospcot.envs.fast_highway import FastHighwayEnv
+from dospcot.envs.highway import (
+    FAST_HIGHWAY_ID,
+    HIGHWAY_ENV_IDS,
+    highway_view_names,
+    make_masked_highway,
+    try_highway_config,
+)
+from dospcot.tasks.registry import Task, register
+from dospcot.tasks.sensor import SensorTask, check_sensor_demonstrations, validate_sensor_demonstrations
+
+if TYPE_CHECKING:
+    from dospcot.config.run_configs import TrainConfig
+
+
+@register
+class HighwayTask(Task):
+    """A highway: an episode that lasts all its ``episode_steps`` (no crash) is a success."""
+
+    name = "highway"
+    section = "highway"
+
+    def title(self, cfg: TrainConfig) -> str:
+        return cfg.highway.env_id
+
+    def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
+        return highway_view_names(cfg.highway.env_id)
+
+    def validate(self, cfg: TrainConfig) -> None:
+        if cfg.highway.env_id not in (*HIGHWAY_ENV_IDS, FAST_HIGHWAY_ID):
+            allowed = ", ".join((*HIGHWAY_ENV_IDS, FAST_HIGHWAY_ID))
+            raise ConfigError(f"highway.env_id: unknown task {cfg.highway.env_id!r}; allowed: {allowed}")
+        validate_sensor_demonstrations(cfg)
+
+    def has_monitor(self, cfg: TrainConfig) -> bool:
+        return cfg.highway.reveal_first_steps > 0
+
+    def check(self, cfg: TrainConfig) -> None:
+        highway = cfg.highway
+        if highway.env_id == FAST_HIGHWAY_ID:
+            check = FastHighwayEnv.check_overrides
+        else:  # highway-env finds some bad values only when it resets and steps
+            check = partial(try_highway_config, highway.env_id)
+        try:
+            check(highway.config)
+        except ValueError as err:
+            raise ConfigError(f"highway.config: {err}") from None
+        check_sensor_demonstrations(cfg)
+
+    def build(self, cfg: TrainConfig) -> SensorTask:
+        highway = cfg.highway
+        make_env = partial(
+            make_masked_highway, highway.env_id, config=highway.config,
+            reveal_first_steps=highway.reveal_first_steps,
+        )  # fmt: skip
+        return SensorTask(cfg, highway, make_env)
