@@ -4,11 +4,11 @@ round after another, each against figures worked out by hand."""
 import numpy as np
 import pytest
 
-from dospcot.core.cotrainer import CoTrainingConfig, Pool, RoundResult, SelfPacedCoTrainer
+from dospcot.config.learning_sections import CoTrainingConfig
+from dospcot.core.cotrainer import Pool, RoundResult, RunCoTrainer, RunPool, SelfPacedCoTrainer
 from dospcot.core.key_pool import key_features
 from dospcot.core.reward_classes import QuantileRewardClasses, RewardClasses, episode_end_class_mask
 from dospcot.core.round_records import record_head, round_stats
-from dospcot.core.run_spec import RunSpec
 
 
 def test_reward_classes_keep_the_order_of_first_appearance_and_round_trip():
@@ -39,7 +39,7 @@ def test_while_every_label_is_0_a_goal_reward_is_a_value_no_label_has_shown():
         view_class=np.zeros((1, 1, 3), int), threshold=np.ones((1, 1, 2)), classifier_loss=np.zeros((1, 1)),
         pace=np.ones(1), changed=np.ones(1, bool), stopped=np.zeros(1, bool),
     )  # fmt: skip
-    stats = round_stats(result, np.ones(3, bool), classes.encode(np.array([[0.0, 0.0, 0.93]]))[0])
+    stats = round_stats(result.of_run(0), np.ones(3, bool), classes.encode(np.array([[0.0, 0.0, 0.93]]))[0])
     assert stats["pseudo_accuracy"] == pytest.approx(2 / 3) and stats["worst_class_recall"] == 0.0
     classes.fit(np.array([0.0] * 11 + [0.9]))  # a goal label: its class takes every goal reward
     np.testing.assert_array_equal(classes.encode(np.array([[0.0, 0.93]])), [[0, 1]])
@@ -57,7 +57,7 @@ def test_round_stats_read_the_run_they_are_given_in_a_batch():
     )  # fmt: skip
     truth = np.array([0, 1, 0, 1])
     unlabelled = np.array([False, True, True, True])
-    stats = round_stats(result, unlabelled, truth, run=1)
+    stats = round_stats(result.of_run(1), unlabelled, truth)
     assert stats["pace"] == 0.75 and stats["stopped"] is True
     assert stats["coverage"] == 1.0  # samples 1-3 of U, all admitted
     assert stats["pseudo_accuracy"] == pytest.approx(2 / 3)  # sample 3: class 0, truly 1
@@ -66,18 +66,18 @@ def test_round_stats_read_the_run_they_are_given_in_a_batch():
     view = stats["views"][0]
     assert view["view_coverage"] == 1.0 and view["view_pseudo_accuracy"] == pytest.approx(2 / 3)
     assert view["lambda"] == 0.6 and view["classifier_loss"] == 0.7
-    first = round_stats(result, unlabelled, truth, run=0)
+    first = round_stats(result.of_run(0), unlabelled, truth)
     assert first["coverage"] == pytest.approx(1 / 3) and first["pseudo_accuracy"] == 1.0
     assert first["stopped"] is False and first["views"][0]["lambda"] == pytest.approx(0.3)
 
 
 def test_record_head_names_the_run_and_the_agent():
-    spec = RunSpec("cotrain", ("esarsa", "q"), ("coords", "patch"), gamma=0.3, seed=4)
-    assert record_head(spec, 2, np.int64(1)) == {
+    head = ("cotrain", ("esarsa", "q"), ("coords", "patch"), 0.3, 4)
+    assert record_head(*head, 2, np.int64(1)) == {
         "method": "cotrain", "agents": "esarsa-q", "views": "coords-patch", "m": 2, "gamma": 0.3,
         "seed": 4, "round": 2, "agent": 1, "kind": "q", "view": "patch",
     }  # fmt: skip
-    assert type(record_head(spec, 2, np.int64(1))["agent"]) is int
+    assert type(record_head(*head, 2, np.int64(1))["agent"]) is int
 
 
 def test_a_class_labelled_only_on_episode_ends_is_open_only_to_episode_ends():
@@ -105,7 +105,7 @@ def test_a_class_a_sample_may_not_take_is_never_its_pseudo_label():
     label_class = np.array([[0, 1, -1, -1, -1]])
     mask = np.ones((1, 5, 2), bool)
     mask[0, 3, 1] = False
-    trainer = SelfPacedCoTrainer([1], 1, CoTrainingConfig(add_fraction_start=1.0, max_classes=2), [0])
+    trainer = SelfPacedCoTrainer([1], 1, CoTrainingConfig(add_fraction_start=1.0, max_classes=2), [0], 2)
     result = trainer.step(Pool([x], labelled, label_class, ~labelled, mask))
     assert result.pseudo_class[0, 4] == 1 and result.pseudo_class[0, 2] == 0
     assert result.pseudo_class[0, 3] != 1 and result.view_class[0, 0, 3] != 1
@@ -147,7 +147,7 @@ def test_the_self_paced_schedule_admits_per_class_quotas_then_everything(n_views
     config = CoTrainingConfig(
         max_classes=2, add_fraction_start=0.5, add_fraction_step=0.5, stop_when_fully_admitted=True
     )
-    trainer = SelfPacedCoTrainer([f.shape[2] for f in pool.features], 1, config, [0])
+    trainer = SelfPacedCoTrainer([f.shape[2] for f in pool.features], 1, config, [0], config.max_classes)
     first = trainer.step(pool)
     # add_num = 0.5 * |U| = 18; each class holds half the labels, so 9 of each are admitted.
     admitted = first.pseudo_weight[0] > 0
@@ -176,9 +176,28 @@ def test_candidate_quotas_admit_a_rare_class_whose_labels_understate_it():
     )  # fmt: skip
     for quota, rare_admitted in (("label-share", 7), ("candidates", 9)):
         config = CoTrainingConfig(max_classes=2, add_fraction_start=1.0, quota=quota)
-        result = SelfPacedCoTrainer([2], 1, config, [0]).step(pool)
+        result = SelfPacedCoTrainer([2], 1, config, [0], config.max_classes).step(pool)
         admitted = result.pseudo_weight[0] > 0
         # add_num = |U| = 35. Label share: class 1 gets ceil(0.2 * 35) = 7 of its 9 candidates.
         # Candidates: every class admits all its candidates (26 and 9).
         assert admitted[truth == 1].sum() == rare_admitted
         assert admitted[truth == 0].sum() == 26
+
+
+def test_the_single_run_cotrainer_is_the_batched_one_on_a_batch_of_one():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(12, 3))
+    labelled = np.arange(12) < 4
+    label_class = np.where(labelled, np.arange(12) % 2, -1)
+    mask = np.array([True, True, False])
+    config = CoTrainingConfig(max_classes=3)
+    single = RunCoTrainer([3, 3], config, 5, 3)
+    batched = SelfPacedCoTrainer([3, 3], 1, config, [5], 3)
+    for _ in range(2):  # a second round reads the first one's weights
+        one = single.step(RunPool([x, -x], labelled, label_class, ~labelled, mask))
+        pool = Pool([x[None], -x[None]], labelled[None], label_class[None], ~labelled[None], mask[None])
+        many = batched.step(pool).of_run(0)
+        for name in ("pseudo_class", "pseudo_weight", "view_weight", "view_class", "threshold"):
+            np.testing.assert_array_equal(getattr(one, name), getattr(many, name))
+        assert one.pseudo_class.shape == (12,) and one.view_class.shape == (2, 12)
+        assert (one.pace, one.changed, one.stopped) == (many.pace, many.changed, many.stopped)

@@ -6,24 +6,30 @@ import pickle
 import subprocess
 import sys
 import textwrap
-from functools import partial
 
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
 from stable_baselines3 import DQN
-from test_neural_cotraining import CONFIG, LAYOUT, VIEWS  # the small grid of the co-training tests
+from test_neural_cotraining import (  # the small grid of the co-training tests
+    LABEL_FRACTION,
+    LAYOUT,
+    VIEWS,
+    config,
+    grid,
+)
 
-from dospcot.config.loading import ConfigError, load_config
-from dospcot.demonstrations import Demonstrations, DemonstrationsConfig, expert_demonstrations
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.demonstrations import Demonstrations, expert_demonstrations
 from dospcot.envs import GridWorld, StateActionMask, View, ViewObservationWrapper
 from dospcot.envs.highway import FAST_HIGHWAY_ID, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.experiment.train import build_run
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn import large_margin_loss
-from dospcot.tasks.grid import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 
 
 def test_the_large_margin_loss_by_hand():
@@ -87,10 +93,8 @@ def test_bad_demonstrations_files_fail_with_one_line(tmp_path):
 
 
 def test_expert_episodes_follow_the_optimal_policy_first_from_the_start():
-    run = NeuralCoTraining(
-        partial(GridWorld, LAYOUT), VIEWS, NeuralRunSpec("cotrain", ("esarsa_dqn",), ("coords",)), CONFIG
-    )
-    mdp, optimum = run.mdp, run.task.policy_metrics.optimal_return
+    run = grid(config())
+    mdp, optimum = run.task.mdp, run.task.policy_metrics.optimal_return
     demos = expert_demonstrations(mdp, 4, seed=3)
     assert demos.n_episodes == 4 and demos.views == ("coords",)
     first = demos.episode == 0
@@ -110,22 +114,18 @@ def test_expert_episodes_follow_the_optimal_policy_first_from_the_start():
     np.testing.assert_array_equal(again.states, demos.states)  # seeded
 
 
-def _run(labels: bool, weight: float = 1.0, seed: int = 0) -> NeuralCoTraining:
-    config = NeuralConfig(
-        **{
-            **vars(CONFIG),
-            "demonstrations": DemonstrationsConfig(episodes=3, labels=labels, margin_loss_weight=weight),
-        }
+def _run(labels: bool, weight: float = 1.0, seed: int = 0) -> CoTrainingRun:
+    demonstrations = {"episodes": 3, "labels": labels, "margin_loss_weight": weight}
+    return grid(
+        config("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed, demonstrations=demonstrations)
     )
-    spec = NeuralRunSpec("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed=seed)
-    return NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, config)
 
 
 def test_demonstrated_rewards_are_labels_for_the_classifiers_and_the_agents_own_steps():
     run = _run(labels=True)
-    demos, store, mdp = run.task.demos, run.store, run.mdp
+    demos, store, mdp = run.task.demos, run.store, run.task.mdp
     keys = demos.states * mdp.n_actions + demos.actions
-    drawn = StateActionMask(mdp.n_states, mdp.n_actions, CONFIG.label_fraction, 0).labelled.ravel()
+    drawn = StateActionMask(mdp.n_states, mdp.n_actions, LABEL_FRACTION, 0).labelled.ravel()
     # Before any step, the pool holds exactly the demonstrated keys as labelled, with their rewards.
     assert set(np.flatnonzero(store.labelled)) == set(keys.tolist())
     np.testing.assert_array_equal(store.label_value[keys], mdp.reward[demos.states, demos.actions])
@@ -137,11 +137,11 @@ def test_demonstrated_rewards_are_labels_for_the_classifiers_and_the_agents_own_
 
 def test_without_labels_no_demonstrated_reward_reaches_a_learner():
     run = _run(labels=False)
-    mdp = run.mdp
+    mdp = run.task.mdp
     assert run.task.demos.rewards is None and run.task.revealed_keys is None
     assert not run.store.visited.any() and not run.store.labelled.any()
     mask = run.agents[0].get_env().envs[0].get_wrapper_attr("mask")
-    drawn = StateActionMask(mdp.n_states, mdp.n_actions, CONFIG.label_fraction, 0).labelled
+    drawn = StateActionMask(mdp.n_states, mdp.n_actions, LABEL_FRACTION, 0).labelled
     np.testing.assert_array_equal(mask.labelled, drawn)
     assert all(agent.n_demonstrations == len(run.task.demos) for agent in run.agents)  # the loss only
     assert all(agent.n_demonstrations == 0 for agent in _run(labels=False, weight=0.0).agents)

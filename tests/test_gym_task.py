@@ -17,7 +17,9 @@ import pytest
 import stable_baselines3
 import torch
 
-from dospcot.config.loading import ConfigError, load_config
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.demonstrations import Demonstrations
 from dospcot.envs import minigrid_views
 from dospcot.envs.gym_sensors import (
@@ -30,7 +32,7 @@ from dospcot.envs.masking import key_is_labelled
 from dospcot.experiment.python_api import gym_config, train_env
 from dospcot.experiment.run_folder import RunFolderError
 from dospcot.experiment.train import build_run, evaluate, resume
-from dospcot.tasks.sensor import KeyedStepStore, TransitionCoTraining
+from dospcot.tasks.sensor import KeyedStepStore, SensorTask
 
 LENGTH = 10
 
@@ -164,7 +166,7 @@ def test_a_toml_config_with_a_dotted_path_view_is_the_python_entry_points_config
     from_toml = load_config(str(_corridor_toml(tmp_path)))
     from_python = gym_config(make_corridor, VIEWS, label_fraction=0.1, name="corridor", settings=SETTINGS)
     assert from_toml == from_python  # the same run, which the test above trains
-    assert isinstance(build_run(from_toml), TransitionCoTraining)
+    assert isinstance(build_run(from_toml).task, SensorTask)
 
 
 def test_success_counts_returns_above_the_threshold_and_the_score_needs_a_max_return(tmp_path):
@@ -217,8 +219,8 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
     plain = build_run(cfg)
     plain.run()
     make = partial(make_masked_gym, cfg.gym.env_id, view_specs=cfg.gym.views, state_key=cfg.gym.state_key)
-    scrambled = TransitionCoTraining(
-        lambda *args: _ScrambledHiddenReward(make(*args)), plain.spec, plain.config
+    scrambled = CoTrainingRun(
+        SensorTask(cfg, cfg.gym, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
     )
     scrambled.run()
     n = len(plain.store)

@@ -12,11 +12,13 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from dospcot.cli import main
-from dospcot.config.loading import ConfigError, load_config
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.envs.highway import make_masked_highway
 from dospcot.experiment.train import build_run, evaluate
-from dospcot.tasks.sensor import TransitionCoTraining
+from dospcot.tasks.sensor import SensorTask
 
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
 
@@ -213,8 +215,8 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_id
         make_masked_highway, cfg.highway.env_id, config=cfg.highway.config,
         reveal_first_steps=cfg.highway.reveal_first_steps,
     )  # fmt: skip
-    scrambled = TransitionCoTraining(
-        lambda *args: _ScrambledHiddenReward(make(*args)), plain.spec, plain.config
+    scrambled = CoTrainingRun(
+        SensorTask(cfg, cfg.highway, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
     )
     scrambled.run()
     n = len(plain.store)

@@ -3,15 +3,17 @@ sensor blind spots and a reward monitor)."""
 
 import json
 import pickle
-from dataclasses import replace
 from functools import partial
 
 import gymnasium as gym
 import numpy as np
 import pytest
 import torch as th
+from small_runs import grid_config, grid_run
 
-from dospcot.core.cotrainer import RoundResult
+from dospcot.config.errors import ConfigError
+from dospcot.core.cotrainer import RunRound
+from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.round_records import round_stats
 from dospcot.envs import (
     FiniteCheckWrapper,
@@ -22,20 +24,35 @@ from dospcot.envs import (
     monitored_states,
     view_blind_spots,
 )
-from dospcot.tasks.grid import NeuralConfig, NeuralCoTraining, NeuralRunSpec
 
 LAYOUT = GridWorld(size=6, layout_seed=0).layout
 VIEWS = grid_views(LAYOUT, patch_size=3)
-CONFIG = NeuralConfig(
-    rounds=2, steps_per_round=300, label_fraction=0.2, max_episode_steps=36,
-    dqn={"learning_starts": 50, "buffer_size": 5_000, "policy_kwargs": {"net_arch": [32]}},
-)  # fmt: skip
+LABEL_FRACTION = 0.2
+SECTIONS = {
+    "training": {"rounds": 2, "steps_per_round": 300, "label_fraction": LABEL_FRACTION},
+    "env": {"max_episode_steps": 36},
+    "dqn": {"learning_starts": 50, "buffer_size": 5_000, "net_arch": [32]},
+}
+
+
+def config(method="cotrain", agents=("esarsa_dqn",), views=("coords",), seed=0, **changes):
+    """The tests' small grid run; ``changes`` update keys of a section (``training={"rounds": 1}``)."""
+    sections = {
+        name: {**SECTIONS.get(name, {}), **values} for name, values in {**SECTIONS, **changes}.items()
+    }
+    return grid_config(method, agents, views, seed, **sections)
+
+
+GRID = partial(GridWorld, LAYOUT)
+
+
+def grid(cfg, make_env=GRID, views=VIEWS, monitored=None) -> CoTrainingRun:
+    return grid_run(cfg, make_env, views, monitored)
 
 
 @pytest.mark.parametrize("views", [("coords",), ("coords", "patch"), ("coords", "patch", "rays")])
 def test_cotraining_runs_two_rounds_with_one_two_and_three_views(views):
-    spec = NeuralRunSpec("cotrain", ("esarsa_dqn",) * len(views), views, seed=1)
-    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG)
+    run = grid(config("cotrain", ("esarsa_dqn",) * len(views), views, seed=1))
     records = run.run()
     assert len(records) == 2 * len(views)
     last = [r for r in records if r["round"] == 2]
@@ -44,12 +61,11 @@ def test_cotraining_runs_two_rounds_with_one_two_and_three_views(views):
     assert all(r["eps"] == pytest.approx(1.0 + (0.05 - 1.0) * r["pace"]) for r in last)
     assert 0 < last[0]["coverage"] <= 1 and 0 <= last[0]["pseudo_accuracy"] <= 1
     # The table is indexed by (s, a) key: every seen key has its entry.
-    assert len(run.table) == run.mdp.n_states * run.mdp.n_actions == run.store.visited.size
+    assert len(run.table) == run.task.mdp.n_states * run.task.mdp.n_actions == run.store.visited.size
 
 
 def test_baselines_follow_a_linear_schedule():
-    spec = NeuralRunSpec("labels-only", ("dqn",), ("coords",), seed=0)
-    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG)
+    run = grid(config("labels-only", ("dqn",)))
     records = run.run()
     assert [r["eps"] for r in records] == pytest.approx([1.0 + (0.05 - 1.0) * 0.5, 0.05])
     # A baseline records its effort as co-training does: the (s, a) keys whose labels it saw.
@@ -58,8 +74,7 @@ def test_baselines_follow_a_linear_schedule():
 
 def test_with_every_reward_revealed_the_pace_is_full_and_exploration_decays():
     # No unlabelled key is left to admit: the self-paced schedule is done, not stuck at its start.
-    spec = NeuralRunSpec("cotrain", ("esarsa_dqn",), ("coords",), seed=0)
-    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, replace(CONFIG, label_fraction=1.0))
+    run = grid(config(training={"label_fraction": 1.0}))
     records = run.run()
     assert [r["pace"] for r in records] == [1.0, 1.0] and [r["coverage"] for r in records] == [0.0, 0.0]
     assert [r["eps"] for r in records] == pytest.approx([0.05, 0.05])
@@ -67,25 +82,21 @@ def test_with_every_reward_revealed_the_pace_is_full_and_exploration_decays():
 
 def test_exploration_by_rounds_ignores_the_pace():
     # Every reward revealed: the pace is full after round 1, yet eps follows the rounds as a baseline's.
-    spec = NeuralRunSpec("cotrain", ("esarsa_dqn",), ("coords",), seed=0)
-    config = replace(CONFIG, label_fraction=1.0, exploration="rounds")
-    records = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, config).run()
+    records = grid(config(training={"label_fraction": 1.0, "exploration": "rounds"})).run()
     assert [r["pace"] for r in records] == [1.0, 1.0]
     assert [r["eps"] for r in records] == pytest.approx([1.0 + (0.05 - 1.0) * 0.5, 0.05])
     with pytest.raises(ValueError, match="exploration must be 'pace' or 'rounds', got 'steps'"):
-        replace(CONFIG, exploration="steps")
+        config(training={"exploration": "steps"})
 
 
 def _permuted_grid(seed: int, monitored_states: np.ndarray | None = None) -> GridWorld:
     env = GridWorld(LAYOUT)
-    masked = ~StateActionMask(
-        env.observation_space.n, 4, CONFIG.label_fraction, seed, monitored_states
-    ).labelled
+    masked = ~StateActionMask(env.observation_space.n, 4, LABEL_FRACTION, seed, monitored_states).labelled
     env.reward[masked] = np.random.default_rng(0).permutation(env.reward[masked])
     return env
 
 
-def assert_same_learners(a: NeuralCoTraining, b: NeuralCoTraining) -> None:
+def assert_same_learners(a: CoTrainingRun, b: CoTrainingRun) -> None:
     """Two runs' agents hold bit-identical parameters, and their reward tables the same rewards and
     weights: what the leakage tests ask of runs whose hidden rewards differ."""
     for agent_a, agent_b in zip(a.agents, b.agents, strict=True):
@@ -97,11 +108,11 @@ def assert_same_learners(a: NeuralCoTraining, b: NeuralCoTraining) -> None:
 @pytest.mark.parametrize("kinds", [("esarsa_dqn", "dqn"), ("tabular", "tabular")])
 def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical(kinds):
     assert not np.array_equal(_permuted_grid(3).reward, GridWorld(LAYOUT).reward)
-    spec = NeuralRunSpec("cotrain", kinds, ("coords", "patch"), seed=3)
+    cfg = config("cotrain", kinds, ("coords", "patch"), seed=3)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
-    a = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG)
+    a = grid(cfg)
     a.run()
-    b = NeuralCoTraining(partial(_permuted_grid, 3), VIEWS, spec, CONFIG)
+    b = grid(cfg, partial(_permuted_grid, 3))
     b.run()
     assert_same_learners(a, b)
 
@@ -110,19 +121,20 @@ def test_leakage_under_blind_spots_and_a_monitor_agents_stay_bit_identical():
     monitor = monitored_states(6, 2)
     assert not np.array_equal(_permuted_grid(3, monitor).reward, GridWorld(LAYOUT).reward)
     views = grid_views(LAYOUT, 3, blind_spots=view_blind_spots(LAYOUT, 0.5, 3))
-    spec = NeuralRunSpec("cotrain", ("dqn", "dqn"), ("patch", "rays"), seed=3)
+    cfg = config("cotrain", ("dqn", "dqn"), ("patch", "rays"), seed=3)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
-    a = NeuralCoTraining(partial(GridWorld, LAYOUT), views, spec, CONFIG, monitor)
+    a = grid(cfg, views=views, monitored=monitor)
     a.run()
-    b = NeuralCoTraining(partial(_permuted_grid, 3, monitor), views, spec, CONFIG, monitor)
+    b = grid(cfg, partial(_permuted_grid, 3, monitor), views, monitor)
     b.run()
     assert a.store.labelled[a.store.visited].mean() > 0.2  # the monitor revealed more than the share
     assert_same_learners(a, b)
 
 
 def test_a_mix_of_tabular_and_neural_agents_cotrains_and_resumes_from_its_state():
-    spec = NeuralRunSpec("cotrain", ("tabular", "esarsa_dqn", "dqn"), ("coords", "patch", "rays"), seed=2)
-    build = partial(NeuralCoTraining, partial(GridWorld, LAYOUT), VIEWS, spec, CONFIG)
+    build = partial(
+        grid, config("cotrain", ("tabular", "esarsa_dqn", "dqn"), ("coords", "patch", "rays"), seed=2)
+    )
     full = build()
     records = full.run()
     assert [r["env_steps"] for r in records] == [300] * 3 + [600] * 3
@@ -140,25 +152,24 @@ def test_a_mix_of_tabular_and_neural_agents_cotrains_and_resumes_from_its_state(
             assert th.equal(p, q)
 
 
-def test_bad_specs_raise():
-    with pytest.raises(ValueError, match="unknown agent kind"):
-        NeuralRunSpec("cotrain", ("ppo",), ("coords",))
-    with pytest.raises(ValueError, match=r"unknown view\(s\) \['lidar'\]"):
-        NeuralCoTraining(
-            partial(GridWorld, LAYOUT), VIEWS, NeuralRunSpec("cotrain", ("dqn",), ("lidar",)), CONFIG
-        )
+def test_bad_configs_raise():
+    with pytest.raises(ConfigError, match="agents: unknown agent kind 'ppo'"):
+        config("cotrain", ("ppo",))
+    with pytest.raises(ConfigError, match="views: the grid world has no view 'lidar'"):
+        config("cotrain", ("dqn",), ("lidar",))
+    with pytest.raises(ValueError, match=r"unknown view\(s\) \['rays'\]"):  # a task of the test's own
+        grid(config("cotrain", ("dqn",), ("rays",)), views={"coords": VIEWS["coords"]})
     with pytest.raises(ValueError, match="label_fraction"):
-        replace(CONFIG, label_fraction=0.0)
+        config(training={"label_fraction": 0.0})
 
 
 def test_training_episodes_follow_their_own_limit_while_evaluation_keeps_the_horizon():
-    config = replace(CONFIG, rounds=1, train_episode_steps=5)
-    spec = NeuralRunSpec("oracle", ("esarsa_dqn",), ("coords",), seed=0)
-    run = NeuralCoTraining(partial(GridWorld, LAYOUT, exploring_starts=True), VIEWS, spec, config)
+    cfg = config("oracle", training={"rounds": 1}, env={"train_episode_steps": 5})
+    run = grid(cfg, partial(GridWorld, LAYOUT, exploring_starts=True))
     run.run()
     # 300 steps in episodes of at most 5 steps: at least 60 episodes (fewer steps end at the goal).
     assert run.agents[0]._episode_num >= 60
-    assert run.mdp.max_episode_steps == CONFIG.max_episode_steps
+    assert run.task.mdp.max_episode_steps == SECTIONS["env"]["max_episode_steps"]
 
 
 class _NaNRewardAt(GridWorld):
@@ -175,8 +186,7 @@ class _NaNRewardAt(GridWorld):
 
 
 def test_a_nan_reward_stops_the_run_naming_the_env_and_the_step():
-    spec = NeuralRunSpec("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed=0)
-    run = NeuralCoTraining(partial(_NaNRewardAt, LAYOUT), VIEWS, spec, CONFIG)
+    run = grid(config("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch")), partial(_NaNRewardAt, LAYOUT))
     # The mask decides whether the agent sees the NaN as its reward or only as the hidden reward.
     with pytest.raises(
         NonFiniteError,
@@ -207,13 +217,13 @@ def test_finite_check_names_a_nan_observation_at_reset_and_at_a_step():
         env.step(0)
 
 
-def _buffered_keys(run: NeuralCoTraining) -> np.ndarray:
+def _buffered_keys(run: CoTrainingRun) -> np.ndarray:
     """The (s, a) key of each step in agent 0's replay buffer (its view is ``coords``, one row per
     state)."""
     buffer = run.agents[0].replay_buffer
     obs, actions = buffer.observations[: buffer.size(), 0], buffer.actions[: buffer.size(), 0, 0]
-    states = (obs[:, None, :] == run.mdp.views["coords"][None]).all(-1).argmax(1)
-    return states * run.mdp.n_actions + actions
+    states = (obs[:, None, :] == run.task.mdp.views["coords"][None]).all(-1).argmax(1)
+    return states * run.task.mdp.n_actions + actions
 
 
 def _last_round_q(kind: str, update_steps: int, shift: float) -> tuple[float, int]:
@@ -221,10 +231,11 @@ def _last_round_q(kind: str, update_steps: int, shift: float) -> tuple[float, in
     is shifted by ``shift``; returns it and the key. The key is the admitted one the agent's replay
     buffer holds most often (the first such), so that the effect tested does not hinge on whether
     the seed's first admitted key happened to be visited once or often."""
-    spec = NeuralRunSpec("cotrain", (kind,), ("coords",), seed=0)
     # A fast learner, so that the shifted key's few replayed samples move its value visibly.
-    config = replace(CONFIG, rounds=1, update_steps=update_steps, dqn={**CONFIG.dqn, "learning_rate": 0.01})
-    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, config)
+    cfg = config(
+        "cotrain", (kind,), training={"rounds": 1, "update_steps": update_steps}, dqn={"learning_rate": 0.01}
+    )
+    run = grid(cfg)
     table_set, picked = run.table.set, []
 
     def shifted_set(ids, reward, weight):
@@ -236,9 +247,9 @@ def _last_round_q(kind: str, update_steps: int, shift: float) -> tuple[float, in
 
     run.table.set = shifted_set
     run.run_round()
-    state, action = divmod(picked[0], run.mdp.n_actions)
+    state, action = divmod(picked[0], run.task.mdp.n_actions)
     with th.no_grad():
-        q = run.agents[0].q_net(th.as_tensor(run.mdp.views["coords"][[state]]))
+        q = run.agents[0].q_net(th.as_tensor(run.task.mdp.views["coords"][[state]]))
     return float(q[0, action]), picked[0]
 
 
@@ -254,12 +265,11 @@ def test_round_stats_name_the_worst_class_the_mean_accuracy_hides():
     # Six admitted samples (the seventh is not admitted): hidden classes 0, 0, 0, 1, -1 (a value no
     # label showed, e.g. the goal) and 0; given classes 0, 0, 1, 1, 0 and 0.
     true_class = np.array([0, 0, 0, 1, -1, 0, 1])
-    given = np.array([[0, 0, 1, 1, 0, 0, -1]])
+    given = np.array([0, 0, 1, 1, 0, 0, -1])
     weight = (given >= 0).astype(float)
-    result = RoundResult(
+    result = RunRound(
         pseudo_class=given, pseudo_weight=weight, view_weight=weight[None], view_class=given[None],
-        threshold=np.zeros((1, 1, 2)), classifier_loss=np.zeros((1, 1)), pace=np.array([6 / 7]),
-        changed=np.zeros(1), stopped=np.zeros(1, dtype=bool),
+        threshold=np.zeros((1, 2)), classifier_loss=np.zeros(1), pace=6 / 7, changed=0.0, stopped=False,
     )  # fmt: skip
     unlabelled = np.ones(7, dtype=bool)
     stats = round_stats(result, unlabelled, true_class)
@@ -272,8 +282,9 @@ def test_round_stats_name_the_worst_class_the_mean_accuracy_hides():
 
 
 def test_agents_take_their_first_gradient_step_in_learn_from_round():
-    spec = NeuralRunSpec("cotrain", ("esarsa_dqn", "tabular"), ("coords", "patch"), seed=0)
-    run = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, replace(CONFIG, learn_from_round=2))
+    run = grid(
+        config("cotrain", ("esarsa_dqn", "tabular"), ("coords", "patch"), training={"learn_from_round": 2})
+    )
     assert [agent.learning_starts for agent in run.agents] == [300, 300]
     run.run_round()
     # Round 1 collects at random: every buffered step is a uniform draw, none trained the agents.

@@ -10,12 +10,14 @@ import numpy as np
 import pytest
 
 from dospcot.cli import main
-from dospcot.config.loading import ConfigError, load_config
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.config.presets import PAPER_PRESETS
 from dospcot.experiment import bench
 from dospcot.experiment.report import write_report
 from dospcot.experiment.sweep import SweepError, SweepSpec, Trial, plan_jobs, run_sweep
 from dospcot.metrics import SeedSummary
-from dospcot.paper.protocol import PRESETS, cell_summary, protocol_specs, train_protocol_at
+from dospcot.paper.protocol import cell_summary, protocol_specs, train_protocol_at
 
 # Five episodes a round and short classifier fits: every file and figure of the protocol in seconds.
 QUICK = ["tabular.episodes_per_round=5", "tabular.cotraining.classifier.epochs=10"]
@@ -31,7 +33,7 @@ def test_protocol_has_every_run_of_the_four_tables():
 
 
 def test_paper_presets_hold_the_papers_hyperparameters():
-    text, code = (load_config(PRESETS[name]).tabular for name in ("paper-text", "published-code"))
+    text, code = (load_config(PAPER_PRESETS[name]).tabular for name in ("paper-text", "published-code"))
     assert (text.learning_rate, text.discount, code.learning_rate, code.discount) == (0.8, 0.95, 0.5, 1.0)
     for cfg in (text, code):
         assert (cfg.rounds, cfg.episodes_per_round, cfg.eps_start, cfg.eps_end) == (5, 500, 0.1, 0.1)

@@ -5,7 +5,6 @@ import json
 import pickle
 import re
 import runpy
-from dataclasses import replace
 from functools import partial
 from pathlib import Path
 
@@ -14,9 +13,10 @@ import numpy as np
 import pytest
 from test_gym_task import LENGTH, SETTINGS, corridor_cell, make_corridor
 from test_gym_task import VIEWS as GYM_VIEWS
-from test_neural_cotraining import CONFIG, LAYOUT, VIEWS, assert_same_learners
+from test_neural_cotraining import LAYOUT, SECTIONS, assert_same_learners, config, grid
 
-from dospcot.config.loading import ConfigError, load_config
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
 from dospcot.core.classifier import ClassifierConfig
 from dospcot.core.cotrainer import Pool
 from dospcot.core.reward_classes import QuantileRewardClasses
@@ -30,7 +30,6 @@ from dospcot.core.segments import (
 from dospcot.envs import GridWorld, RewardMaskWrapper
 from dospcot.experiment.python_api import gym_config
 from dospcot.experiment.train import build_run
-from dospcot.tasks.grid import NeuralCoTraining, NeuralRunSpec
 
 REWARDS = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0]
 
@@ -180,7 +179,7 @@ def test_a_steps_weight_is_the_largest_weight_of_a_segment_holding_it():
 
 
 K = 4
-SEGMENTS = replace(CONFIG, segment_length=K, label_fraction=0.3)
+SEGMENTS = {"segment_length": K, "label_fraction": 0.3}
 
 
 class SumPreservingRewards(gym.Wrapper):
@@ -207,12 +206,12 @@ def _shifted_grid() -> gym.Env:
 
 
 def test_leakage_rewards_that_keep_every_segment_sum_leave_the_learners_bit_identical():
-    assert SEGMENTS.max_episode_steps % K == 0
-    spec = NeuralRunSpec("cotrain", ("dqn", "esarsa_dqn"), ("coords", "patch"), seed=3)
+    assert SECTIONS["env"]["max_episode_steps"] % K == 0
+    cfg = config("cotrain", ("dqn", "esarsa_dqn"), ("coords", "patch"), seed=3, training=SEGMENTS)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
-    a = NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, spec, SEGMENTS)
+    a = grid(cfg)
     a.run()
-    b = NeuralCoTraining(_shifted_grid, VIEWS, spec, SEGMENTS)
+    b = grid(cfg, _shifted_grid)
     b.run()
     # The single rewards differed; only the segment sums reached the learners, and they agree.
     assert not np.array_equal(a.store.hidden_reward, b.store.hidden_reward)
@@ -221,8 +220,7 @@ def test_leakage_rewards_that_keep_every_segment_sum_leave_the_learners_bit_iden
 
 
 def test_a_run_on_segment_labels_cotrains_on_segments_and_resumes_from_its_state():
-    spec = NeuralRunSpec("cotrain", ("dqn", "dqn"), ("coords", "patch"), seed=1)
-    build = partial(NeuralCoTraining, partial(GridWorld, LAYOUT), VIEWS, spec, SEGMENTS)
+    build = partial(grid, config("cotrain", ("dqn", "dqn"), ("coords", "patch"), seed=1, training=SEGMENTS))
     full = build()
     records = full.run()
     n = len(full.segments)
@@ -243,8 +241,8 @@ def test_a_run_on_segment_labels_cotrains_on_segments_and_resumes_from_its_state
     resumed.load_state_dict(pickle.loads(state))
     assert json.dumps(resumed.run_round()) == json.dumps(records[2:])
     assert np.array_equal(resumed.table.reward, full.table.reward)
-    with pytest.raises(ValueError, match="segment labels need co-training"):
-        NeuralCoTraining(partial(GridWorld, LAYOUT), VIEWS, replace(spec, method="labels-only"), SEGMENTS)
+    with pytest.raises(ConfigError, match="segment labels need co-training"):
+        config("labels-only", ("dqn", "dqn"), ("coords", "patch"), seed=1, training=SEGMENTS)
 
 
 @pytest.mark.parametrize(

@@ -18,7 +18,8 @@ from dospcot.envs import (
     view_blind_spots,
 )
 from dospcot.envs.gridworld import FREE, LAVA, N_TERRAIN, misread
-from dospcot.experiment.train import build_run, build_task
+from dospcot.experiment.train import build_run
+from dospcot.tasks.grid import grid_world
 
 # Lava at (0, 2), (1, 1), (2, 0) and (3, 3); start (3, 0), goal (1, 3).
 MAP = """
@@ -145,14 +146,14 @@ def test_a_transition_monitor_reveals_the_first_steps_of_every_episode():
 
 def test_the_config_keys_reach_the_views_and_the_mask():
     cfg = load_config("tiny", ["env.blind_spot_rate=0.5", "env.monitored_columns=2"])
-    _, views, layout = build_task(cfg)
+    _, views, layout = grid_world(cfg)
     blind = view_blind_spots(layout, 0.5, cfg.seed)
     expected = grid_views(layout, 3, cfg.env.compass, blind, ray_encoding=cfg.env.ray_encoding)
     assert all(np.array_equal(views[v].fn(s), expected[v].fn(s)) for v in views for s in range(36))
     run = build_run(cfg)
     assert np.array_equal(run.task.monitored_states, monitored_states(6, 2))
     identical = load_config("tiny", ["env.blind_spot_rate=0.5", 'env.blind_spots="identical"'])
-    _, views, _ = build_task(identical)
+    _, views, _ = grid_world(identical)
     blind = view_blind_spots(layout, 0.5, cfg.seed, identical=True)
     expected = grid_views(layout, 3, cfg.env.compass, blind, ray_encoding=identical.env.ray_encoding)
     assert all(np.array_equal(views["rays"].fn(s), expected["rays"].fn(s)) for s in range(36))

@@ -14,7 +14,8 @@ import pytest
 import torch
 
 from dospcot.cli import main
-from dospcot.config.loading import ConfigError, load_config
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
 from dospcot.experiment import run_folder
 from dospcot.experiment.report import load_runs, write_report
 from dospcot.experiment.sweep import SweepError, SweepSpec, Trial, open_sweep, parse_grid, run_sweep

@@ -1,0 +1,43 @@
+"""Small grid runs the tests build with their own envs and views."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+from dospcot.config.loading import from_mapping
+from dospcot.config.run_configs import TrainConfig
+from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.tasks.grid import GridTask
+
+SB3_DQN = {"learning_rate": 1e-4, "batch_size": 32, "gamma": 0.99, "target_update_interval": 10_000}
+"""stable-baselines3 ``DQN``'s own defaults where ``[dqn]``'s differ: the small-grid tests were tuned
+on them."""
+SB3_TABULAR = {"gamma": 0.99, "train_freq": 4, "learning_starts": 100}
+"""Likewise for ``[tabular_agent]``: the tabular agent's own defaults (SB3's, but its step size)."""
+
+
+def grid_config(
+    method: str = "cotrain",
+    agents: Sequence[str] = ("esarsa_dqn",),
+    views: Sequence[str] = ("coords",),
+    seed: int = 0,
+    **sections: dict[str, Any],
+) -> TrainConfig:
+    """A grid run's config, checked as a TOML file's would be; ``sections`` are tables by name
+    (``training={"rounds": 2}``); ``[dqn]`` and ``[tabular_agent]`` start from the agents' own defaults
+    (:data:`SB3_DQN`, :data:`SB3_TABULAR`)."""
+    data = {"method": method, "agents": list(agents), "views": list(views), "seed": seed, **sections}
+    data["dqn"] = {**SB3_DQN, **sections.get("dqn", {})}
+    data["tabular_agent"] = {**SB3_TABULAR, **sections.get("tabular_agent", {})}
+    return from_mapping(TrainConfig, data)
+
+
+def grid_run(
+    cfg: TrainConfig,
+    make_env: Callable[[], Any],
+    views: dict[str, Any],
+    monitored: Any = None,
+) -> CoTrainingRun:
+    """A co-training run of ``cfg`` on a grid-like task of the test's own (``make_env`` and its views)."""
+    return CoTrainingRun(GridTask(cfg, make_env, views, monitored), cfg)
