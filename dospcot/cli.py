@@ -6,9 +6,9 @@ import argparse
 import json
 import shlex
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
 QUICK_BENCH_OUT = Path("runs/bench-quick.md")
 """Where ``dospcot bench --quick`` writes its smoke-test figures."""
@@ -34,24 +34,27 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def parse_fraction(text: str) -> float:
+def _number(text: str, kind: type, allowed: Callable[[Any], bool], unreadable: str, outside: str) -> Any:
+    """``text`` read as a ``kind`` that ``allowed`` accepts; otherwise an argparse error, ``unreadable``
+    or ``outside`` with ``{text}`` filled in."""
     try:
-        value = float(text)
+        value = kind(text)
     except ValueError:
-        raise argparse.ArgumentTypeError(f"--label-fraction takes a number in (0, 1], got {text!r}") from None
-    if not 0 < value <= 1:
-        raise argparse.ArgumentTypeError(f"--label-fraction must lie in (0, 1], got {text}")
+        raise argparse.ArgumentTypeError(unreadable.format(text=repr(text))) from None
+    if not allowed(value):
+        raise argparse.ArgumentTypeError(outside.format(text=value))
     return value
+
+
+def parse_fraction(text: str) -> float:
+    unreadable = "--label-fraction takes a number in (0, 1], got {text}"
+    outside = "--label-fraction must lie in (0, 1], got {text}"
+    return _number(text, float, lambda v: 0 < v <= 1, unreadable, outside)
 
 
 def positive_int(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"expected a positive integer, got {value}")
-    return value
+    wanted = "expected a positive integer, got {text}"
+    return _number(text, int, lambda v: v >= 1, wanted, wanted)
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -234,7 +237,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from dospcot.config.errors import ConfigError
         from dospcot.envs import NonFiniteError
         from dospcot.experiment.run_folder import RunFolderError
-        from dospcot.experiment.sweep import SweepError
+        from dospcot.experiment.sweep_spec import SweepError
 
         try:
             return RUN_COMMANDS[args.command](args, command)
@@ -307,7 +310,8 @@ def _evaluate(args: argparse.Namespace, command: str) -> int:
 
 def _sweep(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.errors import ConfigError
-    from dospcot.experiment.sweep import SweepSpec, default_sweep_dir, run_sweep
+    from dospcot.experiment.sweep import default_sweep_dir, run_sweep
+    from dospcot.experiment.sweep_spec import SweepSpec
 
     if args.resume is not None:
         if args.configs or args.grid or args.overrides or args.name:
@@ -316,13 +320,13 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
             )
         sweep_dir, spec = args.resume, None
         if args.seeds is not None:
-            from dospcot.experiment.sweep import add_seeds
+            from dospcot.experiment.sweep_spec import add_seeds
 
             spec = add_seeds(sweep_dir, args.seeds)
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
-        from dospcot.experiment.sweep import parse_grid
+        from dospcot.experiment.sweep_spec import parse_grid
 
         seeds = tuple(args.seeds or (0,))
         spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), seeds, tuple(args.overrides))
@@ -358,7 +362,8 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.presets import PAPER_PRESETS
     from dospcot.experiment.report import write_report
     from dospcot.experiment.run_folder import new_run_dir
-    from dospcot.experiment.sweep import SweepError, SweepSpec, run_sweep
+    from dospcot.experiment.sweep import run_sweep
+    from dospcot.experiment.sweep_spec import SweepError, SweepSpec
 
     overrides = [
         *([f"tabular.label_fraction={args.label_fraction}"] if args.label_fraction is not None else []),

@@ -230,7 +230,7 @@ def test_on_highway_a_saved_agent_demonstrates_in_every_view_of_the_run(tmp_path
     run = build_run(load_config("fasthighway-dospcot", settings))
     demos = run.task.demos
     assert demos.n_episodes == 2 and set(demos.views) == {"kinematics", "occupancy"}
-    assert len(demos) <= 2 * run.config.max_episode_steps
+    assert len(demos) <= 2 * run.cfg.highway.episode_steps
     # Within an episode each step starts where the last one ended, in every view.
     same_episode = demos.episode[1:] == demos.episode[:-1]
     for view in demos.views:

@@ -31,7 +31,7 @@ from dospcot.envs.gym_sensors import (
 from dospcot.envs.masking import key_is_labelled
 from dospcot.experiment.python_api import gym_config, train_env
 from dospcot.experiment.run_folder import RunFolderError
-from dospcot.experiment.train import build_run, evaluate, resume
+from dospcot.experiment.train import build_run, check_config, evaluate, resume
 from dospcot.tasks.sensor import KeyedStepStore, SensorTask
 
 LENGTH = 10
@@ -263,8 +263,8 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
     ],
 )
 def test_bad_gym_input_fails_with_one_line(tmp_path, override, message):
-    with pytest.raises(ConfigError) as err:
-        load_config(str(_corridor_toml(tmp_path)), [override])
+    with pytest.raises(ConfigError) as err:  # the config's checks, then its task's check step
+        check_config(load_config(str(_corridor_toml(tmp_path)), [override]))
     assert message in str(err.value) and "\n" not in str(err.value)
 
 
@@ -356,7 +356,7 @@ def test_read_termination_gives_the_classifiers_whether_a_step_ended_its_episode
     # onehot: 10 numbers of s, 2 of the action, 10 of s', then the flag; signed: 1 + 2 + 1 + 1.
     assert [f.shape[-1] for f in pool.features] == run.task.feature_dims() == [23, 5]
     for features in pool.features:
-        np.testing.assert_array_equal(features[0, :, -1], ended.astype(np.float32))
+        np.testing.assert_array_equal(features[:, -1], ended.astype(np.float32))
     without = gym_config(
         make_corridor, VIEWS, state_key=corridor_cell, settings={**SETTINGS, "training.rounds": 1}
     )
@@ -368,7 +368,7 @@ def test_episode_end_classes_keep_the_goal_class_off_steps_that_go_on():
     pool lets every other pair take class 0 alone, and no admitted pair that goes on gets the goal."""
     settings = {**SETTINGS, "training.rounds": 2, "gym.reward_classes": 2, "gym.episode_end_classes": True}
     cfg = gym_config(make_corridor, VIEWS, label_fraction=1.0, state_key=corridor_cell, settings=settings)
-    assert build_run(cfg).task.config.episode_end_classes
+    assert build_run(cfg).task.section.episode_end_classes
     run = build_run(
         gym_config(
             make_corridor, VIEWS, label_fraction=0.5, seed=3, state_key=corridor_cell, settings=settings
@@ -379,13 +379,13 @@ def test_episode_end_classes_keep_the_goal_class_off_steps_that_go_on():
     n = len(store)
     goal = int(run.classes.encode(np.array([[1.0]]))[0, 0])
     assert goal == 1 and store.labelled[:n][store.terminal[:n]].all()  # seed 3 labels the goal pair
-    assert pool.class_mask.shape == (1, n, 2)
-    np.testing.assert_array_equal(pool.class_mask[0, :, goal], store.terminal[:n])
-    assert pool.class_mask[0, :, 0].all()
+    assert pool.class_mask.shape == (n, 2)
+    np.testing.assert_array_equal(pool.class_mask[:, goal], store.terminal[:n])
+    assert pool.class_mask[:, 0].all()
     result = run.trainer.step(pool)
-    goes_on = ~store.terminal[:n] & pool.unlabelled[0]
-    assert goes_on.any() and (result.pseudo_class[0][goes_on] != goal).all()
-    assert (result.view_class[:, 0][:, goes_on] != goal).all()
+    goes_on = ~store.terminal[:n] & pool.unlabelled
+    assert goes_on.any() and (result.pseudo_class[goes_on] != goal).all()
+    assert (result.view_class[:, goes_on] != goal).all()
     assert {record["round"] for record in records} == {1, 2}
 
 
@@ -648,7 +648,9 @@ def test_bad_demonstrations_files_for_a_gym_run_fail_with_one_line(tmp_path):
     with pytest.raises(ConfigError, match=r"gym\.episode_end_classes: demonstrations do not record which"):
         gym_config(make_corridor, VIEWS, settings={**settings, "gym.episode_end_classes": True})
     with pytest.raises(ConfigError, match=r"demonstrations\.file: demonstrations: cannot read"):
-        gym_config(make_corridor, VIEWS, settings={"demonstrations.file": str(tmp_path / "none.npz")})
+        check_config(
+            gym_config(make_corridor, VIEWS, settings={"demonstrations.file": str(tmp_path / "none.npz")})
+        )
     with pytest.raises(ConfigError, match='a task = "gym" run\'s demonstrations come from a file or a saved'):
         gym_config(make_corridor, VIEWS, settings={"demonstrations.episodes": 3})
     with pytest.raises(ConfigError, match="a grid run's demonstrations come from value iteration"):

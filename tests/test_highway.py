@@ -17,7 +17,7 @@ from dospcot.config.loading import load_config
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.envs.highway import make_masked_highway
-from dospcot.experiment.train import build_run, evaluate
+from dospcot.experiment.train import build_run, check_config, evaluate
 from dospcot.tasks.sensor import SensorTask
 
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
@@ -265,7 +265,7 @@ def test_bad_highway_configs_fail_with_one_line(tmp_path, capsys, override, mess
 
 
 def test_fast_env_config_keys_and_views_are_checked():
-    with pytest.raises(ConfigError, match=r"highway.config: .*speed_limit"):
-        load_config("fasthighway-dospcot", ["highway.config={speed_limit=3}"])
+    with pytest.raises(ConfigError, match=r"highway.config: .*speed_limit"):  # the task's check step
+        check_config(load_config("fasthighway-dospcot", ["highway.config={speed_limit=3}"]))
     with pytest.raises(ConfigError, match="no view 'ttc'; allowed: kinematics, occupancy"):
         load_config("fasthighway-dospcot", ['views=["ttc"]'])

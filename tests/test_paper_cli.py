@@ -13,9 +13,10 @@ from dospcot.cli import main
 from dospcot.config.errors import ConfigError
 from dospcot.config.loading import load_config
 from dospcot.config.presets import PAPER_PRESETS
-from dospcot.experiment import bench
+from dospcot.experiment import bench, bench_rows
 from dospcot.experiment.report import write_report
-from dospcot.experiment.sweep import SweepError, SweepSpec, Trial, plan_jobs, run_sweep
+from dospcot.experiment.sweep import plan_jobs, run_sweep
+from dospcot.experiment.sweep_spec import SweepError, SweepSpec, Trial
 from dospcot.metrics import SeedSummary
 from dospcot.paper.protocol import cell_summary, protocol_specs, train_protocol_at
 
@@ -193,9 +194,9 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert "| ratio | target | met |" in text
 
 
-def _row(name: str, ours: float) -> bench.Row:
-    steps = bench.Measurement.of([ours, ours, ours], "steps/s")
-    return bench.Row(name, "setting", steps, bench.Measurement.of([10.0] * 3, "steps/s"), True, 0.5)
+def _row(name: str, ours: float) -> bench_rows.Row:
+    steps = bench_rows.Measurement.of([ours, ours, ours], "steps/s")
+    return bench_rows.Row(name, "setting", steps, bench_rows.Measurement.of([10.0] * 3, "steps/s"), True, 0.5)
 
 
 def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, monkeypatch):

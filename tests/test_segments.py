@@ -16,9 +16,9 @@ from test_gym_task import VIEWS as GYM_VIEWS
 from test_neural_cotraining import LAYOUT, SECTIONS, assert_same_learners, config, grid
 
 from dospcot.config.errors import ConfigError
+from dospcot.config.learning_sections import ClassifierConfig
 from dospcot.config.loading import load_config
-from dospcot.core.classifier import ClassifierConfig
-from dospcot.core.cotrainer import Pool
+from dospcot.core.cotrainer import RunPool
 from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.core.segments import (
     SegmentLabelWrapper,
@@ -122,25 +122,18 @@ def test_the_store_keeps_each_segment_once_and_the_wrapper_drops_one_cut_off_by_
 
 
 def test_a_segments_input_is_the_sum_of_its_steps_inputs_and_its_class_a_bin_of_its_sum():
-    step_features = np.array([[[1.0, 0.0], [0.0, 1.0], [2.0, 2.0]]])  # (1, N = 3, d = 2)
-    steps = Pool(
-        [step_features],
-        np.zeros((1, 3), bool),
-        np.full((1, 3), -1),
-        np.ones((1, 3), bool),
-        np.ones((1, 4), bool),
-    )
+    step_features = np.array([[1.0, 0.0], [0.0, 1.0], [2.0, 2.0]])  # (N = 3, d = 2)
+    steps = RunPool([step_features], np.zeros(3, bool), np.full(3, -1), np.ones(3, bool), np.ones(4, bool))
     store = SegmentStore(2)
     store.add([0, 2], 5.0, 5.0)
     store.add([1], None, 0.0)
     store.add([1, 0], 0.0, 0.0)
     pool = segment_pool(steps, store, QuantileRewardClasses(4))
-    assert pool.features[0].tolist() == [[[3.0, 2.0], [0.0, 1.0], [1.0, 1.0]]]
-    assert pool.labelled.tolist() == [[True, False, True]] and pool.unlabelled.tolist() == [
-        [False, True, False]
-    ]
-    assert pool.label_class.tolist() == [[1, -1, 0]]  # two sums seen, 0 and 5: a class each
-    assert pool.class_mask.tolist() == [[True, True, False, False]]
+    assert pool.features[0].tolist() == [[3.0, 2.0], [0.0, 1.0], [1.0, 1.0]]
+    assert pool.labelled.tolist() == [True, False, True]
+    assert pool.unlabelled.tolist() == [False, True, False]
+    assert pool.label_class.tolist() == [1, -1, 0]  # two sums seen, 0 and 5: a class each
+    assert pool.class_mask.tolist() == [True, True, False, False]
 
 
 def test_the_per_step_model_recovers_rewards_that_the_segment_sums_determine():
@@ -162,13 +155,7 @@ def test_the_per_step_model_recovers_rewards_that_the_segment_sums_determine():
 
 
 def test_a_steps_weight_is_the_largest_weight_of_a_segment_holding_it():
-    steps = Pool(
-        [np.eye(5)[None]],
-        np.zeros((1, 5), bool),
-        np.full((1, 5), -1),
-        np.ones((1, 5), bool),
-        np.ones((1, 2), bool),
-    )
+    steps = RunPool([np.eye(5)], np.zeros(5, bool), np.full(5, -1), np.ones(5, bool), np.ones(2, bool))
     store = SegmentStore(2)
     for ids in ([0, 1], [1, 2], [3]):
         store.add(ids, None, 0.0)

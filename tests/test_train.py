@@ -24,18 +24,15 @@ from tensorboard.backend.event_processing.event_file_loader import EventFileLoad
 from tensorboard.compat.proto.event_pb2 import SessionLog
 
 from dospcot.cli import main
-from dospcot.config.loading import (
-    DQN_DEFAULTS,
-    DQN_SET_ELSEWHERE,
-    ConfigError,
-    DQNConfig,
-    load_config,
-    preset_names,
-)
+from dospcot.config.errors import ConfigError
+from dospcot.config.learning_sections import DQN_DEFAULTS, DQN_SET_ELSEWHERE, DQNConfig
+from dospcot.config.loading import load_config
+from dospcot.config.presets import preset_names
 from dospcot.core.classifier import load_classifier
 from dospcot.envs import GridWorld, TabularMDP
 from dospcot.experiment.run_folder import RunFolderError, read_checkpoint, write_csv
-from dospcot.experiment.train import ROUND_SCALARS, SEGMENT_SCALARS, build_task, evaluate
+from dospcot.experiment.train import ROUND_SCALARS, SEGMENT_SCALARS, evaluate
+from dospcot.tasks.grid import grid_world
 
 ISSUE_PRESETS = [
     "grid16-dospcot", "grid16-oracle", "grid16-masked-zero", "grid16-labels-only", "grid16-self-training",
@@ -182,7 +179,7 @@ def test_a_section_of_the_other_task_is_refused_unless_it_says_nothing(tmp_path)
 
 
 def test_on_the_grid16_map_every_view_tells_every_cell_apart():
-    make_env, views, _ = build_task(load_config("grid16"))
+    make_env, views, _ = grid_world(load_config("grid16"))
     mdp = TabularMDP.from_env(make_env(), views, 64)
     assert {v: len(np.unique(mdp.views[v], axis=0)) for v in views} == {v: 256 for v in views}
 

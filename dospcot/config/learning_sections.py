@@ -21,6 +21,20 @@ MODEL_KINDS: tuple[str, ...] = ("mlp", "linear")
 LOSS_KINDS: tuple[str, ...] = ("cross_entropy", "hinge")
 
 
+def check_at_least(section: Any, bound: int, *names: str) -> None:
+    """Raise ``ValueError`` for the first of the section's fields ``names`` below ``bound``."""
+    for name in names:
+        if getattr(section, name) < bound:
+            raise ValueError(f"{name} must be >= {bound}, got {getattr(section, name)}")
+
+
+def check_within(section: Any, low: float, high: float, *names: str) -> None:
+    """Raise ``ValueError`` for the first of the section's fields ``names`` outside [low, high]."""
+    for name in names:
+        if not low <= getattr(section, name) <= high:
+            raise ValueError(f"{name} must lie in [{low:g}, {high:g}], got {getattr(section, name)}")
+
+
 @dataclass(frozen=True)
 class TrainingConfig:
     """The rounds of one run: the ``[training]`` section of a config, and the first fields of
@@ -61,14 +75,12 @@ class TrainingConfig:
     segment_length: int = 1
 
     def __post_init__(self) -> None:
-        if self.segment_length < 1:
-            raise ValueError(f"segment_length must be >= 1, got {self.segment_length}")
+        check_at_least(self, 1, "segment_length")
         if self.rounds < 1 or self.steps_per_round < 1:
             raise ValueError(
                 f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
             )
-        if self.update_steps < 0:
-            raise ValueError(f"update_steps must be >= 0, got {self.update_steps}")
+        check_at_least(self, 0, "update_steps")
         if self.exploration not in ("pace", "rounds"):
             raise ValueError(f"exploration must be 'pace' or 'rounds', got {self.exploration!r}")
         if not 1 <= self.learn_from_round <= self.rounds:
@@ -77,9 +89,7 @@ class TrainingConfig:
             )
         if not 0 < self.label_fraction <= 1:
             raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
-        for name in ("eps_start", "eps_end"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+        check_within(self, 0, 1, "eps_start", "eps_end")
 
     @property
     def collect_only_steps(self) -> int:
@@ -128,11 +138,10 @@ def _sb3_dqn_fields() -> list[tuple[str, type, Any]]:
 
 class _DQNChecks:
     def __post_init__(self) -> None:
-        for name in ("buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.learning_starts < 0:
-            raise ValueError(f"learning_starts must be >= 0, got {self.learning_starts}")
+        check_at_least(
+            self, 1, "buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"
+        )
+        check_at_least(self, 0, "learning_starts")
         if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1:
             raise ValueError(f"gamma and tau must lie in (0, 1], got {self.gamma}, {self.tau}")
         if self.learning_rate <= 0:
@@ -205,11 +214,8 @@ class TabularAgentConfig:
             raise ValueError(
                 f"learning_rate and gamma must lie in (0, 1], got {self.learning_rate}, {self.gamma}"
             )
-        for name in ("batch_size", "train_freq", "gradient_steps", "buffer_size", "n_steps"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        if self.learning_starts < 0:
-            raise ValueError(f"learning_starts must be >= 0, got {self.learning_starts}")
+        check_at_least(self, 1, "batch_size", "train_freq", "gradient_steps", "buffer_size", "n_steps")
+        check_at_least(self, 0, "learning_starts")
 
 
 @dataclass(frozen=True)
@@ -292,24 +298,24 @@ class TabularConfig:
 
     :param rounds: co-training rounds (each one a collection of ``episodes_per_round`` episodes).
     :param episodes_per_round: episodes each agent plays per round.
+    :param replay_sweeps: synchronous TD sweeps over the store after each round's co-training.
+    :param label_fraction: share of labelled (s, a) keys, in (0, 1].
+    :param cotraining: the self-paced schedule (its consensus weight is replaced by each run's gamma).
     :param learning_rate: TD step size.
     :param discount: discount factor (also the one value iteration uses for the optimum).
     :param eps_start: exploration rate at pace 0.
     :param eps_end: exploration rate at pace 1; eps(p) = eps_start + (eps_end - eps_start) * p.
-    :param label_fraction: share of labelled (s, a) keys, in (0, 1].
-    :param replay_sweeps: synchronous TD sweeps over the store after each round's co-training.
-    :param cotraining: the self-paced schedule (its consensus weight is replaced by each run's gamma).
     """
 
     rounds: int = 5
     episodes_per_round: int = 500
+    replay_sweeps: int = 1
+    label_fraction: float = 0.1
+    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
     learning_rate: float = 0.8
     discount: float = 0.95
     eps_start: float = 0.1
     eps_end: float = 0.1
-    label_fraction: float = 0.1
-    replay_sweeps: int = 1
-    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
 
     def __post_init__(self) -> None:
         check_label_fraction(self.label_fraction)
@@ -318,6 +324,4 @@ class TabularConfig:
                 f"rounds and episodes_per_round must be >= 1 and replay_sweeps >= 0; got {self.rounds}, "
                 f"{self.episodes_per_round}, {self.replay_sweeps}"
             )
-        for name in ("eps_start", "eps_end"):
-            if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+        check_within(self, 0, 1, "eps_start", "eps_end")

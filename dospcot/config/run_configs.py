@@ -93,8 +93,8 @@ class TrainConfig:
             key = "agents" if self.agents else "agent"
             neural = ", ".join(kind for kind in RUN_AGENT_KINDS if kind != "tabular")
             raise ConfigError(
-                f"{key}: 'tabular' needs a task whose states are known in advance (task = \"grid\"); "
-                f"allowed on {self.task_name}: {neural}"
+                f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
+                f"{self.task_name}: {neural}"
             )
         self._check_demonstrations()
         self._check_segments()

@@ -79,47 +79,18 @@ class RoundResult:
 
 
 @dataclass(frozen=True)
-class RunPool:
-    """The samples of one round of one run, over N pool slots: :class:`Pool` without the runs' axis.
-
-    :param features: per view, (N, d_j) classifier inputs.
-    :param labelled: (N,) bool, samples whose true reward was revealed.
-    :param label_class: (N,) int class index of the revealed reward (-1 elsewhere).
-    :param unlabelled: (N,) bool, the unlabelled pool U.
-    :param class_mask: (K,) bool, the classes the run has seen; or (N, K), the classes each sample may take.
-    """
-
-    features: list[np.ndarray]
-    labelled: np.ndarray
-    label_class: np.ndarray
-    unlabelled: np.ndarray
-    class_mask: np.ndarray
+class RunPool(Pool):
+    """The samples of one round of one run: a :class:`Pool` without the runs' axis, so ``features``
+    per view (N, d_j), ``labelled``, ``label_class`` and ``unlabelled`` (N,), ``class_mask`` (K,) or
+    (N, K)."""
 
 
 @dataclass(frozen=True)
-class RunRound:
-    """What one co-training round decided for one run: :class:`RoundResult` without the runs' axis.
-
-    :param pseudo_class: (N,) consensus class of each sample of U, -1 if no view admitted it.
-    :param pseudo_weight: (N,) its self-paced weight.
-    :param view_weight: (m, N) the weights v_j of each view.
-    :param view_class: (m, N) the class each view predicts.
-    :param threshold: (m, K) lambda_{j,c}.
-    :param classifier_loss: (m,) final training loss of each classifier.
-    :param pace: admitted share of U, in [0, 1].
-    :param changed: share of U whose pseudo-label changed since the previous round.
-    :param stopped: whether the stopping rule fired.
-    """
-
-    pseudo_class: np.ndarray
-    pseudo_weight: np.ndarray
-    view_weight: np.ndarray
-    view_class: np.ndarray
-    threshold: np.ndarray
-    classifier_loss: np.ndarray
-    pace: float
-    changed: float
-    stopped: bool
+class RunRound(RoundResult):
+    """What one co-training round decided for one run (:meth:`RoundResult.of_run`): a
+    :class:`RoundResult` without the runs' axis, so ``pseudo_class`` and ``pseudo_weight`` (N,),
+    ``view_weight`` and ``view_class`` (m, N), ``threshold`` (m, K), ``classifier_loss`` (m,), and
+    ``pace``, ``changed`` and ``stopped`` plain numbers."""
 
 
 class SelfPacedCoTrainer:

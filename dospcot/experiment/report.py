@@ -27,7 +27,6 @@ from __future__ import annotations
 import csv
 import json
 import math
-import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,7 +38,7 @@ from dospcot import metrics
 from dospcot.config.loading import load_config
 from dospcot.experiment.plots import Band, plot_bands
 from dospcot.experiment.run_folder import CONFIG_FILE, METRICS_FILE, SUMMARY_FILE, write_csv, write_text
-from dospcot.experiment.sweep import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
+from dospcot.experiment.sweep_spec import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
 from dospcot.metrics import SeedSummary
 from dospcot.paper import protocol as paper
 from dospcot.tasks.registry import get_task
@@ -261,10 +260,9 @@ def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
     spec, runs = load_runs(sweep_dir)
     out_dir = out_dir or sweep_dir
     out_dir.mkdir(parents=True, exist_ok=True)
-    # A sweep holds one kind of config (SweepSpec.trials); its task is read, not the whole config, so
-    # that a record trained under older keys still reports.
-    task = tomllib.loads((runs[0].run_dir / CONFIG_FILE).read_text()).get("task", "grid")
-    return get_task(task).write_report(spec, runs, out_dir)
+    # A sweep holds one kind of config (SweepSpec.trials). A paper-protocol summary names its task; a
+    # co-training run's names none, and every co-training task writes the same report as the grid's.
+    return get_task(runs[0].summary.get("task", "grid")).write_report(spec, runs, out_dir)
 
 
 def write_cotraining_report(spec: SweepSpec, runs: Sequence[TrialRun], out_dir: Path) -> list[Path]:

@@ -10,22 +10,19 @@ from typing import TYPE_CHECKING
 
 from dospcot.config.errors import ConfigError
 from dospcot.envs.gym_sensors import check_gym_task, make_masked_gym
-from dospcot.tasks.registry import Task, register
-from dospcot.tasks.sensor import SensorTask, check_sensor_demonstrations, validate_sensor_demonstrations
+from dospcot.tasks.registry import register
+from dospcot.tasks.sensor import SensorTask, SensorTaskBase
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
 
 
 @register
-class GymTask(Task):
+class GymTask(SensorTaskBase):
     """A gymnasium env: an episode whose true return exceeds ``gym.success_return`` is a success."""
 
     name = "gym"
     section = "gym"
-
-    def title(self, cfg: TrainConfig) -> str:
-        return cfg.gym.env_id
 
     def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
         return tuple(cfg.gym.views)
@@ -38,7 +35,7 @@ class GymTask(Task):
             raise ConfigError(
                 'gym.views: a task = "gym" run needs its views, e.g. views = {state = "observation"}'
             )
-        validate_sensor_demonstrations(cfg)
+        super().validate(cfg)
         demos = cfg.demonstrations
         reads_ends = [key for key in ("read_termination", "episode_end_classes") if getattr(gym, key)]
         if (demos.file or demos.agent) and demos.labels and reads_ends:
@@ -55,7 +52,7 @@ class GymTask(Task):
             )
         except ValueError as err:
             raise ConfigError(str(err)) from None
-        check_sensor_demonstrations(cfg)
+        super().check(cfg)
 
     def build(self, cfg: TrainConfig) -> SensorTask:
         gym = cfg.gym

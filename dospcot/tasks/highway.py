@@ -16,34 +16,31 @@ from dospcot.envs.highway import (
     make_masked_highway,
     try_highway_config,
 )
-from dospcot.tasks.registry import Task, register
-from dospcot.tasks.sensor import SensorTask, check_sensor_demonstrations, validate_sensor_demonstrations
+from dospcot.tasks.registry import register
+from dospcot.tasks.sensor import SensorTask, SensorTaskBase
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
 
 
 @register
-class HighwayTask(Task):
+class HighwayTask(SensorTaskBase):
     """A highway: an episode that lasts all its ``episode_steps`` (no crash) is a success."""
 
     name = "highway"
     section = "highway"
 
-    def title(self, cfg: TrainConfig) -> str:
-        return cfg.highway.env_id
-
-    def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
-        return highway_view_names(cfg.highway.env_id)
-
     def validate(self, cfg: TrainConfig) -> None:
         if cfg.highway.env_id not in (*HIGHWAY_ENV_IDS, FAST_HIGHWAY_ID):
             allowed = ", ".join((*HIGHWAY_ENV_IDS, FAST_HIGHWAY_ID))
             raise ConfigError(f"highway.env_id: unknown task {cfg.highway.env_id!r}; allowed: {allowed}")
-        validate_sensor_demonstrations(cfg)
+        super().validate(cfg)
 
     def has_monitor(self, cfg: TrainConfig) -> bool:
         return cfg.highway.reveal_first_steps > 0
+
+    def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
+        return highway_view_names(cfg.highway.env_id)
 
     def check(self, cfg: TrainConfig) -> None:
         highway = cfg.highway
@@ -55,7 +52,7 @@ class HighwayTask(Task):
             check(highway.config)
         except ValueError as err:
             raise ConfigError(f"highway.config: {err}") from None
-        check_sensor_demonstrations(cfg)
+        super().check(cfg)
 
     def build(self, cfg: TrainConfig) -> SensorTask:
         highway = cfg.highway

@@ -16,7 +16,7 @@ from dospcot.paper.protocol import episodes_per_seed, train_protocol_at
 from dospcot.tasks.registry import Task, register
 
 if TYPE_CHECKING:
-    from dospcot.experiment.sweep import SweepSpec
+    from dospcot.experiment.sweep_spec import SweepSpec
 
 
 @register
@@ -46,20 +46,12 @@ class PaperTask(Task):
             f"{run_dir} is a paper-protocol run: it keeps no agents (its figures are in {METRICS_FILE})"
         )
 
-    def result_line(self, run_dir: Path, summary: dict[str, Any]) -> str:
-        mean = summary["mean"]
-        return (
-            f"{run_dir}: ESARSA-ESARSA DOSPCoT agreement {mean['dospcot_agreement']:.3f}, oracle "
-            f"{mean['oracle_agreement']:.3f} (seed {summary['seed']}, {summary['runs']} runs, round "
-            f"{summary['rounds']}; every run in metrics.csv)"
-        )
-
     def write_report(self, spec: SweepSpec, runs: list[Any], out_dir: Path) -> list[Path]:
         from dospcot.experiment.report import write_paper_report
 
         return write_paper_report(spec, runs, out_dir)
 
-    def train_seeds_at(
+    def train_seeds_at(  # what seeds_train_together promises
         self,
         cfg: PaperConfig,
         run_dirs: dict[int, Path],
@@ -71,3 +63,11 @@ class PaperTask(Task):
             cfg, run_dirs, commands=commands,
             progress=None if progress is None else lambda done: progress(done / episodes),
         )  # fmt: skip
+
+    def result_line(self, run_dir: Path, summary: dict[str, Any]) -> str:
+        mean = summary["mean"]
+        return (
+            f"{run_dir}: ESARSA-ESARSA DOSPCoT agreement {mean['dospcot_agreement']:.3f}, oracle "
+            f"{mean['oracle_agreement']:.3f} (seed {summary['seed']}, {summary['runs']} runs, round "
+            f"{summary['rounds']}; every run in metrics.csv)"
+        )

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
@@ -25,7 +24,7 @@ from dospcot.config.errors import ConfigError
 if TYPE_CHECKING:
     from dospcot.config.run_configs import RunConfig, TrainConfig
     from dospcot.core.cotraining_run import CoTrainingTask
-    from dospcot.experiment.sweep import SweepSpec
+    from dospcot.experiment.sweep_spec import SweepSpec
 
 _TASKS: dict[str, Task] = {}
 
@@ -41,7 +40,9 @@ class Task:
     discrete_states: ClassVar[bool] = False
     """Whether every state and its views are known in advance, as ``tabular`` agents need."""
     seeds_train_together: ClassVar[bool] = False
-    """Whether a sweep trains several seeds of one config in one process (:meth:`train_seeds_at`)."""
+    """Whether a sweep trains several seeds of one config in one process: such a task also has
+    ``train_seeds_at(cfg, run_dirs, commands, progress)``, which trains each seed in its folder and
+    calls ``progress`` with the share of one seed just done (the paper protocol's)."""
 
     def config_type(self) -> type:
         """The root dataclass of the task's configs."""
@@ -93,28 +94,17 @@ class Task:
     def result_line(self, run_dir: Path, summary: dict[str, Any]) -> str:
         """What ``dospcot train`` prints of a finished run's ``summary.json``."""
         mean = summary["mean"]
-        return (
-            f"{run_dir}: normalised score {mean['normalised_score']:.3f}, agreement "
-            f"{mean['agreement']:.3f}, success {mean['success']:.2f} (mean over {summary['m']} agent(s), "
-            f"round {summary['rounds']})"
+        figures = ", ".join(
+            f"{name.replace('_', ' ')} {mean[name]:.{digits}f}"
+            for name, digits in (("normalised_score", 3), ("agreement", 3), ("success", 2))
         )
+        return f"{run_dir}: {figures} (mean over {summary['m']} agent(s), round {summary['rounds']})"
 
     def write_report(self, spec: SweepSpec, runs: list[Any], out_dir: Path) -> list[Path]:
         """Write a sweep's report into ``out_dir``; return the files."""
         from dospcot.experiment.report import write_cotraining_report
 
         return write_cotraining_report(spec, runs, out_dir)
-
-    def train_seeds_at(
-        self,
-        cfg: RunConfig,
-        run_dirs: dict[int, Path],
-        commands: dict[int, str],
-        progress: Callable[[float], None] | None,
-    ) -> None:
-        """Train the seeds of one config in one process, each in its folder (where
-        :attr:`seeds_train_together`); ``progress`` gets the share of one seed just done."""
-        raise NotImplementedError(f"task {self.name!r} trains one seed per process")
 
 
 def register(cls: type[Task]) -> type[Task]:

@@ -42,6 +42,7 @@ from dospcot.core.reward_classes import QuantileRewardClasses, episode_end_class
 from dospcot.demonstrations import Demonstrations, load_agent, record_demonstrations
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.seeding import EVAL_SEED, agent_seed, demonstration_seed
+from dospcot.tasks.registry import Task
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
@@ -109,8 +110,15 @@ class StepStore(InPlaceState):
         key: Hashable = None,
         terminal: bool = False,
     ) -> int:
-        """Record one step between two stored rows; return its store id (a new one: every step is its
-        own sample; ``key`` is for :class:`KeyedStepStore`)."""
+        """Record one step between two stored rows; return its store id: a new one, unless the step
+        revisits a sample (a :class:`KeyedStepStore`'s pair named by ``key`` and ``action``), whose label
+        and hidden reward it then updates."""
+        n = self.sample_of(key, action)
+        if n is not None:
+            if observed:  # the mask labels every visit of a pair or none
+                self.label_value[n] = reward
+            self.hidden_reward[n] = hidden
+            return n
         if self._n == self.action.size:
             grow = max(1024, self._n)
             for name in self.STEP_ARRAYS:
@@ -124,15 +132,23 @@ class StepStore(InPlaceState):
             hidden,
         )
         self._n += 1
+        self.first_visit(key, action, n)
         return n
+
+    def sample_of(self, key: Hashable, action: int) -> int | None:
+        """The sample a step of ``action`` from the state named ``key`` revisits: none here."""
+        return None
+
+    def first_visit(self, key: Hashable, action: int, n: int) -> None:
+        """Note that sample ``n`` is the step of ``action`` from the state named ``key``."""
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         # A checkpoint from before ``terminal`` was stored: no run of that code read it.
         super().load_state_dict({"terminal": np.zeros(state["action"].size, bool), **state})
 
     def is_new(self, key: Hashable, action: int) -> bool:
-        """Whether a step of ``action`` from the state named ``key`` starts a new sample: always here."""
-        return True
+        """Whether a step of ``action`` from the state named ``key`` starts a new sample."""
+        return self.sample_of(key, action) is None
 
     def features(self, view: str, n_actions: int, termination: bool = False) -> np.ndarray:
         """(len, 2 d + A) float32: view of s, one-hot action, view of s' of every step; with
@@ -161,32 +177,12 @@ class KeyedStepStore(StepStore):
         self.ids: dict[tuple[Hashable, int], int] = {}
         """The store id of each (state key, action) pair seen."""
 
-    def add(
-        self,
-        state_row: int,
-        action: int,
-        next_row: int,
-        observed: bool,
-        reward: float,
-        hidden: float,
-        key: Hashable = None,
-        terminal: bool = False,
-    ) -> int:
-        """Record a visit of the pair (``key``, ``action``); return the pair's id. The rows (and whether
-        the step ended its episode) are read on the pair's first visit only."""
-        n = self.ids.get((key, action))
-        if n is None:
-            n = self.ids[key, action] = super().add(
-                state_row, action, next_row, observed, reward, hidden, terminal=terminal
-            )
-            return n
-        if observed:  # the mask labels every visit of a pair or none
-            self.label_value[n] = reward
-        self.hidden_reward[n] = hidden
-        return n
+    def sample_of(self, key: Hashable, action: int) -> int | None:
+        """The pair's id, once it was visited: a revisit reads no rows (nor whether it ended its episode)."""
+        return self.ids.get((key, action))
 
-    def is_new(self, key: Hashable, action: int) -> bool:
-        return (key, action) not in self.ids
+    def first_visit(self, key: Hashable, action: int, n: int) -> None:
+        self.ids[key, action] = n
 
 
 def _grow(array: np.ndarray, extra: int) -> np.ndarray:
@@ -419,6 +415,20 @@ def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> Du
     return DummyVecEnv([build])
 
 
+class SensorTaskBase(Task):
+    """A task the sensor adapter serves (highway, gym): named in messages by its section's env id, its
+    demonstrations from a file or a saved agent, checked before anything trains."""
+
+    def title(self, cfg: TrainConfig) -> str:
+        return getattr(cfg, self.section).env_id
+
+    def validate(self, cfg: TrainConfig) -> None:
+        validate_sensor_demonstrations(cfg)
+
+    def check(self, cfg: TrainConfig) -> None:
+        check_sensor_demonstrations(cfg)
+
+
 def validate_sensor_demonstrations(cfg: TrainConfig) -> None:
     """A sensor task's demonstrations come from a file or a saved agent (no I/O)."""
     demos = cfg.demonstrations
@@ -450,6 +460,7 @@ __all__ = [
     "SensorSection",
     "SensorStoreWrapper",
     "SensorTask",
+    "SensorTaskBase",
     "StepStore",
     "check_sensor_demonstrations",
     "validate_sensor_demonstrations",

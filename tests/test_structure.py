@@ -1,0 +1,120 @@
+"""The package's structure holds: one config tree with renamed keys refused by name, a task registry
+that a new module extends, one loop over rounds, and a command line that answers without torch."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import from_mapping, load_config
+from dospcot.config.run_configs import TrainConfig
+from dospcot.experiment.train import build_run
+from dospcot.tasks.registry import get_task, tasks
+
+PACKAGE = Path(__file__).parents[1] / "dospcot"
+
+
+def test_building_the_parser_and_listing_presets_leave_torch_and_sb3_unimported():
+    script = (
+        "import contextlib, io, sys\n"
+        "from dospcot.cli import build_parser, main\n"
+        "build_parser()\n"
+        "with contextlib.redirect_stdout(io.StringIO()) as out:\n"
+        "    assert main(['train', '--list']) == 0\n"
+        "assert 'grid16-dospcot' in out.getvalue().split()\n"
+        "for argv in (['--help'], ['train', '--threads', '0'], ['nope']):\n"
+        "    with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):\n"
+        "        try:\n"
+        "            main(argv)\n"
+        "        except SystemExit:\n"
+        "            pass\n"
+        "print(sorted(m for m in ('torch', 'stable_baselines3') if m in sys.modules))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize(
+    ("override", "message"),
+    [
+        ("cotraining.gamma=0.5", "cotraining.gamma: renamed; the key is now cotraining.consensus_weight"),
+        ("cotraining={gamma=0.5}", "cotraining.gamma: renamed; the key is now cotraining.consensus_weight"),
+    ],
+)
+def test_a_renamed_key_is_refused_with_its_new_name(override, message):
+    with pytest.raises(ConfigError, match=f"^{re.escape(message)}$"):
+        load_config("grid16-dospcot", [override])
+    assert (
+        load_config("grid16-dospcot", ["cotraining.consensus_weight=0.5"]).cotraining.consensus_weight == 0.5
+    )
+
+
+def test_an_older_config_file_with_the_renamed_key_names_the_new_one(tmp_path):
+    path = tmp_path / "old.toml"
+    path.write_text('extends = "tiny"\n\n[cotraining]\ngamma = 0.3\n')
+    with pytest.raises(
+        ConfigError, match=r"cotraining\.gamma: renamed; the key is now cotraining\.consensus_weight"
+    ):
+        load_config(str(path))
+
+
+def test_an_unknown_task_names_the_registered_ones():
+    with pytest.raises(ConfigError, match=r"^task: unknown task 'nope'; allowed: grid, gym, highway, paper"):
+        load_config("tiny", ["task=nope"])
+    assert {"grid", "gym", "highway", "paper"} <= set(tasks())
+
+
+def test_a_new_task_is_one_module_that_registers_itself():
+    import toy_chain_task  # registers task = "chain" on import
+
+    assert type(get_task("chain")) is toy_chain_task.ChainTask
+    data = {
+        "task": "chain", "method": "oracle", "views": ["cell", "progress"], "agent": "tabular",
+        "env": {"size": 6, "max_episode_steps": 20},
+        "training": {"rounds": 2, "steps_per_round": 400, "eps_end": 0.0},
+        "tabular_agent": {"learning_rate": 0.5},
+    }  # fmt: skip
+    cfg = from_mapping(TrainConfig, data)
+    with pytest.raises(ConfigError, match="views: the chain has no view 'coords'; allowed: cell, progress"):
+        from_mapping(TrainConfig, {**data, "views": ["coords"]})
+    run = build_run(cfg)
+    records = run.run()
+    last = [r for r in records if r["round"] == 2]
+    # Both views' agents learn the corridor: the optimum is 5 steps right, and they take it.
+    assert [r["success"] for r in last] == [1.0, 1.0]
+    assert [r["greedy_return"] for r in last] == [-5.0, -5.0]
+
+
+def test_no_module_outside_the_registry_branches_on_a_task():
+    branches = re.compile(r"task\s*(==|!=|in)\s*[\"'(]|isinstance\([^)]*PaperConfig")
+    found = [
+        f"{path.relative_to(PACKAGE)}:{number}"
+        for path in PACKAGE.rglob("*.py")
+        if path.parent.name != "tasks"
+        for number, line in enumerate(path.read_text().splitlines(), 1)
+        if branches.search(line)
+    ]
+    assert found == []
+
+
+def test_only_the_run_drives_its_rounds():
+    drivers = [
+        str(path.relative_to(PACKAGE))
+        for path in PACKAGE.rglob("*.py")
+        if ".run_round(" in path.read_text() and path.name != "cotraining_run.py"
+    ]
+    assert drivers == []
+
+
+def test_no_module_of_the_package_is_over_500_lines():
+    long = {
+        str(p.relative_to(PACKAGE)): n
+        for p in PACKAGE.rglob("*.py")
+        if (n := len(p.read_text().splitlines())) > 500
+    }
+    assert long == {}
