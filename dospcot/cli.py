@@ -221,6 +221,24 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         help=f"output file (default BENCHMARKS.md; with --quick {QUICK_BENCH_OUT}, never BENCHMARKS.md)",
     )
+    study = commands.add_parser(
+        "study",
+        help="one of the published studies: its sweeps, then its tables (with --docs, its docs page)",
+        description="Run a study's sweeps (only the trials not yet finished), then print its tables from "
+        "every finished run; with --docs also write docs/<study>.md and its README.md block.",
+    )
+    # No choices: the studies' names live with their declarations, which import torch.
+    study.add_argument("study", metavar="STUDY", help="the study, e.g. grid16 (a wrong name lists them)")
+    study.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's)")
+    study.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
+    study.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        help="override a key in every trial (repeatable; the study then writes its own sweep folders)",
+    )  # fmt: skip
+    study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
+    study.add_argument("--docs", action="store_true", help="also write docs/<study>.md and its README block")
+    study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
     return parser
 
 
@@ -387,12 +405,26 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
     return 0
 
 
+def _study(args: argparse.Namespace, command: str) -> int:
+    from dospcot.config.errors import ConfigError
+    from dospcot.experiment.studies import get_study, header_command, run_study
+
+    try:
+        get_study(args.study)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    options = shlex.split(command)[3:]  # what follows "dospcot study STUDY"
+    run_study(args, header_command(("dospcot", "study"), args.study, options), prog="dospcot study: error")
+    return 0
+
+
 RUN_COMMANDS = {
     "train": _train,
     "evaluate": _evaluate,
     "sweep": _sweep,
     "report": _report,
     "reproduce-paper": _reproduce_paper,
+    "study": _study,
 }
 """Commands whose bad configs and folders end in one line on stderr and exit status 2."""
 

@@ -7,7 +7,12 @@ import pytest
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.core.cotrainer import Pool, RoundResult, RunCoTrainer, RunPool, SelfPacedCoTrainer
 from dospcot.core.key_pool import key_features
-from dospcot.core.reward_classes import QuantileRewardClasses, RewardClasses, episode_end_class_mask
+from dospcot.core.reward_classes import (
+    QuantileRewardClasses,
+    RewardClasses,
+    RunRewardClasses,
+    episode_end_class_mask,
+)
 from dospcot.core.round_records import record_head, round_stats
 
 
@@ -33,16 +38,30 @@ def test_while_every_label_is_0_a_goal_reward_is_a_value_no_label_has_shown():
     # count a goal step given 0 as wrong, not as right.
     classes = QuantileRewardClasses(2)
     classes.fit(np.zeros(12))
-    np.testing.assert_array_equal(classes.encode(np.array([[0.0, 0.93, -0.5]])), [[0, -1, -1]])
+    np.testing.assert_array_equal(classes.encode(np.array([0.0, 0.93, -0.5])), [0, -1, -1])
     result = RoundResult(
         pseudo_class=np.array([[0, 0, 0]]), pseudo_weight=np.ones((1, 3)), view_weight=np.ones((1, 1, 3)),
         view_class=np.zeros((1, 1, 3), int), threshold=np.ones((1, 1, 2)), classifier_loss=np.zeros((1, 1)),
         pace=np.ones(1), changed=np.ones(1, bool), stopped=np.zeros(1, bool),
     )  # fmt: skip
-    stats = round_stats(result.of_run(0), np.ones(3, bool), classes.encode(np.array([[0.0, 0.0, 0.93]]))[0])
+    stats = round_stats(result.of_run(0), np.ones(3, bool), classes.encode(np.array([0.0, 0.0, 0.93])))
     assert stats["pseudo_accuracy"] == pytest.approx(2 / 3) and stats["worst_class_recall"] == 0.0
     classes.fit(np.array([0.0] * 11 + [0.9]))  # a goal label: its class takes every goal reward
-    np.testing.assert_array_equal(classes.encode(np.array([[0.0, 0.93]])), [[0, 1]])
+    np.testing.assert_array_equal(classes.encode(np.array([0.0, 0.93])), [0, 1])
+
+
+def test_one_runs_reward_classes_are_a_batch_of_runs_without_the_runs_axis():
+    one, batch = RunRewardClasses(3), RewardClasses(1, 3)
+    for labels in (np.array([-1.0, -100.0, -1.0]), np.array([0.0, -100.0])):
+        one.observe(labels)
+        batch.observe(0, labels)
+    assert one.values.tolist() == batch.values[0].tolist() == [-1.0, -100.0, 0.0]
+    rewards = np.array([-100.0, 0.0, 5.0])
+    assert one.encode(rewards).tolist() == batch.encode(rewards[None])[0].tolist() == [1, 2, -1]
+    assert one.decode(np.array([2, -1]))[0] == 0.0 and np.isnan(one.decode(np.array([-1]))[0])
+    assert one.mask.tolist() == [True, True, True]
+    with pytest.raises(ValueError, match="the run saw more than 3 distinct reward values"):
+        one.observe(np.array([7.0]))
 
 
 def test_round_stats_read_the_run_they_are_given_in_a_batch():

@@ -377,7 +377,7 @@ def test_episode_end_classes_keep_the_goal_class_off_steps_that_go_on():
     records = run.run()
     store, pool = run.store, run.task.pool()
     n = len(store)
-    goal = int(run.classes.encode(np.array([[1.0]]))[0, 0])
+    goal = int(run.classes.encode(np.array([1.0]))[0])
     assert goal == 1 and store.labelled[:n][store.terminal[:n]].all()  # seed 3 labels the goal pair
     assert pool.class_mask.shape == (n, 2)
     np.testing.assert_array_equal(pool.class_mask[:, goal], store.terminal[:n])

@@ -80,18 +80,18 @@ def test_quantile_reward_classes_bin_by_label_quantiles_and_round_trip():
     classes.fit(labels)
     # Quartile edges of the labels: 0.175, 0.35, 0.525; bin means by hand.
     np.testing.assert_allclose(classes.edges, [0.175, 0.35, 0.525])
-    np.testing.assert_allclose(classes.values[0], [0.05, 0.25, 0.45, 0.65])
-    encoded = classes.encode(np.array([[0.0, 0.2, 0.35, 0.9, -1.0]]))
-    np.testing.assert_array_equal(encoded, [[0, 1, 2, 3, 0]])
-    every_class = np.arange(4)[None]
+    np.testing.assert_allclose(classes.values, [0.05, 0.25, 0.45, 0.65])
+    encoded = classes.encode(np.array([0.0, 0.2, 0.35, 0.9, -1.0]))
+    np.testing.assert_array_equal(encoded, [0, 1, 2, 3, 0])
+    every_class = np.arange(4)
     np.testing.assert_array_equal(classes.encode(classes.decode(every_class)), every_class)
     np.testing.assert_allclose(
-        classes.decode(classes.encode(labels[None]))[0], [0.05] * 2 + [0.25] * 2 + [0.45] * 2 + [0.65] * 2
+        classes.decode(classes.encode(labels)), [0.05] * 2 + [0.25] * 2 + [0.45] * 2 + [0.65] * 2
     )
     # A reward that fills several quantiles merges their bins; unknown classes decode to NaN.
     classes.fit(np.array([0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 1.0]))  # quartiles 0, 1, 1
-    np.testing.assert_allclose(classes.values[0, :2], [0.0, 1.0])
-    assert not classes.mask[0, 2:].any() and np.isnan(classes.decode(np.array([[-1]]))[0, 0])
+    np.testing.assert_allclose(classes.values[:2], [0.0, 1.0])
+    assert not classes.mask[2:].any() and np.isnan(classes.decode(np.array([-1]))[0])
 
 
 def test_a_rare_reward_keeps_its_own_quantile_class():
@@ -99,19 +99,19 @@ def test_a_rare_reward_keeps_its_own_quantile_class():
     # A sparse goal reward: 0 on 19 steps in 20. Its quartiles are all 0, yet 1 is a class of its own.
     classes.fit(np.array([0.0] * 19 + [1.0]))
     np.testing.assert_allclose(classes.edges, [1.0])
-    np.testing.assert_allclose(classes.values[0, :2], [0.0, 1.0])
-    np.testing.assert_array_equal(classes.encode(np.array([[0.0, 1.0]])), [[0, 1]])
+    np.testing.assert_allclose(classes.values[:2], [0.0, 1.0])
+    np.testing.assert_array_equal(classes.encode(np.array([0.0, 1.0])), [0, 1])
     # MiniGrid's goal reward, 1 - 0.9 t / T, takes many values: the quartiles at 0 move up to the
     # smallest goal reward (0.4), and the goal rewards share one class, worth their mean.
     classes.fit(np.array([0.0] * 16 + [0.4, 0.6, 0.8, 1.0]))
     np.testing.assert_allclose(classes.edges, [0.4])
-    np.testing.assert_allclose(classes.values[0, :2], [0.0, 0.7])
+    np.testing.assert_allclose(classes.values[:2], [0.0, 0.7])
     # A quantile interpolated between 0 and the smallest goal reward would leave an empty bin.
     classes = QuantileRewardClasses(5)
     classes.fit(np.array([0.0] * 17 + [0.4, 0.5, 0.6, 0.8, 1.0]))  # quintiles 0, 0, 0, 0.32
     np.testing.assert_allclose(classes.edges, [0.4])
-    np.testing.assert_allclose(classes.values[0, :2], [0.0, 0.66])
-    assert classes.mask[0].sum() == 2
+    np.testing.assert_allclose(classes.values[:2], [0.0, 0.66])
+    assert classes.mask.sum() == 2
 
 
 def test_a_hidden_reward_between_two_classes_labels_takes_the_nearest_labels_class():
@@ -121,19 +121,19 @@ def test_a_hidden_reward_between_two_classes_labels_takes_the_nearest_labels_cla
     labels = np.array([0.0] * 16 + [0.4, 0.6, 0.8, 1.0])
     classes.fit(labels)
     np.testing.assert_allclose(classes.hidden_edges, [0.2])
-    hidden = np.array([[0.0, 0.15, 0.25, 0.3, 0.4, 0.9]])
-    np.testing.assert_array_equal(classes.encode(hidden), [[0, 0, 0, 0, 1, 1]])
-    np.testing.assert_array_equal(classes.encode_hidden(hidden), [[0, 0, 1, 1, 1, 1]])
-    np.testing.assert_array_equal(classes.encode_hidden(labels[None]), classes.encode(labels[None]))
+    hidden = np.array([0.0, 0.15, 0.25, 0.3, 0.4, 0.9])
+    np.testing.assert_array_equal(classes.encode(hidden), [0, 0, 0, 0, 1, 1])
+    np.testing.assert_array_equal(classes.encode_hidden(hidden), [0, 0, 1, 1, 1, 1])
+    np.testing.assert_array_equal(classes.encode_hidden(labels), classes.encode(labels))
     # Quartiles of 0.0-0.7 in steps of 0.1 (edges 0.175, 0.35, 0.525): midway 0.15, 0.35, 0.55.
     classes = QuantileRewardClasses(4)
     labels = np.arange(8) / 10
     classes.fit(labels)
     np.testing.assert_allclose(classes.hidden_edges, [0.15, 0.35, 0.55])
-    np.testing.assert_array_equal(classes.encode_hidden(labels[None]), classes.encode(labels[None]))
+    np.testing.assert_array_equal(classes.encode_hidden(labels), classes.encode(labels))
     # One labelled value: as encode, any other reward is a value no label has shown.
     classes.fit(np.zeros(5))
-    np.testing.assert_array_equal(classes.encode_hidden(np.array([[0.0, 0.3]])), [[0, -1]])
+    np.testing.assert_array_equal(classes.encode_hidden(np.array([0.0, 0.3])), [0, -1])
 
 
 def _train(tmp_path, preset: str, *overrides: str):

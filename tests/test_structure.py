@@ -9,9 +9,10 @@ import sys
 from pathlib import Path
 
 import pytest
+import tomli_w
 
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import from_mapping, load_config
+from dospcot.config.loading import from_mapping, load_config, load_run_config
 from dospcot.config.run_configs import TrainConfig
 from dospcot.experiment.train import build_run
 from dospcot.tasks.registry import get_task, tasks
@@ -61,6 +62,19 @@ def test_an_older_config_file_with_the_renamed_key_names_the_new_one(tmp_path):
         ConfigError, match=r"cotraining\.gamma: renamed; the key is now cotraining\.consensus_weight"
     ):
         load_config(str(path))
+
+
+def test_a_run_folder_written_before_a_rename_still_loads_under_the_new_names(tmp_path):
+    cfg = load_config("tiny", ["cotraining.consensus_weight=0.7"])
+    old = cfg.to_dict()
+    old["cotraining"] = {"gamma" if k == "consensus_weight" else k: v for k, v in old["cotraining"].items()}
+    path = tmp_path / "config.toml"
+    path.write_text(tomli_w.dumps(old))
+    assert load_run_config(path) == cfg
+    paper = load_config("paper-text").to_dict()
+    paper["tabular"]["cotraining"]["gamma"] = paper["tabular"]["cotraining"].pop("consensus_weight")
+    path.write_text(tomli_w.dumps(paper))
+    assert load_run_config(path) == load_config("paper-text")
 
 
 def test_an_unknown_task_names_the_registered_ones():
@@ -118,3 +132,15 @@ def test_no_module_of_the_package_is_over_500_lines():
         if (n := len(p.read_text().splitlines())) > 500
     }
     assert long == {}
+
+
+def test_the_studies_are_a_command_of_the_package(capsys, tmp_path):
+    from dospcot.cli import main
+
+    assert main(["study", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert (
+        err.startswith("dospcot study: error: no study 'nope'; the studies: grid16,") and err.count("\n") == 1
+    )
+    with pytest.raises(SystemExit, match="no finished run of this study under"):
+        main(["study", "grid16", "--render-only", "--runs-dir", str(tmp_path)])

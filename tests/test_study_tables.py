@@ -1,4 +1,5 @@
-"""The pre-registered second-view tables of scripts/study.py: paired differences and verdicts by hand."""
+"""The study tables of dospcot.experiment.studies (the pre-registered second-view tables first): paired
+differences and verdicts by hand."""
 
 import json
 import subprocess
@@ -8,11 +9,23 @@ from pathlib import Path
 import pytest
 
 from dospcot.experiment.report import TrialRun
+from dospcot.experiment.studies import STUDIES
+from dospcot.experiment.studies.label_sources import (
+    DEMO_ARMS,
+    EFFORT_ARMS,
+    EFFORT_HIGHWAY_ARMS,
+    EXPERT,
+    demonstration_tables,
+    effort_tables,
+)
+from dospcot.experiment.studies.minigrid import minigrid_tables
+from dospcot.experiment.studies.provenance import header
+from dospcot.experiment.studies.second_view import second_view_tables
 from dospcot.experiment.sweep import Trial
 from dospcot.metrics import SeedSummary
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "scripts"))
-import study
+STUDY_SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "study.py"
+"""The command the docs name, a shim of :func:`dospcot.experiment.studies.main`."""
 
 INDEPENDENT = {"env.blind_spot_rate": "0.5", "env.blind_spots": "independent", "agent": "dqn"}
 IDENTICAL = {**INDEPENDENT, "env.blind_spots": "identical"}
@@ -39,7 +52,7 @@ def test_h1_is_confirmed_only_when_both_paired_intervals_clear_zero_by_the_small
     patch = [(0.5, 0.90), (0.5, 0.91), (0.5, 0.92), (0.5, 0.93)]
     rays = [(0.0, 0.95), (0.5, 0.95), (0.0, 0.95), (0.5, 0.95)]  # higher accuracy, lower success
     dospcot = [(1.0, 0.97), (1.0, 0.98), (1.0, 0.97), (1.0, 0.98)]
-    lines = study.second_view_tables(_setting(INDEPENDENT, dospcot, patch, rays))
+    lines = second_view_tables(_setting(INDEPENDENT, dospcot, patch, rays))
     text = "\n".join(lines)
     # The better view per metric: rays for accuracy (0.95 > 0.915), patch for success (0.5 > 0.25).
     accuracy = SeedSummary.of([0.02, 0.03, 0.02, 0.03])
@@ -49,16 +62,16 @@ def test_h1_is_confirmed_only_when_both_paired_intervals_clear_zero_by_the_small
     assert "H1 (DOSPCoT above the better self-training view in both): **confirmed**" in text
     # An accuracy gain below the smallest effect (0.01) does not count, however sure.
     small = [(1.0, 0.955), (1.0, 0.955), (1.0, 0.955), (1.0, 0.955)]
-    text = "\n".join(study.second_view_tables(_setting(INDEPENDENT, small, patch, rays)))
+    text = "\n".join(second_view_tables(_setting(INDEPENDENT, small, patch, rays)))
     assert "H1 (DOSPCoT above the better self-training view in both): **not confirmed**" in text
 
 
 def test_h2_asks_both_intervals_to_hold_zero():
     same = [(0.5, 0.9), (1.0, 0.95), (0.5, 0.9), (1.0, 0.95)]
-    text = "\n".join(study.second_view_tables(_setting(IDENTICAL, same, same, same)))
+    text = "\n".join(second_view_tables(_setting(IDENTICAL, same, same, same)))
     assert "H2 (no difference: both intervals hold 0): **confirmed**" in text
     better = [(1.0, 0.99)] * 4
-    text = "\n".join(study.second_view_tables(_setting(IDENTICAL, better, same, same)))
+    text = "\n".join(second_view_tables(_setting(IDENTICAL, better, same, same)))
     assert "H2 (no difference: both intervals hold 0): **not confirmed**" in text
 
 
@@ -67,7 +80,7 @@ def test_h2_asks_both_intervals_to_hold_zero():
 )
 def test_h3_compares_masked_zero_with_the_better_self_training_view_and_dospcot(zero, verdict):
     ones = [(1.0, 0.9)] * 4
-    text = "\n".join(study.second_view_tables(_setting(MONITOR, ones, ones, ones, zero)))
+    text = "\n".join(second_view_tables(_setting(MONITOR, ones, ones, ones, zero)))
     assert f"H3 (masked-zero below self-training and DOSPCoT): **{verdict}**" in text
     assert "success, DOSPCoT minus masked-zero (paired by seed)" in text
 
@@ -76,7 +89,7 @@ def test_a_monitor_setting_also_reports_dospcot_against_the_better_self_training
     patch = [(1.0, 0.90)] * 4
     rays = [(0.5, 0.96)] * 4
     dospcot = [(1.0, 0.95), (0.5, 0.94), (1.0, 0.95), (1.0, 0.94)]
-    text = "\n".join(study.second_view_tables(_setting(MONITOR, dospcot, patch, rays)))
+    text = "\n".join(second_view_tables(_setting(MONITOR, dospcot, patch, rays)))
     accuracy = SeedSummary.of([-0.01, -0.02, -0.01, -0.02])  # against rays, the more accurate view
     success = SeedSummary.of([0.0, -0.5, 0.0, 0.0])  # against patch, the more successful one
     minus = "DOSPCoT minus self-training"
@@ -88,7 +101,7 @@ def test_a_monitor_setting_also_reports_dospcot_against_the_better_self_training
 
 def test_a_setting_with_a_method_not_yet_run_says_so():
     runs = [r for r in _setting(INDEPENDENT, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4, [(1.0, 0.9)] * 4)]
-    text = "\n".join(study.second_view_tables([r for r in runs if r.trial.name != "grid16-dospcot"]))
+    text = "\n".join(second_view_tables([r for r in runs if r.trial.name != "grid16-dospcot"]))
     assert "H1 (DOSPCoT above the better self-training view in both): not yet run" in text
 
 
@@ -114,13 +127,11 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
         run("minigrid-doorkey-dospcot", 0, 0.5, (0.0,)),  # its labels hold no goal pair
         run("minigrid-doorkey-dospcot", 1, 0.5),
     ]
-    rows = {
-        line.split(" | ")[2]: line for line in study.minigrid_tables(runs) if line.startswith("| MiniGrid")
-    }
+    rows = {line.split(" | ")[2]: line for line in minigrid_tables(runs) if line.startswith("| MiniGrid")}
     assert rows["`minigrid-lavagap-oracle`"].endswith("| 100% |")
     assert rows["`minigrid-lavagap-dospcot`"].endswith("| 50% |")  # 0.45 of the oracle's 0.9
     assert rows["`minigrid-doorkey-dospcot`"].endswith("| n/a (oracle 0) |")
-    lines = study.minigrid_tables(runs)
+    lines = minigrid_tables(runs)
     assert "20 greedy episodes per agent" in lines[0]
     text = "\n".join(lines)
     assert "| MiniGrid-DoorKey-5x5-v0 | DOSPCoT (m = 2, image + egocentric map) | image | 0.500" in text
@@ -139,17 +150,17 @@ def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
     }
     for arm, values in success.items():
         for seed, value in enumerate(values):
-            runs.append(_run("grid16-dospcot", study.DEMO_ARMS[arm], seed, value, 0.9))
-    text = "\n".join(study.demonstration_tables(runs))
+            runs.append(_run("grid16-dospcot", DEMO_ARMS[arm], seed, value, 0.9))
+    text = "\n".join(demonstration_tables(runs))
     for arm, values in success.items():
         assert f"| {arm} | 4 | {SeedSummary.of(values)} |" in text
     assert "as labels only" not in text  # an arm not run has no row
     diff = SeedSummary.of([0.0, 0.5, 0.0, 0.0])  # 1% + demonstrations minus 5%, seed by seed
     assert f"(paired by seed): {diff}; target (at least 0): **met**" in text
-    worse = [run for run in runs if run.trial.params != study.DEMO_ARMS["labels 5%"]] + [
-        _run("grid16-dospcot", study.DEMO_ARMS["labels 5%"], seed, 1.0, 0.9) for seed in range(4)
+    worse = [run for run in runs if run.trial.params != DEMO_ARMS["labels 5%"]] + [
+        _run("grid16-dospcot", DEMO_ARMS["labels 5%"], seed, 1.0, 0.9) for seed in range(4)
     ]
-    assert "target (at least 0): **not met**" in "\n".join(study.demonstration_tables(worse))
+    assert "target (at least 0): **not met**" in "\n".join(demonstration_tables(worse))
 
 
 def test_the_equal_effort_table_leads_with_effort_and_pairs_each_arm_with_per_step_labels():
@@ -164,9 +175,9 @@ def test_the_equal_effort_table_leads_with_effort_and_pairs_each_arm_with_per_st
             mean = {"success": success, "pseudo_accuracy": 0.9}
             if effort is not None:
                 mean["labelled_steps"] = effort
-            trial = Trial("grid16-dospcot", "grid16-dospcot", dict(study.EFFORT_ARMS[arm]), seed)
+            trial = Trial("grid16-dospcot", "grid16-dospcot", dict(EFFORT_ARMS[arm]), seed)
             runs.append(TrialRun(trial, {"mean": mean}, [], Path()))
-    text = "\n".join(study.effort_tables(runs))
+    text = "\n".join(effort_tables(runs))
     effort, success = SeedSummary.of([40, 44, 42]), SeedSummary.of([1.0, 0.5, 1.0])
     assert f"| per-step labels, 5% of keys | 3 | {effort} | {success} |" in text
     assert "| labels 1% + 10 demonstrations | 3 | n/a | 1.000 [1.000, 1.000] |" in text
@@ -177,7 +188,7 @@ def test_the_equal_effort_table_leads_with_effort_and_pairs_each_arm_with_per_st
         in text
     )
     # The arm shared with the demo-labels study runs once, in that study's sweep.
-    names = [sweep.name for sweep in study.STUDIES["equal-effort"].sweeps]
+    names = [sweep.name for sweep in STUDIES["equal-effort"].sweeps]
     assert "demonstrations-labels-1-10-demonstrations" in names
     assert names[0] == "effort-per-step-labels-5-of-keys"
 
@@ -187,11 +198,11 @@ def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_orac
     for seed, (ret, crash_free) in enumerate([(20.0, 0.8), (22.0, 1.0)]):
         for arm, shift in (("per-step labels, 5% of steps", 0.0), ("segments of 4, 5% of segments", -2.0)):
             mean = {"greedy_return": ret + shift, "success": crash_free + shift / 10, "labelled_steps": 2000}
-            params = dict(study.EFFORT_HIGHWAY_ARMS[arm])
+            params = dict(EFFORT_HIGHWAY_ARMS[arm])
             runs.append(TrialRun(Trial("fasthighway-dospcot", "x", params, seed), {"mean": mean}, [], Path()))
         oracle = {"greedy_return": 25.0, "success": 1.0}
         runs.append(TrialRun(Trial("fasthighway-oracle", "x", {}, seed), {"mean": oracle}, [], Path()))
-    study_ = study.STUDIES["equal-effort-highway"]
+    study_ = STUDIES["equal-effort-highway"]
     text = "\n".join(study_.tables(runs))
     assert "| return | no-crash episodes |" in text
     assert (
@@ -208,12 +219,12 @@ def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_orac
     assert f"- return, {pair}: {SeedSummary.of([-2.0, -2.0])}" in text  # the return is paired too
     # The expert trains first; the demonstrations arm reads its seed-0 agent.
     assert study_.sweeps[0].configs == ("fasthighway-oracle",)
-    assert study.EXPERT.startswith(f"runs/sweeps/{study_.sweeps[0].name}/")
+    assert EXPERT.startswith(f"runs/sweeps/{study_.sweeps[0].name}/")
 
 
 def _render_only(name: str, runs_dir: Path) -> subprocess.CompletedProcess:
     """``study.py <name> --render-only`` on the sweeps under ``runs_dir``, in a process of its own."""
-    command = [sys.executable, str(Path(study.__file__)), name, "--render-only", "--runs-dir", str(runs_dir)]
+    command = [sys.executable, str(STUDY_SCRIPT), name, "--render-only", "--runs-dir", str(runs_dir)]
     return subprocess.run(command, capture_output=True, text=True)
 
 
@@ -235,7 +246,7 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
         run_dir.mkdir()
         (run_dir / "run_info.json").write_text(json.dumps({"wall_time_s": 48.0, **info}))
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
-    line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
+    line = header(runs, "python scripts/study.py x", [tmp_path])[0]
     assert line.endswith(
         "; 4 minutes of training, the runs' wall times summed (one torch thread per run); source commits "
         "aaaaaaa (2), "
@@ -244,7 +255,7 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
     for run in runs:  # every run with its CPU time: the header counts that, not the wall time
         info = json.loads((run.run_dir / "run_info.json").read_text())
         (run.run_dir / "run_info.json").write_text(json.dumps({**info, "cpu_time_s": 36.0}))
-    line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
+    line = header(runs, "python scripts/study.py x", [tmp_path])[0]
     assert "; 3 CPU-minutes of training (one torch thread per run); " in line
 
 
@@ -258,7 +269,7 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
         info = {"wall_time_s": 60.0, "commit": "a" * 40} | ({"cpu": cpu} if cpu else {})
         (run_dir / "run_info.json").write_text(json.dumps(info))
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
-    line = study.header(runs, "python scripts/study.py x", [tmp_path])[0]
+    line = header(runs, "python scripts/study.py x", [tmp_path])[0]
     assert line.endswith(
         "source commit aaaaaaa (3); torch CPU kernels AVX2 (1), AVX512 (1), not recorded (1)."
     )

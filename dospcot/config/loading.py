@@ -88,6 +88,29 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
     return from_mapping(get_task(data.get("task", "grid")).config_type(), data)
 
 
+def load_run_config(path: Path) -> RunConfig:
+    """The config a run folder holds (its ``config.toml``), validated as :func:`load_config` does, but
+    with every key renamed since the folder was written read under its new name: a run folder outlives
+    its code (the record's do), while a config a person writes with an old key is refused."""
+    data = read_config_data(str(path))
+    cls = get_task(data.get("task", "grid")).config_type()
+    return from_mapping(cls, _renamed_to_now(cls, data))
+
+
+def _renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
+    """``data`` with the renamed keys of ``cls`` and of its sections (``renamed_keys``) under their new
+    names."""
+    renamed: dict[str, str] = getattr(cls, "renamed_keys", {})
+    hints = typing.get_type_hints(cls)
+    out = {}
+    for key, value in data.items():
+        key = renamed.get(key, key)
+        hint = hints.get(key)
+        section = dataclasses.is_dataclass(hint) and isinstance(value, Mapping)
+        out[key] = _renamed_to_now(hint, value) if section else value
+    return out
+
+
 def set_key(data: dict[str, Any], path: Sequence[str], value: Any, where: str) -> None:
     """Set the key ``path`` (sections, then the key) of the config table ``data`` to ``value``,
     making missing sections; ``where`` names the override in the error for a key that is no section."""

@@ -55,7 +55,7 @@ import torch as th
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.core.cotrainer import RunCoTrainer, RunPool
-from dospcot.core.reward_classes import QuantileRewardClasses, RewardClasses
+from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
 from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.envs.finite_check import FiniteCheckWrapper
@@ -76,7 +76,7 @@ class CoTrainingTask(Protocol):
     store: Any
     """Every step the agents took, in the form the pool is built from; its ``state_dict()`` and
     ``load_state_dict(state)`` checkpoint it in place."""
-    classes: RewardClasses | QuantileRewardClasses
+    classes: RunRewardClasses | QuantileRewardClasses
     """The reward classes of the run's labels (one run)."""
     n_classes: int
     """K, the most reward classes the run may hold (the classifiers' outputs)."""
@@ -215,7 +215,7 @@ class CoTrainingRun:
         return self.task.store
 
     @property
-    def classes(self) -> RewardClasses | QuantileRewardClasses:
+    def classes(self) -> RunRewardClasses | QuantileRewardClasses:
         """The task's reward classes."""
         return self.task.classes
 
@@ -276,8 +276,7 @@ class CoTrainingRun:
         if self.segments is not None:
             return self._cotrain_segments(pool)
         result = self.trainer.step(pool)
-        # The reward classes are batched over runs (the tabular path's); this run is their only one.
-        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class[None])[0], nan=0.0)
+        pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class), nan=0.0)
         self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight)
         self.stopped = result.stopped
         stats = round_stats(result, pool.unlabelled, self.task.true_class())  # metrics only
@@ -290,14 +289,14 @@ class CoTrainingRun:
         pool = segment_pool(steps, segments, self.segment_classes)
         result = self.trainer.step(pool)
         labelled = pool.labelled
-        pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class[None])[0], nan=0.0)
+        pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class), nan=0.0)
         sums = np.where(labelled, segments.label[:n], pseudo)
         weight = np.where(labelled, 1.0, result.pseudo_weight)
         model = self.cfg.cotraining.classifier
         reward, step_weight = step_rewards(steps, segments, sums, weight, model, self.step_model_seeds())
         self.table.set(np.arange(reward.size), reward, step_weight)
         self.stopped = result.stopped
-        true_class = self.segment_classes.encode_hidden(segments.hidden[None, :n])[0]  # metrics only
+        true_class = self.segment_classes.encode_hidden(segments.hidden[:n])  # metrics only
         stats = round_stats(result, pool.unlabelled, true_class)
         # How far the decoded per-step rewards lie from the hidden ones, where the agents read them.
         decoded = step_weight > 0

@@ -10,48 +10,71 @@ import numpy as np
 
 
 class _ClassValues:
-    """A reward value per class and run: ``values`` (B, K), NaN where a run has no such class."""
+    """A reward value per class: ``values`` (B, K) for B runs, or (K,) for one run; NaN where a run has
+    no such class."""
 
-    def __init__(self, n_runs: int, n_classes: int) -> None:
-        self.values = np.full((n_runs, n_classes), np.nan)
-        """(B, K) the value of each class, NaN where the run has no such class yet."""
+    def __init__(self, shape: tuple[int, ...]) -> None:
+        self.values = np.full(shape, np.nan)
+        """The value of each class, NaN where the run has no such class yet."""
 
     @property
     def mask(self) -> np.ndarray:
-        """(B, K) bool, the classes each run has."""
+        """bool, the classes each run has (the shape of ``values``)."""
         return ~np.isnan(self.values)
 
     def decode(self, classes: np.ndarray) -> np.ndarray:
-        """Reward value of each class index (B, N); NaN for -1."""
-        values = np.take_along_axis(self.values, np.clip(classes, 0, None), axis=1)
+        """Reward value of each class index, (B, N) from (B, N) or (N,) from (N,); NaN for -1."""
+        values = np.take_along_axis(self.values, np.clip(classes, 0, None), axis=-1)
         return np.where(classes >= 0, values, np.nan)
+
+    def encode(self, rewards: np.ndarray) -> np.ndarray:
+        """Class index of each reward, (B, N) from (B, N) or (N,) from (N,); -1 where unknown."""
+        match = rewards[..., None] == self.values[..., None, :]
+        return np.where(match.any(-1), match.argmax(-1), -1)
+
+
+def _add_new_values(row: np.ndarray, rewards: np.ndarray, run: str) -> None:
+    """Write the values of ``rewards`` that ``row`` (K,) lacks into its free classes, in order."""
+    for value in rewards:
+        if np.any(row == value):
+            continue
+        free = np.flatnonzero(np.isnan(row))
+        if free.size == 0:
+            raise ValueError(
+                f"{run} saw more than {row.size} distinct reward values; raise max_classes "
+                f"or bin a continuous reward into quantile classes"
+            )
+        row[free[0]] = value
 
 
 class RewardClasses(_ClassValues):
-    """The reward values each of ``n_runs`` runs has seen in its labels.
+    """The reward values each of ``n_runs`` runs has seen in its labels (the batched tabular runs).
 
     :param n_runs: number of independent runs.
     :param n_classes: K, the most distinct values a run may see (a config's ``max_classes``).
     """
 
+    def __init__(self, n_runs: int, n_classes: int) -> None:
+        super().__init__((n_runs, n_classes))
+
     def observe(self, run: int, rewards: np.ndarray) -> None:
         """Add the values of ``rewards`` (labels of run ``run``) not seen before, in the order given."""
-        for value in rewards:
-            row = self.values[run]
-            if np.any(row == value):
-                continue
-            free = np.flatnonzero(np.isnan(row))
-            if free.size == 0:
-                raise ValueError(
-                    f"run {run} saw more than {row.size} distinct reward values; raise max_classes "
-                    f"or bin a continuous reward into quantile classes"
-                )
-            row[free[0]] = value
+        _add_new_values(self.values[run], rewards, f"run {run}")
 
-    def encode(self, rewards: np.ndarray) -> np.ndarray:
-        """Class index of each reward, shape (B, N) from rewards (B, N); -1 where unknown."""
-        match = rewards[..., None] == self.values[:, None, :]
-        return np.where(match.any(-1), match.argmax(-1), -1)
+
+class RunRewardClasses(_ClassValues):
+    """The reward values one run has seen in its labels: :class:`RewardClasses` without the runs' axis
+    (``values`` (K,); ``encode`` and ``decode`` (N,) from (N,)).
+
+    :param n_classes: K, the most distinct values the run may see (a config's ``max_classes``).
+    """
+
+    def __init__(self, n_classes: int) -> None:
+        super().__init__((n_classes,))
+
+    def observe(self, rewards: np.ndarray) -> None:
+        """Add the values of ``rewards`` (labels) not seen before, in the order given."""
+        _add_new_values(self.values, rewards, "the run")
 
 
 class QuantileRewardClasses(_ClassValues):
@@ -63,7 +86,7 @@ class QuantileRewardClasses(_ClassValues):
     merge their bins, so a run may have fewer than K classes. Two cases keep a rare reward apart from
     a common one: labels of at most K distinct values (a sparse goal reward, 0 or 1) get one class per
     value, and a quantile below the second-smallest labelled value moves up to it. The interface matches
-    :class:`RewardClasses` with one run: ``values`` is (1, K).
+    :class:`RunRewardClasses`: ``values`` is (K,), ``encode`` and ``decode`` (N,) from (N,).
 
     :param n_classes: K.
     """
@@ -71,7 +94,7 @@ class QuantileRewardClasses(_ClassValues):
     def __init__(self, n_classes: int) -> None:
         if n_classes < 1:
             raise ValueError(f"need at least one reward class, got {n_classes}")
-        super().__init__(1, n_classes)  # values (1, K): each class's bin mean, NaN where it has none
+        super().__init__((n_classes,))  # values (K,): each class's bin mean, NaN where it has none
         self.edges = np.zeros(0)
         """(k - 1,) the inner bin edges: class c holds rewards in [edges[c - 1], edges[c])."""
         self.only_value: float | None = None
@@ -83,7 +106,7 @@ class QuantileRewardClasses(_ClassValues):
     def fit(self, rewards: np.ndarray) -> None:
         """Set the bins from every labelled reward so far, (n,) float."""
         rewards = np.asarray(rewards, dtype=np.float64)
-        n_classes = self.values.shape[1]
+        n_classes = self.values.size
         self.values[:] = np.nan
         if rewards.size == 0:
             self.edges, self.only_value, self.hidden_edges = np.zeros(0), None, np.zeros(0)
@@ -100,14 +123,14 @@ class QuantileRewardClasses(_ClassValues):
             self.edges = np.unique(np.maximum(quantiles, distinct[1]))
         bins = np.searchsorted(self.edges, rewards, side="right")
         for c in range(self.edges.size + 1):
-            self.values[0, c] = rewards[bins == c].mean()
+            self.values[c] = rewards[bins == c].mean()
         # Each edge has labels on both sides: distinct[0] below the first, the largest label above the last.
         self.hidden_edges = np.array(
             [(rewards[bins <= c].max() + rewards[bins > c].min()) / 2 for c in range(self.edges.size)]
         )
 
     def encode(self, rewards: np.ndarray) -> np.ndarray:
-        """Class (bin) index of each reward, (1, N) from (1, N); -1 before any label was seen, and,
+        """Class (bin) index of each reward, (N,) from (N,); -1 before any label was seen, and,
         while every label holds one value, for any other reward: a value no label has shown (a goal
         reward when no goal step is labelled), which the one class cannot stand for."""
         if not self.mask.any():
@@ -117,7 +140,7 @@ class QuantileRewardClasses(_ClassValues):
         return np.searchsorted(self.edges, rewards, side="right")
 
     def encode_hidden(self, rewards: np.ndarray) -> np.ndarray:
-        """The class of each hidden reward, (1, N) from (1, N), for the metrics: the class of the
+        """The class of each hidden reward, (N,) from (N,), for the metrics: the class of the
         nearest label. It equals :meth:`encode` on every labelled value and differs only between two
         classes' labels, where :meth:`encode`'s edge, a quantile, may sit at the upper class's
         smallest label: a goal reached later than any labelled one (MiniGrid pays ``1 - 0.9 t / T``)

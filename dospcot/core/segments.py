@@ -131,9 +131,8 @@ def segment_pool(steps: RunPool, store: SegmentStore, classes: QuantileRewardCla
     for f in steps.features:
         padded = np.concatenate([f, np.zeros((1, f.shape[1]), f.dtype)])  # row -1: no step
         features.append(padded[ids].sum(axis=1))
-    # The quantile classes keep a runs' axis of one.
-    label_class = np.where(labelled, classes.encode(store.label[None, :n])[0], -1)
-    return RunPool(features, labelled, label_class, ~labelled, classes.mask[0])
+    label_class = np.where(labelled, classes.encode(store.label[:n]), -1)
+    return RunPool(features, labelled, label_class, ~labelled, classes.mask)
 
 
 def fit_step_rewards(

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from dospcot import metrics
-from dospcot.config.loading import load_config
+from dospcot.config.loading import load_run_config
 from dospcot.experiment.plots import Band, plot_bands
 from dospcot.experiment.run_folder import CONFIG_FILE, METRICS_FILE, SUMMARY_FILE, write_csv, write_text
 from dospcot.experiment.sweep_spec import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
@@ -336,7 +336,7 @@ def paper_report_tables(runs: Sequence[TrialRun], level: int = 2) -> tuple[list[
     lines: list[str] = []
     rows: list[dict[str, Any]] = []
     for (name, params), members in grouped.items():
-        cfg = load_config(str(members[0].run_dir / CONFIG_FILE))
+        cfg = load_run_config(members[0].run_dir / CONFIG_FILE)
         records = [row for run in members for row in run.curves]
         table = paper.build_tables(records, metrics.published_paper_tables(), cfg.tabular.rounds)
         seeds = [run.trial.seed for run in members]

@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
+from dospcot.config.loading import load_config, load_run_config
 from dospcot.experiment.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
 
 SWEEP_FILE = "sweep.json"
@@ -239,7 +239,7 @@ def stale_trials(sweep_dir: Path, trials: Sequence[Trial]) -> list[tuple[str, st
         path = trial_dir(sweep_dir, trial) / CONFIG_FILE
         if not path.is_file():
             continue
-        stored, current = load_config(str(path)), load_config(trial.config, trial.overrides())
+        stored, current = load_run_config(path), load_config(trial.config, trial.overrides())
         if stored != current:
             old, new = _flat(stored.to_dict()), _flat(current.to_dict())
             key = next(k for k in sorted(old.keys() | new.keys()) if old.get(k) != new.get(k))

@@ -41,7 +41,7 @@ from stable_baselines3.common.logger import configure
 from torch.utils.tensorboard import SummaryWriter
 from tqdm.auto import tqdm
 
-from dospcot.config.loading import load_config
+from dospcot.config.loading import load_run_config
 from dospcot.config.run_configs import RunConfig, TrainConfig
 from dospcot.core.classifier import save_classifier
 from dospcot.core.cotraining_run import CoTrainingRun
@@ -148,7 +148,7 @@ def run_config(run_dir: Path) -> RunConfig:
     config_path = run_dir / CONFIG_FILE
     if not config_path.is_file():
         raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
-    return load_config(str(config_path))
+    return load_run_config(config_path)
 
 
 def train_cotraining_run(run_dir: Path, cfg: TrainConfig, *, show_progress: bool, command: str) -> Path:
@@ -249,7 +249,7 @@ def _write_round_files(run_dir: Path, run: CoTrainingRun, cfg: TrainConfig, reco
     if run.trainer is not None:
         for clf, view in zip(run.trainer.classifiers, cfg.views, strict=True):
             atomic_write(run_dir / f"classifier_{view}.pt", partial(save_classifier, clf))
-        rewards = run.classes.values[0][run.classes.mask[0]]
+        rewards = run.classes.values[run.classes.mask]
         write_json(run_dir / REWARD_CLASSES_FILE, {"rewards": [float(v) for v in rewards]})
 
 

@@ -27,7 +27,7 @@ from dospcot.config.errors import ConfigError
 from dospcot.core.cotrainer import RunPool
 from dospcot.core.in_place_state import InPlaceState
 from dospcot.core.key_pool import key_features
-from dospcot.core.reward_classes import RewardClasses
+from dospcot.core.reward_classes import RunRewardClasses
 from dospcot.demonstrations import expert_demonstrations
 from dospcot.envs import GridLayout, GridWorld, grid_views, monitored_states, view_blind_spots
 from dospcot.envs.masking import RewardMaskWrapper
@@ -141,7 +141,7 @@ class GridTask:
         )
         self.store = KeyStore(self.mdp.n_states, self.mdp.n_actions)
         self.n_classes = cfg.cotraining.max_classes
-        self.classes = RewardClasses(1, self.n_classes)
+        self.classes = RunRewardClasses(self.n_classes)
         self.policy_metrics = metrics.GreedyPolicyMetrics(self.mdp, discount=1.0)
         wanted = cfg.demonstrations
         self.demos = (
@@ -186,19 +186,16 @@ class GridTask:
         store = self.store
         labelled = store.visited & store.labelled
         unlabelled = store.visited & ~store.labelled
-        # The reward classes are batched over runs (the tabular path's); this run is their only one.
-        self.classes.observe(0, np.unique(store.label_value[labelled]))
-        label_class = np.where(labelled, self.classes.encode(store.label_value[None])[0], -1)
+        self.classes.observe(np.unique(store.label_value[labelled]))
+        label_class = np.where(labelled, self.classes.encode(store.label_value), -1)
         features = [
-            key_features(self.mdp.views[v], store.next_state[None], store.visited[None], self.mdp.n_actions)[
-                0
-            ]
+            key_features(self.mdp.views[v], store.next_state, store.visited, self.mdp.n_actions)
             for v in self.cfg.views
         ]
-        return RunPool(features, labelled, label_class, unlabelled, self.classes.mask[0])
+        return RunPool(features, labelled, label_class, unlabelled, self.classes.mask)
 
     def true_class(self) -> np.ndarray:
-        return self.classes.encode(self.store.hidden_reward[None])[0]
+        return self.classes.encode(self.store.hidden_reward)
 
     def greedy_actions(self, agents: Sequence[ExpectedSarsaDQN]) -> np.ndarray:
         """(m, S) each agent's greedy action in every state, read through its own view."""

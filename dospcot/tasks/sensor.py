@@ -291,17 +291,17 @@ class SensorTask:
         n = len(store)
         labelled, unlabelled = store.labelled[:n], ~store.labelled[:n]
         self.classes.fit(store.label_value[:n][labelled])
-        label_class = np.where(labelled, self.classes.encode(store.label_value[:n][None])[0], -1)
+        label_class = np.where(labelled, self.classes.encode(store.label_value[:n]), -1)
         termination = self.section.read_termination
         features = [store.features(v, self.n_actions, termination) for v in self.cfg.views]
-        class_mask = self.classes.mask[0]  # the quantile classes keep a runs' axis of one
+        class_mask = self.classes.mask
         if self.section.episode_end_classes:
             class_mask = episode_end_class_mask(label_class, labelled, store.terminal[:n], class_mask)
         return RunPool(features, labelled, label_class, unlabelled, class_mask)
 
     def true_class(self) -> np.ndarray:
         hidden = self.store.hidden_reward[: len(self.store)]  # metrics only
-        return self.classes.encode_hidden(hidden[None])[0]
+        return self.classes.encode_hidden(hidden)
 
     def _returns(self, policy: Any, env: DummyVecEnv) -> tuple[np.ndarray, np.ndarray]:
         env.seed(EVAL_SEED)

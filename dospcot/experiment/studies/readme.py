@@ -1,10 +1,13 @@
-"""Replace a generated block of README.md, the text between a start and an end marker."""
+"""Where ``--docs`` writes: the checkout's ``docs/`` and the generated blocks of its README.md, the
+text between a start and an end marker."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
-README = Path(__file__).resolve().parent.parent / "README.md"
+ROOT = Path(__file__).resolve().parents[3]
+"""The checkout this package sits in (an editable install): ``--docs`` writes its docs/ and README.md."""
+README = ROOT / "README.md"
 
 
 def check_readme_block(start: str, end: str) -> None:

@@ -1,0 +1,149 @@
+"""The README's neural studies, each one command: a ``dospcot sweep`` and its ``dospcot report``.
+
+    python scripts/study.py label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~2.5 h)
+    python scripts/study.py grid16 --docs           # 6 grid16 presets x seeds 0-9
+    python scripts/study.py grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
+    python scripts/study.py grid32 --docs           # 4 grid32 presets x seeds 0-4
+    python scripts/study.py grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
+    python scripts/study.py fasthighway --docs      # 4 fasthighway presets x seeds 0-4
+    python scripts/study.py minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
+    python scripts/study.py highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
+    python scripts/study.py paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
+    python scripts/study.py paper-published-code --docs   # the same with its published code's settings
+    python scripts/study.py demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
+    python scripts/study.py equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
+    python scripts/study.py equal-effort-highway --docs  # the same on the fast highway, 5 seeds
+    python scripts/study.py second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
+    python scripts/study.py second-view-highway --docs   # its highway monitor setting x seeds 0-4
+
+A study is one or more sweeps in ``runs/sweeps/``: rerunning the command runs only the trials not yet
+finished, then rebuilds the tables from every finished run folder (``--render-only`` trains nothing).
+The grid tables lead with success (the share of seeds x agents whose greedy policy reaches the goal
+from the map's start) and optimal-action agreement; the normalised score follows, with its caveat in
+each table's header (a policy that never reaches the goal but avoids lava scores high).
+With ``--docs`` the tables go to ``docs/<study>.md`` and into README.md between the study's
+``<!-- <study>-table:start -->`` and ``<!-- <study>-table:end -->`` markers, and the label-fraction
+plot to ``docs/label-fraction.png``; for the paper studies the README gets an excerpt (paper accuracy
+and Table 3 of optimal-action agreement) and the docs page every table. No number is typed by hand.
+"""
+
+# The package: each study is declared once, beside its tables, in the module of its group (grid,
+# highway, minigrid, label_sources, second_view, paper); declaration.py says what a study is, tables.py
+# and provenance.py hold what their tables share, readme.py where --docs writes. This module gathers
+# them into STUDIES and runs one (``main``, behind scripts/study.py).
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import shutil
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from dospcot.experiment.report import load_runs, write_report
+from dospcot.experiment.studies import grid, highway, label_sources, minigrid, paper, second_view
+from dospcot.experiment.studies.declaration import Study, Sweep
+from dospcot.experiment.studies.provenance import header
+from dospcot.experiment.studies.readme import ROOT, check_readme_block, replace_readme_block
+from dospcot.experiment.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
+
+__all__ = ["STUDIES", "Study", "Sweep", "get_study", "header", "header_command", "main", "run_study"]
+
+STUDIES: dict[str, Study] = {
+    **grid.STUDIES,
+    **highway.STUDIES,
+    **minigrid.STUDIES,
+    **label_sources.STUDIES,
+    **second_view.STUDIES,
+    **paper.STUDIES,
+}
+"""Every study by name, in the order the command's help lists them."""
+
+
+def get_study(name: str) -> Study:
+    """The study called ``name``; ``ValueError``, naming every study, where there is none."""
+    try:
+        return STUDIES[name]
+    except KeyError:
+        raise ValueError(f"no study {name!r}; the studies: {', '.join(STUDIES)}") from None
+
+
+def header_command(program: Sequence[str], study: str, options: Sequence[str]) -> str:
+    """The command a study's header names: ``program``, the study and its options, less
+    ``--render-only``, so that tables rebuilt from finished runs name the command that trained them."""
+    return shlex.join([*program, study, *(option for option in options if option != "--render-only")])
+
+
+def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") -> None:
+    """Run the study ``args.study`` (its unfinished trials; none with ``args.render_only``), then print
+    its tables and, with ``args.docs``, write its docs page, plot and README block. ``command`` is the
+    header's command line (:func:`header_command`); ``prog`` starts each one-line error, on which it
+    exits with status 1. ``args`` holds what :func:`main` parses: study, seeds, workers, backend,
+    overrides, runs_dir, docs and render_only."""
+    study = get_study(args.study)
+    markers = (f"<!-- {args.study}-table:start -->", f"<!-- {args.study}-table:end -->")
+    if args.docs and study.readme is not None:
+        try:  # before hours of training, not after
+            check_readme_block(*markers)
+        except ValueError as err:
+            sys.exit(f"{prog}: {err}")
+    args.seeds = args.seeds or study.seeds
+    # Another --seeds or --set is another sweep: it gets its own folder.
+    default = (args.seeds, args.overrides) == (study.seeds, [])
+    suffix = "" if default else f"-{args.seeds}seeds-{len(args.overrides)}sets"
+    runs, sweep_dirs, written, not_started = [], [], [], []
+    for sweep in study.sweeps:
+        sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
+        spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
+        try:  # trials run under a preset that has changed since are neither resumed nor tabled
+            if args.render_only:
+                check_not_stale(sweep_dir, spec.trials())
+            else:
+                failed = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers).failed
+                if failed:
+                    sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
+        except SweepError as err:
+            sys.exit(f"{prog}: {err}")
+        try:
+            written += write_report(sweep_dir)
+        except SweepError:  # never started, or no trial finished yet: the study was cut short there
+            not_started.append(sweep_dir)
+            continue
+        runs += load_runs(sweep_dir)[1]
+        sweep_dirs.append(sweep_dir)
+    if not runs:
+        sys.exit(f"{prog}: no finished run of this study under {args.runs_dir}; run it without --render-only")
+    unfinished = ", ".join(f"`{d}`" for d in not_started)
+    missing = [f"Not finished yet: sweep(s) {unfinished}."] if not_started else []
+    table = "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
+    print(table)
+    if args.docs:
+        docs_table = table.replace("](docs/", "](")  # the docs page sits beside the plot
+        (ROOT / "docs" / f"{args.study}.md").write_text(f"# {study.title}\n\n{docs_table}")
+        plot = next((p for p in written if study.plot and p.name == study.plot[0]), None)
+        if plot is not None:
+            shutil.copyfile(plot, ROOT / "docs" / study.plot[1])
+        if study.readme is not None:
+            replace_readme_block(*markers, study.readme(table))
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """``python scripts/study.py STUDY [options]``: parse ``argv`` (by default ``sys.argv[1:]``) and
+    run the study; its header names the command as ``python scripts/study.py`` with these options."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("study", choices=list(STUDIES))
+    parser.add_argument(
+        "--seeds", type=int, help="seeds 0..N-1 (default: the study's, 5; highway 3, paper 10)"
+    )
+    parser.add_argument("--workers", type=int, default=2, help="trials at once (default 2)")
+    parser.add_argument("--backend", choices=["local", "ray"], default="local")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"))
+    parser.add_argument("--docs", action="store_true", help="also write docs/<study>.md and README.md")
+    parser.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
+    args = parser.parse_args(argv)
+    run_study(args, header_command(("python", "scripts/study.py"), args.study, argv[1:]))
