@@ -57,6 +57,13 @@ def positive_int(text: str) -> int:
     return _number(text, int, lambda v: v >= 1, wanted, wanted)
 
 
+def add_overrides(parser: argparse.ArgumentParser, help: str) -> None:
+    """The ``--set KEY=VALUE`` option (repeatable) of a command that reads configs."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=help
+    )
+
+
 class OneLineParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose usage errors are one line (and exit status 2), as every other
     error of the CLI."""
@@ -79,14 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
         "metrics.csv, summary.json, agents, classifiers, plots, checkpoint).",
     )
     train.add_argument("config", nargs="?", help="a preset name (see --list) or a path to a .toml")
-    train.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a config key, e.g. --set training.rounds=3 --set seed=2 (repeatable)",
-    )
+    add_overrides(train, "override a config key, e.g. --set training.rounds=3 --set seed=2 (repeatable)")
     train.add_argument(
         "--resume", type=Path, metavar="RUN_DIR", help="continue a killed run from its checkpoint"
     )
@@ -129,10 +129,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="a count (5 means seeds 0-4) or a comma list (default 1); with --resume, seeds to add "
         "to the sweep (a count or list that holds its own seeds): only the new seeds' trials run",
     )
-    sweep.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="override a key in every trial (repeatable)",
-    )  # fmt: skip
+    add_overrides(sweep, "override a key in every trial (repeatable)")
     sweep.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
     sweep.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
     sweep.add_argument(
@@ -185,14 +182,7 @@ def build_parser() -> argparse.ArgumentParser:
         type=positive_int,
         help="episodes per agent per round (default: the preset's, 500, the paper's; fewer for a quick look)",
     )
-    paper.add_argument(
-        "--set",
-        dest="overrides",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="override a key of the preset, e.g. --set tabular.replay_sweeps=0 (repeatable)",
-    )
+    add_overrides(paper, "override a key of the preset, e.g. --set tabular.replay_sweeps=0 (repeatable)")
     paper.add_argument("--workers", type=positive_int, default=2, help="processes (default 2)")
     paper.add_argument(
         "--out",
@@ -223,19 +213,16 @@ def build_parser() -> argparse.ArgumentParser:
     )
     study = commands.add_parser(
         "study",
-        help="one of the published studies: its sweeps, then its tables (with --docs, its docs page)",
         description="Run a study's sweeps (only the trials not yet finished), then print its tables from "
         "every finished run; with --docs also write docs/<study>.md and its README.md block.",
+        help="one of the published studies: its sweeps, then its tables (with --docs, its docs page)",
     )
+    add_overrides(study, "override a key in every trial (repeatable; the study then writes its own sweeps)")
     # No choices: the studies' names live with their declarations, which import torch.
     study.add_argument("study", metavar="STUDY", help="the study, e.g. grid16 (a wrong name lists them)")
     study.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's)")
     study.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
     study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
-    study.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-        help="override a key in every trial (repeatable; the study then writes its own sweep folders)",
-    )  # fmt: skip
     study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
     study.add_argument("--docs", action="store_true", help="also write docs/<study>.md and its README block")
     study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
@@ -253,13 +240,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     if args.command in RUN_COMMANDS:
         from dospcot.config.errors import ConfigError
+        from dospcot.core.raters import QueriesPending, RaterError
         from dospcot.envs import NonFiniteError
         from dospcot.experiment.run_folder import RunFolderError
         from dospcot.experiment.sweep_spec import SweepError
 
         try:
             return RUN_COMMANDS[args.command](args, command)
-        except (ConfigError, RunFolderError, SweepError) as err:
+        except QueriesPending as pending:  # not an error: the run waits for a person's answers
+            run_dir = pending.path.parent.parent
+            print(
+                f"{run_dir}: {pending.count} reward queries wait in {pending.path}; write each answer in its "
+                f"reward column, then: dospcot train --resume {run_dir}"
+            )
+            return 0
+        except (ConfigError, RunFolderError, SweepError, RaterError) as err:
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
             return 2
         except NonFiniteError as err:  # the env's fault, not the command line's

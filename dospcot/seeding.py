@@ -23,7 +23,7 @@ EVAL_SEED = 1_000_003
 
 # The stream tags: the first word of each derivation's spawn key. Never renumber them: a run's
 # seeds, and so its results, depend on them.
-_AGENT, _ROUND_RESET, _CLASSIFIER, _LAYER, _DEMONSTRATIONS = range(5)
+_AGENT, _ROUND_RESET, _CLASSIFIER, _LAYER, _DEMONSTRATIONS, _QUERIES = range(6)
 
 
 def _derive(seed: int, stream: int, *index: int) -> int:
@@ -61,3 +61,8 @@ def demonstration_seed(seed: int) -> int:
     """The seed of the first demonstration episode a saved agent records for run ``seed``; episode
     ``i`` resets with this seed + ``i``."""
     return _derive(seed, _DEMONSTRATIONS)
+
+
+def query_seed(seed: int, round_: int) -> int:
+    """The seed of the reward queries' random draws in round ``round_`` (1-based) of run ``seed``."""
+    return _derive(seed, _QUERIES, round_)

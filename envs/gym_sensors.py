@@ -346,6 +346,7 @@ def make_masked_gym(
     wrappers: Sequence[str] = (),
     state_key: str = "",
     train_wrappers: Sequence[str] = (),
+    queried: bool = False,
 ) -> gym.Env:
     """A gymnasium task whose rewards are revealed per step with probability ``label_fraction``.
 
@@ -362,11 +363,13 @@ def make_masked_gym(
         out), e.g. :class:`~dospcot.envs.minigrid_views.RandomStart`.
     :param state_key: a name from :data:`STATE_KEYS` or a dotted path to a function of the unwrapped
         env: the mask then labels (state key, action) pairs (``"key"`` mode); empty: single steps.
+    :param queried: reward queries buy the labels: a ``label_fraction`` of 0 is allowed.
     """
     sensors = make_gym_sensors(env_id, view_specs, views, env_kwargs, wrappers, state_key, train_wrappers)
     mask = RewardMaskWrapper(
-        sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed
-    )
+        sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed,
+        queried=queried,
+    )  # fmt: skip
     return SensorViewWrapper(mask, view, views)
 
 

@@ -173,6 +173,7 @@ def make_masked_highway(
     mask_seed: int = 0,
     config: Mapping[str, Any] | None = None,
     reveal_first_steps: int = 0,
+    queried: bool = False,
 ) -> gym.Env:
     """A highway task whose rewards are revealed per transition with probability ``label_fraction``.
 
@@ -183,10 +184,11 @@ def make_masked_highway(
     :param mask_seed: seed of the reveal draws.
     :param config: the task's config overrides (highway-env's keys, or :class:`FastHighwayConfig`'s).
     :param reveal_first_steps: a reward monitor: the first this many steps of every episode are revealed.
+    :param queried: reward queries buy the labels: a ``label_fraction`` of 0 is allowed.
     """
     check_views(env_id, views)
     env = RewardMaskWrapper(
         make_highway(env_id, config), label_fraction, mode="transition", mask_seed=mask_seed,
-        reveal_first_steps=reveal_first_steps,
+        reveal_first_steps=reveal_first_steps, queried=queried,
     )  # fmt: skip
     return SensorViewWrapper(env, view, views)

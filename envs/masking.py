@@ -46,10 +46,14 @@ REWARD_INFO_KEYS: tuple[str, ...] = ("rewards",)
 a masked step drops them."""
 
 
-def check_label_fraction(label_fraction: float) -> float:
-    """Return ``label_fraction`` as a float, or raise ``ValueError`` if it is outside (0, 1]."""
+def check_label_fraction(label_fraction: float, *, queried: bool = False) -> float:
+    """Return ``label_fraction`` as a float, or raise ``ValueError`` if it is outside (0, 1].
+
+    :param queried: also allow 0, a mask with no random share: the rewards are bought by queries
+        instead (:mod:`dospcot.core.queries`), and only monitors and demonstrations reveal any up front.
+    """
     fraction = float(label_fraction)
-    if not 0.0 < fraction <= 1.0:
+    if not (0.0 < fraction <= 1.0 or (queried and fraction == 0.0)):
         raise ValueError(f"label_fraction must lie in (0, 1], got {label_fraction!r}")
     return fraction
 
@@ -75,9 +79,11 @@ class StateActionMask:
 
     :param n_states: number of discrete states.
     :param n_actions: number of discrete actions.
-    :param label_fraction: share of labelled keys, in (0, 1].
+    :param label_fraction: share of labelled keys, in (0, 1]; with ``queried``, 0: none drawn.
     :param seed: seed of the draw; the same seed always labels the same keys.
     :param monitored_states: bool (n_states,), states whose every key is labelled; None: none.
+    :param queried: the labels are bought by reward queries (:mod:`dospcot.core.queries`), so a
+        ``label_fraction`` of 0 is allowed.
     """
 
     def __init__(
@@ -87,8 +93,10 @@ class StateActionMask:
         label_fraction: float,
         seed: int,
         monitored_states: np.ndarray | None = None,
+        *,
+        queried: bool = False,
     ) -> None:
-        fraction = check_label_fraction(label_fraction)
+        fraction = check_label_fraction(label_fraction, queried=queried)
         monitored = (
             np.zeros(n_states, dtype=bool) if monitored_states is None else np.asarray(monitored_states)
         )
@@ -98,7 +106,7 @@ class StateActionMask:
             )
         labelled = np.repeat(monitored, n_actions)
         drawn = np.flatnonzero(~labelled)
-        if drawn.size:
+        if drawn.size and fraction > 0:
             n_labelled = max(1, round(fraction * drawn.size))
             labelled[np.random.default_rng(seed).permutation(drawn)[:n_labelled]] = True
         self.labelled: np.ndarray = labelled.reshape(n_states, n_actions)
@@ -115,7 +123,8 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     :param env: the env to mask. In ``"state-action"`` mode both spaces must be ``Discrete``; in
         ``"key"`` mode ``env.get_wrapper_attr("state_key")()`` must name the current state.
     :param label_fraction: share of labelled keys (state-action mode), probability that a step is
-        revealed (transition mode) or that a (state key, action) pair is (key mode), in (0, 1].
+        revealed (transition mode) or that a (state key, action) pair is (key mode), in (0, 1]; with
+        ``queried``, 0: none but what a monitor or ``revealed_keys`` reveal.
     :param mode: ``"state-action"``, ``"transition"`` or ``"key"``. In key mode ``info["state_key"]``
         holds the key of the state a step started from.
     :param mask_seed: seed of the mask, independent of the seed passed to ``reset``.
@@ -128,6 +137,8 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
     :param segment_length: k; above 1, whole k-step segments are labelled with their summed reward,
         each with probability ``label_fraction``, and no single reward is revealed (settable later,
         as :class:`dospcot.core.segments.SegmentLabelWrapper` does).
+    :param queried: the labels are bought by reward queries (:mod:`dospcot.core.queries`), so a
+        ``label_fraction`` of 0 (no random share) is allowed.
     """
 
     def __init__(
@@ -140,11 +151,12 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         reveal_first_steps: int = 0,
         revealed_keys: np.ndarray | None = None,
         segment_length: int = 1,
+        queried: bool = False,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
             self, label_fraction=label_fraction, mode=mode, mask_seed=mask_seed,
             monitored_states=monitored_states, reveal_first_steps=reveal_first_steps,
-            revealed_keys=revealed_keys, segment_length=segment_length,
+            revealed_keys=revealed_keys, segment_length=segment_length, queried=queried,
         )  # fmt: skip
         super().__init__(env)
         if mode not in MASK_MODES:
@@ -162,7 +174,7 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         if reveal_first_steps < 0:
             raise ValueError(f"reveal_first_steps must be >= 0, got {reveal_first_steps}")
         self.reveal_first_steps = int(reveal_first_steps)
-        self.label_fraction = check_label_fraction(label_fraction)
+        self.label_fraction = check_label_fraction(label_fraction, queried=queried)
         self.mode: MaskMode = mode
         self.mask: StateActionMask | None = None
         if mode == "state-action":
@@ -175,7 +187,7 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                     )
             self.mask = StateActionMask(
                 int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed,
-                monitored_states,
+                monitored_states, queried=queried,
             )  # fmt: skip
             if revealed_keys is not None:
                 if revealed_keys.shape != self.mask.labelled.shape:

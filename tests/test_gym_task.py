@@ -397,7 +397,7 @@ def test_a_store_from_a_checkpoint_older_than_its_terminal_flags_resumes():
     old = {name: value for name, value in store.state_dict().items() if name != "terminal"}
     resumed = KeyedStepStore({"cell": (1,)})
     resumed.load_state_dict(old)
-    resumed.add(0, 1, 0, True, 1.0, 1.0, key=2, terminal=True)
+    resumed.add(0, 1, 0, True, 1.0, 1.0, key=2, ends=(True, False))
     np.testing.assert_array_equal(resumed.terminal[: len(resumed)], [False, False, False, True])
 
 

@@ -2,9 +2,20 @@
 
 from __future__ import annotations
 
+import csv
+import math
+from functools import partial
+
+import gymnasium as gym
 import numpy as np
 import pytest
+from test_highway import TINY as HIGHWAY_TINY
+from test_neural_cotraining import assert_same_learners
 
+from dospcot.cli import main
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import (
     choose_queries,
     disagreement_order,
@@ -13,6 +24,11 @@ from dospcot.core.queries import (
     query_budget,
 )
 from dospcot.core.raters import FileRater, QueriesPending, RaterError, SimulatedRater
+from dospcot.envs import GridWorld
+from dospcot.envs.highway import make_masked_highway
+from dospcot.experiment.train import build_run
+from dospcot.tasks.grid import GridTask, grid_world
+from dospcot.tasks.sensor import SensorTask
 
 # Two views, four samples, three classes.
 PROBABILITIES = np.array(
@@ -116,3 +132,168 @@ def test_the_file_rater_writes_the_queries_then_reads_a_persons_answers(tmp_path
         rater.answer(2, ids, [])
     pending.value.path.write_text("sample,key,reward\n3,s=0 a=3,0.5\n7,s=1 a=3,-1\n")
     assert rater.answer(2, ids, []).tolist() == [-1.0, 0.5]
+
+
+# --- Queries in whole runs -------------------------------------------------------------------------
+
+TINY_QUERIES = ["training.label_fraction=0.2"]
+
+
+def _grid_run(strategy: str, *overrides: str, make_env=None, seed: int = 3) -> CoTrainingRun:
+    cfg = load_config(
+        "tiny", [*TINY_QUERIES, f'training.label_strategy="{strategy}"', f"seed={seed}", *overrides]
+    )
+    if make_env is None:
+        return build_run(cfg)
+    _, views, _ = grid_world(cfg)
+    return CoTrainingRun(GridTask(cfg, make_env, views), cfg)
+
+
+@pytest.mark.parametrize("strategy", ["random", "outcomes", "uncertainty", "disagreement"])
+def test_every_strategy_spends_the_uniform_masks_budget_and_never_more(strategy):
+    run = _grid_run(strategy)
+    spent = []
+
+    def check(run: CoTrainingRun, rows: list[dict]) -> None:
+        met = int(run.store.visited.sum())
+        revealed = int(run.queries.revealed.sum())
+        spent.append(revealed)
+        assert revealed == math.ceil(0.2 * met - 1e-9)  # enough candidates: the whole budget, no more
+        assert run.store.labelled.sum() == revealed  # no mask share: every label was bought
+        assert all(
+            row["labelled_steps"] == revealed and row["queries"] == len(run.queries.answers_of(run.round))
+            for row in rows
+        )
+
+    run.run(on_round=check)
+    assert spent[0] < spent[1]  # more keys met, more budget
+    log = run.queries.log
+    assert len(log) == spent[-1] and {row["sample"] for row in log} == set(
+        np.flatnonzero(run.queries.revealed)
+    )
+    # The answers are the keys' true rewards, and the agents' steps on a bought key read it at weight 1.
+    rewards = run.task.mdp.reward.ravel()
+    assert all(row["answer"] == rewards[row["sample"]] for row in log)
+    bought = np.flatnonzero(run.queries.revealed)
+    np.testing.assert_array_equal(run.table.reward[bought], rewards[bought])
+    assert (run.table.weight[bought] == 1.0).all()
+    strategies = {row["strategy"] for row in log}
+    assert strategies == ({"random"} if strategy == "random" else {"random", strategy})
+
+
+def _unqueried_permuted_grid(queried: np.ndarray, seed: int) -> GridWorld:
+    """The tiny grid with the rewards of every key never queried permuted among themselves."""
+    env = _tiny_grid()
+    keys = np.setdiff1d(np.arange(env.reward.size), queried)
+    flat = env.reward.reshape(-1)
+    flat[keys] = np.random.default_rng(seed).permutation(flat[keys])
+    return env
+
+
+def _tiny_grid() -> GridWorld:
+    return grid_world(load_config("tiny"))[0]()
+
+
+@pytest.mark.parametrize(
+    ("strategy", "agents"),
+    [("random", "dqn"), ("outcomes", "dqn"), ("uncertainty", "esarsa_dqn"), ("disagreement", "dqn"),
+     ("disagreement", "tabular")],
+)  # fmt: skip
+def test_leakage_permuting_the_hidden_rewards_of_keys_never_queried_changes_nothing(strategy, agents):
+    plain = _grid_run(strategy, f'agent="{agents}"')
+    plain.run()
+    queried = np.flatnonzero(plain.queries.revealed)
+    permuted = _unqueried_permuted_grid(queried, 0)
+    assert not np.array_equal(permuted.reward, _tiny_grid().reward)
+    # SB3 seeds the global generators when an agent is built: build and run one run at a time.
+    other = _grid_run(strategy, f'agent="{agents}"', make_env=partial(_unqueried_permuted_grid, queried, 0))
+    other.run()
+    assert other.queries.log == plain.queries.log
+    assert_same_learners(plain, other)
+
+
+class _ScrambleUnqueried(gym.Wrapper):
+    """1 - r as the hidden reward of every step whose store id is not in ``queried`` (a step pool's
+    ids are the store's length at each step); the evaluation envs, which have no store, are left alone."""
+
+    def __init__(self, env: gym.Env, queried: set[int]) -> None:
+        super().__init__(env)
+        self.queried, self.store = queried, None
+
+    def step(self, action):
+        obs, reward, terminated, truncated, info = self.env.step(action)
+        if self.store is not None and len(self.store) not in self.queried:
+            info = dict(info, hidden_reward=1.0 - info["hidden_reward"])
+        return obs, reward, terminated, truncated, info
+
+
+@pytest.mark.parametrize("strategy", ["outcomes", "disagreement"])
+def test_leakage_on_the_fast_highway_scrambling_unqueried_hidden_rewards_changes_nothing(strategy):
+    cfg = load_config(
+        "fasthighway-dospcot",
+        [*HIGHWAY_TINY, "training.label_fraction=0.1", f'training.label_strategy="{strategy}"'],
+    )
+    plain = build_run(cfg)
+    plain.run()
+    queried = set(np.flatnonzero(plain.queries.revealed).tolist())
+    make = partial(make_masked_highway, cfg.highway.env_id, config=cfg.highway.config, queried=True)
+    task = SensorTask(cfg, cfg.highway, lambda *args: _ScrambleUnqueried(make(*args), queried))
+    for env in task._envs:
+        env.env.store = task.store
+    other = CoTrainingRun(task, cfg)
+    other.run()
+    n = len(plain.store)
+    assert not np.array_equal(plain.store.hidden_reward[:n], other.store.hidden_reward[:n])
+    assert other.queries.log == plain.queries.log
+    assert_same_learners(plain, other)
+
+
+def _write_rows(path, rows: list[dict]) -> None:
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def test_a_run_answered_through_files_equals_the_simulated_run(tmp_path, capsys):
+    sets = [*TINY_QUERIES, 'training.label_strategy="disagreement"']
+    args = ["train", "tiny", "--no-progress", *(a for s in sets for a in ("--set", s))]
+    assert main([*args, "--runs-dir", str(tmp_path / "simulated")]) == 0
+    assert main([*args, "--set", 'training.rater="file"', "--runs-dir", str(tmp_path / "file")]) == 0
+    (run_dir,) = (tmp_path / "file" / "tiny").iterdir()
+    rewards = build_run(load_config("tiny")).task.mdp.reward.ravel()
+    for round_ in (1, 2):
+        out = capsys.readouterr().out
+        path = run_dir / "queries" / f"round_{round_}.csv"
+        assert f"reward queries wait in {path}" in out and f"dospcot train --resume {run_dir}" in out
+        rows = list(csv.DictReader(path.open()))
+        assert rows and all(row["reward"] == "" for row in rows)
+        # A bad answer file is one line, and nothing is lost: the resume after it goes on.
+        for row in rows:
+            row["reward"] = repr(float(rewards[int(row["sample"])]))
+        _write_rows(path, [{**rows[0], "reward": "x"}, *rows[1:]])
+        assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert "has no numeric reward ('x')" in err and err.count("\n") == 1
+        _write_rows(path, rows)
+        assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 0
+    (simulated,) = (tmp_path / "simulated" / "tiny").iterdir()
+    for name in ("metrics.csv", "summary.json", "queries.csv"):
+        assert (run_dir / name).read_bytes() == (simulated / name).read_bytes()
+
+
+def test_queries_go_beside_demonstrations_and_refuse_what_cannot_query():
+    run = _grid_run("uncertainty", "demonstrations.episodes=2", "demonstrations.margin_loss_weight=0")
+    demonstrated = run.store.labelled.copy()
+    run.run()
+    assert not run.queries.revealed[demonstrated].any()  # a demonstrated key is never bought again
+    for overrides, message in (
+        (['training.label_strategy="disagreement"', 'views=["patch"]'], "two views' classifiers disagree"),
+        (
+            ['training.label_strategy="random"', 'method="masked-zero"'],
+            "queries the rewards co-training needs",
+        ),
+        (['training.label_strategy="random"', "training.segment_length=3"], "segment labels none"),
+    ):
+        with pytest.raises(ConfigError, match=message):
+            load_config("tiny", overrides)

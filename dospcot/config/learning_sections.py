@@ -62,6 +62,17 @@ class TrainingConfig:
         keys or steps). Above 1, co-training only: the labels are the summed rewards of k-step
         segments of the agents' episodes, a share ``label_fraction`` of the segments, so the same
         rater effort in labelled steps (:mod:`dospcot.core.segments`).
+    :param label_strategy: how labels are chosen (:mod:`dospcot.core.queries`): ``"uniform"``, a fixed
+        random mask of share ``label_fraction`` (the paper's setting); or a rater with a budget who,
+        after each round's collection, labels at most ``ceil(label_fraction x samples met)`` in all,
+        chosen ``"random"``-ly, by ``"outcomes"`` (the kinds of episode end first), by
+        ``"uncertainty"`` (the views' classifiers' smallest margins) or by ``"disagreement"``
+        (co-testing: where the views' classifiers disagree; two or more views). Co-training only.
+    :param query_random_share: the share of each round's queries an active strategy draws at random.
+    :param query_recent_rounds: prefer the samples first met in the latest this many rounds (0: all).
+    :param rater: who answers the queries: ``"simulated"`` (the hidden reward) or ``"file"`` (a person:
+        each round's queries go to the run folder's ``queries/round_<r>.csv`` and the run stops until
+        ``dospcot train --resume`` finds them answered).
     """
 
     rounds: int = 5
@@ -73,6 +84,10 @@ class TrainingConfig:
     update_steps: int = 0
     learn_from_round: int = 1
     segment_length: int = 1
+    label_strategy: Literal["uniform", "random", "outcomes", "uncertainty", "disagreement"] = "uniform"
+    query_random_share: float = 0.2
+    query_recent_rounds: int = 0
+    rater: Literal["simulated", "file"] = "simulated"
 
     def __post_init__(self) -> None:
         check_at_least(self, 1, "segment_length")
@@ -89,7 +104,10 @@ class TrainingConfig:
             )
         if not 0 < self.label_fraction <= 1:
             raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
-        check_within(self, 0, 1, "eps_start", "eps_end")
+        check_within(self, 0, 1, "eps_start", "eps_end", "query_random_share")
+        check_at_least(self, 0, "query_recent_rounds")
+        if self.rater == "file" and self.label_strategy == "uniform":
+            raise ValueError('rater = "file" answers queries: set label_strategy to an active strategy')
 
     @property
     def collect_only_steps(self) -> int:

@@ -98,6 +98,7 @@ class TrainConfig:
             )
         self._check_demonstrations()
         self._check_segments()
+        self._check_queries()
 
     def _check_demonstrations(self) -> None:
         demos = self.demonstrations
@@ -129,6 +130,26 @@ class TrainConfig:
             raise ConfigError(
                 "training.segment_length: segment labels reveal no single reward, so they cannot be "
                 "combined with a reward monitor"
+            )
+
+    def _check_queries(self) -> None:
+        strategy = self.training.label_strategy
+        if strategy == "uniform":
+            return
+        if self.method != "cotrain":
+            raise ConfigError(
+                f'training.label_strategy: "{strategy}" queries the rewards co-training needs (method = '
+                f'"cotrain"; one view is self-training), got method = "{self.method}"; use "uniform"'
+            )
+        if strategy == "disagreement" and len(self.views) < 2:
+            raise ConfigError(
+                'training.label_strategy: "disagreement" asks where two views\' classifiers disagree, and '
+                f'the run has one view ({self.views[0]}); use "uncertainty" for one view'
+            )
+        if self.training.segment_length > 1:
+            raise ConfigError(
+                "training.label_strategy: queries reveal single rewards, segment labels none; "
+                f'set label_strategy = "uniform" with segment_length = {self.training.segment_length}'
             )
 
     @property

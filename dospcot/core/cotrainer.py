@@ -224,6 +224,19 @@ class RunCoTrainer:
         :func:`~dospcot.core.classifier.save_classifier` writes it)."""
         return self._batch.classifiers
 
+    def probabilities(self, pool: RunPool) -> np.ndarray | None:
+        """(m, N, K) each view's class probabilities of the pool's samples, or None before the first
+        round fit the classifiers."""
+        if self._batch.round == 0:
+            return None
+        mask = torch.from_numpy(pool.class_mask[None])
+        return np.stack(
+            [
+                clf.scores(torch.from_numpy(np.asarray(f, dtype=np.float64)[None]), mask)[0].numpy()
+                for clf, f in zip(self.classifiers, pool.features, strict=True)
+            ]
+        )
+
     def step(self, pool: RunPool) -> RunRound:
         """One round (:meth:`SelfPacedCoTrainer.step`) on the run's pool."""
         batched = Pool(

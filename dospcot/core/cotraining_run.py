@@ -8,6 +8,8 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
 1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
    rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
    time, so what earlier rounds admitted drives this round's updates.
+   **Queries** (an active ``training.label_strategy``, :mod:`dospcot.core.queries`): a rater labels
+   the samples the strategy chooses, within the budget the uniform mask would spend.
 2. **Co-train** (method ``"cotrain"``): the task turns its store into a
    :class:`~dospcot.core.cotrainer.RunPool` (labelled samples and the unlabelled pool U, each view's
    classifier inputs), which goes to the run's :class:`~dospcot.core.cotrainer.RunCoTrainer` (select,
@@ -55,12 +57,14 @@ import torch as th
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.core.cotrainer import RunCoTrainer, RunPool
+from dospcot.core.queries import QueriedTask, Rater, RewardQueries
+from dospcot.core.raters import SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
 from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
-from dospcot.seeding import agent_seed, classifier_seed, round_reset_seed
+from dospcot.seeding import agent_seed, classifier_seed, query_seed, round_reset_seed
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
@@ -70,8 +74,10 @@ AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expecte
 and the tabular Expected-SARSA agent."""
 
 
-class CoTrainingTask(Protocol):
-    """What a task adapter supplies to :class:`CoTrainingRun`."""
+class CoTrainingTask(QueriedTask, Protocol):
+    """What a task adapter supplies to :class:`CoTrainingRun` (and, for reward queries, what
+    :class:`~dospcot.core.queries.QueriedTask` asks, plus ``hidden_reward(ids)`` for the simulated
+    rater alone)."""
 
     store: Any
     """Every step the agents took, in the form the pool is built from; its ``state_dict()`` and
@@ -170,10 +176,24 @@ class CoTrainingRun:
     :param task: the task adapter (store, pool, evaluator), e.g. ``get_task(cfg.task).build(cfg)``.
     :param cfg: the run's config, read directly: its method, views and agent kinds, seed, ``[training]``,
         ``[dqn]``, ``[tabular_agent]``, ``[cotraining]`` and ``[demonstrations]``.
+    :param rater: who answers the reward queries of an active ``training.label_strategy``; None: the
+        simulated rater, which answers from the hidden reward.
     """
 
-    def __init__(self, task: CoTrainingTask, cfg: TrainConfig) -> None:
+    def __init__(self, task: CoTrainingTask, cfg: TrainConfig, rater: Rater | None = None) -> None:
         self.task, self.cfg = task, cfg
+        training = cfg.training
+        self.queries: RewardQueries | None = None
+        """The reward queries of an active label strategy, or None (the uniform mask)."""
+        if training.label_strategy != "uniform":
+            rater = rater or SimulatedRater(task.hidden_reward)
+            self.queries = RewardQueries(
+                training.label_strategy, training.label_fraction, training.query_random_share,
+                training.query_recent_rounds, rater,
+            )  # fmt: skip
+        self.collected = False
+        """Whether this round's collection is done, its queries not yet answered (a run stopped for a
+        person's answers resumes there)."""
         self.table = RewardTable()
         self.segments: SegmentStore | None = None
         """The labelled and unlabelled segments under segment labels (``segment_length`` > 1), or None."""
@@ -235,7 +255,8 @@ class CoTrainingRun:
         """
         last = self.cfg.training.rounds if until_round is None else min(until_round, self.cfg.training.rounds)
         records: list[dict] = []
-        while self.round < last and not self.stopped:
+        # A round stopped for a person's answers (collected, not yet co-trained) is finished first.
+        while (self.round < last or self.collected) and not self.stopped:
             rows = self.run_round(callback)
             records += rows
             if on_round is not None:
@@ -247,14 +268,20 @@ class CoTrainingRun:
 
         :param callback: passed to every agent's ``learn()`` (SB3 callbacks, e.g. a progress bar).
         """
-        self.round += 1
-        for k, agent in enumerate(self.agents):  # 1. collect and learn, with last round's rewards and weights
-            # Every round starts from fresh episodes with seeded resets, so a run resumed from the
-            # checkpoint of the last round continues exactly as the uninterrupted run would.
-            env = agent.get_env()
-            env.seed(round_reset_seed(self.cfg.seed, k, self.round))
-            agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
-            agent.learn(self.cfg.training.steps_per_round, callback=callback, reset_num_timesteps=False)
+        if not self.collected:  # 1. collect and learn, with last round's rewards and weights
+            self.round += 1
+            for k, agent in enumerate(self.agents):
+                # Every round starts from fresh episodes with seeded resets, so a run resumed from the
+                # checkpoint of the last round continues exactly as the uninterrupted run would.
+                env = agent.get_env()
+                env.seed(round_reset_seed(self.cfg.seed, k, self.round))
+                agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
+                agent.learn(self.cfg.training.steps_per_round, callback=callback, reset_num_timesteps=False)
+            self.collected = True
+        if self.queries is not None:  # 1b. buy labels (a file rater may stop the run here)
+            rng = np.random.default_rng(query_seed(self.cfg.seed, self.round))
+            self.queries.buy(self.round, self.task, self._probabilities, rng)
+        self.collected = False
         if self.trainer is not None:  # 2-3. co-train, pseudo-rewards
             stats = self.cotrain()
         else:  # a baseline has no co-trainer, but its labels are its effort too
@@ -278,6 +305,9 @@ class CoTrainingRun:
         result = self.trainer.step(pool)
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class), nan=0.0)
         self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight)
+        if self.queries is not None:  # a bought label reaches every stored and future step of its sample
+            bought = np.flatnonzero(self.queries.revealed)
+            self.table.set(bought, self.store.label_value[bought], 1.0)
         self.stopped = result.stopped
         stats = round_stats(result, pool.unlabelled, self.task.true_class())  # metrics only
         return {**stats, "labelled_steps": int(pool.labelled.sum())}
@@ -306,6 +336,10 @@ class CoTrainingRun:
             "labelled_steps": int((segments.ids[:n][labelled] >= 0).sum()),
             "step_reward_error": float(error.mean()) if decoded.any() else float("nan"),
         }
+
+    def _probabilities(self) -> np.ndarray | None:
+        """(m, N, K) the views' class probabilities of the task's pool, or None before any fit."""
+        return None if self.trainer is None else self.trainer.probabilities(self.task.pool())
 
     def step_model_seeds(self) -> list[int]:
         """One seed per view: the initial parameters of its per-step reward model under segment labels."""
@@ -344,6 +378,10 @@ class CoTrainingRun:
             "table": self.table.state_dict(),
             "classes": self.classes,
             "trainer": self.trainer,
+            "collected": self.collected,
+            "queries": None
+            if self.queries is None
+            else (self.queries.revealed, self.queries.met_round, self.queries.log),
             # SB3 draws exploration and replay batches from the legacy global generators.
             "rng": {"python": random.getstate(), "numpy": np.random.get_state(), "torch": th.get_rng_state()},  # noqa: NPY002
         }
@@ -357,6 +395,9 @@ class CoTrainingRun:
         self.segment_classes = state.get("segment_classes", self.segment_classes)  # older checkpoints lack it
         self.table.load_state_dict(state["table"])
         self.task.classes, self.trainer = state["classes"], state["trainer"]
+        self.collected = state.get("collected", False)  # older checkpoints: at a round's end
+        if self.queries is not None:
+            self.queries.revealed, self.queries.met_round, self.queries.log = state["queries"]
         for k, agent in enumerate(self.agents):
             loaded = type(agent).load(io.BytesIO(state["agents"][k]), env=agent.get_env())
             loaded.replay_buffer = state["buffers"][k]
@@ -393,6 +434,8 @@ class CoTrainingRun:
                     "labelled_steps": stats.get("labelled_steps", float("nan")),
                     "step_reward_error": stats.get("step_reward_error", float("nan")),
                     **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
+                    # Runs on the uniform mask keep the columns they always had.
+                    **({} if self.queries is None else {"queries": self.queries.answers_of(self.round).size}),
                 }
             )
         return rows

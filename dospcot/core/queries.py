@@ -39,6 +39,8 @@ import numpy as np
 STRATEGIES: tuple[str, ...] = ("uniform", "random", "outcomes", "uncertainty", "disagreement")
 """``training.label_strategy`` values; ``"uniform"`` is the fixed random mask and buys nothing."""
 CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")
+LOG_COLUMNS: tuple[str, ...] = ("round", "sample", "strategy", "answer")
+"""The columns of a run's ``queries.csv``."""
 """The strategies that read the reward classifiers (so need co-training)."""
 
 
@@ -66,6 +68,22 @@ class QueriedTask(Protocol):
 
     def reveal(self, ids: np.ndarray, rewards: np.ndarray) -> None:
         """Label samples ``ids`` with ``rewards`` in the store, for all their visits."""
+
+
+class StoreQueries:
+    """What the reward queries write into a task adapter's store, whose samples hold ``labelled``,
+    ``label_value`` and ``hidden_reward`` arrays; and the hidden rewards the simulated rater reads."""
+
+    store: Any
+
+    def reveal(self, ids: np.ndarray, rewards: np.ndarray) -> None:
+        """Label samples ``ids`` with ``rewards``, for all their visits."""
+        self.store.labelled[ids] = True
+        self.store.label_value[ids] = rewards
+
+    def hidden_reward(self, ids: np.ndarray) -> np.ndarray:
+        """The hidden rewards of samples ``ids``: for the simulated rater alone, never a learner."""
+        return self.store.hidden_reward[ids]
 
 
 ProbabilitiesOf = Callable[[], "np.ndarray | None"]

@@ -73,12 +73,15 @@ def write_toml(path: Path, data: dict[str, Any]) -> None:
     write_text(path, tomli_w.dumps(data))
 
 
-def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
-    """One row per dict; the columns are every row's keys in order of first appearance, a row's missing
-    ones left empty (a run resumed from a checkpoint written before a column existed)."""
+def write_csv(path: Path, rows: Sequence[dict[str, Any]], columns: Sequence[str] = ()) -> None:
+    """One row per dict; the columns are ``columns`` and then every row's keys in order of first
+    appearance, a row's missing ones left empty (a run resumed from a checkpoint written before a
+    column existed)."""
     text = io.StringIO()
     writer = csv.DictWriter(
-        text, fieldnames=list(dict.fromkeys(k for row in rows for k in row)), lineterminator="\n"
+        text,
+        fieldnames=list(dict.fromkeys([*columns, *(k for row in rows for k in row)])),
+        lineterminator="\n",
     )
     writer.writeheader()
     writer.writerows(rows)

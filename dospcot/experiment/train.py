@@ -45,6 +45,8 @@ from dospcot.config.loading import load_run_config
 from dospcot.config.run_configs import RunConfig, TrainConfig
 from dospcot.core.classifier import save_classifier
 from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.queries import LOG_COLUMNS, Rater
+from dospcot.core.raters import FileRater, QueriesPending
 from dospcot.experiment.plots import plot_learning_curves
 from dospcot.experiment.run_folder import (
     CHECKPOINT_FILE,
@@ -71,6 +73,10 @@ ROUND_SCALARS = (
     "normalised_score", "agreement", "labelled_steps",
 )  # fmt: skip
 """The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
+QUERIES_FILE = "queries.csv"
+"""Every label a rater gave: round, sample, how it was chosen, answer (active label strategies)."""
+QUERIES_FOLDER = "queries"
+"""Where a file rater writes each round's queries, ``round_<r>.csv``, for a person to answer."""
 SEGMENT_SCALARS = ("step_reward_error",)
 """The further per-round scalars of a run on segment labels."""
 SUMMARY_METRICS = (
@@ -79,10 +85,13 @@ SUMMARY_METRICS = (
 )  # fmt: skip
 
 
-def build_run(cfg: TrainConfig) -> CoTrainingRun:
+def build_run(cfg: TrainConfig, rater: Rater | None = None) -> CoTrainingRun:
     """The co-training run of a config, before its first round: its task's adapter
-    (``cfg.task_definition.build``) driven by :class:`~dospcot.core.cotraining_run.CoTrainingRun`."""
-    return CoTrainingRun(cfg.task_definition.build(cfg), cfg)
+    (``cfg.task_definition.build``) driven by :class:`~dospcot.core.cotraining_run.CoTrainingRun`.
+
+    :param rater: answers an active label strategy's queries; None: the simulated rater.
+    """
+    return CoTrainingRun(cfg.task_definition.build(cfg), cfg, rater)
 
 
 class _StepBar(BaseCallback):
@@ -170,7 +179,7 @@ def _train_in(
     run_dir: Path, cfg: TrainConfig, state: dict[str, Any] | None, show_progress: bool, command: str
 ) -> Path:
     started, started_cpu = time.perf_counter(), time.process_time()
-    run = build_run(cfg)
+    run = build_run(cfg, FileRater(run_dir / QUERIES_FOLDER) if cfg.training.rater == "file" else None)
     records: list[dict] = []
     elapsed, cpu, sessions, commits = 0.0, 0.0, 1, [source_commit()]
     if state is not None:
@@ -194,14 +203,7 @@ def _train_in(
         desc=f"{cfg.name} round {run.round + 1}/{rounds}", disable=not show_progress, dynamic_ncols=True,
     )  # fmt: skip
 
-    def after_round(run: CoTrainingRun, rows: list[dict]) -> None:
-        """Log the round, write its files and checkpoint it."""
-        records.extend(rows)
-        _log_round(run, rows)
-        score = np.mean([r["normalised_score"] for r in rows])
-        bar.set_postfix(score=f"{score:.2f}", pace=f"{rows[0]['pace']:.2f}")
-        bar.set_description(f"{cfg.name} round {min(run.round + 1, rounds)}/{rounds}")
-        _write_round_files(run_dir, run, cfg, records)
+    def checkpoint() -> None:
         write_checkpoint(
             run_dir,
             {
@@ -214,8 +216,23 @@ def _train_in(
             },
         )
 
-    run.run(on_round=after_round, callback=_StepBar(bar))
-    bar.close()
+    def after_round(run: CoTrainingRun, rows: list[dict]) -> None:
+        """Log the round, write its files and checkpoint it."""
+        records.extend(rows)
+        _log_round(run, rows)
+        score = np.mean([r["normalised_score"] for r in rows])
+        bar.set_postfix(score=f"{score:.2f}", pace=f"{rows[0]['pace']:.2f}")
+        bar.set_description(f"{cfg.name} round {min(run.round + 1, rounds)}/{rounds}")
+        _write_round_files(run_dir, run, cfg, records)
+        checkpoint()
+
+    try:
+        run.run(on_round=after_round, callback=_StepBar(bar))
+    except QueriesPending:  # a person answers the queries: keep the collected round, stop until then
+        checkpoint()
+        raise
+    finally:
+        bar.close()
     for agent in run.agents:
         agent.logger.close()
     plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
@@ -234,16 +251,32 @@ def _train_in(
 
 
 def _log_round(run: CoTrainingRun, rows: list[dict]) -> None:
+    bought = {} if run.queries is None else _queries_per_class(run)
     for agent, row in zip(run.agents, rows, strict=True):
         for key in (*ROUND_SCALARS, *SEGMENT_SCALARS):
             if math.isfinite(row[key]):
                 agent.logger.record(f"dospcot/{key}", row[key])
+        for key, count in bought.items():
+            agent.logger.record(f"queries/{key}", count)
         agent.logger.record("dospcot/round", run.round)
         agent.logger.dump(step=agent.num_timesteps)
 
 
+def _queries_per_class(run: CoTrainingRun) -> dict[str, int]:
+    """This round's answers in all and per reward class of the run (``class_<c>``; ``unknown`` for a
+    value no class holds yet)."""
+    answers = run.queries.answers_of(run.round)
+    classes = run.classes.encode(answers) if answers.size else np.zeros(0, dtype=np.int64)
+    counts = {"total": int(answers.size)}
+    for c in np.unique(classes):
+        counts["unknown" if c < 0 else f"class_{c}"] = int((classes == c).sum())
+    return counts
+
+
 def _write_round_files(run_dir: Path, run: CoTrainingRun, cfg: TrainConfig, records: list[dict]) -> None:
     write_csv(run_dir / METRICS_FILE, records)
+    if run.queries is not None:
+        write_csv(run_dir / QUERIES_FILE, run.queries.log, LOG_COLUMNS)
     for agent, view in zip(run.agents, cfg.views, strict=True):
         atomic_write(run_dir / f"agent_{view}.zip", agent.save)
     if run.trainer is not None:

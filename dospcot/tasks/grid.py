@@ -27,6 +27,7 @@ from dospcot.config.errors import ConfigError
 from dospcot.core.cotrainer import RunPool
 from dospcot.core.in_place_state import InPlaceState
 from dospcot.core.key_pool import key_features
+from dospcot.core.queries import StoreQueries
 from dospcot.core.reward_classes import RunRewardClasses
 from dospcot.demonstrations import expert_demonstrations
 from dospcot.envs import GridLayout, GridWorld, grid_views, monitored_states, view_blind_spots
@@ -34,7 +35,7 @@ from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import View, ViewObservationWrapper
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.tasks.registry import Task, register
+from dospcot.tasks.registry import Task, mask_fraction, register
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
@@ -60,16 +61,30 @@ class KeyStore(InPlaceState):
         self.labelled = np.zeros(n_keys, dtype=bool)
         self.label_value = np.zeros(n_keys)
         self.hidden_reward = np.zeros(n_keys)
-        """The true reward of each seen key: metrics only, never the learners."""
+        """The true reward of each seen key: metrics only, never the learners (and the simulated rater)."""
+        self.terminated = np.zeros(n_keys, dtype=bool)
+        """Whether a step of the key ended its episode (an agent sees that without a reward)."""
+        self.truncated = np.zeros(n_keys, dtype=bool)
+        """Whether the time limit cut an episode at a step of the key."""
 
     def add(
-        self, state: int, action: int, next_state: int, observed: bool, reward: float, hidden: float
+        self,
+        state: int,
+        action: int,
+        next_state: int,
+        observed: bool,
+        reward: float,
+        hidden: float,
+        ends: tuple[bool, bool] = (False, False),
     ) -> int:
-        """Record one step; return its key."""
+        """Record one step (``ends``: whether it ended its episode, whether the time limit cut it);
+        return its key."""
         key = state * self.n_actions + action
         self.visited[key] = True
         self.next_state[key] = next_state
         self.hidden_reward[key] = hidden
+        self.terminated[key] |= ends[0]
+        self.truncated[key] |= ends[1]
         if observed:
             self.labelled[key] = True
             self.label_value[key] = reward
@@ -104,6 +119,7 @@ class StoreWrapper(gym.Wrapper):
             info["reward_observed"],
             float(reward),
             info["hidden_reward"],
+            (bool(terminated), bool(truncated)),
         )
         self._state = next_state
         return obs, reward, terminated, truncated, info
@@ -113,7 +129,7 @@ MakeEnv = Callable[[], gym.Env]
 """Builds a fresh copy of a discrete task (a toy-text env with ``P`` and ``s``)."""
 
 
-class GridTask:
+class GridTask(StoreQueries):
     """The grid adapter of a run (:class:`~dospcot.core.cotraining_run.CoTrainingTask`).
 
     :param cfg: the run's config: its views, method, seed, label fraction, episode lengths
@@ -162,9 +178,23 @@ class GridTask:
             ):
                 self.store.add(int(s), int(a), int(s2), True, float(r), float(r))
 
+    # What the reward queries read of the pool (dospcot.core.queries.QueriedTask): never a hidden reward.
+    def met(self) -> np.ndarray:
+        return self.store.visited.copy()
+
+    def labelled(self) -> np.ndarray:
+        return self.store.labelled.copy()
+
+    def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.store.terminated.copy(), self.store.truncated.copy()
+
+    def describe(self, sample: int) -> dict[str, Any]:
+        state, action = divmod(sample, self.mdp.n_actions)
+        return {"key": f"state {state}, action {action}"}
+
     def agent_env(self, k: int, view: str) -> gym.Env:
         cfg = self.cfg
-        fraction = 1.0 if cfg.method == "oracle" else cfg.training.label_fraction
+        fraction = mask_fraction(cfg)
         env = gym.wrappers.TimeLimit(self.make_env(), cfg.env.train_episode_steps or cfg.env.episode_steps)
         env = RewardMaskWrapper(
             env,
@@ -173,6 +203,7 @@ class GridTask:
             mask_seed=cfg.seed,
             monitored_states=self.monitored_states,
             revealed_keys=self.revealed_keys,
+            queried=cfg.training.label_strategy != "uniform",
         )
         return ViewObservationWrapper(StoreWrapper(env, self.store), self.views[view])
 

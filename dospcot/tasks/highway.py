@@ -58,6 +58,6 @@ class HighwayTask(SensorTaskBase):
         highway = cfg.highway
         make_env = partial(
             make_masked_highway, highway.env_id, config=highway.config,
-            reveal_first_steps=highway.reveal_first_steps,
+            reveal_first_steps=highway.reveal_first_steps, queried=cfg.training.label_strategy != "uniform",
         )  # fmt: skip
         return SensorTask(cfg, highway, make_env)

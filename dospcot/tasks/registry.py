@@ -107,6 +107,14 @@ class Task:
         return write_cotraining_report(spec, runs, out_dir)
 
 
+def mask_fraction(cfg: TrainConfig) -> float:
+    """The random share of a run's reward mask: every reward for the oracle, none where a rater buys
+    the labels (an active ``training.label_strategy``), else ``training.label_fraction``."""
+    if cfg.method == "oracle":
+        return 1.0
+    return cfg.training.label_fraction if cfg.training.label_strategy == "uniform" else 0.0
+
+
 def register(cls: type[Task]) -> type[Task]:
     """Class decorator: add a :class:`Task` to the registry under its ``name``."""
     if cls.name in _TASKS and type(_TASKS[cls.name]) is not cls:

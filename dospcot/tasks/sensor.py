@@ -38,11 +38,12 @@ from dospcot.config.errors import ConfigError
 from dospcot.config.task_sections import DemonstrationsConfig, GymConfig, HighwayConfig
 from dospcot.core.cotrainer import RunPool
 from dospcot.core.in_place_state import InPlaceState
+from dospcot.core.queries import StoreQueries
 from dospcot.core.reward_classes import QuantileRewardClasses, episode_end_class_mask
 from dospcot.demonstrations import Demonstrations, load_agent, record_demonstrations
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.seeding import EVAL_SEED, agent_seed, demonstration_seed
-from dospcot.tasks.registry import Task
+from dospcot.tasks.registry import Task, mask_fraction
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
@@ -62,7 +63,10 @@ class StepStore(InPlaceState):
     :param view_shapes: the shape of each view, by name.
     """
 
-    STEP_ARRAYS = ("state_row", "next_row", "action", "labelled", "terminal", "label_value", "hidden_reward")
+    STEP_ARRAYS = (
+        "state_row", "next_row", "action", "labelled", "terminal", "truncated", "label_value",
+        "hidden_reward",
+    )  # fmt: skip
     """The arrays that hold one entry per step."""
 
     def __init__(self, view_shapes: dict[str, tuple[int, ...]]) -> None:
@@ -76,6 +80,8 @@ class StepStore(InPlaceState):
         self.action = np.zeros(0, np.int64)
         self.labelled = np.zeros(0, bool)
         self.terminal = np.zeros(0, bool)
+        self.truncated = np.zeros(0, bool)
+        """Whether the time limit cut each step's episode there (read by the reward queries)."""
         """Whether each step ended its episode (the env's ``terminated``, which the mask leaves visible)."""
         self.label_value = np.zeros(0)
         self.hidden_reward = np.zeros(0)
@@ -108,11 +114,12 @@ class StepStore(InPlaceState):
         reward: float,
         hidden: float,
         key: Hashable = None,
-        terminal: bool = False,
+        ends: tuple[bool, bool] = (False, False),
     ) -> int:
-        """Record one step between two stored rows; return its store id: a new one, unless the step
-        revisits a sample (a :class:`KeyedStepStore`'s pair named by ``key`` and ``action``), whose label
-        and hidden reward it then updates."""
+        """Record one step between two stored rows (``ends``: whether it ended its episode, whether the
+        time limit cut it); return its store id: a new one, unless the step revisits a sample (a
+        :class:`KeyedStepStore`'s pair named by ``key`` and ``action``), whose label and hidden reward
+        it then updates."""
         n = self.sample_of(key, action)
         if n is not None:
             if observed:  # the mask labels every visit of a pair or none
@@ -125,7 +132,7 @@ class StepStore(InPlaceState):
                 setattr(self, name, _grow(getattr(self, name), grow))
         n = self._n
         self.state_row[n], self.action[n], self.next_row[n] = state_row, action, next_row
-        self.terminal[n] = terminal
+        self.terminal[n], self.truncated[n] = ends
         self.labelled[n], self.label_value[n], self.hidden_reward[n] = (
             observed,
             reward if observed else 0.0,
@@ -143,8 +150,9 @@ class StepStore(InPlaceState):
         """Note that sample ``n`` is the step of ``action`` from the state named ``key``."""
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
-        # A checkpoint from before ``terminal`` was stored: no run of that code read it.
-        super().load_state_dict({"terminal": np.zeros(state["action"].size, bool), **state})
+        # A checkpoint from before ``terminal`` or ``truncated`` was stored: no run of that code read it.
+        unread = {name: np.zeros(state["action"].size, bool) for name in ("terminal", "truncated")}
+        super().load_state_dict({**unread, **state})
 
     def is_new(self, key: Hashable, action: int) -> bool:
         """Whether a step of ``action`` from the state named ``key`` starts a new sample."""
@@ -221,7 +229,7 @@ class SensorStoreWrapper(gym.Wrapper):
         info = dict(info)
         info["store_id"] = self.store.add(
             self._row if new else -1, action, next_row, info["reward_observed"], float(reward),
-            info["hidden_reward"], key=info.get("state_key"), terminal=terminated,
+            info["hidden_reward"], key=info.get("state_key"), ends=(terminated, truncated),
         )  # fmt: skip
         self._views, self._row = views, next_row
         return obs, reward, terminated, truncated, info
@@ -239,7 +247,7 @@ class _RandomPolicy:
         return self.rng.integers(self.n, size=len(obs)), None
 
 
-class SensorTask:
+class SensorTask(StoreQueries):
     """The sensor adapter of a run (:class:`~dospcot.core.cotraining_run.CoTrainingTask`).
 
     :param cfg: the run's config: its views, method, seed, label fraction and demonstrations.
@@ -260,7 +268,7 @@ class SensorTask:
         make_eval_env: Callable[..., gym.Env] | None = None,
     ) -> None:
         self.cfg, self.section = cfg, section
-        fraction = 1.0 if cfg.method == "oracle" else cfg.training.label_fraction
+        fraction = mask_fraction(cfg)
         # A keyed pool holds each pair once: its agents must agree on whether it is labelled.
         seeds = [cfg.seed if section.keyed else agent_seed(cfg.seed, k) for k in range(len(cfg.views))]
         envs = [make_env(v, cfg.views, fraction, seed) for v, seed in zip(cfg.views, seeds, strict=True)]
@@ -275,6 +283,24 @@ class SensorTask:
         self.eval_envs = [_eval_env(build_eval, v, section.episode_steps) for v in cfg.views]
         returns = self._returns(_RandomPolicy(envs[0].action_space, cfg.seed), self.eval_envs[0])[0]
         self.random_return = float(np.mean(returns))
+
+    # What the reward queries read of the pool (dospcot.core.queries.QueriedTask): never a hidden reward.
+    def met(self) -> np.ndarray:
+        return np.ones(len(self.store), dtype=bool)
+
+    def labelled(self) -> np.ndarray:
+        return self.store.labelled[: len(self.store)].copy()
+
+    def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        n = len(self.store)
+        return self.store.terminal[:n].copy(), self.store.truncated[:n].copy()
+
+    def describe(self, sample: int) -> dict[str, Any]:
+        keys = getattr(self.store, "ids", None)
+        if keys is not None:  # a keyed pool's sample is a (state key, action) pair
+            key, action = next(pair for pair, n in keys.items() if n == sample)
+            return {"key": f"state {key}, action {action}"}
+        return {"key": f"step {sample}, action {int(self.store.action[sample])}"}
 
     def agent_env(self, k: int, view: str) -> gym.Env:
         return self._envs[k]

@@ -42,7 +42,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from dospcot.experiment.report import load_runs, write_report
-from dospcot.experiment.studies import grid, highway, label_sources, minigrid, paper, second_view
+from dospcot.experiment.studies import grid, highway, label_sources, minigrid, paper, queries, second_view
 from dospcot.experiment.studies.declaration import Study, Sweep
 from dospcot.experiment.studies.provenance import header
 from dospcot.experiment.studies.readme import ROOT, check_readme_block, replace_readme_block
@@ -57,6 +57,7 @@ STUDIES: dict[str, Study] = {
     **label_sources.STUDIES,
     **second_view.STUDIES,
     **paper.STUDIES,
+    **queries.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 

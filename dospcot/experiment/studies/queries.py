@@ -1,0 +1,193 @@
+"""The active-queries study (docs/preregistration-queries.md): label strategies at an equal budget on
+grid16's unseen layouts, MiniGrid and the fast highway, with the pre-registered hypotheses Q1-Q3."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+
+from dospcot.experiment.report import TrialRun
+from dospcot.experiment.run_folder import REWARD_CLASSES_FILE
+from dospcot.experiment.studies.declaration import Study, Sweep
+from dospcot.experiment.studies.grid import LAYOUT, UNSEEN_LAYOUTS
+from dospcot.experiment.studies.tables import FRACTION, MINIGRID_TASKS, over_seeds
+from dospcot.metrics import SeedSummary
+
+STRATEGY = "training.label_strategy"
+SELF_TRAINING = ("uniform", "random", "uncertainty")
+DOSPCOT = ("uniform", "random", "uncertainty", "outcomes", "disagreement")
+Q3_STRATEGY = "outcomes"
+"""The strategy the MiniGrid target (Q3) is judged on, named in the pre-registration."""
+COLUMNS = ("success", "pseudo_accuracy", "worst_class_precision", "labelled_steps")
+
+
+def _arms(prefix: str, fraction: str, extra: dict[str, tuple[str, ...]], name: str) -> tuple[Sweep, ...]:
+    """The study's arms on one task: oracle; self-training and DOSPCoT under their strategies."""
+    budget = {**extra, FRACTION: (fraction,)}
+    return (
+        Sweep(f"{name}-oracle", (f"{prefix}-oracle",), dict(extra)),
+        Sweep(f"{name}-self-training", (f"{prefix}-self-training",), {**budget, STRATEGY: SELF_TRAINING}),
+        Sweep(f"{name}-dospcot", (f"{prefix}-dospcot",), {**budget, STRATEGY: DOSPCOT}),
+    )
+
+
+def _arm(run: TrialRun) -> str:
+    """A run's arm: its method and, but for the oracle, its strategy and label fraction."""
+    config = run.trial.config
+    method = "self-training" if config.endswith("-self-training") else config.rsplit("-", 1)[-1]
+    if method == "oracle":
+        return "oracle"
+    strategy = run.trial.params.get(STRATEGY, "uniform")
+    return f"{method} {strategy} @ {run.trial.params.get(FRACTION, '')}"
+
+
+def _pairs(runs: list[TrialRun], arm: str) -> dict[tuple[str, int], TrialRun]:
+    """The runs of one arm by (layout, seed): the pairs of a paired comparison."""
+    return {(r.trial.params.get(LAYOUT, ""), r.trial.seed): r for r in runs if _arm(r) == arm}
+
+
+def _difference(runs: list[TrialRun], a: str, b: str, metric: str) -> SeedSummary:
+    """``metric`` of arm a minus arm b, paired by layout and seed."""
+    first, second = _pairs(runs, a), _pairs(runs, b)
+    both = sorted(set(first) & set(second))
+    return SeedSummary.of(
+        [first[k].summary["mean"][metric] - second[k].summary["mean"][metric] for k in both]
+    )
+
+
+def _arm_table(runs: list[TrialRun], task: str) -> list[str]:
+    arms = list(dict.fromkeys(_arm(r) for r in runs))
+    lines = [f"| {task} | " + " | ".join(COLUMNS) + " | seeds |", "|---|" + "---|" * (len(COLUMNS) + 1)]
+    for arm in arms:
+        members = [r for r in runs if _arm(r) == arm]
+        cells = " | ".join(over_seeds(members, column) for column in COLUMNS)
+        lines.append(f"| {arm} | {cells} | {len(members)} |")
+    return lines
+
+
+def _verdict(held: bool | None) -> str:
+    return "not yet run" if held is None else ("**held**" if held else "**not met**")
+
+
+def _q1_q2(runs: list[TrialRun], task: str, q1: bool) -> list[str]:
+    lines = []
+    disagreement, uncertainty = "dospcot disagreement @ {f}", "self-training uncertainty @ {f}"
+    fraction = next((r.trial.params[FRACTION] for r in runs if FRACTION in r.trial.params), "")
+    if q1:
+        diff = _difference(runs, disagreement.format(f="0.02"), "dospcot uniform @ 0.05", "success")
+        held = None if diff.n == 0 else diff.low >= -0.05
+        lines.append(
+            f"- Q1 ({task}): success of DOSPCoT disagreement at 2% minus DOSPCoT uniform at 5%, paired: "
+            f"{diff} over {diff.n} pairs; lower bound >= -0.05: {_verdict(held)}."
+        )
+    for metric in ("success", "pseudo_accuracy"):
+        a, b = disagreement.format(f=fraction), uncertainty.format(f=fraction)
+        diff = _difference(runs, a, b, metric)
+        held = None if diff.n == 0 else diff.low > 0
+        lines.append(
+            f"- Q2 ({task}, {metric}): DOSPCoT disagreement minus self-training uncertainty, paired: {diff} "
+            f"over {diff.n} pairs; interval above 0: {_verdict(held)}."
+        )
+    return lines
+
+
+def _goal_labelled(run: TrialRun) -> bool:
+    """Whether the run's labels hold a goal step: a positive reward class (MiniGrid pays only there)."""
+    return any(r > 0 for r in json.loads((run.run_dir / REWARD_CLASSES_FILE).read_text())["rewards"])
+
+
+def _q3(runs: list[TrialRun], task: str) -> str:
+    oracle = [r.summary["mean"]["success"] for r in runs if _arm(r) == "oracle"]
+    judged = [r for r in runs if _arm(r) == f"dospcot {Q3_STRATEGY} @ 0.1"]
+    if not oracle or not judged:
+        return f"- Q3 ({task}): {_verdict(None)}."
+    success = SeedSummary.of([r.summary["mean"]["success"] for r in judged]).mean
+    share = success / max(sum(oracle) / len(oracle), 1e-12)
+    goal = sum(_goal_labelled(r) for r in judged)
+    held = share >= 0.9 and goal == len(judged)
+    return (
+        f"- Q3 ({task}): DOSPCoT {Q3_STRATEGY} reaches {share:.0%} of the oracle's success; {goal} of its "
+        f"{len(judged)} seeds' labels hold a goal pair; at least 90% and every seed: {_verdict(held)}."
+    )
+
+
+def _tables(tasks: dict[str, Callable[[TrialRun], bool]], hypotheses: Callable[..., list[str]]) -> Callable:
+    def tables(runs: list[TrialRun]) -> list[str]:
+        lines = [
+            "Each cell: mean over seeds [95% bootstrap interval] of the run's mean over its agents, last "
+            "round; the arm names the method, its label strategy and its label fraction (docs/queries.md). "
+            "Differences are paired by seed (and layout on the grid).",
+        ]
+        for task, belongs in tasks.items():
+            members = [r for r in runs if belongs(r)]
+            if members:
+                lines += ["", *_arm_table(members, task), "", *hypotheses(members, task)]
+        return lines
+
+    return tables
+
+
+def _minigrid_hypotheses(runs: list[TrialRun], task: str) -> list[str]:
+    return [*_q1_q2(runs, task, q1=False), _q3(runs, task)]
+
+
+def _grid_and_minigrid_hypotheses(runs: list[TrialRun], task: str) -> list[str]:
+    if task.startswith("grid16"):
+        return _q1_q2(runs, task, q1=True)
+    return _minigrid_hypotheses(runs, task)
+
+
+def _of_config(prefix: str) -> Callable[[TrialRun], bool]:
+    return lambda run: run.trial.config.startswith(prefix)
+
+
+GRID_SWEEPS = (
+    # The arms of the hypotheses first, so that a study cut short has its verdicts: Q1, then Q2.
+    Sweep(
+        "queries-grid16-disagreement",
+        ("grid16-dospcot",),
+        {LAYOUT: UNSEEN_LAYOUTS, FRACTION: ("0.02",), STRATEGY: ("disagreement",)},
+    ),
+    Sweep("queries-grid16-reference", ("grid16-dospcot",), {LAYOUT: UNSEEN_LAYOUTS, FRACTION: ("0.05",)}),
+    Sweep(
+        "queries-grid16-self-training",
+        ("grid16-self-training",),
+        {LAYOUT: UNSEEN_LAYOUTS, FRACTION: ("0.02",), STRATEGY: ("uncertainty", "uniform", "random")},
+    ),
+    Sweep(
+        "queries-grid16-dospcot",
+        ("grid16-dospcot",),
+        {
+            LAYOUT: UNSEEN_LAYOUTS,
+            FRACTION: ("0.02",),
+            STRATEGY: ("uniform", "random", "uncertainty", "outcomes"),
+        },
+    ),
+    Sweep("queries-grid16-oracle", ("grid16-oracle",), {LAYOUT: UNSEEN_LAYOUTS}),
+)
+MINIGRID_SWEEPS = tuple(
+    sweep for task in MINIGRID_TASKS for sweep in _arms(f"minigrid-{task}", "0.1", {}, f"queries-{task}")
+)
+
+STUDIES: dict[str, Study] = {
+    "queries": Study(
+        (*GRID_SWEEPS, *MINIGRID_SWEEPS),
+        _tables(
+            {
+                "grid16, layouts 101, 202, 303": _of_config("grid16-"),
+                **{env_id: _of_config(f"minigrid-{task}-") for task, env_id in MINIGRID_TASKS.items()},
+            },
+            _grid_and_minigrid_hypotheses,
+        ),
+        "Active reward queries: label strategies at an equal budget",
+        seeds=10,
+        readme=None,
+    ),
+    "queries-highway": Study(
+        _arms("fasthighway", "0.02", {}, "queries-fasthighway"),
+        _tables({"fast highway": lambda r: True}, lambda runs, task: []),
+        "Active reward queries on the fast highway (no hypothesis)",
+        seeds=5,
+        readme=None,
+    ),
+}
