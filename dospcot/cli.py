@@ -238,6 +238,21 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         print("\n".join(preset_names()))
         return 0
+    from dospcot.experiment.interrupts import Interrupted, stop_on_signals
+
+    try:
+        with stop_on_signals():
+            return _run(args, command)
+    except Interrupted as stop:  # Ctrl-C or SIGTERM: what was kept, and how to go on
+        print(f"dospcot {args.command}: interrupted; kept {stop}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print(f"dospcot {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _run(args: argparse.Namespace, command: str) -> int:
+    """Run the parsed command; its bad inputs end in one line on stderr and exit status 2."""
     if args.command in RUN_COMMANDS:
         from dospcot.config.errors import ConfigError
         from dospcot.core.raters import QueriesPending, RaterError
@@ -265,7 +280,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.out is None:
             args.out = QUICK_BENCH_OUT if args.quick else Path("BENCHMARKS.md")
-        elif args.quick and args.out.resolve() == Path("BENCHMARKS.md").resolve():
+        elif args.quick and args.out.name == "BENCHMARKS.md":
             print(
                 "dospcot bench: error: --quick figures are a smoke test and never go into BENCHMARKS.md; "
                 f"leave out --out (they go to {QUICK_BENCH_OUT}) or name another file",
@@ -312,12 +327,17 @@ def _evaluate(args: argparse.Namespace, command: str) -> int:
     from dospcot.experiment.train import evaluate
 
     result = evaluate(args.run_dir)
+    state = "finished" if result["finished"] else "unfinished"
+    print(f"{args.run_dir}: the agents of round {result['round']} of {result['rounds']} ({state})")
     for view, row in result["per_view"].items():
         print(
             f"{view:>8}: return {row['greedy_return']:8.1f}  success {row['success']:.0f}  "
             f"normalised score {row['normalised_score']:.3f}  agreement {row['agreement']:.3f}"
         )
-    print(f"wrote {args.run_dir / 'evaluation.json'}")
+    if result["finished"]:
+        print(f"wrote {args.run_dir / 'evaluation.json'}")
+    else:
+        print("nothing written: the run is unfinished, and a resume would make a file of it stale")
     return 0
 
 
@@ -326,6 +346,8 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
     from dospcot.experiment.sweep import default_sweep_dir, run_sweep
     from dospcot.experiment.sweep_spec import SweepSpec
 
+    if args.ray_address and args.backend != "ray":
+        raise ConfigError("--ray-address names a Ray cluster: it needs --backend ray")
     if args.resume is not None:
         if args.configs or args.grid or args.overrides or args.name:
             raise ConfigError(
@@ -372,12 +394,22 @@ def _report(args: argparse.Namespace, command: str) -> int:
 def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
     import time
 
+    from dospcot.config.errors import ConfigError
     from dospcot.config.presets import PAPER_PRESETS
     from dospcot.experiment.report import write_report
     from dospcot.experiment.run_folder import new_run_dir
     from dospcot.experiment.sweep import run_sweep
     from dospcot.experiment.sweep_spec import SweepError, SweepSpec
 
+    for option, key in (("--label-fraction", "label_fraction"), ("--episodes", "episodes_per_round")):
+        given = [o for o in args.overrides if o.partition("=")[0].strip() == f"tabular.{key}"]
+        if given and getattr(args, option[2:].replace("-", "_")) is not None:
+            raise ConfigError(f"{option} and --set {given[0]} both set tabular.{key}: give it once")
+    if len(args.seeds) < 2:
+        raise ConfigError(
+            f"--seeds gives one seed ({args.seeds[0]}): the protocol's verdicts are intervals over seeds, "
+            "which one seed cannot give; give 2 or more (default 10)"
+        )
     overrides = [
         *([f"tabular.label_fraction={args.label_fraction}"] if args.label_fraction is not None else []),
         *([f"tabular.episodes_per_round={args.episodes}"] if args.episodes is not None else []),

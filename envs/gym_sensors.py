@@ -63,7 +63,10 @@ def import_dotted(path: str, what: str) -> Any:
     try:
         target: Any = importlib.import_module(module_name)
     except ImportError as err:
-        raise ValueError(f"{what}: cannot import module {module_name!r} ({err})") from None
+        raise ValueError(
+            f"{what}: cannot import module {module_name!r} ({err}); a module of your own must be "
+            "importable from where dospcot runs (its folder on PYTHONPATH), not only beside the config"
+        ) from None
     for part in attr.split("."):
         if not hasattr(target, part):
             raise ValueError(f"{what}: module {module_name!r} has no {attr!r}")
@@ -172,7 +175,13 @@ class ObservationSensors(gym.Wrapper):
         try:
             self._obs, _ = env.reset(seed=0)
         except Exception as err:  # a user's env may raise anything
-            raise ValueError(f"the env's reset failed: {type(err).__name__}: {err}") from None
+            raise ValueError(f"the env's reset failed: {type(err).__name__}: {err}") from err
+        if not env.observation_space.contains(self._obs):
+            shape, dtype = np.shape(self._obs), getattr(self._obs, "dtype", type(self._obs).__name__)
+            raise ValueError(
+                f"the env's first observation (shape {shape}, {dtype}) does not fit its observation_space "
+                f"{env.observation_space}; an agent would learn from values its space does not allow"
+            )
         self._spaces = {
             name: gym.spaces.Box(-np.inf, np.inf, self._read(name).shape, np.float32) for name in self._fns
         }
@@ -201,9 +210,12 @@ class ObservationSensors(gym.Wrapper):
 
     def _read(self, name: str) -> np.ndarray:
         try:
-            value = np.asarray(self._fns[name](self._obs), dtype=np.float32)
-        except Exception as err:  # a user's function may raise anything
-            raise ValueError(f"view {name!r} failed on an observation: {type(err).__name__}: {err}") from None
+            raw = self._fns[name](self._obs)
+            value = np.asarray(raw, dtype=np.float32)
+        except Exception as err:  # a user's function may raise anything: named, its error the cause
+            raise ValueError(f"view {name!r} failed on an observation: {type(err).__name__}: {err}") from err
+        if raw is None:
+            raise ValueError(f"view {name!r} returned None; a view returns an array of numbers")
         return value.ravel()
 
     def view_space(self, name: str) -> gym.spaces.Box:
@@ -254,6 +266,8 @@ def make_gym_env(
             env = factory(**kwargs)
         except TypeError as err:  # an env_kwargs key the function does not take
             raise ValueError(f"gym.env_kwargs: {err}") from None
+        except Exception as err:  # a user's function may raise anything: named, its error the cause
+            raise ValueError(f"gym.env_id: {env_id} raised {type(err).__name__}: {err}") from err
         if not isinstance(env, gym.Env):
             raise ValueError(f"gym.env_id: {env_id!r} returned a {type(env).__name__}, not a gymnasium Env")
     else:

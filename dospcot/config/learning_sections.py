@@ -11,6 +11,7 @@ from typing import Any, ClassVar, Literal
 
 from stable_baselines3 import DQN
 
+from dospcot.config.checks import check_at_least, check_positive, check_within
 from dospcot.core.selection import QUOTAS, WEIGHTINGS, Quota, Weighting
 from dospcot.envs.masking import check_label_fraction
 from dospcot.policies import ExpectedSarsaDQN
@@ -19,20 +20,6 @@ ModelKind = Literal["mlp", "linear"]
 LossKind = Literal["cross_entropy", "hinge"]
 MODEL_KINDS: tuple[str, ...] = ("mlp", "linear")
 LOSS_KINDS: tuple[str, ...] = ("cross_entropy", "hinge")
-
-
-def check_at_least(section: Any, bound: int, *names: str) -> None:
-    """Raise ``ValueError`` for the first of the section's fields ``names`` below ``bound``."""
-    for name in names:
-        if getattr(section, name) < bound:
-            raise ValueError(f"{name} must be >= {bound}, got {getattr(section, name)}")
-
-
-def check_within(section: Any, low: float, high: float, *names: str) -> None:
-    """Raise ``ValueError`` for the first of the section's fields ``names`` outside [low, high]."""
-    for name in names:
-        if not low <= getattr(section, name) <= high:
-            raise ValueError(f"{name} must lie in [{low:g}, {high:g}], got {getattr(section, name)}")
 
 
 @dataclass(frozen=True)
@@ -160,6 +147,15 @@ class _DQNChecks:
             self, 1, "buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"
         )
         check_at_least(self, 0, "learning_starts")
+        check_positive(self, "max_grad_norm", "stats_window_size")
+        if self.gradient_steps < 1 and self.gradient_steps != -1:
+            raise ValueError(
+                f"gradient_steps must be >= 1, or -1 (as many as env steps), got {self.gradient_steps}"
+            )
+        if self.buffer_size < self.batch_size:
+            raise ValueError(
+                f"buffer_size must hold a batch (batch_size {self.batch_size}), got {self.buffer_size}"
+            )
         if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1:
             raise ValueError(f"gamma and tau must lie in (0, 1], got {self.gamma}, {self.tau}")
         if self.learning_rate <= 0:
@@ -260,6 +256,9 @@ class ClassifierConfig:
             raise ValueError(f"classifier model must be one of {MODEL_KINDS}, got {self.model!r}")
         if self.loss not in LOSS_KINDS:
             raise ValueError(f"classifier loss must be one of {LOSS_KINDS}, got {self.loss!r}")
+        check_at_least(self, 1, "hidden", "epochs")
+        check_positive(self, "lr")
+        check_at_least(self, 0, "l2")
 
 
 @dataclass(frozen=True)
@@ -308,6 +307,8 @@ class CoTrainingConfig:
             raise ValueError(f"add_fraction_start must be > 0, got {self.add_fraction_start}")
         if self.add_fraction_step < 0:
             raise ValueError(f"add_fraction_step must be >= 0, got {self.add_fraction_step}")
+        check_within(self, 0, 1, "tol")
+        check_at_least(self, 1, "max_classes")
 
 
 @dataclass(frozen=True)
@@ -337,6 +338,10 @@ class TabularConfig:
 
     def __post_init__(self) -> None:
         check_label_fraction(self.label_fraction)
+        if not 0 < self.learning_rate <= 1 or not 0 < self.discount <= 1:
+            raise ValueError(
+                f"learning_rate and discount must lie in (0, 1], got {self.learning_rate}, {self.discount}"
+            )
         if self.rounds < 1 or self.episodes_per_round < 1 or self.replay_sweeps < 0:
             raise ValueError(
                 f"rounds and episodes_per_round must be >= 1 and replay_sweeps >= 0; got {self.rounds}, "

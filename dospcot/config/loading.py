@@ -18,6 +18,8 @@ tables are merged key by key over the base's.
 from __future__ import annotations
 
 import dataclasses
+import math
+import re
 import tomllib
 import typing
 from collections.abc import Mapping, Sequence
@@ -29,16 +31,27 @@ from dospcot.config.presets import read_config_text
 from dospcot.config.run_configs import RunConfig
 from dospcot.tasks.registry import get_task
 
+BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.:/-]*")
+"""A value ``--set`` takes as a string without TOML's quotes: a name, a dotted path or a file path."""
+
 
 def parse_override(text: str) -> tuple[list[str], Any]:
-    """``"training.rounds=3"`` -> (["training", "rounds"], 3); values are TOML, bare words strings."""
+    """``"training.rounds=3"`` -> (["training", "rounds"], 3); values are TOML, bare words strings.
+
+    :raises ConfigError: the value is neither TOML nor a bare word (an unclosed quote or table).
+    """
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
         raise ConfigError(f"--set takes key=value, got {text!r}")
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
-        value = raw
+        if not BARE_WORD.fullmatch(raw.strip()):
+            raise ConfigError(
+                f"--set {text}: {raw!r} is not a TOML value; a string needs its quotes past the shell, "
+                f"e.g. --set '{key.strip()}=\"text\"'"
+            ) from None
+        value = raw.strip()
     return key.strip().split("."), value
 
 
@@ -113,13 +126,16 @@ def _renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
 
 def set_key(data: dict[str, Any], path: Sequence[str], value: Any, where: str) -> None:
     """Set the key ``path`` (sections, then the key) of the config table ``data`` to ``value``,
-    making missing sections; ``where`` names the override in the error for a key that is no section."""
+    making missing sections; a table ``value`` merges key by key into the table already there, as
+    ``extends`` does, so ``--set 'training={rounds=1}'`` changes one key, not the whole section.
+    ``where`` names the override in the error for a key that is no section."""
     table = data
     for part in path[:-1]:
         table = table.setdefault(part, {})
         if not isinstance(table, dict):
             raise ConfigError(f"{where}: {part!r} is not a section")
-    table[path[-1]] = value
+    old = table.get(path[-1])
+    table[path[-1]] = _merge(old, value) if isinstance(old, dict) and isinstance(value, dict) else value
 
 
 def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
@@ -137,7 +153,11 @@ def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
         if key not in fields:
             raise ConfigError(f"unknown key '{prefix}{key}'; allowed: {', '.join(fields)}")
     hints = typing.get_type_hints(cls)
-    kwargs = {key: _convert(hints[key], value, f"{prefix}{key}") for key, value in data.items()}
+    unbounded: frozenset[str] = getattr(cls, "infinite_keys", frozenset())
+    kwargs = {
+        key: _convert(hints[key], value, f"{prefix}{key}", may_be_infinite=key in unbounded)
+        for key, value in data.items()
+    }
     try:
         return cls(**kwargs)
     except ConfigError:
@@ -155,7 +175,7 @@ SCALARS: dict[type, tuple[type | tuple[type, ...], str]] = {
 """The scalar field types of a config: the TOML values each takes, and its name in an error."""
 
 
-def _convert(hint: Any, value: Any, key: str) -> Any:
+def _convert(hint: Any, value: Any, key: str, may_be_infinite: bool = False) -> Any:
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if dataclasses.is_dataclass(hint):
         return from_mapping(hint, value, f"{key}.")
@@ -166,7 +186,7 @@ def _convert(hint: Any, value: Any, key: str) -> Any:
     if origin is tuple:
         if not isinstance(value, list | tuple):
             raise ConfigError(f"{key}: expected a list, got {value!r}")
-        return tuple(_convert(args[0], item, key) for item in value)
+        return tuple(_convert(args[0], item, key, may_be_infinite) for item in value)
     if origin is dict:
         if not isinstance(value, Mapping):
             raise ConfigError(f"{key}: expected a table, got {value!r}")
@@ -176,5 +196,8 @@ def _convert(hint: Any, value: Any, key: str) -> Any:
         # A TOML true is a Python int too: only a bool field takes it.
         if not isinstance(value, accepted) or (isinstance(value, bool) and hint is not bool):
             raise ConfigError(f"{key}: expected {what}, got {value!r}")
+        # NaN compares false with every bound, and an infinite value with most: neither is a setting.
+        if hint is float and (math.isnan(value) or (math.isinf(value) and not may_be_infinite)):
+            raise ConfigError(f"{key}: expected a finite number, got {value!r}")
         return hint(value)
     raise ConfigError(f"{key}: cannot be set from a config")  # pragma: no cover - a field type we never use

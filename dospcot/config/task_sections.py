@@ -6,7 +6,9 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
+
+from dospcot.config.checks import check_at_least
 
 
 @dataclass(frozen=True)
@@ -59,6 +61,17 @@ class EnvConfig:
     def __post_init__(self) -> None:
         if not 4 <= self.size <= 256:
             raise ValueError(f"size must lie in [4, 256], got {self.size}")
+        check_at_least(self, 0, "layout_seed")
+        if not (0 <= self.lava_density < 1 and 0 <= self.wall_density < 1):
+            raise ValueError(
+                "lava_density and wall_density must lie in [0, 1), got "
+                f"{self.lava_density}, {self.wall_density}"
+            )
+        if self.lava_density + self.wall_density >= 0.9:
+            raise ValueError(
+                "lava_density + wall_density must stay below 0.9 (the map needs free cells), got "
+                f"{self.lava_density + self.wall_density:g}"
+            )
         if not 0.0 <= self.blind_spot_rate <= 1.0:
             raise ValueError(f"blind_spot_rate must lie in [0, 1], got {self.blind_spot_rate}")
         if not 0 <= self.monitored_columns <= self.size:
@@ -177,6 +190,9 @@ class GymConfig:
     state_key: str = ""
     read_termination: bool = False
     episode_end_classes: bool = False
+
+    infinite_keys: ClassVar[frozenset[str]] = frozenset({"max_return"})
+    """Float keys that may be infinite (``inf``: the best return is not known)."""
 
     def __post_init__(self) -> None:
         if self.episode_steps < 1 or self.reward_classes < 1 or self.eval_episodes < 1:

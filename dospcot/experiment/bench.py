@@ -27,6 +27,7 @@ from dospcot.experiment.bench_rows import (
     bench_sweep_throughput,
     bench_tabular,
 )
+from dospcot.experiment.interrupts import Interrupted
 
 BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "tabular": bench_tabular,
@@ -140,14 +141,23 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
         raise ValueError(f"unknown benchmark(s) {unknown}; allowed: {', '.join(BENCHMARKS)}")
     if only and (not out.is_file() or TABLE_HEADER not in out.read_text()):
         raise ValueError(f"--only updates the table of a file a full `dospcot bench` wrote; {out} holds none")
+    try:  # before the rows, which take most of an hour, not after
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise ValueError(f"--out {out}: cannot make its folder ({err.strerror or err})") from None
     torch.set_num_threads(1)
     rows = []
     chosen = {name: BENCHMARKS[name] for name in only} if only else BENCHMARKS
     with tqdm(chosen.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
         for name, bench in bar:
             bar.set_postfix_str(name)
-            rows.append(bench(quick, repeats))
-    out.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                rows.append(bench(quick, repeats))
+            except KeyboardInterrupt:
+                done = ", ".join(row.name for row in rows) or "none"
+                raise Interrupted(
+                    f"nothing: {out} is unchanged (rows measured before the stop: {done})"
+                ) from None
     out.write_text(_with_rows(out.read_text(), rows, command) if only else render(rows, command, repeats))
     return rows
 

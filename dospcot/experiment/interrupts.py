@@ -13,7 +13,7 @@ from contextlib import contextmanager
 from types import FrameType
 
 
-class Interrupted(Exception):  # noqa: N818 - a stop the user asked for, not a failure
+class Interrupted(Exception):  # a stop the user asked for, not a failure
     """A command stopped by SIGINT or SIGTERM.
 
     :param kept: what is on disk, in words (e.g. "3 of 5 rounds, in runs/tiny/<stamp>").

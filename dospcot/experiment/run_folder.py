@@ -8,6 +8,7 @@ new, never half-written.
 from __future__ import annotations
 
 import csv
+import hashlib
 import io
 import json
 import os
@@ -16,7 +17,8 @@ import platform
 import subprocess
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from functools import cache, partial
 from pathlib import Path
 from typing import IO, Any
@@ -33,6 +35,9 @@ SUMMARY_FILE = "summary.json"
 REWARD_CLASSES_FILE = "reward_classes.json"
 CHECKPOINT_FILE = "checkpoint.pkl"
 CHECKPOINT_FORMAT = 1
+LOCK_FILE = ".lock"
+TMP_SUFFIX = ".partial"
+"""The ending of a run folder still being made (:func:`new_run_dir`)."""
 
 
 class RunFolderError(RuntimeError):
@@ -155,19 +160,72 @@ def write_run_info(run_dir: Path, command: str, wall_time_s: float, **extra: Any
     )  # fmt: skip
 
 
-def new_run_dir(root: Path, name: str) -> Path:
-    """``root/name/<stamp>/``, created; the stamp is the local time, made unique with a suffix."""
+def new_run_dir(root: Path, name: str, config: dict[str, Any] | None = None) -> Path:
+    """``root/name/<stamp>/``, created atomically with its ``config.toml`` (``config``; None: an empty
+    folder): the folder is made and filled under a temporary name, then renamed, so a run folder never
+    exists half made. The stamp is the local time, made unique with a suffix."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
+    parent = root / name
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        partial_dir = Path(tempfile.mkdtemp(prefix=f".{stamp}.", suffix=TMP_SUFFIX, dir=parent))
+        partial_dir.chmod(0o755)  # mkdtemp makes folders private; run folders are for sharing
+    except OSError as err:  # root is a file, or cannot be created
+        raise RunFolderError(f"cannot make a run folder under {root}: {err.strerror or err}") from None
+    if config is not None:
+        write_toml(partial_dir / CONFIG_FILE, config)
     for k in range(1000):
-        run_dir = root / name / (stamp if k == 0 else f"{stamp}-{k}")
+        run_dir = parent / (stamp if k == 0 else f"{stamp}-{k}")
         try:
-            run_dir.mkdir(parents=True)
+            partial_dir.rename(run_dir)  # fails where the name is taken (a non-empty folder)
             return run_dir
+        except OSError:
+            if not run_dir.exists():
+                raise
+    raise RunFolderError(f"cannot make a new run folder under {parent}")
+
+
+def config_digest(run_dir: Path) -> str:
+    """The SHA-256 of a run folder's ``config.toml``: a checkpoint keeps it, and a resume refuses a
+    config edited since."""
+    return hashlib.sha256((run_dir / CONFIG_FILE).read_bytes()).hexdigest()
+
+
+@contextmanager
+def run_lock(run_dir: Path) -> Iterator[None]:
+    """Hold ``run_dir/.lock`` (the process id) while training: a second process on the same folder
+    stops with one line naming the holder. A lock whose process is gone is taken over."""
+    lock = run_dir / LOCK_FILE
+    for _ in range(2):
+        try:
+            descriptor = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
         except FileExistsError:
+            holder = _lock_holder(lock)
+            if holder is not None:
+                raise RunFolderError(
+                    f"{run_dir} is being trained by process {holder} (its {LOCK_FILE}); wait for it or "
+                    "stop it, then resume"
+                ) from None
+            lock.unlink(missing_ok=True)  # its process is gone
             continue
-        except OSError as err:  # root is a file, or cannot be created
-            raise RunFolderError(f"cannot make a run folder under {root}: {err.strerror}") from None
-    raise RunFolderError(f"cannot make a new run folder under {root / name}")
+        with os.fdopen(descriptor, "w") as handle:
+            handle.write(str(os.getpid()))
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)
+        return
+    raise RunFolderError(f"cannot take the lock {lock}")  # pragma: no cover - a race lost twice
+
+
+def _lock_holder(lock: Path) -> int | None:
+    """The live process that holds ``lock``, or None (gone, or the lock unreadable)."""
+    try:
+        pid = int(lock.read_text())
+        os.kill(pid, 0)
+    except (OSError, ValueError):
+        return None
+    return pid
 
 
 def write_checkpoint(run_dir: Path, state: dict[str, Any]) -> None:

@@ -42,6 +42,7 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from dospcot.config.loading import load_config
+from dospcot.experiment.interrupts import Interrupted, leave_interrupts_to_the_parent
 from dospcot.experiment.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
 from dospcot.experiment.sweep_spec import (
     TRIAL_FILE,
@@ -176,20 +177,15 @@ def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_prog
     context = multiprocessing.get_context("spawn")
     total = sum(len(job) for job in jobs)
     manager = SyncManager(ctx=context)
-    manager.start(exit_with_parent, (os.getpid(),))
-    with (
-        manager,
-        ProcessPoolExecutor(
-            min(workers, len(jobs)), mp_context=context, initializer=exit_with_parent, initargs=(os.getpid(),)
-        ) as pool,
-        tqdm(
-            total=total,
-            unit="trial",
-            disable=not show_progress,
-            dynamic_ncols=True,
-            bar_format="{l_bar}{bar}| {n:.1f}/{total} trials [{elapsed}<{remaining}{postfix}]",
-        ) as bar,
-    ):
+    manager.start(_worker_start, (os.getpid(),))
+    pool = ProcessPoolExecutor(
+        min(workers, len(jobs)), mp_context=context, initializer=_worker_start, initargs=(os.getpid(),)
+    )
+    bar = tqdm(
+        total=total, unit="trial", disable=not show_progress, dynamic_ncols=True,
+        bar_format="{l_bar}{bar}| {n:.1f}/{total} trials [{elapsed}<{remaining}{postfix}]",
+    )  # fmt: skip
+    try:
         reports = manager.Queue()  # (job index, share of a trial done) from the workers
         futures = {
             pool.submit(run_job, sweep_dir, job, partial(_report_progress, reports, index)): index
@@ -211,7 +207,32 @@ def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_prog
                         failed[trial.trial_id] = f"{type(error).__name__}: {error}"
             bar.n = sum(shown)
             bar.set_postfix(failed=len(failed))  # refreshes the bar
+    except KeyboardInterrupt:
+        # The workers ignore Ctrl-C (_worker_start): the sweep stops them, and their trials resume from
+        # their last finished rounds.
+        for process in list(pool._processes.values()):
+            process.terminate()
+        pool.shutdown(wait=True, cancel_futures=True)
+        trials = [trial for job in jobs for trial in job]
+        finished = sum(is_finished(sweep_dir, trial) for trial in trials)
+        started = [t for t in trials if (trial_dir(sweep_dir, t) / CONFIG_FILE).is_file()]
+        stopped = [t.trial_id for t in started if not is_finished(sweep_dir, t)]
+        raise Interrupted(
+            f"{finished} of the {total} trials to run finished; {len(stopped)} stopped mid-run "
+            f"({', '.join(stopped) or 'none'}) resume from their last finished round",
+            f"dospcot sweep --resume {sweep_dir}",
+        ) from None
+    finally:
+        bar.close()
+        pool.shutdown(wait=True)
+        manager.shutdown()
     return failed
+
+
+def _worker_start(parent: int) -> None:
+    """A worker of the local backend (or its manager): exits with the sweep, and leaves Ctrl-C to it."""
+    leave_interrupts_to_the_parent()
+    exit_with_parent(parent)
 
 
 def exit_with_parent(parent: int, interval: float = 1.0) -> None:

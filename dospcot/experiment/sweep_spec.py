@@ -139,6 +139,9 @@ def parse_grid(items: Sequence[str]) -> dict[str, tuple[str, ...]]:
             raise ConfigError(
                 f"--grid {name}: " + ("use --seeds for seeds" if name == "seed" else "given twice")
             )
+        repeated = sorted({v for v in values if values.count(v) > 1})
+        if repeated:
+            raise ConfigError(f"--grid {name}: {repeated[0]} is given twice; each value once")
         grid[name] = values
     return grid
 

@@ -47,6 +47,7 @@ from dospcot.core.classifier import save_classifier
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import LOG_COLUMNS, Rater
 from dospcot.core.raters import FileRater, QueriesPending
+from dospcot.experiment.interrupts import Interrupted
 from dospcot.experiment.plots import plot_learning_curves
 from dospcot.experiment.run_folder import (
     CHECKPOINT_FILE,
@@ -56,9 +57,11 @@ from dospcot.experiment.run_folder import (
     SUMMARY_FILE,
     RunFolderError,
     atomic_write,
+    config_digest,
     new_run_dir,
     read_checkpoint,
     remove_stale_temporaries,
+    run_lock,
     source_commit,
     write_checkpoint,
     write_csv,
@@ -73,6 +76,7 @@ ROUND_SCALARS = (
     "normalised_score", "agreement", "labelled_steps",
 )  # fmt: skip
 """The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
+EVALUATION_FILE = "evaluation.json"
 QUERIES_FILE = "queries.csv"
 """Every label a rater gave: round, sample, how it was chosen, answer (active label strategies)."""
 QUERIES_FOLDER = "queries"
@@ -119,15 +123,27 @@ def train(
     show_progress: bool = True,
     command: str = "",
 ) -> Path:
-    """Train ``cfg`` in a new folder ``runs_root/<name>/<stamp>/``; return that folder."""
+    """Train ``cfg`` in a new folder ``runs_root/<name>/<stamp>/``; return that folder.
+
+    The folder is made only once every check has passed, with its ``config.toml``; a failure before the
+    run's first round ends (a task that cannot be built) removes it again, as nothing in it can resume.
+    """
     check_config(cfg)
-    return train_at(new_run_dir(runs_root, cfg.name), cfg, show_progress=show_progress, command=command)
+    run_dir = new_run_dir(runs_root, cfg.name, cfg.to_dict())
+    try:
+        return train_at(run_dir, cfg, show_progress=show_progress, command=command)
+    except Exception:
+        if not any((run_dir / name).is_file() for name in (CHECKPOINT_FILE, METRICS_FILE)):
+            shutil.rmtree(run_dir, ignore_errors=True)
+        raise
 
 
 def train_at(run_dir: Path, cfg: RunConfig, *, show_progress: bool = True, command: str = "") -> Path:
-    """Train ``cfg`` in ``run_dir`` (created if missing, as ``dospcot sweep`` names its trials)."""
+    """Train ``cfg`` in ``run_dir`` (created if missing, as ``dospcot sweep`` names its trials), holding
+    the folder's lock."""
     run_dir.mkdir(parents=True, exist_ok=True)
-    return cfg.task_definition.train_at(run_dir, cfg, show_progress=show_progress, command=command)
+    with run_lock(run_dir):
+        return cfg.task_definition.train_at(run_dir, cfg, show_progress=show_progress, command=command)
 
 
 def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> Path:
@@ -139,8 +155,9 @@ def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> P
             f"{run_dir} is a finished run (it has {SUMMARY_FILE}): nothing to resume; to train its "
             f"config again: dospcot train {run_dir / CONFIG_FILE}"
         )
-    remove_stale_temporaries(run_dir)
-    return cfg.task_definition.resume(run_dir, cfg, show_progress=show_progress, command=command)
+    with run_lock(run_dir):
+        remove_stale_temporaries(run_dir)
+        return cfg.task_definition.resume(run_dir, cfg, show_progress=show_progress, command=command)
 
 
 def evaluate(run_dir: Path) -> dict[str, Any]:
@@ -161,18 +178,36 @@ def run_config(run_dir: Path) -> RunConfig:
 
 
 def train_cotraining_run(run_dir: Path, cfg: TrainConfig, *, show_progress: bool, command: str) -> Path:
-    """Train a co-training run of SB3 agents in ``run_dir``, which holds nothing yet."""
-    write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
+    """Train a co-training run of SB3 agents in ``run_dir``, which holds at most its config yet."""
+    if not (run_dir / CONFIG_FILE).is_file():
+        write_toml(run_dir / CONFIG_FILE, cfg.to_dict())
     return _train_in(run_dir, cfg, None, show_progress, command)
 
 
 def resume_cotraining_run(run_dir: Path, cfg: TrainConfig, *, show_progress: bool, command: str) -> Path:
-    """Continue a co-training run from the checkpoint of its last finished round."""
+    """Continue a co-training run from the checkpoint of its last finished round.
+
+    :raises RunFolderError: the checkpoint is gone though rounds finished (a restart would silently
+        redo them), or ``config.toml`` changed since the checkpoint was written.
+    """
     if not (run_dir / CHECKPOINT_FILE).is_file():
+        if (run_dir / METRICS_FILE).is_file():
+            raise RunFolderError(
+                f"{run_dir} finished rounds ({METRICS_FILE}) but has no {CHECKPOINT_FILE}: it cannot go on "
+                f"from them; train its config anew: dospcot train {run_dir / CONFIG_FILE}"
+            )
         # Killed in its first round: only the config is worth keeping, and old events would repeat.
         shutil.rmtree(run_dir / "tb", ignore_errors=True)
         return _train_in(run_dir, cfg, None, show_progress, command)
-    return _train_in(run_dir, cfg, read_checkpoint(run_dir), show_progress, command)
+    state = read_checkpoint(run_dir)
+    trained = state.get("config_sha256")  # a checkpoint older than this field was not checked
+    if trained is not None and trained != config_digest(run_dir):
+        raise RunFolderError(
+            f"{run_dir / CONFIG_FILE} changed since its checkpoint was written: its rounds were trained "
+            f"under another config; restore the file, or train the new config in a new folder: "
+            f"dospcot train {run_dir / CONFIG_FILE}"
+        )
+    return _train_in(run_dir, cfg, state, show_progress, command)
 
 
 def _train_in(
@@ -197,6 +232,7 @@ def _train_in(
             SummaryWriter(folder, purge_step=agent.num_timesteps).close()
         agent.set_logger(configure(folder, ["tensorboard"]))
     rounds = cfg.training.rounds
+    digest = config_digest(run_dir)
     per_round = cfg.training.steps_per_round * len(run.agents)
     bar = tqdm(
         total=rounds * per_round, initial=run.round * per_round, unit="step",
@@ -213,6 +249,7 @@ def _train_in(
                 "cpu_s": cpu + time.process_time() - started_cpu,
                 "sessions": sessions,
                 "commits": commits,
+                "config_sha256": digest,
             },
         )
 
@@ -231,6 +268,10 @@ def _train_in(
     except QueriesPending:  # a person answers the queries: keep the collected round, stop until then
         checkpoint()
         raise
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the checkpoint of the last finished round stays
+        done = len({row["round"] for row in records})
+        kept = f"{done} of {rounds} rounds in {run_dir}" if done else f"no finished round in {run_dir}"
+        raise Interrupted(kept, f"dospcot train --resume {run_dir}") from None
     finally:
         bar.close()
     for agent in run.agents:
@@ -308,23 +349,39 @@ def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:
 
 def evaluate_cotraining_run(run_dir: Path, cfg: TrainConfig) -> dict[str, Any]:
     """Re-evaluate a co-training run's saved agents (loaded with plain ``stable_baselines3.DQN.load``)
-    with its task adapter's evaluator, as during training (no training run, no fresh agents); writes
-    ``evaluation.json``."""
+    with its task adapter's evaluator, as during training (no training run, no fresh agents).
+
+    :return: the round whose agents were scored, whether the run is finished, and per view and averaged
+        the figures; a finished run's are written to ``evaluation.json``, an unfinished one's nowhere
+        (a later resume would leave the file stale).
+    """
     agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
     policy = cfg.task_definition.build(cfg).evaluate(agents)
     per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
-    result = {"per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()}}
-    write_json(run_dir / "evaluation.json", result)
+    finished = (run_dir / SUMMARY_FILE).is_file()
+    result = {
+        "round": _rounds_done(run_dir), "rounds": cfg.training.rounds, "finished": finished,
+        "per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()},
+    }  # fmt: skip
+    if finished:
+        write_json(run_dir / EVALUATION_FILE, result)
     return result
+
+
+def _rounds_done(run_dir: Path) -> int:
+    """The last round ``metrics.csv`` records (0: none)."""
+    if not (run_dir / METRICS_FILE).is_file():
+        return 0
+    with (run_dir / METRICS_FILE).open() as rows:
+        return max((int(row["round"]) for row in csv.DictReader(rows)), default=0)
 
 
 def _load_agent(run_dir: Path, name: str) -> stable_baselines3.DQN:
     path = run_dir / name
     if not path.is_file():
-        if not (run_dir / METRICS_FILE).is_file():
+        rounds = _rounds_done(run_dir)
+        if not rounds:
             raise RunFolderError(f"{path} does not exist: the run finished no round")
-        with (run_dir / METRICS_FILE).open() as rows:
-            rounds = max(int(row["round"]) for row in csv.DictReader(rows))
         raise RunFolderError(
             f"{path} is missing, though the run finished {rounds} round(s): the folder is incomplete"
         )

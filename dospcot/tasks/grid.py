@@ -296,6 +296,12 @@ class GridWorldTask(Task):
     def has_monitor(self, cfg: TrainConfig) -> bool:
         return cfg.env.monitored_columns > 0
 
+    def check(self, cfg: TrainConfig) -> None:
+        try:  # a map the densities cannot make solvable fails after its draws, not in round 1
+            grid_world(cfg)
+        except (ValueError, RuntimeError) as err:
+            raise ConfigError(f"env: {err}") from None
+
     def build(self, cfg: TrainConfig) -> GridTask:
         make_env, views, layout = grid_world(cfg)
         columns = cfg.env.monitored_columns

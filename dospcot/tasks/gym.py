@@ -50,8 +50,8 @@ class GymTask(SensorTaskBase):
             check_gym_task(
                 gym.env_id, gym.env_kwargs, gym.wrappers, gym.views, gym.state_key, gym.train_wrappers
             )
-        except ValueError as err:
-            raise ConfigError(str(err)) from None
+        except ValueError as err:  # the cause stays: a user's env or view that raised
+            raise ConfigError(str(err)) from err.__cause__
         super().check(cfg)
 
     def build(self, cfg: TrainConfig) -> SensorTask:

@@ -11,6 +11,7 @@ from typing import TYPE_CHECKING, Any
 from tqdm.auto import tqdm
 
 from dospcot.config.run_configs import PaperConfig
+from dospcot.experiment.interrupts import Interrupted
 from dospcot.experiment.run_folder import METRICS_FILE, RunFolderError
 from dospcot.paper.protocol import episodes_per_seed, train_protocol_at
 from dospcot.tasks.registry import Task, register
@@ -35,7 +36,12 @@ class PaperTask(Task):
             total=episodes_per_seed(cfg), unit="ep", desc=f"{cfg.name} seed {cfg.seed}",
             disable=not show_progress, mininterval=1.0, dynamic_ncols=True,
         ) as bar:  # fmt: skip
-            train_protocol_at(cfg, {cfg.seed: run_dir}, commands={cfg.seed: command}, progress=bar.update)
+            try:
+                train_protocol_at(cfg, {cfg.seed: run_dir}, commands={cfg.seed: command}, progress=bar.update)
+            except KeyboardInterrupt:  # a seed keeps no checkpoint: it trains again from the start
+                raise Interrupted(
+                    f"nothing of seed {cfg.seed}", f"dospcot train --resume {run_dir}"
+                ) from None
         return run_dir
 
     def resume(self, run_dir: Path, cfg: PaperConfig, *, show_progress: bool, command: str) -> Path:
