@@ -256,7 +256,7 @@ def _run(args: argparse.Namespace, command: str) -> int:
     if args.command in RUN_COMMANDS:
         from dospcot.config.errors import ConfigError
         from dospcot.core.raters import QueriesPending, RaterError
-        from dospcot.envs import NonFiniteError
+        from dospcot.envs import EnvRaisedError, NonFiniteError
         from dospcot.experiment.run_folder import RunFolderError
         from dospcot.experiment.sweep_spec import SweepError
 
@@ -272,7 +272,7 @@ def _run(args: argparse.Namespace, command: str) -> int:
         except (ConfigError, RunFolderError, SweepError, RaterError) as err:
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
             return 2
-        except NonFiniteError as err:  # the env's fault, not the command line's
+        except (NonFiniteError, EnvRaisedError) as err:  # the env's fault, not the command line's
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
             return 1
     if args.command == "bench":

@@ -4,7 +4,7 @@ from gymnasium.envs.registration import register
 
 from dospcot.envs.cliffwalking import CLIFF_VIEWS, make_masked_cliffwalking
 from dospcot.envs.fast_highway import FastHighwayConfig, FastHighwayEnv, FastHighwayVec
-from dospcot.envs.finite_check import FiniteCheckWrapper, NonFiniteError
+from dospcot.envs.finite_check import EnvRaisedError, FiniteCheckWrapper, NonFiniteError
 from dospcot.envs.gridworld import (
     GridLayout,
     GridWorld,
@@ -42,6 +42,7 @@ for _task in ("highway-fast-v0", "merge-v0", "roundabout-v0"):
 
 __all__ = [
     "CLIFF_VIEWS",
+    "EnvRaisedError",
     "FastHighwayConfig",
     "FastHighwayEnv",
     "FastHighwayVec",

@@ -1,4 +1,5 @@
-"""Stop a run at the first NaN or infinite reward or observation, naming the env and the step."""
+"""Stop a run at the first NaN or infinite reward or observation, or at an error the env raises,
+naming the env and the step."""
 
 from __future__ import annotations
 
@@ -10,6 +11,10 @@ import numpy as np
 
 class NonFiniteError(RuntimeError):
     """An env returned a NaN or infinite reward or observation."""
+
+
+class EnvRaisedError(RuntimeError):
+    """An env raised while an agent reset or stepped it; the env's own error is the cause."""
 
 
 class FiniteCheckWrapper(gym.Wrapper):
@@ -32,16 +37,23 @@ class FiniteCheckWrapper(gym.Wrapper):
         self.episode_steps = 0
 
     def reset(self, **kwargs: Any):
-        obs, info = self.env.reset(**kwargs)
+        try:
+            obs, info = self.env.reset(**kwargs)
+        except Exception as err:  # a user's env may raise anything: named, its error the cause
+            raise EnvRaisedError(f"env {self.name} raised {type(err).__name__} at reset: {err}") from err
         self.episode_steps = 0
         self._check("observation", obs, "at reset")
         return obs, info
 
     def step(self, action: Any):
-        obs, reward, terminated, truncated, info = self.env.step(action)
+        step, in_episode = self.steps + 1, self.episode_steps + 1
+        where = f"at env step {step} (step {in_episode} of its episode, action {action})"
+        try:
+            obs, reward, terminated, truncated, info = self.env.step(action)
+        except Exception as err:  # a user's env may raise anything: named, its error the cause
+            raise EnvRaisedError(f"env {self.name} raised {type(err).__name__} {where}: {err}") from err
         self.steps += 1
         self.episode_steps += 1
-        where = f"at env step {self.steps} (step {self.episode_steps} of its episode, action {action})"
         self._check("reward", reward, where)
         if "hidden_reward" in info:
             self._check("hidden reward", info["hidden_reward"], where)

@@ -29,6 +29,7 @@ import json
 import multiprocessing
 import os
 import shutil
+import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
@@ -175,6 +176,10 @@ def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_prog
         return failed
     # spawn, not fork: a forked child inherits torch's thread pools and locks from the parent.
     context = multiprocessing.get_context("spawn")
+    # Workers stopped by Ctrl-C leave the pool's queue locks to the resource tracker, which would warn of
+    # them in lines of its own after the one that says what was kept; they are freed all the same.
+    if "ignore::UserWarning:multiprocessing.resource_tracker" not in sys.warnoptions:
+        sys.warnoptions.append("ignore::UserWarning:multiprocessing.resource_tracker")
     total = sum(len(job) for job in jobs)
     manager = SyncManager(ctx=context)
     manager.start(_worker_start, (os.getpid(),))
@@ -218,8 +223,8 @@ def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_prog
         started = [t for t in trials if (trial_dir(sweep_dir, t) / CONFIG_FILE).is_file()]
         stopped = [t.trial_id for t in started if not is_finished(sweep_dir, t)]
         raise Interrupted(
-            f"{finished} of the {total} trials to run finished; {len(stopped)} stopped mid-run "
-            f"({', '.join(stopped) or 'none'}) resume from their last finished round",
+            f"{finished} finished trial(s) of the {total} to run; {len(stopped)} stopped mid-run "
+            f"({', '.join(stopped) or 'none'}), which resume from their last finished round",
             f"dospcot sweep --resume {sweep_dir}",
         ) from None
     finally:

@@ -133,6 +133,8 @@ def tasks() -> dict[str, Task]:
 
 def get_task(name: str) -> Task:
     """The registered task ``name``; a :class:`ConfigError` naming the others if there is none."""
+    if not isinstance(name, str):
+        raise ConfigError(f"task: expected a string, got {name!r}")
     registered = _TASKS if name in _TASKS else tasks()
     if name not in registered:
         raise ConfigError(f"task: unknown task {name!r}; allowed: {', '.join(sorted(registered))}")

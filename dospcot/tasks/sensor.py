@@ -41,6 +41,7 @@ from dospcot.core.in_place_state import InPlaceState
 from dospcot.core.queries import StoreQueries
 from dospcot.core.reward_classes import QuantileRewardClasses, episode_end_class_mask
 from dospcot.demonstrations import Demonstrations, load_agent, record_demonstrations
+from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.seeding import EVAL_SEED, agent_seed, demonstration_seed
 from dospcot.tasks.registry import Task, mask_fraction
@@ -433,10 +434,13 @@ class SensorTask(StoreQueries):
 
 
 def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> DummyVecEnv:
-    """An unmasked copy of the task observing ``view`` (the hidden reward is the reward)."""
+    """An unmasked copy of the task observing ``view`` (the hidden reward is the reward), checked as the
+    agents' envs are: a non-finite value or an error of the env stops the run naming it."""
 
     def build() -> gym.Env:
-        return Monitor(gym.wrappers.TimeLimit(make_env(view, (view,), 1.0, 0), max_steps))
+        env = make_env(view, (view,), 1.0, 0)
+        checked = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (evaluation, view {view})")
+        return Monitor(gym.wrappers.TimeLimit(checked, max_steps))
 
     return DummyVecEnv([build])
 

@@ -1,0 +1,272 @@
+"""Bad inputs end in one line before anything is made, run folders cannot be corrupted, and Ctrl-C stops
+a sweep with the command that resumes it (docs/troubleshooting.md)."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+import typing
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from dospcot.cli import main
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import load_config
+from dospcot.config.run_configs import TrainConfig
+from dospcot.envs import EnvRaisedError
+from dospcot.experiment.python_api import train_env
+from dospcot.experiment.run_folder import LOCK_FILE
+from dospcot.experiment.train import check_config
+
+SHORT = ["training.rounds=1", "training.steps_per_round=60", "dqn.learning_starts=20"]
+
+
+def _keys(cls: type, prefix: str = "") -> list[tuple[str, typing.Any]]:
+    """Every key of a config tree and its type hint."""
+    keys = []
+    hints = typing.get_type_hints(cls)
+    for field in dataclasses.fields(cls):
+        hint = hints[field.name]
+        if dataclasses.is_dataclass(hint):
+            keys += _keys(hint, f"{prefix}{field.name}.")
+        else:
+            keys.append((f"{prefix}{field.name}", hint))
+    return keys
+
+
+KEYS = [key for key, _ in _keys(TrainConfig)]
+VALUES = st.sampled_from(
+    ["nan", "inf", "-inf", "-1", "0", "1", "3", "0.5", "2.5", "-0.5", "1e9", "true", '"x"', '""', "[1]",
+     "[]", "{a=1}", "1e-12"]
+)  # fmt: skip
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(key=st.sampled_from(KEYS), value=VALUES)
+def test_any_value_of_any_key_is_a_config_or_one_line_naming_the_key(key, value):
+    """Wrong types, out-of-range and non-finite values of every key: the config and its task's check
+    step accept them, or refuse them with one ConfigError line; nothing else is raised."""
+    try:
+        cfg = load_config("tiny", [f"{key}={value}"])
+        check_config(cfg)
+    except ConfigError as err:
+        assert "\n" not in str(err) and str(err)
+        return
+    # A value that passes is one a run can use: finite wherever it is a float.
+    for name, item in dataclasses.asdict(cfg).items():
+        if isinstance(item, float):
+            assert math.isfinite(item), name
+
+
+@pytest.mark.slow
+@settings(max_examples=40, deadline=None)
+@given(key=st.sampled_from(KEYS), value=VALUES)
+def test_any_value_on_the_command_line_trains_or_exits_2_in_one_line_leaving_no_folder(key, value):
+    runs = Path(os.environ.get("PYTEST_TMP", "/tmp")) / f"dospcot-bad-{os.getpid()}"
+    _train_or_refuse(runs, f"{key}={value}")
+
+
+def _train_or_refuse(runs: Path, override: str) -> None:
+    import shutil
+
+    shutil.rmtree(runs, ignore_errors=True)
+    args = ["train", "tiny", "--no-progress", "--runs-dir", str(runs)]
+    sets = [a for o in [*SHORT, override] for a in ("--set", o)]
+    process = subprocess.run(
+        [sys.executable, "-m", "dospcot.cli", *args, *sets], capture_output=True, text=True, timeout=300
+    )
+    if process.returncode == 0:
+        assert list(runs.glob("tiny/*/summary.json"))
+    else:
+        assert process.returncode == 2, process.stderr
+        assert process.stderr.count("\n") == 1 and "Traceback" not in process.stderr
+        assert not list(runs.glob("tiny/*")), "a refused config left a run folder"
+
+
+@pytest.mark.parametrize(
+    "override",
+    ["env.lava_density=2", "env.lava_density=0.8", "env.step_cost=nan", "cotraining.classifier.epochs=0",
+     "cotraining.classifier.lr=nan", "dqn.buffer_size=8", 'name="tiny2', "training.rounds=0"],
+)  # fmt: skip
+def test_the_reported_bad_inputs_exit_2_in_one_line_before_a_folder(tmp_path, override):
+    _train_or_refuse(tmp_path / "runs", override)
+    assert not (tmp_path / "runs").exists() or not list((tmp_path / "runs").glob("tiny/*"))
+
+
+def test_set_merges_a_table_key_by_key_and_refuses_what_is_not_toml():
+    cfg = load_config("tiny", ["training={rounds=1}"])
+    assert (cfg.training.rounds, cfg.training.steps_per_round) == (
+        1,
+        load_config("tiny").training.steps_per_round,
+    )
+    assert load_config("tiny", ["agent=tabular"]).agent == "tabular"  # a bare word is a string
+    for override in ('name="tiny2', "training={rounds=1", "name=two words"):
+        with pytest.raises(
+            ConfigError, match="is not a TOML value; a string needs its quotes past the shell"
+        ):
+            load_config("tiny", [override])
+
+
+def _broken_env() -> gym.Env:
+    raise RuntimeError("no such hardware")
+
+
+class _StepRaises(gym.Wrapper):
+    def step(self, action):
+        raise OSError("the simulator died")
+
+
+def _dies_on_step() -> gym.Env:
+    return _StepRaises(gym.make("CartPole-v1"))
+
+
+def _none_view(obs: np.ndarray) -> None:
+    return None
+
+
+def test_the_python_api_raises_config_errors_with_the_users_error_as_cause(tmp_path):
+    with pytest.raises(
+        ConfigError, match=r"gym\.env_id: test_bad_inputs:_broken_env raised RuntimeError"
+    ) as err:
+        train_env(_broken_env, {"state": "observation"}, runs_dir=tmp_path, show_progress=False)
+    assert isinstance(err.value.__cause__, RuntimeError)
+    with pytest.raises(ConfigError, match="view 'none' returned None; a view returns an array of numbers"):
+        train_env("CartPole-v1", {"none": _none_view}, runs_dir=tmp_path, show_progress=False)
+    with pytest.raises(EnvRaisedError, match=r"raised OSError at env step 1 .*the simulator died") as err:
+        train_env(_dies_on_step, {"state": "observation"}, runs_dir=tmp_path, show_progress=False)
+    assert isinstance(err.value.__cause__, OSError)
+    assert not list(tmp_path.glob("gym/*")), "a run that failed before its first round left its folder"
+
+
+def _stopped_for_answers(tmp_path: Path, capsys) -> Path:
+    """A two-round tiny run whose file rater stopped it in round 2, round 1 finished."""
+    sets = ["training.label_fraction=0.2", 'training.label_strategy="random"', 'training.rater="file"']
+    assert (
+        main(
+            [
+                "train",
+                "tiny",
+                "--no-progress",
+                "--runs-dir",
+                str(tmp_path),
+                *(a for s in sets for a in ("--set", s)),
+            ]
+        )
+        == 0
+    )
+    (run_dir,) = (tmp_path / "tiny").iterdir()
+    path = run_dir / "queries" / "round_1.csv"
+    rows = list(csv.DictReader(path.open()))
+    with path.open("w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows({**row, "reward": "-1"} for row in rows)
+    assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 0  # round 1, then round 2 asks
+    assert (run_dir / "queries" / "round_2.csv").is_file() and (run_dir / "checkpoint.pkl").is_file()
+    capsys.readouterr()
+    return run_dir
+
+
+def test_run_folders_refuse_a_second_process_an_edited_config_and_a_lost_checkpoint(tmp_path, capsys):
+    run_dir = _stopped_for_answers(tmp_path, capsys)
+    # A live process holds the lock: a second resume stops in one line naming it.
+    (run_dir / LOCK_FILE).write_text(str(os.getppid()))
+    assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
+    assert f"is being trained by process {os.getppid()}" in capsys.readouterr().err
+    (run_dir / LOCK_FILE).write_text("999999999")  # a process that is gone: its lock is taken over
+    config = (run_dir / "config.toml").read_text()
+    (run_dir / "config.toml").write_text(config.replace("rounds = 2", "rounds = 3"))
+    assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "config.toml changed since its checkpoint was written" in err and err.count("\n") == 1
+    (run_dir / "config.toml").write_text(config)
+    # Evaluating an unfinished run says which round it scores and writes nothing.
+    assert main(["evaluate", str(run_dir)]) == 0
+    out = capsys.readouterr().out
+    assert "the agents of round 1 of 2 (unfinished)" in out and "nothing written" in out
+    assert not (run_dir / "evaluation.json").exists()
+    (run_dir / "checkpoint.pkl").unlink()
+    assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
+    assert "finished rounds (metrics.csv) but has no checkpoint.pkl" in capsys.readouterr().err
+
+
+def _sweep(runs: Path, *more: str) -> subprocess.Popen:
+    command = [
+        sys.executable, "-m", "dospcot.cli", "sweep", "tiny", "--seeds", "3", "--workers", "2", "--set",
+        "training.steps_per_round=500", "--runs-dir", str(runs), "--name", "s", "--no-progress", *more,
+    ]  # fmt: skip
+    # Its own process group, as a terminal gives a command; and Ctrl-C's default, whatever launched the tests.
+    return subprocess.Popen(
+        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # fmt: skip
+
+
+@pytest.mark.slow
+def test_ctrl_c_stops_a_sweep_within_seconds_and_it_resumes_byte_identical(tmp_path):
+    sweep = _sweep(tmp_path / "a")
+    trials = tmp_path / "a" / "s" / "trials"
+    deadline = time.monotonic() + 120
+    while not list(trials.glob("*/*/checkpoint.pkl")) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert list(trials.glob("*/*/checkpoint.pkl")), "no trial finished a round"
+    os.killpg(sweep.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
+    stopped = time.monotonic()
+    _, err = sweep.communicate(timeout=30)
+    assert time.monotonic() - stopped < 10 and sweep.returncode == 130
+    assert "interrupted" in err and f"resume with: dospcot sweep --resume {tmp_path / 'a' / 's'}" in err
+    assert "Traceback" not in err and err.count("\n") == 1
+    left = b"?"
+    for _ in range(50):  # no child left (the resource tracker closes a moment after the sweep)
+        left = subprocess.run(["pgrep", "-g", str(sweep.pid)], capture_output=True).stdout
+        if not left:
+            break
+        time.sleep(0.1)
+    assert left == b""
+    resume = ["sweep", "--resume", str(tmp_path / "a" / "s"), "--no-progress"]
+    resumed = subprocess.run([sys.executable, "-m", "dospcot.cli", *resume], capture_output=True, text=True)
+    assert resumed.returncode == 0, resumed.stderr
+    whole = _sweep(tmp_path / "b")
+    assert whole.wait(timeout=300) == 0
+    for summary in sorted(trials.glob("*/*/summary.json")):
+        other = tmp_path / "b" / summary.relative_to(tmp_path / "a")
+        assert summary.read_bytes() == other.read_bytes()
+        assert (summary.parent / "metrics.csv").read_bytes() == (other.parent / "metrics.csv").read_bytes()
+    assert len(list(trials.glob("*/*/summary.json"))) == 3
+
+
+def test_the_commands_refuse_what_they_would_ignore_or_misread(capsys, tmp_path):
+    cases = [
+        (
+            ["reproduce-paper", "--label-fraction", "0.2", "--set", "tabular.label_fraction=0.5"],
+            "give it once",
+        ),
+        (["reproduce-paper", "--seeds", "1"], "one seed cannot give"),
+        (["sweep", "tiny", "--grid", "training.rounds=1,1"], "1 is given twice"),
+        (["sweep", "tiny", "--ray-address", "10.0.0.1:6379"], "it needs --backend ray"),
+        (["bench", "--quick", "--out", str(tmp_path / "x" / "BENCHMARKS.md")], "never go into BENCHMARKS.md"),
+        (["bench", "--quick", "--out", "/proc/nope/bench.md"], "cannot make its folder"),
+    ]
+    for argv, message in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+
+
+def test_a_summary_json_round_trips_finite(tmp_path):
+    # A refused draw leaves nothing; an accepted one trains and its figures are finite numbers or NaN.
+    _train_or_refuse(tmp_path / "runs", "training.eps_end=0.2")
+    (summary,) = (tmp_path / "runs").glob("tiny/*/summary.json")
+    assert json.loads(summary.read_text())["rounds"] == 1
