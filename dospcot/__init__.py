@@ -5,3 +5,7 @@ exchanging confident pseudo-rewards under a self-paced schedule.
 """
 
 __version__ = "0.1.0"
+
+from dospcot.config.errors import ConfigError
+
+__all__ = ["ConfigError", "__version__"]

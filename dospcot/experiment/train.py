@@ -94,7 +94,9 @@ def build_run(cfg: TrainConfig, rater: Rater | None = None) -> CoTrainingRun:
     (``cfg.task_definition.build``) driven by :class:`~dospcot.core.cotraining_run.CoTrainingRun`.
 
     :param rater: answers an active label strategy's queries; None: the simulated rater.
+    :raises ConfigError: what the task's check step finds (files, imports, the env), as for ``train``.
     """
+    check_config(cfg)
     return CoTrainingRun(cfg.task_definition.build(cfg), cfg, rater)
 
 
@@ -214,7 +216,9 @@ def _train_in(
     run_dir: Path, cfg: TrainConfig, state: dict[str, Any] | None, show_progress: bool, command: str
 ) -> Path:
     started, started_cpu = time.perf_counter(), time.process_time()
-    run = build_run(cfg, FileRater(run_dir / QUERIES_FOLDER) if cfg.training.rater == "file" else None)
+    # Checked before the folder was made (train) or the sweep began (its trials): built at once here.
+    rater = FileRater(run_dir / QUERIES_FOLDER) if cfg.training.rater == "file" else None
+    run = CoTrainingRun(cfg.task_definition.build(cfg), cfg, rater)
     records: list[dict] = []
     elapsed, cpu, sessions, commits = 0.0, 0.0, 1, [source_commit()]
     if state is not None:
