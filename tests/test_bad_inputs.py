@@ -270,3 +270,13 @@ def test_a_summary_json_round_trips_finite(tmp_path):
     _train_or_refuse(tmp_path / "runs", "training.eps_end=0.2")
     (summary,) = (tmp_path / "runs").glob("tiny/*/summary.json")
     assert json.loads(summary.read_text())["rounds"] == 1
+
+
+def test_an_empty_config_and_a_report_folder_that_cannot_be_made_are_one_line(tmp_path, capsys):
+    (tmp_path / "empty.toml").write_text("# nothing set\n")
+    assert main(["train", str(tmp_path / "empty.toml"), "--runs-dir", str(tmp_path / "runs")]) == 2
+    assert "holds no key; start it from a preset" in capsys.readouterr().err
+    assert not (tmp_path / "runs").exists()
+    assert main(["report", "runs/sweeps/grid16", "--out", "/proc/nope/report"]) == 2
+    err = capsys.readouterr().err
+    assert "--out /proc/nope/report: cannot make the folder" in err and err.count("\n") == 1

@@ -259,7 +259,10 @@ def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
     return the files."""
     spec, runs = load_runs(sweep_dir)
     out_dir = out_dir or sweep_dir
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise SweepError(f"--out {out_dir}: cannot make the folder ({err.strerror or err})") from None
     # A sweep holds one kind of config (SweepSpec.trials). A paper-protocol summary names its task; a
     # co-training run's names none, and every co-training task writes the same report as the grid's.
     return get_task(runs[0].summary.get("task", "grid")).write_report(spec, runs, out_dir)

@@ -166,6 +166,8 @@ def new_run_dir(root: Path, name: str, config: dict[str, Any] | None = None) -> 
     exists half made. The stamp is the local time, made unique with a suffix."""
     stamp = time.strftime("%Y%m%d-%H%M%S")
     parent = root / name
+    if parent.exists() and not parent.is_dir():  # mkdir would call it "File exists"
+        raise RunFolderError(f"cannot make a run folder under {root}: Not a directory")
     try:
         parent.mkdir(parents=True, exist_ok=True)
         partial_dir = Path(tempfile.mkdtemp(prefix=f".{stamp}.", suffix=TMP_SUFFIX, dir=parent))
