@@ -47,6 +47,7 @@ import shlex
 import shutil
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 from dospcot.experiment.report import TrialRun, load_runs, write_report
@@ -60,15 +61,19 @@ from dospcot.experiment.sweep import SweepError, SweepSpec, check_not_stale, run
 __all__ = [
     "STUDIES",
     "Glance",
+    "Rendered",
     "Study",
     "Sweep",
+    "check_record",
     "get_study",
     "header",
     "header_command",
     "main",
+    "render_study",
     "run_study",
     "study_runs",
     "study_table",
+    "sweep_spec",
 ]
 
 STUDIES: dict[str, Study] = {
@@ -122,6 +127,43 @@ def study_table(
     return "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
 
 
+def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = ()) -> SweepSpec:
+    """The spec of one of a study's sweeps over seeds 0..seeds-1, with ``overrides`` (``--set``)."""
+    return SweepSpec(sweep.configs, sweep.grid, tuple(range(seeds)), tuple(overrides))
+
+
+def check_record(
+    study: Study, runs_dir: Path, seeds: int, overrides: Sequence[str] = (), suffix: str = ""
+) -> None:
+    """Raise :class:`SweepError` where a finished trial of the study was trained under another config
+    than its preset and overrides give now: the record cannot stand for the study then."""
+    for sweep in study.sweeps:
+        sweep_dir = runs_dir / f"{sweep.name}{suffix}"
+        if sweep_dir.is_dir():  # a sweep never started has nothing stale
+            check_not_stale(sweep_dir, sweep_spec(sweep, seeds, overrides).trials())
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """What ``--docs`` writes of a study: its tables (None where the record holds no run), its page,
+    its cells in the results at a glance, and its README block (None where it has none)."""
+
+    table: str | None
+    page: str
+    glance: list[str]
+    readme: str | None
+
+
+def render_study(name: str, runs_dir: Path, command: str, suffix: str = "") -> Rendered:
+    """Study ``name`` rendered from the finished runs under ``runs_dir``, with ``command`` in its
+    header; nothing is trained or written."""
+    study = get_study(name)
+    runs, sweep_dirs, not_started = study_runs(study, runs_dir, suffix)
+    table = study_table(study, runs, command, sweep_dirs, not_started) if runs else None
+    readme = study.readme(table) if study.readme is not None and table is not None else None
+    return Rendered(table, page(name, study, table), glance_cells(study, runs), readme)
+
+
 def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") -> None:
     """Run the study ``args.study`` (its unfinished trials; none with ``args.render_only``), then print
     its tables and, with ``args.docs``, write its page, plot, row of the results at a glance and README
@@ -145,41 +187,37 @@ def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") ->
     # Another --seeds or --set is another sweep: it gets its own folder.
     default = (args.seeds, args.overrides) == (study.seeds, [])
     suffix = "" if default else f"-{args.seeds}seeds-{len(args.overrides)}sets"
-    written = []
-    for sweep in study.sweeps:
-        sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
-        spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
-        try:  # trials run under a preset that has changed since are neither resumed nor tabled
-            if args.render_only:
-                if sweep_dir.is_dir():  # a sweep never started has nothing stale (nor its files)
-                    check_not_stale(sweep_dir, spec.trials())
-            else:
+    try:  # trials run under a preset that has changed since are neither resumed nor tabled
+        if args.render_only:
+            check_record(study, args.runs_dir, args.seeds, args.overrides, suffix)
+        else:
+            for sweep in study.sweeps:
+                spec = sweep_spec(sweep, args.seeds, args.overrides)
+                sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
                 failed = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers).failed
                 if failed:
                     sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
-        except SweepError as err:
-            sys.exit(f"{prog}: {err}")
+    except SweepError as err:
+        sys.exit(f"{prog}: {err}")
+    written = []
+    for sweep in study.sweeps:
         with contextlib.suppress(SweepError):  # a sweep not started has no report
-            written += write_report(sweep_dir)
-    runs, sweep_dirs, not_started = study_runs(study, args.runs_dir, suffix)
-    order = list(STUDIES)
-    if not runs:
-        if args.docs and args.render_only and default:
-            (RESULTS / f"{args.study}.md").write_text(page(args.study, study, None))
-            write_glance(args.study, glance_cells(study, runs), order)
-            print(f"no finished run of {args.study} under {args.runs_dir}: its page says it is unpublished")
-            return
+            written += write_report(args.runs_dir / f"{sweep.name}{suffix}")
+    rendered = render_study(args.study, args.runs_dir, command, suffix)
+    if rendered.table is None and not (args.docs and args.render_only and default):
         sys.exit(f"{prog}: no finished run of this study under {args.runs_dir}; run it without --render-only")
-    table = study_table(study, runs, command, sweep_dirs, not_started)
-    print(table)
+    if rendered.table is None:
+        print(f"no finished run of {args.study} under {args.runs_dir}: its page says it is unpublished")
+    else:
+        print(rendered.table)
     if args.docs:
-        (RESULTS / f"{args.study}.md").write_text(page(args.study, study, table))
+        (RESULTS / f"{args.study}.md").write_text(rendered.page)
         plot = next((p for p in written if study.plot and p.name == study.plot[0]), None)
         if plot is not None:
             shutil.copyfile(plot, RESULTS / study.plot[1])
-        write_glance(args.study, glance_cells(study, runs), order)
-        if study.readme is not None:
-            replace_block(README, block, study.readme(table))
+        write_glance(args.study, rendered.glance, list(STUDIES))
+        if rendered.readme is not None:
+            replace_block(README, block, rendered.readme)
 
 
 def main(argv: Sequence[str] | None = None) -> None:

@@ -42,13 +42,13 @@ def page(name: str, study: Study, table: str | None) -> str:
 
 def unpublished(name: str, study: Study) -> str:
     """The notice in place of a table that the record cannot rebuild."""
-    sweeps = ", ".join(f"`runs/sweeps/{sweep.name}`" for sweep in study.sweeps)
+    sweeps = ", ".join(f"`{sweep.name}`" for sweep in study.sweeps)
     return (
         "**Unpublished: the record holds no runs of this study**, so this page shows no table and no "
         "figure of it (a table is published only where `--render-only` rebuilds it from the runs in "
-        f"`runs/sweeps/`). `dospcot study {name} --docs` trains it ({len(study.sweeps)} sweep(s), "
-        f"seeds 0-{study.seeds - 1}: {sweeps}; several CPU-hours on 2 cores) and writes this page with "
-        "its tables."
+        f"`runs/sweeps/`). `dospcot study {name} --docs` trains it into `runs/sweeps/` "
+        f"({len(study.sweeps)} sweep(s), seeds 0-{study.seeds - 1}: {sweeps}; several CPU-hours on 2 "
+        "cores) and writes this page with its tables."
     )
 
 
@@ -64,11 +64,19 @@ def glance_cells(study: Study, runs: list[TrialRun]) -> list[str]:
 def glance_table(rows: dict[str, list[str]], order: list[str], link: str) -> str:
     """The results at a glance: a row per study of ``order`` (``rows`` holds each one's cells; a study
     without them is named with the command that renders it), each study linked to its page under
-    ``link`` (``docs/results/`` from the README, nothing beside the pages)."""
+    ``link`` (``docs/results/`` from the README, nothing beside the pages), and a line that counts the
+    studies whose headline finds DOSPCoT above self-training."""
     lines = list(GLANCE_HEAD)
     for name in order:
         cells = rows.get(name) or ["", "not rendered yet", "", f"`dospcot study {name} --render-only --docs`"]
         lines.append(f"| [{name}]({link}{name}.md) | " + " | ".join(cells) + " |")
+    paired = [cells for cells in rows.values() if "DOSPCoT minus self-training" in cells[1]]
+    above = [cells for cells in paired if "DOSPCoT above self-training" in cells[3]]
+    lines += [
+        "",
+        f"Of the {len(paired)} studies whose headline is DOSPCoT minus self-training, the interval lies "
+        f"above 0 in {len(above)}.",
+    ]
     return "\n".join(lines)
 
 
