@@ -183,3 +183,18 @@ def test_every_module_has_an_api_page_and_every_public_name_a_docstring():
     missing_pages, undocumented = hooks.documentation_gaps()
     assert missing_pages == []
     assert sorted(set(undocumented) - hooks.KNOWN_GAPS) == []
+
+
+def test_runs_readme_lists_the_files_gitignore_keeps_of_the_record():
+    """runs/README.md's table of the record's files and .gitignore's exceptions name the same files."""
+    table = (ROOT / "runs" / "README.md").read_text().split("## What the record keeps")[1].split("\n\n")[2]
+    listed = set(re.findall(r"^\| `([\w.]+)` \|", table, flags=re.MULTILINE))
+    kept = {
+        line.rsplit("/", 1)[1]
+        for line in (ROOT / ".gitignore").read_text().splitlines()
+        if line.startswith("!runs/sweeps/") and not line.endswith("/")
+    }
+    assert listed == kept == {
+        "sweep.json", "trial.json", "config.toml", "run_info.json", "metrics.csv", "summary.json",
+        "reward_classes.json",
+    }  # fmt: skip
