@@ -5,14 +5,14 @@ PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-slow lint bench clean
+.PHONY: install run test test-slow lint bench docs clean
 
 # torch is installed first, through the constraints file, so that no dependency can pull the
 # registry's CUDA build of torch.
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q -c constraints.txt torch
-	$(PIP) install -q -c constraints.txt -e ".[dev,ray,highway,minigrid]"
+	$(PIP) install -q -c constraints.txt -e ".[dev,docs,ray,highway,minigrid]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -20,19 +20,23 @@ install: $(STAMP)
 run: $(STAMP)  ## the main job on its embedded default: the seed paper's protocol, 10 seeds
 	$(VENV)/bin/dospcot reproduce-paper
 
-test: $(STAMP)
-	$(PY) -m pytest -q
+test: $(STAMP)  ## the tests not marked slow, ruff, and the documentation site with --strict
+	$(PY) -m pytest -q -n 2
 	$(VENV)/bin/ruff check .
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 test-slow: $(STAMP)
-	$(PY) -m pytest -q -m slow
+	$(PY) -m pytest -q -n 2 -m slow
 
 bench: $(STAMP)  ## every benchmark row, written to BENCHMARKS.md (most of an hour: the tabular row alone took 17 minutes on 2 cores)
 	$(VENV)/bin/dospcot bench
+
+docs: $(STAMP)  ## the documentation site into site/ (`$(VENV)/bin/mkdocs serve` serves it while you edit)
+	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/ruff format --check .
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build site *.egg-info

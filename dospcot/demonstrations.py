@@ -86,10 +86,12 @@ class Demonstrations:
 
     @property
     def n_episodes(self) -> int:
+        """The number of episodes (0 for an empty set)."""
         return int(self.episode[-1]) + 1 if len(self) else 0
 
     @property
     def views(self) -> tuple[str, ...]:
+        """The names of the views every step is recorded in."""
         return tuple(self.observations)
 
     def without_rewards(self) -> Demonstrations:

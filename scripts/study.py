@@ -1,4 +1,4 @@
-"""The README's studies, each one command: ``python scripts/study.py STUDY [--docs] [--render-only]``.
+"""The published studies, each one command: ``python scripts/study.py STUDY [--docs] [--render-only]``.
 
 The studies and their command live in :mod:`dospcot.experiment.studies`; ``--help`` lists them.
 """

@@ -278,8 +278,8 @@ def test_a_view_that_changes_shape_fails_with_one_line():
 
 
 @pytest.mark.slow
-def test_the_readme_example_runs_as_it_stands_and_its_agents_reach_the_goal(tmp_path):
-    readme = (Path(__file__).parents[1] / "README.md").read_text()
+def test_the_worked_example_runs_as_it_stands_and_its_agents_reach_the_goal(tmp_path):
+    readme = (Path(__file__).parents[1] / "docs" / "your_env.md").read_text()
     block = readme.split("<!-- your-env-example:start -->")[1].split("<!-- your-env-example:end -->")[0]
     code = block.split("```python\n")[1].split("```")[0]
     (tmp_path / "corridor.py").write_text(code)

@@ -65,7 +65,7 @@ def read_config_data(config: str, _seen: tuple[str, ...] = ()) -> dict[str, Any]
     except tomllib.TOMLDecodeError as err:
         raise ConfigError(f"{origin} is not valid TOML: {err}") from None
     if not data:  # it would train the code's defaults, which no one asked for
-        raise ConfigError(f"{origin} holds no key; start it from a preset: extends = \"tiny\"")
+        raise ConfigError(f'{origin} holds no key; start it from a preset: extends = "tiny"')
     base = data.pop("extends", None)
     if base is None:
         return data

@@ -45,6 +45,7 @@ class Measurement:
 
     @classmethod
     def of(cls, values: list[float], unit: str) -> Measurement:
+        """The median, min and max of repeated measurements ``values``, in ``unit``."""
         return cls(statistics.median(values), min(values), max(values), unit)
 
     def __str__(self) -> str:
@@ -73,10 +74,12 @@ class Row:
 
     @property
     def ratio(self) -> float:
+        """Ours over the peer, of the medians."""
         return self.ours.median / self.peer.median
 
     @property
     def met(self) -> bool:
+        """Whether the ratio meets the target (at least it, or at most it where lower is better)."""
         return self.ratio >= self.target if self.higher_is_better else self.ratio <= self.target
 
 

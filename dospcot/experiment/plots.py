@@ -56,6 +56,7 @@ class Band:
     high: np.ndarray
 
     def labelled(self, label: str) -> Band:
+        """The same band under another legend label."""
         return replace(self, label=label)
 
 

@@ -67,14 +67,17 @@ def remove_stale_temporaries(folder: Path) -> None:
 
 
 def write_text(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically (:func:`atomic_write`)."""
     atomic_write(path, lambda handle: handle.write(text.encode()))
 
 
 def write_json(path: Path, data: Any) -> None:
+    """Write ``data`` to ``path`` as indented JSON, atomically."""
     write_text(path, json.dumps(data, indent=2, sort_keys=False) + "\n")
 
 
 def write_toml(path: Path, data: dict[str, Any]) -> None:
+    """Write ``data`` to ``path`` as TOML, atomically."""
     write_text(path, tomli_w.dumps(data))
 
 

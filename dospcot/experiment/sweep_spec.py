@@ -42,10 +42,12 @@ class SweepSpec:
     overrides: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
+        """The spec as ``sweep.json`` holds it, with its format number."""
         return {"format": SWEEP_FORMAT, **asdict(self)}  # tuples become JSON lists
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> SweepSpec:
+        """The spec that ``sweep.json`` holds; :class:`SweepError` for another format."""
         if data.get("format") != SWEEP_FORMAT:
             raise SweepError(f"{SWEEP_FILE} is not a dospcot sweep of format {SWEEP_FORMAT}")
         return cls(
@@ -96,6 +98,7 @@ class Trial:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Trial:
+        """The trial that its ``trial.json`` holds."""
         return cls(
             data["config"],
             data["name"],
@@ -222,10 +225,12 @@ def _grid_text(grid: dict[str, tuple[str, ...]]) -> str:
 
 
 def trial_dir(sweep_dir: Path, trial: Trial) -> Path:
+    """The run folder of ``trial`` in the sweep folder."""
     return sweep_dir / "trials" / trial.trial_id
 
 
 def is_finished(sweep_dir: Path, trial: Trial) -> bool:
+    """Whether the trial finished: its folder holds ``summary.json``, which a run writes last."""
     return (trial_dir(sweep_dir, trial) / SUMMARY_FILE).is_file()
 
 

@@ -180,15 +180,19 @@ class GridTask(StoreQueries):
 
     # What the reward queries read of the pool (dospcot.core.queries.QueriedTask): never a hidden reward.
     def met(self) -> np.ndarray:
+        """(N,) bool, the samples the agents have met."""
         return self.store.visited.copy()
 
     def labelled(self) -> np.ndarray:
+        """(N,) bool, the samples whose reward is known (revealed, monitored or demonstrated)."""
         return self.store.labelled.copy()
 
     def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) bool each: the samples that ended their episode, and those the time limit cut."""
         return self.store.terminated.copy(), self.store.truncated.copy()
 
     def describe(self, sample: int) -> dict[str, Any]:
+        """What a person is shown of sample ``sample``: its key or step."""
         state, action = divmod(sample, self.mdp.n_actions)
         return {"key": f"state {state}, action {action}"}
 

@@ -287,21 +287,23 @@ class SensorTask(StoreQueries):
 
     # What the reward queries read of the pool (dospcot.core.queries.QueriedTask): never a hidden reward.
     def met(self) -> np.ndarray:
+        """(N,) bool, the samples the agents have met."""
         return np.ones(len(self.store), dtype=bool)
 
     def labelled(self) -> np.ndarray:
+        """(N,) bool, the samples whose reward is known (revealed, monitored or demonstrated)."""
         return self.store.labelled[: len(self.store)].copy()
 
     def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        """(N,) bool each: the samples that ended their episode, and those the time limit cut."""
         n = len(self.store)
         return self.store.terminal[:n].copy(), self.store.truncated[:n].copy()
 
     def describe(self, sample: int) -> dict[str, Any]:
-        keys = getattr(self.store, "ids", None)
-        if keys is not None:  # a keyed pool's sample is a (state key, action) pair
-            key, action = next(pair for pair, n in keys.items() if n == sample)
-            return {"key": f"state {key}, action {action}"}
-        return {"key": f"step {sample}, action {int(self.store.action[sample])}"}
+        """What a person is shown of sample ``sample``: its (state key, action) pair, or its step."""
+        pairs = {n: (f"state {key}", action) for (key, action), n in getattr(self.store, "ids", {}).items()}
+        where, action = pairs.get(sample, (f"step {sample}", int(self.store.action[sample])))
+        return {"key": f"{where}, action {action}"}
 
     def agent_env(self, k: int, view: str) -> gym.Env:
         return self._envs[k]
@@ -434,8 +436,8 @@ class SensorTask(StoreQueries):
 
 
 def _eval_env(make_env: Callable[..., gym.Env], view: str, max_steps: int) -> DummyVecEnv:
-    """An unmasked copy of the task observing ``view`` (the hidden reward is the reward), checked as the
-    agents' envs are: a non-finite value or an error of the env stops the run naming it."""
+    """An unmasked copy of the task observing ``view`` (its hidden reward is the reward), checked as the
+    agents' envs are."""
 
     def build() -> gym.Env:
         env = make_env(view, (view,), 1.0, 0)

@@ -1,54 +1,80 @@
-"""The README's neural studies, each one command: a ``dospcot sweep`` and its ``dospcot report``.
+"""Every published study, each one command: its sweeps (``dospcot sweep``), their reports
+(``dospcot report``) and its tables.
 
-    python scripts/study.py label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~2.5 h)
-    python scripts/study.py grid16 --docs           # 6 grid16 presets x seeds 0-9
-    python scripts/study.py grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
-    python scripts/study.py grid32 --docs           # 4 grid32 presets x seeds 0-4
-    python scripts/study.py grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
-    python scripts/study.py fasthighway --docs      # 4 fasthighway presets x seeds 0-4
-    python scripts/study.py minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
-    python scripts/study.py highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
-    python scripts/study.py paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
-    python scripts/study.py paper-published-code --docs   # the same with its published code's settings
-    python scripts/study.py demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
-    python scripts/study.py equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
-    python scripts/study.py equal-effort-highway --docs  # the same on the fast highway, 5 seeds
-    python scripts/study.py second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
-    python scripts/study.py second-view-highway --docs   # its highway monitor setting x seeds 0-4
+    dospcot study label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~2.5 h)
+    dospcot study grid16 --docs           # 6 grid16 presets x seeds 0-9
+    dospcot study grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
+    dospcot study grid32 --docs           # 4 grid32 presets x seeds 0-4
+    dospcot study grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
+    dospcot study fasthighway --docs      # 4 fasthighway presets x seeds 0-4
+    dospcot study minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
+    dospcot study highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
+    dospcot study paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
+    dospcot study paper-published-code --docs   # the same with its published code's settings
+    dospcot study demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
+    dospcot study equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
+    dospcot study equal-effort-highway --docs  # the same on the fast highway, 5 seeds
+    dospcot study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
+    dospcot study second-view-highway --docs   # its highway monitor setting x seeds 0-4
 
-A study is one or more sweeps in ``runs/sweeps/``: rerunning the command runs only the trials not yet
-finished, then rebuilds the tables from every finished run folder (``--render-only`` trains nothing).
-The grid tables lead with success (the share of seeds x agents whose greedy policy reaches the goal
-from the map's start) and optimal-action agreement; the normalised score follows, with its caveat in
-each table's header (a policy that never reaches the goal but avoids lava scores high).
-With ``--docs`` the tables go to ``docs/<study>.md`` and into README.md between the study's
-``<!-- <study>-table:start -->`` and ``<!-- <study>-table:end -->`` markers, and the label-fraction
-plot to ``docs/label-fraction.png``; for the paper studies the README gets an excerpt (paper accuracy
-and Table 3 of optimal-action agreement) and the docs page every table. No number is typed by hand.
+(``python scripts/study.py`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
+rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
+finished run folder (``--render-only`` trains nothing). The grid tables lead with success (the share
+of seeds x agents whose greedy policy reaches the goal from the map's start) and optimal-action
+agreement; the normalised score follows, with its caveat in each table's header (a policy that never
+reaches the goal but avoids lava scores high).
+
+With ``--docs`` the study's page ``docs/results/<study>.md`` is written: the prose of
+``pages/<study>.md`` in this package with the tables in place (a study whose record holds no run
+gets a page that says so), its plot goes to ``docs/results/``, its row of the results at a glance
+is rewritten in README.md and ``docs/results/index.md`` (between the ``results-at-a-glance``
+markers), and a study with a README block (the paper protocol's headline) rewrites it between its
+``<!-- <study>-table:start -->`` and ``<!-- <study>-table:end -->`` markers. No number is typed by
+hand.
 """
 
 # The package: each study is declared once, beside its tables, in the module of its group (grid,
-# highway, minigrid, label_sources, second_view, paper); declaration.py says what a study is, tables.py
-# and provenance.py hold what their tables share, readme.py where --docs writes. This module gathers
-# them into STUDIES and runs one (``main``, behind scripts/study.py).
+# highway, minigrid, label_sources, second_view, paper), with its page's prose in pages/<study>.md;
+# declaration.py says what a study is, tables.py and provenance.py hold what their tables share,
+# pages.py makes a page and a row of the results at a glance, readme.py where --docs writes. This
+# module gathers them into STUDIES and runs one (``main``, behind scripts/study.py).
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import shlex
 import shutil
 import sys
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
-from dospcot.experiment.report import load_runs, write_report
+from dospcot.experiment.report import TrialRun, load_runs, write_report
 from dospcot.experiment.studies import grid, highway, label_sources, minigrid, paper, queries, second_view
-from dospcot.experiment.studies.declaration import Study, Sweep
+from dospcot.experiment.studies.declaration import Glance, Study, Sweep
+from dospcot.experiment.studies.pages import GLANCE, glance_cells, page, page_prose, write_glance
 from dospcot.experiment.studies.provenance import header
-from dospcot.experiment.studies.readme import ROOT, check_readme_block, replace_readme_block
+from dospcot.experiment.studies.readme import README, RESULTS, read_block, replace_block
 from dospcot.experiment.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
 
-__all__ = ["STUDIES", "Study", "Sweep", "get_study", "header", "header_command", "main", "run_study"]
+__all__ = [
+    "STUDIES",
+    "Glance",
+    "Rendered",
+    "Study",
+    "Sweep",
+    "check_record",
+    "get_study",
+    "header",
+    "header_command",
+    "main",
+    "render_study",
+    "run_study",
+    "study_runs",
+    "study_table",
+    "sweep_spec",
+]
 
 STUDIES: dict[str, Study] = {
     **grid.STUDIES,
@@ -76,57 +102,123 @@ def header_command(program: Sequence[str], study: str, options: Sequence[str]) -
     return shlex.join([*program, study, *(option for option in options if option != "--render-only")])
 
 
+def study_runs(
+    study: Study, runs_dir: Path, suffix: str = ""
+) -> tuple[list[TrialRun], list[Path], list[Path]]:
+    """The finished runs of ``study``'s sweeps under ``runs_dir`` (each sweep's folder name plus
+    ``suffix``), the sweep folders that hold them, and those that hold none (never started)."""
+    runs, sweep_dirs, not_started = [], [], []
+    for sweep in study.sweeps:
+        sweep_dir = runs_dir / f"{sweep.name}{suffix}"
+        try:
+            runs += load_runs(sweep_dir)[1]
+        except SweepError:  # never started, or no trial finished yet: the study was cut short there
+            not_started.append(sweep_dir)
+            continue
+        sweep_dirs.append(sweep_dir)
+    return runs, sweep_dirs, not_started
+
+
+def study_table(
+    study: Study, runs: list[TrialRun], command: str, sweep_dirs: list[Path], not_started: list[Path]
+) -> str:
+    """The study's tables as text: the header (where the figures come from), then its tables."""
+    unfinished = ", ".join(f"`{d}`" for d in not_started)
+    missing = [f"Not finished yet: sweep(s) {unfinished}."] if not_started else []
+    return "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
+
+
+def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = ()) -> SweepSpec:
+    """The spec of one of a study's sweeps over seeds 0..seeds-1, with ``overrides`` (``--set``)."""
+    return SweepSpec(sweep.configs, sweep.grid, tuple(range(seeds)), tuple(overrides))
+
+
+def check_record(
+    study: Study, runs_dir: Path, seeds: int, overrides: Sequence[str] = (), suffix: str = ""
+) -> None:
+    """Raise :class:`SweepError` where a finished trial of the study was trained under another config
+    than its preset and overrides give now: the record cannot stand for the study then."""
+    for sweep in study.sweeps:
+        sweep_dir = runs_dir / f"{sweep.name}{suffix}"
+        if sweep_dir.is_dir():  # a sweep never started has nothing stale
+            check_not_stale(sweep_dir, sweep_spec(sweep, seeds, overrides).trials())
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """What ``--docs`` writes of a study: its tables (None where the record holds no run), its page,
+    its cells in the results at a glance, and its README block (None where it has none)."""
+
+    table: str | None
+    page: str
+    glance: list[str]
+    readme: str | None
+
+
+def render_study(name: str, runs_dir: Path, command: str, suffix: str = "") -> Rendered:
+    """Study ``name`` rendered from the finished runs under ``runs_dir``, with ``command`` in its
+    header; nothing is trained or written."""
+    study = get_study(name)
+    runs, sweep_dirs, not_started = study_runs(study, runs_dir, suffix)
+    table = study_table(study, runs, command, sweep_dirs, not_started) if runs else None
+    readme = study.readme(table) if study.readme is not None and table is not None else None
+    return Rendered(table, page(name, study, table), glance_cells(study, runs), readme)
+
+
 def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") -> None:
     """Run the study ``args.study`` (its unfinished trials; none with ``args.render_only``), then print
-    its tables and, with ``args.docs``, write its docs page, plot and README block. ``command`` is the
-    header's command line (:func:`header_command`); ``prog`` starts each one-line error, on which it
-    exits with status 1. ``args`` holds what :func:`main` parses: study, seeds, workers, backend,
-    overrides, runs_dir, docs and render_only."""
+    its tables and, with ``args.docs``, write its page, plot, row of the results at a glance and README
+    block (docs/results/, README.md). ``command`` is the header's command line
+    (:func:`header_command`); ``prog`` starts each one-line error, on which it exits with status 1.
+    ``args`` holds what :func:`main` parses: study, seeds, workers, backend, overrides, runs_dir, docs
+    and render_only. With ``--render-only --docs`` a study whose record holds no run gets a page that
+    says so."""
     study = get_study(args.study)
-    markers = (f"<!-- {args.study}-table:start -->", f"<!-- {args.study}-table:end -->")
-    if args.docs and study.readme is not None:
+    block = f"{args.study}-table"
+    if args.docs:
         try:  # before hours of training, not after
-            check_readme_block(*markers)
+            page_prose(args.study)
+            read_block(README, GLANCE)
+            read_block(RESULTS / "index.md", GLANCE)
+            if study.readme is not None:
+                read_block(README, block)
         except ValueError as err:
             sys.exit(f"{prog}: {err}")
     args.seeds = args.seeds or study.seeds
     # Another --seeds or --set is another sweep: it gets its own folder.
     default = (args.seeds, args.overrides) == (study.seeds, [])
     suffix = "" if default else f"-{args.seeds}seeds-{len(args.overrides)}sets"
-    runs, sweep_dirs, written, not_started = [], [], [], []
-    for sweep in study.sweeps:
-        sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
-        spec = SweepSpec(sweep.configs, sweep.grid, tuple(range(args.seeds)), tuple(args.overrides))
-        try:  # trials run under a preset that has changed since are neither resumed nor tabled
-            if args.render_only:
-                check_not_stale(sweep_dir, spec.trials())
-            else:
+    try:  # trials run under a preset that has changed since are neither resumed nor tabled
+        if args.render_only:
+            check_record(study, args.runs_dir, args.seeds, args.overrides, suffix)
+        else:
+            for sweep in study.sweeps:
+                spec = sweep_spec(sweep, args.seeds, args.overrides)
+                sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
                 failed = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers).failed
                 if failed:
                     sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
-        except SweepError as err:
-            sys.exit(f"{prog}: {err}")
-        try:
-            written += write_report(sweep_dir)
-        except SweepError:  # never started, or no trial finished yet: the study was cut short there
-            not_started.append(sweep_dir)
-            continue
-        runs += load_runs(sweep_dir)[1]
-        sweep_dirs.append(sweep_dir)
-    if not runs:
+    except SweepError as err:
+        sys.exit(f"{prog}: {err}")
+    written = []
+    for sweep in study.sweeps:
+        with contextlib.suppress(SweepError):  # a sweep not started has no report
+            written += write_report(args.runs_dir / f"{sweep.name}{suffix}")
+    rendered = render_study(args.study, args.runs_dir, command, suffix)
+    if rendered.table is None and not (args.docs and args.render_only and default):
         sys.exit(f"{prog}: no finished run of this study under {args.runs_dir}; run it without --render-only")
-    unfinished = ", ".join(f"`{d}`" for d in not_started)
-    missing = [f"Not finished yet: sweep(s) {unfinished}."] if not_started else []
-    table = "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
-    print(table)
+    if rendered.table is None:
+        print(f"no finished run of {args.study} under {args.runs_dir}: its page says it is unpublished")
+    else:
+        print(rendered.table)
     if args.docs:
-        docs_table = table.replace("](docs/", "](")  # the docs page sits beside the plot
-        (ROOT / "docs" / f"{args.study}.md").write_text(f"# {study.title}\n\n{docs_table}")
+        (RESULTS / f"{args.study}.md").write_text(rendered.page)
         plot = next((p for p in written if study.plot and p.name == study.plot[0]), None)
         if plot is not None:
-            shutil.copyfile(plot, ROOT / "docs" / study.plot[1])
-        if study.readme is not None:
-            replace_readme_block(*markers, study.readme(table))
+            shutil.copyfile(plot, RESULTS / study.plot[1])
+        write_glance(args.study, rendered.glance, list(STUDIES))
+        if rendered.readme is not None:
+            replace_block(README, block, rendered.readme)
 
 
 def main(argv: Sequence[str] | None = None) -> None:
@@ -144,7 +236,9 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument("--backend", choices=["local", "ray"], default="local")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"))
-    parser.add_argument("--docs", action="store_true", help="also write docs/<study>.md and README.md")
+    parser.add_argument(
+        "--docs", action="store_true", help="also write docs/results/<study>.md and its README.md rows"
+    )
     parser.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
     args = parser.parse_args(argv)
     run_study(args, header_command(("python", "scripts/study.py"), args.study, argv[1:]))

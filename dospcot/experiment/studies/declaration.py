@@ -1,4 +1,5 @@
-"""How a study is declared: its sweeps (each a folder under ``--runs-dir``), its tables and its pages."""
+"""How a study is declared: its sweeps (each a folder under ``--runs-dir``), its tables, its row in the
+results at a glance, and its page (the prose of ``pages/<study>.md`` around the generated table)."""
 
 from __future__ import annotations
 
@@ -18,15 +19,29 @@ class Sweep:
 
 
 @dataclass(frozen=True)
+class Glance:
+    """A study's row in "Results at a glance": its headline comparison with the 95% interval, and the
+    verdict that interval gives (both generated from the runs, never typed)."""
+
+    headline: str
+    verdict: str
+
+
+@dataclass(frozen=True)
 class Study:
-    """A study: its sweeps, the tables built from their finished runs, its docs page's title and its
-    seeds (0..seeds-1 unless --seeds says otherwise)."""
+    """A study: its sweeps, the tables built from their finished runs, its page's title, the task it
+    runs on (in words, for the results at a glance) and its seeds (0..seeds-1 unless --seeds says
+    otherwise). Its page's prose, the text above and below the table (what the study runs, the reading
+    of its table, its history), is ``pages/<study>.md`` beside this module."""
 
     sweeps: tuple[Sweep, ...]
     tables: Callable[[list[TrialRun]], list[str]]
     title: str
+    task: str
+    glance: Callable[[list[TrialRun]], Glance]
     seeds: int = 5
-    readme: Callable[[str], str] | None = lambda table: table
+    readme: Callable[[str], str] | None = None
     """The README block from the study's table text; ``None``: the study has no README block."""
     plot: tuple[str, str] | None = None
-    """A plot of the report that goes into ``docs/``: (its name in the sweep folder, its name there)."""
+    """A plot of the report that goes into ``docs/results/``: (its name in the sweep folder, its name
+    there)."""

@@ -4,7 +4,7 @@ map, and score against label fraction."""
 from __future__ import annotations
 
 from dospcot.experiment.report import TrialRun, cells
-from dospcot.experiment.studies.declaration import Study, Sweep
+from dospcot.experiment.studies.declaration import Glance, Study, Sweep
 from dospcot.experiment.studies.provenance import score_floor
 from dospcot.experiment.studies.tables import (
     COLUMNS,
@@ -13,8 +13,11 @@ from dospcot.experiment.studies.tables import (
     METHODS,
     by_method,
     cell_labels,
+    glance_versus,
     over_seeds,
     per_view_rows,
+    verdict,
+    versus,
 )
 
 WORST_CLASS = (
@@ -76,7 +79,7 @@ def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
     grouped = cells(runs)
     names = list(dict.fromkeys(name for name, _ in grouped))
     fractions = list(dict.fromkeys(dict(params)[FRACTION] for _, params in grouped))
-    lines = ["", "![normalised score and success against label fraction](docs/label-fraction.png)"]
+    lines = ["", "![normalised score and success against label fraction](docs/results/label-fraction.png)"]
     for key in ("normalised_score", "success", "agreement"):
         lines += [
             "",
@@ -91,6 +94,33 @@ def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
     return lines
 
 
+def layouts_glance(runs: list[TrialRun]) -> Glance:
+    """Success, DOSPCoT minus self-training, paired by layout and seed over the three layouts."""
+    return glance_versus(
+        runs, "grid16", "success", "layout and seed", key=lambda r: (r.trial.params[LAYOUT], r.trial.seed)
+    )
+
+
+def tabular_glance(runs: list[TrialRun]) -> Glance:
+    """Success after the presets' 5 rounds, DOSPCoT minus self-training."""
+    return glance_versus([r for r in runs if r.summary["rounds"] == 5], "grid16", "success", "seed, 5 rounds")
+
+
+def label_fraction_glance(runs: list[TrialRun]) -> Glance:
+    """Success at the fewest labels the study gives, DOSPCoT minus self-training."""
+    fewest = min((r.trial.params[FRACTION] for r in runs), key=float)
+    diff = versus(
+        [r for r in runs if r.trial.params[FRACTION] == fewest],
+        "grid16-dospcot",
+        "grid16-self-training",
+        "success",
+    )
+    return Glance(
+        f"success at label fraction {fewest}, DOSPCoT minus self-training, paired by seed: {diff}",
+        verdict(diff),
+    )
+
+
 LABEL_FRACTION = Sweep(
     "label-fraction",
     ("grid16-masked-zero", "grid16-self-training", "grid16-dospcot", "grid16-m3"),
@@ -98,7 +128,12 @@ LABEL_FRACTION = Sweep(
 )
 STUDIES: dict[str, Study] = {
     "grid16": Study(
-        (Sweep("grid16", GRID16_PRESETS, {}),), grid16_tables, "The 16 x 16 grid study", seeds=10
+        (Sweep("grid16", GRID16_PRESETS, {}),),
+        grid16_tables,
+        "The 16 x 16 grid study",
+        "16 x 16 grid, layout 0, 5% labels",
+        lambda runs: glance_versus(runs, "grid16", "success"),
+        seeds=10,
     ),
     # The presets on maps nobody tuned them on.
     "grid16-layouts": Study(
@@ -111,6 +146,8 @@ STUDIES: dict[str, Study] = {
         ),
         layout_tables,
         "The 16 x 16 grid presets on three unseen layouts",
+        "16 x 16 grid, layouts 101, 202, 303 (never tuned on)",
+        layouts_glance,
     ),
     "grid32": Study(
         (
@@ -122,6 +159,8 @@ STUDIES: dict[str, Study] = {
         ),
         grid16_tables,
         "The 32 x 32 grid study",
+        "32 x 32 grid, layout 0, 5% labels",
+        lambda runs: glance_versus(runs, "grid32", "success"),
     ),
     # The same six presets with a Q-table over each agent's view in place of every ExpectedSarsaDQN.
     "grid16-tabular": Study(
@@ -135,11 +174,15 @@ STUDIES: dict[str, Study] = {
         ),
         grid16_tables,
         "The 16 x 16 grid study with tabular agents",
+        "16 x 16 grid, layout 0, Q-table agents",
+        tabular_glance,
     ),
     "label-fraction": Study(
         (LABEL_FRACTION,),
         label_fraction_tables,
         "Score against label fraction",
+        "16 x 16 grid, label fractions 0.01-1.0",
+        label_fraction_glance,
         plot=("score_vs_label_fraction.png", "label-fraction.png"),
     ),
 }

@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+from functools import partial
+
 from dospcot.config.loading import load_run_config
 from dospcot.experiment.report import TrialRun
 from dospcot.experiment.studies.declaration import Study, Sweep
 from dospcot.experiment.studies.tables import (
     METHODS,
     by_method,
+    glance_versus,
     mean_over_oracles,
     over_seeds,
     per_view_rows,
@@ -60,10 +63,12 @@ STUDIES: dict[str, Study] = {
         ),
         highway_tables,
         f"The highway study on {env}",
+        f"{task}, 10% of steps labelled",
+        partial(glance_versus, prefix=base, metric="greedy_return"),
         seeds=seeds,
     )
-    for base, env, seeds in (
-        ("highway", "highway-fast-v0", 3),
-        ("fasthighway", "our fast highway env", 5),
+    for base, env, task, seeds in (
+        ("highway", "highway-fast-v0", "highway-env's highway-fast-v0", 3),
+        ("fasthighway", "our fast highway env", "our fast highway (dospcot/FastHighway-v0)", 5),
     )
 }

@@ -9,8 +9,8 @@ from collections.abc import Sequence
 from functools import partial
 
 from dospcot.experiment.report import TrialRun
-from dospcot.experiment.studies.declaration import Study, Sweep
-from dospcot.experiment.studies.tables import COLUMNS, FRACTION, over_seeds, paired
+from dospcot.experiment.studies.declaration import Glance, Study, Sweep
+from dospcot.experiment.studies.tables import COLUMNS, FRACTION, over_seeds, paired, verdict
 
 # A first comparison of label sources: expert demonstrations with 1% per-step labels against 5% per-step
 # labels, on grid16-dospcot, seeds 0-9. Each arm is a set of overrides of the preset, one sweep each.
@@ -165,17 +165,38 @@ EFFORT_HIGHWAY_ARMS: dict[str, dict[str, str]] = {
 EFFORT_HIGHWAY_COLUMNS = ("labelled_steps", "greedy_return", "success", "pseudo_accuracy")
 
 
+def arms_glance(
+    runs: list[TrialRun],
+    arms: dict[str, dict[str, str]],
+    ours: str,
+    theirs: str,
+    metric: str = "success",
+    preset: str = "grid16-dospcot",
+) -> Glance:
+    """``metric`` of arm ``ours`` minus arm ``theirs`` (overrides of ``preset``), paired by seed."""
+    by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
+    diff = paired(by_arm.get(ours, {}), by_arm.get(theirs, {}), metric)
+    words = metric.replace("greedy_", "")
+    return Glance(f"{words}, {ours} minus {theirs}, paired by seed: {diff}", verdict(diff, ours, theirs))
+
+
 STUDIES: dict[str, Study] = {
     "demo-labels": Study(
         _arm_sweeps("demonstrations-", DEMO_ARMS, {}),
         demonstration_tables,
         "Expert demonstrations against per-step labels (grid16)",
+        "16 x 16 grid, layout 0: demonstrations or labels",
+        partial(arms_glance, arms=DEMO_ARMS, ours=DEMO_TARGET[0], theirs=DEMO_TARGET[1]),
         seeds=10,
     ),
     "equal-effort": Study(
         _arm_sweeps("effort-", EFFORT_ARMS, EFFORT_SHARED),
         effort_tables,
         "Label sources at equal effort: per-step labels, segments, demonstrations (grid16)",
+        "16 x 16 grid, layout 0: label sources at equal effort",
+        partial(
+            arms_glance, arms=EFFORT_ARMS, ours="segments of 4, equal effort", theirs=next(iter(EFFORT_ARMS))
+        ),
         seeds=10,
     ),
     "equal-effort-highway": Study(
@@ -190,5 +211,14 @@ STUDIES: dict[str, Study] = {
             preset="fasthighway-dospcot",
         ),
         "Label sources at equal effort: per-step labels, segments, demonstrations (fast highway)",
+        "our fast highway: label sources at equal effort",
+        partial(
+            arms_glance,
+            arms=EFFORT_HIGHWAY_ARMS,
+            ours="segments of 4, 5% of segments",
+            theirs=next(iter(EFFORT_HIGHWAY_ARMS)),
+            metric="greedy_return",
+            preset="fasthighway-dospcot",
+        ),
     ),
 }

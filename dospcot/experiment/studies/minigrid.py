@@ -7,7 +7,7 @@ import json
 from dospcot.config.loading import load_run_config
 from dospcot.experiment.report import TrialRun
 from dospcot.experiment.run_folder import REWARD_CLASSES_FILE
-from dospcot.experiment.studies.declaration import Study, Sweep
+from dospcot.experiment.studies.declaration import Glance, Study, Sweep
 from dospcot.experiment.studies.tables import (
     METHODS,
     MINIGRID_TASKS,
@@ -15,6 +15,8 @@ from dospcot.experiment.studies.tables import (
     mean_over_oracles,
     over_seeds,
     per_view_rows,
+    verdict,
+    versus,
 )
 from dospcot.metrics import SeedSummary
 
@@ -83,6 +85,21 @@ def _goal_label_lines(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> list[
     return lines
 
 
+def minigrid_glance(runs: list[TrialRun]) -> Glance:
+    """Per task, success of DOSPCoT minus self-training, paired by seed."""
+    diffs = {
+        env_id.removeprefix("MiniGrid-").removesuffix("-v0"): versus(
+            runs, f"minigrid-{task}-dospcot", f"minigrid-{task}-self-training", "success"
+        )
+        for task, env_id in MINIGRID_TASKS.items()
+    }
+    return Glance(
+        "success, DOSPCoT minus self-training, paired by seed: "
+        + "; ".join(f"{task} {diff}" for task, diff in diffs.items()),
+        "; ".join(f"{task}: {verdict(diff)}" for task, diff in diffs.items()),
+    )
+
+
 STUDIES: dict[str, Study] = {
     "minigrid": Study(
         tuple(
@@ -95,5 +112,7 @@ STUDIES: dict[str, Study] = {
         ),
         minigrid_tables,
         "MiniGrid: LavaGapS7 and DoorKey-5x5",
+        "MiniGrid LavaGapS7 and DoorKey-5x5, 10% of pairs labelled",
+        minigrid_glance,
     ),
 }

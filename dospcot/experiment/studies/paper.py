@@ -1,28 +1,17 @@
 """The seed paper's protocol on masked CliffWalking-v1: a sweep of one paper preset over seeds, which
-``dospcot report`` tables; the README gets an excerpt, the docs page every table."""
+``dospcot report`` tables; the page gets every table, the README the target line of ``paper-text``."""
 
 from __future__ import annotations
 
-import re
 from functools import partial
 
+from dospcot.config.loading import load_run_config
 from dospcot.config.presets import PAPER_PRESETS
 from dospcot.experiment.report import TrialRun, paper_report_tables
-from dospcot.experiment.studies.declaration import Study, Sweep
-
-
-def _section(text: str, heading: str) -> str:
-    """The markdown from ``heading`` to the next heading of the same or a higher level."""
-    level = heading.split(" ")[0]
-    start = text.index(heading)
-    rest = text[start + len(heading) :]
-    match = re.search(rf"^#{{1,{len(level)}}} ", rest, flags=re.MULTILINE)
-    return (heading + (rest[: match.start()] if match else rest)).strip()
-
-
-def _demote(markdown: str, levels: int = 2) -> str:
-    """Push every heading ``levels`` deeper, so the tables nest under the README's own headings."""
-    return re.sub(r"^(#+) ", lambda m: "#" * (len(m.group(1)) + levels) + " ", markdown, flags=re.MULTILINE)
+from dospcot.experiment.run_folder import CONFIG_FILE
+from dospcot.experiment.studies.declaration import Glance, Study, Sweep
+from dospcot.metrics import SeedSummary, published_paper_tables
+from dospcot.paper import protocol
 
 
 def _with_agreement_plot(plot: str, runs: list[TrialRun]) -> list[str]:
@@ -35,17 +24,33 @@ def _with_agreement_plot(plot: str, runs: list[TrialRun]) -> list[str]:
     ]
 
 
-def paper_readme(table: str) -> str:
-    """The README's excerpt of the paper tables: the header and target line, every paper-accuracy
-    table, and Table 3 of optimal-action agreement."""
-    agreement = _section(table, "## Optimal-action agreement")
-    return "\n\n".join(
-        [
-            table.split("\n## ")[0].strip(),
-            _demote(_section(table, "## Paper accuracy")),
-            "#### Optimal-action agreement, Table 3 (after 5 rounds)",
-            _section(agreement, "### Table 3").split("\n", 1)[1].strip(),
-        ]
+def paper_headline(table: str) -> str:
+    """The README's block of the paper protocol: its target line, as the study's tables state it."""
+    return next(line for line in table.splitlines() if line.startswith("**Target**"))
+
+
+def paper_glance(runs: list[TrialRun]) -> Glance:
+    """The protocol's target: ESARSA-ESARSA DOSPCoT's optimal-action agreement against the oracle's,
+    as the study's target line computes it (:func:`dospcot.paper.protocol.target_check`)."""
+    cfg = load_run_config(runs[0].run_dir / CONFIG_FILE)
+    rows = protocol.build_tables(
+        [row for run in runs for row in run.curves], published_paper_tables(), cfg.tabular.rounds
+    )
+    target = protocol.target_check(rows)
+    ours = next(
+        row
+        for row in rows
+        if (row["table"], row["metric"], row["agents"], row["method"], row["gamma"])
+        == ("3", "agreement", "ESARSA-ESARSA", "DOSPCoT", 0.3)
+    )
+    ours_cell = SeedSummary(*[ours[k] for k in ("mean", "low", "high", "iqm", "n")])
+    met = target["meets_95pct_of_oracle"] and target["beats_masked_zero"] and target["beats_labels_only"]
+    return Glance(
+        f"optimal-action agreement, ESARSA-ESARSA DOSPCoT after {cfg.tabular.rounds} rounds: {ours_cell}, "
+        f"{100 * target['ratio_to_oracle']:.1f}% of the oracle's {target['oracle_agreement']:.3f}",
+        "target met (at least 95% of the oracle, interval above masked-zero and labels-only)"
+        if met
+        else "target not met (95% of the oracle, interval above masked-zero and labels-only)",
     )
 
 
@@ -53,10 +58,12 @@ def paper_readme(table: str) -> str:
 STUDIES: dict[str, Study] = {
     preset: Study(
         (Sweep(preset, (preset,), {}),),
-        partial(_with_agreement_plot, f"docs/{preset}-agreement.png"),
+        partial(_with_agreement_plot, f"docs/results/{preset}-agreement.png"),
         f"Seed paper reproduction: masked CliffWalking-v1 (`{preset}`)",
+        f"masked CliffWalking, the seed paper's protocol ({preset} settings)",
+        paper_glance,
         seeds=10,
-        readme=paper_readme if preset == "paper-text" else None,
+        readme=paper_headline if preset == "paper-text" else None,
         plot=("paper_agreement.png", f"{preset}-agreement.png"),
     )
     for preset in PAPER_PRESETS.values()

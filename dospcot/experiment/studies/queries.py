@@ -8,7 +8,7 @@ from collections.abc import Callable
 
 from dospcot.experiment.report import TrialRun
 from dospcot.experiment.run_folder import REWARD_CLASSES_FILE
-from dospcot.experiment.studies.declaration import Study, Sweep
+from dospcot.experiment.studies.declaration import Glance, Study, Sweep
 from dospcot.experiment.studies.grid import LAYOUT, UNSEEN_LAYOUTS
 from dospcot.experiment.studies.tables import FRACTION, MINIGRID_TASKS, over_seeds
 from dospcot.metrics import SeedSummary
@@ -127,6 +127,23 @@ def _tables(tasks: dict[str, Callable[[TrialRun], bool]], hypotheses: Callable[.
     return tables
 
 
+def _glance(runs: list[TrialRun]) -> Glance:
+    """Q1's comparison: DOSPCoT disagreement at 2% minus DOSPCoT uniform at 5%, success, paired."""
+    diff = _difference(runs, "dospcot disagreement @ 0.02", "dospcot uniform @ 0.05", "success")
+    held = None if diff.n == 0 else diff.low >= -0.05
+    return Glance(
+        f"grid16 success, DOSPCoT disagreement at 2% minus uniform at 5%, paired: {diff}",
+        f"Q1: {_verdict(held).strip('*')}",
+    )
+
+
+def _highway_glance(runs: list[TrialRun]) -> Glance:
+    diff = _difference(runs, "dospcot disagreement @ 0.02", "self-training uncertainty @ 0.02", "success")
+    return Glance(
+        f"success, DOSPCoT disagreement minus self-training uncertainty, paired: {diff}", "no hypothesis"
+    )
+
+
 def _minigrid_hypotheses(runs: list[TrialRun], task: str) -> list[str]:
     return [*_q1_q2(runs, task, q1=False), _q3(runs, task)]
 
@@ -180,14 +197,16 @@ STUDIES: dict[str, Study] = {
             _grid_and_minigrid_hypotheses,
         ),
         "Active reward queries: label strategies at an equal budget",
+        "grid16 (unseen layouts), MiniGrid DoorKey-5x5 and LavaGapS7",
+        _glance,
         seeds=10,
-        readme=None,
     ),
     "queries-highway": Study(
         _arms("fasthighway", "0.02", {}, "queries-fasthighway"),
         _tables({"fast highway": lambda r: True}, lambda runs, task: []),
         "Active reward queries on the fast highway (no hypothesis)",
+        "fast highway",
+        _highway_glance,
         seeds=5,
-        readme=None,
     ),
 }

@@ -1,5 +1,5 @@
-"""Where ``--docs`` writes: the checkout's ``docs/`` and the generated blocks of its README.md, the
-text between a start and an end marker."""
+"""Where ``--docs`` writes: the checkout's ``docs/results/`` and the generated blocks of README.md and
+of ``docs/results/index.md``, each the text between a start and an end marker."""
 
 from __future__ import annotations
 
@@ -8,18 +8,29 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[3]
 """The checkout this package sits in (an editable install): ``--docs`` writes its docs/ and README.md."""
 README = ROOT / "README.md"
+RESULTS = ROOT / "docs" / "results"
+"""The study pages, one per study, and ``index.md``, the results at a glance."""
 
 
-def check_readme_block(start: str, end: str) -> None:
-    """Raise ``ValueError`` unless README.md holds the ``start`` marker once, then ``end`` once."""
-    readme = README.read_text()
-    if readme.count(start) != 1 or readme.count(end) != 1 or readme.index(start) > readme.index(end):
-        raise ValueError(f"README.md needs one {start!r} line and, after it, one {end!r} line")
+def markers(name: str) -> tuple[str, str]:
+    """The start and end marker lines of the generated block ``name``."""
+    return f"<!-- {name}:start -->", f"<!-- {name}:end -->"
 
 
-def replace_readme_block(start: str, end: str, text: str) -> None:
-    """Put ``text`` between the ``start`` and ``end`` marker lines of README.md, keeping the rest."""
-    check_readme_block(start, end)
-    head, rest = README.read_text().split(start)
+def read_block(path: Path, name: str) -> str:
+    """The text between the markers of block ``name`` in ``path``; ``ValueError`` unless the file holds
+    the start marker once and, after it, the end marker once."""
+    start, end = markers(name)
+    text = path.read_text()
+    if text.count(start) != 1 or text.count(end) != 1 or text.index(start) > text.index(end):
+        raise ValueError(f"{path.name} needs one {start!r} line and, after it, one {end!r} line")
+    return text.split(start)[1].split(end)[0].strip("\n")
+
+
+def replace_block(path: Path, name: str, text: str) -> None:
+    """Put ``text`` between the markers of block ``name`` in ``path``, keeping the rest."""
+    read_block(path, name)  # checks the markers
+    start, end = markers(name)
+    head, rest = path.read_text().split(start)
     _, tail = rest.split(end)
-    README.write_text(f"{head}{start}\n{text.rstrip()}\n{end}{tail}")
+    path.write_text(f"{head}{start}\n{text.rstrip()}\n{end}{tail}")

@@ -5,8 +5,10 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
+from typing import Any
 
 from dospcot.experiment.report import TrialRun, cells
+from dospcot.experiment.studies.declaration import Glance
 from dospcot.metrics import SeedSummary
 
 GRID_METHODS = {
@@ -115,3 +117,38 @@ def paired(a: dict[int, TrialRun], b: dict[int, TrialRun], metric: str) -> SeedS
     return SeedSummary.of(
         [run_value(a[s], metric) - run_value(b[s], metric) for s in sorted(set(a) & set(b))]
     )
+
+
+def verdict(diff: SeedSummary, ours: str = "DOSPCoT", theirs: str = "self-training") -> str:
+    """What a paired difference ``ours`` minus ``theirs`` shows: one above the other where its 95%
+    interval excludes 0, else no difference."""
+    if diff.n == 0:
+        return "not run"
+    if diff.low > 0:
+        return f"{ours} above {theirs}"
+    if diff.high < 0:
+        return f"{ours} below {theirs}"
+    return "no difference shown (the interval holds 0)"
+
+
+def versus(
+    runs: list[TrialRun],
+    ours: str,
+    theirs: str,
+    metric: str,
+    key: Callable[[TrialRun], Any] = lambda run: run.trial.seed,
+) -> SeedSummary:
+    """``metric`` of the runs of preset ``ours`` minus those of ``theirs``, paired by ``key`` (the
+    seed; on several maps, the map and the seed)."""
+    a, b = ({key(r): r for r in runs if r.trial.name == name} for name in (ours, theirs))
+    return paired(a, b, metric)
+
+
+def glance_versus(
+    runs: list[TrialRun], prefix: str, metric: str, paired_by: str = "seed", **kwargs
+) -> Glance:
+    """The usual headline: ``metric``, DOSPCoT minus self-training (the presets ``<prefix>-dospcot``
+    and ``<prefix>-self-training``), paired by seed, with its verdict."""
+    diff = versus(runs, f"{prefix}-dospcot", f"{prefix}-self-training", metric, **kwargs)
+    name = COLUMNS.get(metric, metric.replace("_", " "))
+    return Glance(f"{name}, DOSPCoT minus self-training, paired by {paired_by}: {diff}", verdict(diff))
