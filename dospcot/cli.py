@@ -214,7 +214,8 @@ def build_parser() -> argparse.ArgumentParser:
     study = commands.add_parser(
         "study",
         description="Run a study's sweeps (only the trials not yet finished), then print its tables from "
-        "every finished run; with --docs also write docs/<study>.md and its README.md block.",
+        "every finished run; with --docs also write docs/results/<study>.md and its row of the results "
+        "at a glance.",
         help="one of the published studies: its sweeps, then its tables (with --docs, its docs page)",
     )
     add_overrides(study, "override a key in every trial (repeatable; the study then writes its own sweeps)")
@@ -224,7 +225,7 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
     study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
     study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
-    study.add_argument("--docs", action="store_true", help="also write docs/<study>.md and its README block")
+    study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
     study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
     return parser
 
