@@ -268,6 +268,9 @@ def test_a_run_answered_through_files_equals_the_simulated_run(tmp_path, capsys)
         assert f"reward queries wait in {path}" in out and f"dospcot train --resume {run_dir}" in out
         rows = list(csv.DictReader(path.open()))
         assert rows and all(row["reward"] == "" for row in rows)
+        # Each query shows the key and the grid drawn as text, the agent as A where the key starts.
+        state = int(rows[0]["key"].split(",")[0].removeprefix("state "))
+        assert rows[0]["frame"].replace("\n", "")[state] == "A"
         # A bad answer file is one line, and nothing is lost: the resume after it goes on.
         for row in rows:
             row["reward"] = repr(float(rewards[int(row["sample"])]))

@@ -192,9 +192,15 @@ class GridTask(StoreQueries):
         return self.store.terminated.copy(), self.store.truncated.copy()
 
     def describe(self, sample: int) -> dict[str, Any]:
-        """What a person is shown of sample ``sample``: its key or step."""
+        """What a person is shown of sample ``sample``: its key and, where the env draws itself as text,
+        a frame of the state (the agent as ``A``)."""
         state, action = divmod(sample, self.mdp.n_actions)
-        return {"key": f"state {state}, action {action}"}
+        described = {"key": f"state {state}, action {action}"}
+        env = self.make_env()
+        if "ansi" in env.metadata.get("render_modes", ()):
+            env.unwrapped.render_mode, env.unwrapped.s = "ansi", state
+            described["frame"] = env.render()
+        return described
 
     def agent_env(self, k: int, view: str) -> gym.Env:
         cfg = self.cfg
