@@ -123,8 +123,9 @@ def study_table(
     study: Study, runs: list[TrialRun], command: str, sweep_dirs: list[Path], not_started: list[Path]
 ) -> str:
     """The study's tables as text: the header (where the figures come from), then its tables."""
-    unfinished = ", ".join(f"`{d}`" for d in not_started)
-    missing = [f"Not finished yet: sweep(s) {unfinished}."] if not_started else []
+    # By name: where the runs folder lies is the reader's, and a sweep not begun has no folder to cite.
+    unfinished = ", ".join(f"`{d.name}`" for d in not_started)
+    missing = [f"Not finished yet, in the runs folder: sweep(s) {unfinished}."] if not_started else []
     return "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
 
 
