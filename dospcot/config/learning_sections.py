@@ -97,6 +97,11 @@ class TrainingConfig:
             raise ValueError('rater = "file" answers queries: set label_strategy to an active strategy')
 
     @property
+    def total_steps(self) -> int:
+        """Env steps each agent takes in the whole run."""
+        return self.rounds * self.steps_per_round
+
+    @property
     def collect_only_steps(self) -> int:
         """Env steps per agent before ``learn_from_round``: the agents learn nothing while they take
         them (every agent's ``learning_starts`` is at least this)."""

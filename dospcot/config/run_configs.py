@@ -178,9 +178,9 @@ class TrainConfig:
 
     @property
     def buffer_size(self) -> int:
-        """Every agent's replay capacity: steps beyond a run's total never enter the buffer, so capping
-        it changes nothing but memory and the size of every checkpoint."""
-        return min(self.dqn.buffer_size, self.training.rounds * self.training.steps_per_round)
+        """Every neural agent's replay capacity: steps beyond a run's total never enter the buffer, so
+        capping it changes nothing but memory and the size of every checkpoint."""
+        return min(self.dqn.buffer_size, self.training.total_steps)
 
     def to_dict(self) -> dict[str, Any]:
         """The config as plain TOML-ready values (tuples become lists), without the sections of the

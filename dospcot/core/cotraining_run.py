@@ -141,9 +141,6 @@ def make_agent(
     """
     env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
     training = cfg.training
-    # Steps beyond a run's total never enter the buffer: capping it changes nothing but memory and the
-    # size of every checkpoint.
-    steps = training.rounds * training.steps_per_round
     common = dict(
         target=AGENT_TARGETS[kind], seed=agent_seed(cfg.seed, k), exploration_initial_eps=training.eps_start,
         exploration_final_eps=training.eps_end, replay_buffer_kwargs=buffer_kwargs,
@@ -155,11 +152,11 @@ def make_agent(
                 "(a grid world); use esarsa_dqn or dqn"
             )
         kwargs = dataclasses.asdict(cfg.tabular_agent)
-        kwargs["buffer_size"] = min(kwargs["buffer_size"], steps)
+        # Steps beyond a run's total never enter the buffer (TrainConfig.buffer_size, as for the others).
+        kwargs["buffer_size"] = min(kwargs["buffer_size"], training.total_steps)
         agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **kwargs)
     else:
-        kwargs = cfg.dqn.sb3_kwargs()
-        kwargs["buffer_size"] = min(kwargs["buffer_size"], steps)
+        kwargs = {**cfg.dqn.sb3_kwargs(), "buffer_size": cfg.buffer_size}
         demos = cfg.demonstrations
         agent = ExpectedSarsaDQN(
             "MlpPolicy", env, **common, **kwargs,

@@ -156,6 +156,7 @@ class GridTask(StoreQueries):
             make_env(), {name: views[name] for name in cfg.views}, cfg.env.episode_steps
         )
         self.store = KeyStore(self.mdp.n_states, self.mdp.n_actions)
+        self._frame_env: gym.Env | None = None
         self.n_classes = cfg.cotraining.max_classes
         self.classes = RunRewardClasses(self.n_classes)
         self.policy_metrics = metrics.GreedyPolicyMetrics(self.mdp, discount=1.0)
@@ -196,7 +197,9 @@ class GridTask(StoreQueries):
         a frame of the state (the agent as ``A``)."""
         state, action = divmod(sample, self.mdp.n_actions)
         described = {"key": f"state {state}, action {action}"}
-        env = self.make_env()
+        if self._frame_env is None:  # one copy of the task draws every query's frame
+            self._frame_env = self.make_env()
+        env = self._frame_env
         if "ansi" in env.metadata.get("render_modes", ()):
             env.unwrapped.render_mode, env.unwrapped.s = "ansi", state
             described["frame"] = env.render()
