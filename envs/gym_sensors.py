@@ -31,6 +31,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+from gymnasium.envs.registration import load_env_creator
 
 from dospcot.envs import minigrid_views
 from dospcot.envs.masking import RewardMaskWrapper
@@ -248,6 +249,7 @@ def make_gym_env(
     env_kwargs: Mapping[str, Any] | None = None,
     wrappers: Sequence[str] = (),
     train_wrappers: Sequence[str] = (),
+    frames: bool = False,
 ) -> gym.Env:
     """The env ``env_id`` names, built with ``env_kwargs`` and wrapped by ``train_wrappers``, then
     ``wrappers``, in order (the first named is the innermost).
@@ -255,6 +257,8 @@ def make_gym_env(
     :param env_id: a registered gymnasium id; ``"package:Env-v0"`` (gymnasium's own form) imports the
         package that registers it first; ``"package.module:function"`` calls a function that returns
         the env.
+    :param frames: a registered env that lists the render mode ``"rgb_array"`` is made with it, so
+        that it can draw the frames a person is shown (a function's env draws them if it was made so).
     """
     kwargs = dict(env_kwargs or {})
     module, sep, name = env_id.partition(":")
@@ -271,8 +275,11 @@ def make_gym_env(
         if not isinstance(env, gym.Env):
             raise ValueError(f"gym.env_id: {env_id!r} returned a {type(env).__name__}, not a gymnasium Env")
     else:
+        registered = name if sep else env_id
+        if frames and "rgb_array" in _render_modes(registered):
+            kwargs["render_mode"] = "rgb_array"
         try:
-            env = gym.make(name if sep else env_id, **kwargs)
+            env = gym.make(registered, **kwargs)
         except gym.error.Error as err:
             raise ValueError(f"gym.env_id: {err}") from None
         except TypeError as err:  # an env_kwargs key the env does not take
@@ -296,6 +303,16 @@ def _wrap(env: gym.Env, wrapper: str, key: str) -> gym.Env:
         return cls(env)
     except TypeError as err:  # a wrapper that needs more than the env
         raise ValueError(f"{key}: {wrapper} cannot wrap the env by itself ({err})") from None
+
+
+def _render_modes(env_id: str) -> list[str]:
+    """The render modes a registered env's class lists, read without building it (none if unknown)."""
+    try:
+        entry = gym.spec(env_id).entry_point
+    except gym.error.Error:  # gym.make names the problem
+        return []
+    creator = entry if callable(entry) else load_env_creator(entry)
+    return list(getattr(creator, "metadata", {}).get("render_modes", []))
 
 
 def _registers(module: str, env_id: str) -> bool:
@@ -330,14 +347,15 @@ def make_gym_sensors(
     wrappers: Sequence[str] = (),
     state_key: str = "",
     train_wrappers: Sequence[str] = (),
+    frames: bool = False,
 ) -> ObservationSensors:
-    """The env ``env_id`` names (:func:`make_gym_env`) with the sensor interface for ``views``, each
-    resolved from ``view_specs`` (:func:`resolve_view`), and the state key ``state_key`` names (empty:
-    none)."""
+    """The env ``env_id`` names (:func:`make_gym_env`, which reads ``frames``) with the sensor interface
+    for ``views``, each resolved from ``view_specs`` (:func:`resolve_view`), and the state key
+    ``state_key`` names (empty: none)."""
     unknown = [name for name in views if name not in view_specs]
     if unknown:
         raise ValueError(f"unknown view(s) {unknown}; allowed: {', '.join(view_specs)}")
-    env = make_gym_env(env_id, env_kwargs, wrappers, train_wrappers)
+    env = make_gym_env(env_id, env_kwargs, wrappers, train_wrappers, frames)
     try:
         # Before the views: an env with continuous actions is refused for that, whatever its views.
         require_discrete_actions(env)
@@ -361,6 +379,7 @@ def make_masked_gym(
     state_key: str = "",
     train_wrappers: Sequence[str] = (),
     queried: bool = False,
+    frames: bool = False,
 ) -> gym.Env:
     """A gymnasium task whose rewards are revealed per step with probability ``label_fraction``.
 
@@ -378,8 +397,11 @@ def make_masked_gym(
     :param state_key: a name from :data:`STATE_KEYS` or a dotted path to a function of the unwrapped
         env: the mask then labels (state key, action) pairs (``"key"`` mode); empty: single steps.
     :param queried: reward queries buy the labels: a ``label_fraction`` of 0 is allowed.
+    :param frames: make a registered env that can draw itself with render mode ``"rgb_array"``.
     """
-    sensors = make_gym_sensors(env_id, view_specs, views, env_kwargs, wrappers, state_key, train_wrappers)
+    sensors = make_gym_sensors(
+        env_id, view_specs, views, env_kwargs, wrappers, state_key, train_wrappers, frames
+    )
     mask = RewardMaskWrapper(
         sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed,
         queried=queried,

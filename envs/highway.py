@@ -157,12 +157,15 @@ class HighwayEnvSensors(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return np.asarray(self._sensor(name).observe(), dtype=np.float32)
 
 
-def make_highway(env_id: str = "highway-fast-v0", config: Mapping[str, Any] | None = None) -> gym.Env:
-    """A sensor env: highway-env's ``env_id`` (checked ``config`` applied) or our fast env."""
+def make_highway(
+    env_id: str = "highway-fast-v0", config: Mapping[str, Any] | None = None, frames: bool = False
+) -> gym.Env:
+    """A sensor env: highway-env's ``env_id`` (checked ``config`` applied) or our fast env; with
+    ``frames``, highway-env's is made with render mode ``"rgb_array"`` (ours draws nothing)."""
     if env_id == FAST_HIGHWAY_ID:
         return FastHighwayEnv(**dict(config or {}))
     cfg = check_highway_config(env_id, config or {})
-    return HighwayEnvSensors(gym.make(env_id, config=cfg, render_mode=None))
+    return HighwayEnvSensors(gym.make(env_id, config=cfg, render_mode="rgb_array" if frames else None))
 
 
 def make_masked_highway(
@@ -174,6 +177,7 @@ def make_masked_highway(
     config: Mapping[str, Any] | None = None,
     reveal_first_steps: int = 0,
     queried: bool = False,
+    frames: bool = False,
 ) -> gym.Env:
     """A highway task whose rewards are revealed per transition with probability ``label_fraction``.
 
@@ -185,10 +189,11 @@ def make_masked_highway(
     :param config: the task's config overrides (highway-env's keys, or :class:`FastHighwayConfig`'s).
     :param reveal_first_steps: a reward monitor: the first this many steps of every episode are revealed.
     :param queried: reward queries buy the labels: a ``label_fraction`` of 0 is allowed.
+    :param frames: make highway-env's env able to draw itself (:func:`make_highway`).
     """
     check_views(env_id, views)
     env = RewardMaskWrapper(
-        make_highway(env_id, config), label_fraction, mode="transition", mask_seed=mask_seed,
+        make_highway(env_id, config, frames), label_fraction, mode="transition", mask_seed=mask_seed,
         reveal_first_steps=reveal_first_steps, queried=queried,
     )  # fmt: skip
     return SensorViewWrapper(env, view, views)

@@ -20,6 +20,7 @@ import torch
 from dospcot.config.errors import ConfigError
 from dospcot.config.loading import load_config
 from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.raters import QueriesPending
 from dospcot.demonstrations import Demonstrations
 from dospcot.envs import minigrid_views
 from dospcot.envs.gym_sensors import (
@@ -31,7 +32,7 @@ from dospcot.envs.gym_sensors import (
 from dospcot.envs.masking import key_is_labelled
 from dospcot.experiment.python_api import gym_config, train_env
 from dospcot.experiment.run_folder import RunFolderError
-from dospcot.experiment.train import build_run, check_config, evaluate, resume
+from dospcot.experiment.train import build_run, check_config, evaluate, resume, train
 from dospcot.tasks.sensor import KeyedStepStore, SensorTask
 
 LENGTH = 10
@@ -71,6 +72,35 @@ class Corridor(gym.Env):
 
 def make_corridor() -> gym.Env:
     return gym.wrappers.TimeLimit(Corridor(), 20)
+
+
+class DrawnCorridor(Corridor):
+    """The corridor, drawn as a row of 4 x 4 pixel cells: the agent's white, the rest black."""
+
+    metadata = {"render_modes": ["rgb_array"]}  # noqa: RUF012
+
+    def __init__(self, render_mode: str | None = None) -> None:
+        super().__init__()
+        self.render_mode = render_mode
+
+    def render(self) -> np.ndarray:
+        image = np.zeros((4, 4 * LENGTH, 3), np.uint8)
+        image[:, 4 * self.pos : 4 * self.pos + 4] = 255
+        return image
+
+
+def make_drawn_corridor() -> gym.Env:
+    return gym.wrappers.TimeLimit(DrawnCorridor(render_mode="rgb_array"), 20)
+
+
+def drawn_cell(path: Path) -> int:
+    """The agent's cell in a frame :class:`DrawnCorridor` drew, read back from its PNG."""
+    from PIL import Image
+
+    image = np.asarray(Image.open(path))
+    (cells,) = np.nonzero(image[0, ::4, 0])
+    assert image.shape == (4, 4 * LENGTH, 3) and len(cells) == 1
+    return int(cells[0])
 
 
 def signed_cell(obs: dict[str, np.ndarray]) -> np.ndarray:
@@ -160,6 +190,34 @@ def test_a_toy_env_co_trains_from_python_and_its_run_folder_evaluates(tmp_path):
     assert f'signed = "{dotted_path(signed_cell, "v")}"' in config
     with pytest.raises(RunFolderError, match="is a finished run"):  # nothing to resume
         resume(run_dir, show_progress=False)
+
+
+def test_a_file_raters_queries_show_frames_of_the_step_where_the_env_draws_itself(tmp_path):
+    settings = {**SETTINGS, "training.rater": "file", "training.label_strategy": "disagreement"}
+    cfg = gym_config(make_drawn_corridor, VIEWS, label_fraction=0.1, name="drawn", settings=settings)
+    with pytest.raises(QueriesPending) as pending:
+        train(cfg, tmp_path, show_progress=False)
+    rows = list(csv.DictReader(pending.value.path.open()))
+    assert rows and all(row["frame"] and row["next_frame"] for row in rows)
+    queries = pending.value.path.parent
+    for row in rows:  # each query shows its step: the agent's cell before the action, and after it
+        action = int(row["key"].rsplit(" ", 1)[1])
+        before, after = drawn_cell(queries / row["frame"]), drawn_cell(queries / row["next_frame"])
+        assert after == min(max(before + (1 if action == 1 else -1), 0), LENGTH - 1)
+    # A simulated rater's run draws nothing, though its env could.
+    plain = build_run(gym_config(make_drawn_corridor, VIEWS, label_fraction=0.1, settings=SETTINGS))
+    plain.run(until_round=1)
+    assert len(plain.task.store) > 0 and plain.task.store.frames == {}
+
+
+def test_frames_are_asked_of_a_registered_env_only_where_it_lists_rgb_array():
+    assert make_gym_env("CartPole-v1", frames=True).render_mode == "rgb_array"
+    assert make_gym_env("CartPole-v1").render_mode is None
+    gym.register("DospcotTestCorridor-v0", entry_point=Corridor)  # lists no render mode
+    try:
+        assert getattr(make_gym_env("DospcotTestCorridor-v0", frames=True), "render_mode", None) is None
+    finally:
+        gym.registry.pop("DospcotTestCorridor-v0")
 
 
 def test_a_toml_config_with_a_dotted_path_view_is_the_python_entry_points_config(tmp_path):

@@ -1,6 +1,8 @@
 """Highway tasks: the highway-env adapter, sensor views, binned reward classes, transition co-training."""
 
+import csv
 import json
+import math
 import pickle
 from functools import partial
 
@@ -8,6 +10,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
+from PIL import Image
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -15,9 +18,10 @@ from dospcot.cli import main
 from dospcot.config.errors import ConfigError
 from dospcot.config.loading import load_config
 from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.raters import QueriesPending
 from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.envs.highway import make_masked_highway
-from dospcot.experiment.train import build_run, check_config, evaluate
+from dospcot.experiment.train import build_run, check_config, evaluate, train
 from dospcot.tasks.sensor import SensorTask
 
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
@@ -269,3 +273,18 @@ def test_fast_env_config_keys_and_views_are_checked():
         check_config(load_config("fasthighway-dospcot", ["highway.config={speed_limit=3}"]))
     with pytest.raises(ConfigError, match="no view 'ttc'; allowed: kinematics, occupancy"):
         load_config("fasthighway-dospcot", ['views=["ttc"]'])
+
+
+def test_a_file_raters_queries_on_highway_env_show_the_frames_of_each_step(tmp_path):
+    overrides = [
+        *TINY, 'highway.env_id="highway-fast-v0"', 'training.label_strategy="outcomes"',
+        'training.rater="file"', "training.label_fraction=0.05",
+    ]  # fmt: skip
+    with pytest.raises(QueriesPending) as pending:
+        train(load_config("fasthighway-dospcot", overrides), tmp_path, show_progress=False)
+    rows = list(csv.DictReader(pending.value.path.open()))
+    assert len(rows) == math.ceil(0.05 * 2 * 120)  # the budget: 5% of the two agents' steps met
+    for row in rows:
+        folder = pending.value.path.parent
+        before, after = (np.asarray(Image.open(folder / row[c])) for c in ("frame", "next_frame"))
+        assert before.shape == after.shape == (150, 600, 3) and not np.array_equal(before, after)

@@ -5,20 +5,30 @@
   it is asked about.
 - :class:`FileRater` asks a person: it writes each round's queries to ``queries/round_<r>.csv`` in the
   run folder and stops the run (:class:`QueriesPending`); ``dospcot train --resume`` reads the answers
-  from the ``reward`` column of that file.
+  from the ``reward`` column of that file. A query's frames (PNG images, :func:`encode_png`) go beside
+  it, in ``queries/round_<r>/``, its row naming them.
 """
 
 from __future__ import annotations
 
 import csv
+import io
 import math
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
+from PIL import Image
 
 QUERY_COLUMNS = ("sample", "key", "reward")
 """The first columns of a round's query file; each view's predicted class and confidence follow."""
+
+
+def encode_png(image: np.ndarray) -> bytes:
+    """A PNG of ``image``, (H, W, 3) uint8 RGB (an env's ``render()`` in mode ``"rgb_array"``)."""
+    buffer = io.BytesIO()
+    Image.fromarray(np.asarray(image, dtype=np.uint8)).save(buffer, format="PNG")
+    return buffer.getvalue()
 
 
 class QueriesPending(Exception):
@@ -69,7 +79,10 @@ class FileRater:
         path = self.path(round_)
         if not path.is_file():
             self.folder.mkdir(parents=True, exist_ok=True)
-            rows = [{"sample": int(i), **row, "reward": ""} for i, row in zip(ids, described, strict=True)]
+            rows = [
+                {"sample": int(i), **self._write_frames(round_, int(i), row), "reward": ""}
+                for i, row in zip(ids, described, strict=True)
+            ]
             fields = list(dict.fromkeys([*QUERY_COLUMNS, *(k for row in rows for k in row)]))
             temporary = path.with_suffix(".csv.tmp")
             with temporary.open("w", newline="") as handle:
@@ -79,6 +92,18 @@ class FileRater:
             temporary.replace(path)
             raise QueriesPending(len(ids), path)
         return self._read(path, ids)
+
+    def _write_frames(self, round_: int, sample: int, described: dict[str, object]) -> dict[str, object]:
+        """``described`` with each PNG written to ``round_<r>/<sample>_<column>.png`` and named in its
+        place (relative to the queries folder)."""
+        row = dict(described)
+        for column, value in described.items():
+            if isinstance(value, bytes):
+                name = Path(f"round_{round_}") / f"{sample}_{column}.png"
+                (self.folder / name).parent.mkdir(exist_ok=True)
+                (self.folder / name).write_bytes(value)
+                row[column] = name.as_posix()
+        return row
 
     @staticmethod
     def _read(path: Path, ids: np.ndarray) -> np.ndarray:

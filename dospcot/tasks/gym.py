@@ -60,6 +60,6 @@ class GymTask(SensorTaskBase):
             make_masked_gym, gym.env_id, view_specs=gym.views, env_kwargs=gym.env_kwargs,
             wrappers=gym.wrappers, state_key=gym.state_key,
         )  # fmt: skip
-        queried = cfg.training.label_strategy != "uniform"
-        make_env = partial(make_eval_env, train_wrappers=gym.train_wrappers, queried=queried)
+        queried, frames = cfg.training.label_strategy != "uniform", cfg.training.rater == "file"
+        make_env = partial(make_eval_env, train_wrappers=gym.train_wrappers, queried=queried, frames=frames)
         return SensorTask(cfg, gym, make_env, make_eval_env)

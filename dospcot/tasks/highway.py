@@ -56,8 +56,10 @@ class HighwayTask(SensorTaskBase):
 
     def build(self, cfg: TrainConfig) -> SensorTask:
         highway = cfg.highway
-        make_env = partial(
+        make_eval_env = partial(
             make_masked_highway, highway.env_id, config=highway.config,
             reveal_first_steps=highway.reveal_first_steps, queried=cfg.training.label_strategy != "uniform",
         )  # fmt: skip
-        return SensorTask(cfg, highway, make_env)
+        # A file rater's queries show frames: the training envs draw them, the evaluation envs need not.
+        make_env = partial(make_eval_env, frames=cfg.training.rater == "file")
+        return SensorTask(cfg, highway, make_env, make_eval_env)

@@ -39,6 +39,7 @@ from dospcot.config.task_sections import DemonstrationsConfig, GymConfig, Highwa
 from dospcot.core.cotrainer import RunPool
 from dospcot.core.in_place_state import InPlaceState
 from dospcot.core.queries import StoreQueries
+from dospcot.core.raters import encode_png
 from dospcot.core.reward_classes import QuantileRewardClasses, episode_end_class_mask
 from dospcot.demonstrations import Demonstrations, load_agent, record_demonstrations
 from dospcot.envs.finite_check import FiniteCheckWrapper
@@ -81,9 +82,11 @@ class StepStore(InPlaceState):
         self.action = np.zeros(0, np.int64)
         self.labelled = np.zeros(0, bool)
         self.terminal = np.zeros(0, bool)
+        """Whether each step ended its episode (the env's ``terminated``, which the mask leaves visible)."""
         self.truncated = np.zeros(0, bool)
         """Whether the time limit cut each step's episode there (read by the reward queries)."""
-        """Whether each step ended its episode (the env's ``terminated``, which the mask leaves visible)."""
+        self.frames: dict[int, bytes] = {}
+        """A PNG of the state of each row, where the env draws itself for a person (a file rater)."""
         self.label_value = np.zeros(0)
         self.hidden_reward = np.zeros(0)
         """The true reward of each step: metrics only, never the learners."""
@@ -204,12 +207,15 @@ class SensorStoreWrapper(gym.Wrapper):
 
     Views are read only for a step that starts a new sample (on a keyed store, a pair's first visit):
     the wrapper turns on the views' ``lazy_views`` (:class:`~dospcot.envs.sensors.StepViews`, each
-    computed when read) and asks the store before the env steps, while s's views can still be read."""
+    computed when read) and asks the store before the env steps, while s's views can still be read.
+    With ``draw``, an env in render mode ``"rgb_array"`` draws each stored reading's frame, what a
+    person answering the run's queries is shown (``store.frames``)."""
 
-    def __init__(self, env: gym.Env, store: StepStore) -> None:
+    def __init__(self, env: gym.Env, store: StepStore, draw: bool = False) -> None:
         super().__init__(env)
         env.set_wrapper_attr("lazy_views", True, force=False)
         self.store = store
+        self._draw = draw and env.render_mode == "rgb_array"
         self._state_key = env.get_wrapper_attr("current_state_key")
         self._row = -1
         self._views: Mapping[str, np.ndarray] = {}
@@ -223,10 +229,10 @@ class SensorStoreWrapper(gym.Wrapper):
         action = int(action)
         new = self.store.is_new(self._state_key(), action)
         if new and self._row < 0:  # consecutive new samples share the row between them
-            self._row = self.store.add_row(self._views)
+            self._row = self._add_row(self._views)
         obs, reward, terminated, truncated, info = self.env.step(action)
         views = info["views"]
-        next_row = self.store.add_row(views) if new else -1
+        next_row = self._add_row(views) if new else -1
         info = dict(info)
         info["store_id"] = self.store.add(
             self._row if new else -1, action, next_row, info["reward_observed"], float(reward),
@@ -234,6 +240,13 @@ class SensorStoreWrapper(gym.Wrapper):
         )  # fmt: skip
         self._views, self._row = views, next_row
         return obs, reward, terminated, truncated, info
+
+    def _add_row(self, views: Mapping[str, np.ndarray]) -> int:
+        """Store the env's current state reading (and, where it draws itself, its frame)."""
+        row = self.store.add_row(views)
+        if self._draw:
+            self.store.frames[row] = encode_png(self.env.render())
+        return row
 
 
 class _RandomPolicy:
@@ -276,7 +289,8 @@ class SensorTask(StoreQueries):
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in cfg.views}
         self.store = (KeyedStepStore if section.keyed else StepStore)(self.shapes)
         self.demos = self._read_demonstrations(cfg.demonstrations, make_env)
-        self._envs = [SensorStoreWrapper(env, self.store) for env in envs]
+        draw = cfg.training.rater == "file"
+        self._envs = [SensorStoreWrapper(env, self.store, draw) for env in envs]
         self.n_actions = int(envs[0].action_space.n)
         self.n_classes = section.reward_classes
         self.classes = QuantileRewardClasses(section.reward_classes)
@@ -300,10 +314,16 @@ class SensorTask(StoreQueries):
         return self.store.terminal[:n].copy(), self.store.truncated[:n].copy()
 
     def describe(self, sample: int) -> dict[str, Any]:
-        """What a person is shown of sample ``sample``: its (state key, action) pair, or its step."""
-        pairs = {n: (f"state {key}", action) for (key, action), n in getattr(self.store, "ids", {}).items()}
-        where, action = pairs.get(sample, (f"step {sample}", int(self.store.action[sample])))
-        return {"key": f"{where}, action {action}"}
+        """What a person is shown of sample ``sample``: its (state key, action) pair, or its step, and
+        where the env draws itself, PNG frames of s (``frame``) and s' (``next_frame``)."""
+        store = self.store
+        pairs = {n: (f"state {key}", action) for (key, action), n in getattr(store, "ids", {}).items()}
+        where, action = pairs.get(sample, (f"step {sample}", int(store.action[sample])))
+        described: dict[str, Any] = {"key": f"{where}, action {action}"}
+        for column, row in (("frame", store.state_row[sample]), ("next_frame", store.next_row[sample])):
+            if int(row) in store.frames:
+                described[column] = store.frames[int(row)]
+        return described
 
     def agent_env(self, k: int, view: str) -> gym.Env:
         return self._envs[k]
