@@ -91,6 +91,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--resume", type=Path, metavar="RUN_DIR", help="continue a killed run from its checkpoint"
     )
     train.add_argument("--runs-dir", type=Path, default=Path("runs"), help="where runs write (default runs)")
+    train.add_argument(
+        "--seeds",
+        type=parse_seeds,
+        help="train these seeds of the config as one batch in one process, a run folder each: a count "
+        "(10 means seeds 0-9) or a comma list (docs/batched_seeds.md)",
+    )
     train.add_argument("--list", action="store_true", help="list the shipped presets and exit")
     train.add_argument(
         "--threads",
@@ -132,6 +138,14 @@ def build_parser() -> argparse.ArgumentParser:
     add_overrides(sweep, "override a key in every trial (repeatable)")
     sweep.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
     sweep.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    sweep.add_argument(
+        "--batch-seeds",
+        type=positive_int,
+        default=1,
+        metavar="K",
+        help="train each cell's seeds in batches of at most K per process (local backend; "
+        "docs/batched_seeds.md); default 1: every trial alone",
+    )
     sweep.add_argument(
         "--ray-address", metavar="ADDRESS", help="an existing Ray cluster (default: start a local instance)"
     )
@@ -223,6 +237,9 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("study", metavar="STUDY", help="the study, e.g. grid16 (a wrong name lists them)")
     study.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's)")
     study.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    study.add_argument(
+        "--batch-seeds", type=positive_int, default=1, metavar="K", help="as dospcot sweep's (default 1)"
+    )
     study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
     study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
     study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
@@ -308,19 +325,30 @@ def _train(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.loading import load_config
     from dospcot.config.presets import preset_names
     from dospcot.experiment.train import resume, run_config, train
+    from dospcot.experiment.train_batch import batch_members, resume_batch, train_seeds
 
     torch.set_num_threads(args.threads)
+    progress = not args.no_progress
     if args.resume is not None:
-        if args.config or args.overrides:
-            raise ConfigError("--resume RUN_DIR takes no CONFIG or --set: the run folder holds its config")
-        run_dir = resume(args.resume, show_progress=not args.no_progress, command=command)
+        if args.config or args.overrides or args.seeds:
+            raise ConfigError(
+                "--resume RUN_DIR takes no CONFIG, --set or --seeds: the run folder holds its config"
+            )
+        if batch_members(args.resume) is not None:
+            run_dirs = resume_batch(args.resume, show_progress=progress, command=command)
+        else:
+            run_dirs = [resume(args.resume, show_progress=progress, command=command)]
     else:
         if not args.config:
             raise ConfigError(f"give a CONFIG: a preset ({', '.join(preset_names())}) or a path to a .toml")
         cfg = load_config(args.config, args.overrides)
-        run_dir = train(cfg, args.runs_dir, show_progress=not args.no_progress, command=command)
-    summary = json.loads((run_dir / "summary.json").read_text())
-    print(run_config(run_dir).task_definition.result_line(run_dir, summary))
+        if args.seeds is not None:
+            run_dirs = train_seeds(cfg, args.seeds, args.runs_dir, show_progress=progress, command=command)
+        else:
+            run_dirs = [train(cfg, args.runs_dir, show_progress=progress, command=command)]
+    for run_dir in run_dirs:
+        summary = json.loads((run_dir / "summary.json").read_text())
+        print(run_config(run_dir).task_definition.result_line(run_dir, summary))
     return 0
 
 
@@ -369,7 +397,7 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
     result = run_sweep(
         sweep_dir, spec, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-        show_progress=not args.no_progress,
+        show_progress=not args.no_progress, batch_seeds=args.batch_seeds,
     )  # fmt: skip
     print(
         f"{sweep_dir}: {len(result.trials)} trials; {len(result.skipped)} already finished, "

@@ -23,7 +23,7 @@ EVAL_SEED = 1_000_003
 
 # The stream tags: the first word of each derivation's spawn key. Never renumber them: a run's
 # seeds, and so its results, depend on them.
-_AGENT, _ROUND_RESET, _CLASSIFIER, _LAYER, _DEMONSTRATIONS, _QUERIES = range(6)
+_AGENT, _ROUND_RESET, _CLASSIFIER, _LAYER, _DEMONSTRATIONS, _QUERIES, _BATCHED_DRAWS = range(7)
 
 
 def _derive(seed: int, stream: int, *index: int) -> int:
@@ -66,3 +66,10 @@ def demonstration_seed(seed: int) -> int:
 def query_seed(seed: int, round_: int) -> int:
     """The seed of the reward queries' random draws in round ``round_`` (1-based) of run ``seed``."""
     return _derive(seed, _QUERIES, round_)
+
+
+def batched_draws_seed(seed: int, k: int) -> int:
+    """The stream agent ``k`` of run ``seed`` draws its exploration, replay batches and demonstration
+    minibatches from when the run is a member of a batch (:mod:`dospcot.core.batched_runs`); a run of
+    its own draws them from numpy's global generator, which SB3 seeds."""
+    return _derive(seed, _BATCHED_DRAWS, k)

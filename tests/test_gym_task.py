@@ -33,7 +33,8 @@ from dospcot.envs.masking import key_is_labelled
 from dospcot.experiment.python_api import gym_config, train_env
 from dospcot.experiment.run_folder import RunFolderError
 from dospcot.experiment.train import build_run, check_config, evaluate, resume, train
-from dospcot.tasks.sensor import KeyedStepStore, SensorTask
+from dospcot.tasks.sensor import SensorTask
+from dospcot.tasks.sensor_store import KeyedStepStore
 
 LENGTH = 10
 

@@ -117,12 +117,17 @@ def test_no_module_outside_the_registry_branches_on_a_task():
 
 
 def test_only_the_run_drives_its_rounds():
+    """CoTrainingRun.run is the one loop over a run's rounds; a batch of seeds (BatchedRuns) drives its
+    members through the run's own phases of a round, never through a member's run_round."""
     drivers = [
         str(path.relative_to(PACKAGE))
         for path in PACKAGE.rglob("*.py")
-        if ".run_round(" in path.read_text() and path.name != "cotraining_run.py"
+        if ".run_round(" in path.read_text() and path.name not in ("cotraining_run.py", "batched_runs.py")
     ]
     assert drivers == []
+    batch = (PACKAGE / "core" / "batched_runs.py").read_text()
+    assert "run.run_round(" not in batch
+    assert all(f"run.{phase}(" in batch for phase in ("seed_round_env", "label_and_cotrain", "close_round"))
 
 
 def test_no_module_of_the_package_is_over_500_lines():

@@ -31,7 +31,8 @@ from dospcot.config.presets import preset_names
 from dospcot.core.classifier import load_classifier
 from dospcot.envs import GridWorld, TabularMDP
 from dospcot.experiment.run_folder import RunFolderError, read_checkpoint, write_csv
-from dospcot.experiment.train import ROUND_SCALARS, SEGMENT_SCALARS, evaluate
+from dospcot.experiment.run_session import ROUND_SCALARS, SEGMENT_SCALARS
+from dospcot.experiment.train import evaluate
 from dospcot.tasks.grid import grid_world
 
 ISSUE_PRESETS = [

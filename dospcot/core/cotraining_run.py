@@ -268,13 +268,26 @@ class CoTrainingRun:
         if not self.collected:  # 1. collect and learn, with last round's rewards and weights
             self.round += 1
             for k, agent in enumerate(self.agents):
-                # Every round starts from fresh episodes with seeded resets, so a run resumed from the
-                # checkpoint of the last round continues exactly as the uninterrupted run would.
-                env = agent.get_env()
-                env.seed(round_reset_seed(self.cfg.seed, k, self.round))
-                agent.set_env(env, force_reset=True)  # learn() then resets it, with that seed
+                self.seed_round_env(k)  # learn() then resets it, with that seed
                 agent.learn(self.cfg.training.steps_per_round, callback=callback, reset_num_timesteps=False)
             self.collected = True
+        stats = self.label_and_cotrain()  # 1b-3.
+        for agent in self.agents:  # 4. policy update on the rewards and weights just written
+            agent.update(self.cfg.training.update_steps)
+        return self.close_round(stats)  # 5-6.
+
+    def seed_round_env(self, k: int) -> None:
+        """Seed agent ``k``'s env for this round and have it reset at the round's start."""
+        # Every round starts from fresh episodes with seeded resets, so a run resumed from the
+        # checkpoint of the last round continues exactly as the uninterrupted run would.
+        agent = self.agents[k]
+        env = agent.get_env()
+        env.seed(round_reset_seed(self.cfg.seed, k, self.round))
+        agent.set_env(env, force_reset=True)
+
+    def label_and_cotrain(self) -> dict:
+        """Steps 1b-3 of a collected round: buy labels, co-train and write the pseudo-rewards; returns
+        the round's co-training figures."""
         if self.queries is not None:  # 1b. buy labels (a file rater may stop the run here)
             rng = np.random.default_rng(query_seed(self.cfg.seed, self.round))
             self.queries.buy(self.round, self.task, self._probabilities, rng)
@@ -283,9 +296,11 @@ class CoTrainingRun:
             stats = self.cotrain()
         else:  # a baseline has no co-trainer, but its labels are its effort too
             stats = {"labelled_steps": int(self.store.labelled.sum())}
+        return stats
+
+    def close_round(self, stats: dict) -> list[dict]:
+        """Steps 5-6 of a round whose policies are updated: age, then record."""
         training = self.cfg.training
-        for agent in self.agents:  # 4. policy update on the rewards and weights just written
-            agent.update(training.update_steps)
         pace = self.round / training.rounds  # 5. age
         if training.exploration == "pace":
             pace = stats.get("pace", pace)

@@ -21,6 +21,7 @@ from stable_baselines3 import DQN
 from dospcot.config.learning_sections import TabularConfig
 from dospcot.config.loading import load_config
 from dospcot.config.run_configs import TrainConfig
+from dospcot.core.batched_runs import BatchedRuns
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.envs import CLIFF_VIEWS, StateActionMask, ViewObservationWrapper
 from dospcot.experiment.sweep import run_sweep
@@ -276,6 +277,32 @@ def bench_cotraining_overhead(quick: bool, repeats: int) -> Row:
     )  # fmt: skip
 
 
+def _cpu_seconds_per_seed(cfgs: list[TrainConfig], batched: bool) -> float:
+    """CPU seconds per seed of training ``cfgs`` (one per seed) as one batch, or one run after another."""
+    start = time.process_time()
+    runs = [build_run(cfg) for cfg in cfgs] if batched else []
+    if batched:
+        BatchedRuns(runs).run()
+    for cfg in [] if batched else cfgs:
+        build_run(cfg).run()
+    return (time.process_time() - start) / len(cfgs)
+
+
+def bench_batched_seeds(quick: bool, repeats: int) -> Row:
+    """CPU time per seed of ``grid16-dospcot``'s seeds trained as one batch against runs of their own."""
+    seeds = 4 if quick else 10
+    overrides = ["training.rounds=2", "training.steps_per_round=3000", "training.update_steps=500"]
+    cfgs = [load_config("grid16-dospcot", [*overrides, f"seed={seed}"]) for seed in range(seeds)]
+    ours, peer = _alternating(
+        repeats, lambda _: _cpu_seconds_per_seed(cfgs, True), lambda _: _cpu_seconds_per_seed(cfgs, False)
+    )
+    return Row.measured(
+        "`dospcot train --seeds`, one batch vs runs of their own: CPU time per seed",
+        f"`grid16-dospcot`, seeds 0-{seeds - 1}, 2 rounds x 3,000 steps per agent, 500 update steps",
+        "CPU-s", ours, peer, higher_is_better=False, target=0.25,
+    )  # fmt: skip
+
+
 def _trials_per_minute(spec: SweepSpec, workers: int) -> float:
     with tempfile.TemporaryDirectory() as tmp:
         start = time.perf_counter()
@@ -356,7 +383,7 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     preset adds to every training step (the keyed reward mask, the first view observed, the pool
     store, which reads every view on a pair's first visit) against the bare MiniGrid env."""
     from dospcot.envs.gym_sensors import make_masked_gym
-    from dospcot.tasks.sensor import KeyedStepStore, SensorStoreWrapper
+    from dospcot.tasks.sensor_store import KeyedStepStore, SensorStoreWrapper
 
     steps = 2_000 if quick else 20_000
     cfg = load_config("minigrid-lavagap-dospcot")

@@ -20,6 +20,8 @@ On a cluster every node must see the sweep folder (a shared filesystem), since t
 Paper-protocol configs (``task = "paper"``) vectorise over seeds: the local backend trains one cell's
 unfinished seeds in ``workers`` batches, one batch per process, and each seed still writes its own
 trial folder (the same folder it would write alone). The ray backend runs each seed as its own trial.
+With ``batch_seeds`` K > 1 the local backend also batches a train cell's seeds, K at most per process
+(:mod:`dospcot.experiment.train_batch`), where the config allows it.
 A sweep runs paper-protocol configs or train configs, not both: ``dospcot report`` tables them apart.
 """
 
@@ -88,40 +90,81 @@ def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
     return json.loads((run_dir / SUMMARY_FILE).read_text())
 
 
-def plan_jobs(trials: Sequence[Trial], workers: int) -> list[list[Trial]]:
-    """The local backend's jobs, one process each: every train trial alone; a paper-protocol cell's
-    trials (one config and grid values, over seeds) split into ``workers`` batches, since its runs
-    vectorise over seeds and a batch of seeds costs little more than one."""
+def plan_jobs(trials: Sequence[Trial], workers: int, batch_seeds: int = 1) -> list[list[Trial]]:
+    """The local backend's jobs, one process each: a paper-protocol cell's trials (one config and grid
+    values, over seeds) split into ``workers`` batches, since its runs vectorise over seeds and a batch
+    of seeds costs little more than one; with ``batch_seeds`` K > 1, a train cell's seeds in batches of
+    at most K (docs/batched_seeds.md) where its config can batch; every other trial alone."""
     jobs: list[list[Trial]] = []
     cells: dict[tuple[str, tuple[tuple[str, str], ...]], list[Trial]] = {}
+    batches: dict[tuple[str, tuple[tuple[str, str], ...]], list[Trial]] = {}
     for trial in trials:
-        if load_config(trial.config, trial.overrides()).task_definition.seeds_train_together:
-            cells.setdefault((trial.config, tuple(trial.params.items())), []).append(trial)
+        cfg = load_config(trial.config, trial.overrides())
+        cell = (trial.config, tuple(trial.params.items()))
+        if cfg.task_definition.seeds_train_together:
+            cells.setdefault(cell, []).append(trial)
+        elif batch_seeds > 1 and _can_batch(cfg):
+            batches.setdefault(cell, []).append(trial)
         else:
             jobs.append([trial])
     for members in cells.values():
         jobs += [members[i::workers] for i in range(min(workers, len(members)))]
+    for members in batches.values():
+        jobs += [members[i : i + batch_seeds] for i in range(0, len(members), batch_seeds)]
     return jobs
 
 
-def run_job(sweep_dir: Path, trials: list[Trial], progress: Callable[[float], None] | None = None) -> None:
+def _can_batch(cfg: Any) -> bool:
+    from dospcot.core.batched_runs import config_refusal  # torch: only where batches are asked for
+
+    return config_refusal(cfg) is None
+
+
+def run_job(
+    sweep_dir: Path,
+    trials: list[Trial],
+    progress: Callable[[float], None] | None = None,
+    batch_seeds: int = 1,
+) -> None:
     """Run one job of :func:`plan_jobs`: a trial, or a batch of one cell's seeds trained together.
 
     :param progress: called with the share of a trial just done (a batch reports as it trains).
+    :param batch_seeds: as :func:`plan_jobs`'s: above 1, a train cell's job is a batch even of one
+        seed, so that no seed's result depends on how the cell's seeds were grouped.
     """
-    if len(trials) == 1:
+    cfg = load_config(trials[0].config, trials[0].overrides())
+    batched = batch_seeds > 1 and not cfg.task_definition.seeds_train_together and _can_batch(cfg)
+    if len(trials) == 1 and not batched:
         run_trial(sweep_dir, trials[0])
         return
     import torch
 
     torch.set_num_threads(1)
-    cfg = load_config(trials[0].config, trials[0].overrides())
+    if batched:
+        _run_batch(sweep_dir, trials, progress)
+        return
     cfg.task_definition.train_seeds_at(
         cfg,
         {trial.seed: _fresh_trial_dir(sweep_dir, trial) for trial in trials},
         {trial.seed: _command(trial) for trial in trials},
         progress,
     )
+
+
+def _run_batch(sweep_dir: Path, trials: list[Trial], progress: Callable[[float], None] | None) -> None:
+    """Train a batch of one train cell's seeds in one process, each in its trial folder: resumed where
+    the same batch was killed, else from the start (members are independent, so a batch's grouping
+    changes none of its members' results)."""
+    from dospcot.experiment.train_batch import batch_members, resume_batch, train_batch_at
+
+    run_dirs = [trial_dir(sweep_dir, trial) for trial in trials]
+    commands = [_command(trial) for trial in trials]
+    if batch_members(run_dirs[0]) == [d.resolve() for d in run_dirs]:
+        resume_batch(run_dirs[0], show_progress=False, commands=commands, progress=progress)
+        return
+    cfgs = [load_config(trial.config, trial.overrides()) for trial in trials]
+    fresh = [_fresh_trial_dir(sweep_dir, trial) for trial in trials]
+    train_batch_at(fresh, cfgs, commands=commands, progress=progress)
 
 
 @dataclass
@@ -143,15 +186,23 @@ def run_sweep(
     workers: int = 2,
     ray_address: str | None = None,
     show_progress: bool = True,
+    batch_seeds: int = 1,
 ) -> SweepResult:
     """Run every unfinished trial of a sweep (``spec=None``: resume the sweep stored in ``sweep_dir``).
 
     :param workers: trials at once (processes for ``local``, concurrent Ray trials for ``ray``).
+    :param batch_seeds: K > 1: the local backend trains each train cell's seeds in batches of at most
+        K, one batch per process (docs/batched_seeds.md); 1: every trial alone.
     :param ray_address: an existing Ray cluster (``ray``); ``None`` starts a local instance with
         ``workers`` CPUs.
     """
     if workers < 1:
         raise SweepError(f"--workers must be at least 1, got {workers}")
+    if batch_seeds < 1 or (batch_seeds > 1 and backend != "local"):
+        raise SweepError(
+            f"--batch-seeds takes a count >= 1, and more than 1 on the local backend only; got {batch_seeds} "
+            f"on {backend}"
+        )
     if spec is None:
         spec = open_sweep(sweep_dir, None)
         trials = spec.trials()
@@ -162,7 +213,8 @@ def run_sweep(
     todo = [t for t in trials if not is_finished(sweep_dir, t)]
     skipped = [t for t in trials if t not in todo]
     if backend == "local":
-        failed = _run_local(sweep_dir, plan_jobs(todo, workers), workers, show_progress)
+        jobs = plan_jobs(todo, workers, batch_seeds)
+        failed = _run_local(sweep_dir, jobs, workers, show_progress, batch_seeds)
     elif backend == "ray":
         failed = _run_ray(sweep_dir, todo, workers, ray_address)
     else:
@@ -170,7 +222,9 @@ def run_sweep(
     return SweepResult(sweep_dir, trials, skipped, todo, failed)
 
 
-def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_progress: bool) -> dict[str, str]:
+def _run_local(
+    sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_progress: bool, batch_seeds: int = 1
+) -> dict[str, str]:
     failed: dict[str, str] = {}
     if not jobs:
         return failed
@@ -193,7 +247,9 @@ def _run_local(sweep_dir: Path, jobs: list[list[Trial]], workers: int, show_prog
     try:
         reports = manager.Queue()  # (job index, share of a trial done) from the workers
         futures = {
-            pool.submit(run_job, sweep_dir, job, partial(_report_progress, reports, index)): index
+            pool.submit(
+                run_job, sweep_dir, job, partial(_report_progress, reports, index), batch_seeds
+            ): index
             for index, job in enumerate(jobs)
         }
         shown = [0.0] * len(jobs)

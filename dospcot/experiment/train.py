@@ -27,66 +27,37 @@ uninterrupted run. ``dospcot evaluate`` adds ``evaluation.json``.
 from __future__ import annotations
 
 import csv
-import math
 import shutil
-import time
-from functools import partial
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import stable_baselines3
 from stable_baselines3.common.callbacks import BaseCallback
-from stable_baselines3.common.logger import configure
-from torch.utils.tensorboard import SummaryWriter
 from tqdm.auto import tqdm
 
 from dospcot.config.loading import load_run_config
 from dospcot.config.run_configs import RunConfig, TrainConfig
-from dospcot.core.classifier import save_classifier
 from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.core.queries import LOG_COLUMNS, Rater
-from dospcot.core.raters import FileRater, QueriesPending
-from dospcot.experiment.interrupts import Interrupted
-from dospcot.experiment.plots import plot_learning_curves
+from dospcot.core.queries import Rater
+from dospcot.core.raters import QueriesPending
 from dospcot.experiment.run_folder import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
     METRICS_FILE,
-    REWARD_CLASSES_FILE,
     SUMMARY_FILE,
     RunFolderError,
-    atomic_write,
     config_digest,
     new_run_dir,
     read_checkpoint,
     remove_stale_temporaries,
     run_lock,
-    source_commit,
-    write_checkpoint,
-    write_csv,
     write_json,
-    write_run_info,
     write_toml,
 )
+from dospcot.experiment.run_session import RunSession
 
-ROUND_SCALARS = (
-    "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
-    "worst_class_recall", "worst_class_precision", "classifier_loss", "greedy_return", "success",
-    "normalised_score", "agreement", "labelled_steps",
-)  # fmt: skip
-"""The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
 EVALUATION_FILE = "evaluation.json"
-QUERIES_FILE = "queries.csv"
-"""Every label a rater gave: round, sample, how it was chosen, answer (active label strategies)."""
-QUERIES_FOLDER = "queries"
-"""Where a file rater writes each round's queries, ``round_<r>.csv``, for a person to answer."""
-SEGMENT_SCALARS = ("step_reward_error",)
-"""The further per-round scalars of a run on segment labels."""
-SUMMARY_METRICS = (
-    "normalised_score", "agreement", "greedy_return", "success", "pseudo_accuracy",
-    "worst_class_recall", "worst_class_precision", "coverage", "labelled_steps", "step_reward_error",
-)  # fmt: skip
 
 
 def build_run(cfg: TrainConfig, rater: Rater | None = None) -> CoTrainingRun:
@@ -215,140 +186,30 @@ def resume_cotraining_run(run_dir: Path, cfg: TrainConfig, *, show_progress: boo
 def _train_in(
     run_dir: Path, cfg: TrainConfig, state: dict[str, Any] | None, show_progress: bool, command: str
 ) -> Path:
-    started, started_cpu = time.perf_counter(), time.process_time()
-    # Checked before the folder was made (train) or the sweep began (its trials): built at once here.
-    rater = FileRater(run_dir / QUERIES_FOLDER) if cfg.training.rater == "file" else None
-    run = CoTrainingRun(cfg.task_definition.build(cfg), cfg, rater)
-    records: list[dict] = []
-    elapsed, cpu, sessions, commits = 0.0, 0.0, 1, [source_commit()]
-    if state is not None:
-        run.load_state_dict(state["run"])
-        records, elapsed, sessions = state["records"], state["elapsed_s"], state["sessions"] + 1
-        cpu = state.get("cpu_s", float("nan"))  # a checkpoint older than this field: unknown
-        # A resumed run may have been trained by other code before: each session's commit is kept (a
-        # checkpoint older than this field names none for its sessions).
-        commits = state.get("commits", [None] * (sessions - 1)) + commits
-    for agent, view in zip(run.agents, cfg.views, strict=True):
-        folder = str(run_dir / "tb" / f"agent_{view}")
-        if state is not None:
-            # The killed session logged part of the round resumed now: TensorBoard drops every event
-            # from this step on in the files before this marker, so each step appears once.
-            SummaryWriter(folder, purge_step=agent.num_timesteps).close()
-        agent.set_logger(configure(folder, ["tensorboard"]))
-    rounds = cfg.training.rounds
-    digest = config_digest(run_dir)
+    session = RunSession(run_dir, cfg, state, command)
+    run, rounds = session.run, cfg.training.rounds
     per_round = cfg.training.steps_per_round * len(run.agents)
     bar = tqdm(
         total=rounds * per_round, initial=run.round * per_round, unit="step",
         desc=f"{cfg.name} round {run.round + 1}/{rounds}", disable=not show_progress, dynamic_ncols=True,
     )  # fmt: skip
 
-    def checkpoint() -> None:
-        write_checkpoint(
-            run_dir,
-            {
-                "run": run.state_dict(),
-                "records": records,
-                "elapsed_s": elapsed + time.perf_counter() - started,
-                "cpu_s": cpu + time.process_time() - started_cpu,
-                "sessions": sessions,
-                "commits": commits,
-                "config_sha256": digest,
-            },
-        )
-
     def after_round(run: CoTrainingRun, rows: list[dict]) -> None:
-        """Log the round, write its files and checkpoint it."""
-        records.extend(rows)
-        _log_round(run, rows)
+        session.after_round(rows)
         score = np.mean([r["normalised_score"] for r in rows])
         bar.set_postfix(score=f"{score:.2f}", pace=f"{rows[0]['pace']:.2f}")
         bar.set_description(f"{cfg.name} round {min(run.round + 1, rounds)}/{rounds}")
-        _write_round_files(run_dir, run, cfg, records)
-        checkpoint()
 
     try:
         run.run(on_round=after_round, callback=_StepBar(bar))
     except QueriesPending:  # a person answers the queries: keep the collected round, stop until then
-        checkpoint()
+        session.checkpoint()
         raise
     except KeyboardInterrupt:  # Ctrl-C or SIGTERM: the checkpoint of the last finished round stays
-        done = len({row["round"] for row in records})
-        kept = f"{done} of {rounds} rounds in {run_dir}" if done else f"no finished round in {run_dir}"
-        raise Interrupted(kept, f"dospcot train --resume {run_dir}") from None
+        raise session.interrupted() from None
     finally:
         bar.close()
-    for agent in run.agents:
-        agent.logger.close()
-    plot_learning_curves(records, run_dir / "learning_curves.png", title=f"{cfg.name} (seed {cfg.seed})")
-    resumed = {"session_commits": commits} if sessions > 1 else {}
-    cpu += time.process_time() - started_cpu
-    times = {} if np.isnan(cpu) else {"cpu_time_s": round(cpu, 2)}  # NaN: a session's CPU time unknown
-    write_run_info(
-        run_dir, command, elapsed + time.perf_counter() - started, sessions=sessions, **times, **resumed
-    )
-    # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
-    write_json(run_dir / SUMMARY_FILE, run_summary(records, run))
-    # A finished run is never resumed, and its checkpoint holds every replay buffer (about a GB on
-    # a 32 x 32 grid): a sweep of finished runs would fill a disk.
-    (run_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
-    return run_dir
-
-
-def _log_round(run: CoTrainingRun, rows: list[dict]) -> None:
-    bought = {} if run.queries is None else _queries_per_class(run)
-    for agent, row in zip(run.agents, rows, strict=True):
-        for key in (*ROUND_SCALARS, *SEGMENT_SCALARS):
-            if math.isfinite(row[key]):
-                agent.logger.record(f"dospcot/{key}", row[key])
-        for key, count in bought.items():
-            agent.logger.record(f"queries/{key}", count)
-        agent.logger.record("dospcot/round", run.round)
-        agent.logger.dump(step=agent.num_timesteps)
-
-
-def _queries_per_class(run: CoTrainingRun) -> dict[str, int]:
-    """This round's answers in all and per reward class of the run (``class_<c>``; ``unknown`` for a
-    value no class holds yet)."""
-    answers = run.queries.answers_of(run.round)
-    classes = run.classes.encode(answers) if answers.size else np.zeros(0, dtype=np.int64)
-    counts = {"total": int(answers.size)}
-    for c in np.unique(classes):
-        counts["unknown" if c < 0 else f"class_{c}"] = int((classes == c).sum())
-    return counts
-
-
-def _write_round_files(run_dir: Path, run: CoTrainingRun, cfg: TrainConfig, records: list[dict]) -> None:
-    write_csv(run_dir / METRICS_FILE, records)
-    if run.queries is not None:
-        write_csv(run_dir / QUERIES_FILE, run.queries.log, LOG_COLUMNS)
-    for agent, view in zip(run.agents, cfg.views, strict=True):
-        atomic_write(run_dir / f"agent_{view}.zip", agent.save)
-    if run.trainer is not None:
-        for clf, view in zip(run.trainer.classifiers, cfg.views, strict=True):
-            atomic_write(run_dir / f"classifier_{view}.pt", partial(save_classifier, clf))
-        rewards = run.classes.values[run.classes.mask]
-        write_json(run_dir / REWARD_CLASSES_FILE, {"rewards": [float(v) for v in rewards]})
-
-
-def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:
-    """The last round's metrics per view and averaged over the views (no timings: a resumed run
-    ends with the summary of the uninterrupted one)."""
-    last = [r for r in records if r["round"] == run.round]
-    cfg = run.cfg
-    return {
-        "method": cfg.method,
-        "views": list(cfg.views),
-        "agents": list(cfg.agent_kinds),
-        "m": len(cfg.views),
-        "seed": cfg.seed,
-        "rounds": run.round,
-        "stopped_early": run.stopped,
-        "env_steps_per_agent": int(last[0]["env_steps"]),
-        **run.reference_returns(),
-        "mean": {key: float(np.mean([r[key] for r in last])) for key in SUMMARY_METRICS},
-        "per_view": {r["view"]: {key: r[key] for key in (*SUMMARY_METRICS, "eps", "pace")} for r in last},
-    }
+    return session.finish()
 
 
 def evaluate_cotraining_run(run_dir: Path, cfg: TrainConfig) -> dict[str, Any]:

@@ -54,6 +54,18 @@ class StackedAdam:
         self.steps[member] = step
 
     @th.no_grad()
+    def member_state(self, param: th.Tensor, member: int, shape: tuple[int, ...]) -> dict[str, th.Tensor]:
+        """Member ``member``'s state for ``param`` as one ``torch.optim.Adam``'s for the matching
+        unstacked parameter of shape ``shape`` (the inverse of :meth:`set_member`)."""
+        k = next(i for i, p in enumerate(self.params) if p is param)
+        moments = []
+        for stacked in (self.exp_avg[k], self.exp_avg_sq[k]):
+            value = stacked[member].clone()
+            moments.append(value.T.contiguous() if len(shape) == 2 else value.reshape(shape))
+        step = th.tensor(float(self.steps[member]), dtype=th.float32)
+        return {"step": step, "exp_avg": moments[0], "exp_avg_sq": moments[1]}
+
+    @th.no_grad()
     def step(self, active: th.Tensor) -> None:
         """One update of the members where ``active`` (S,) bool is set, from the parameters' ``grad``;
         the others are left exactly as they were."""
@@ -79,13 +91,3 @@ class StackedAdam:
             v.copy_(th.where(on, v * beta2 + (1 - beta2) * (grad * grad), v))
             denom = (v.sqrt() / correction).add_(self.eps)
             p.copy_(th.where(on, p - step_size * (m / denom), p))
-
-    def state_dict(self) -> dict[str, object]:
-        """The optimizer's state, for a checkpoint."""
-        return {"steps": self.steps, "exp_avg": self.exp_avg, "exp_avg_sq": self.exp_avg_sq}
-
-    def load_state_dict(self, state: dict[str, object]) -> None:
-        """Continue from :meth:`state_dict`."""
-        self.steps = state["steps"]  # type: ignore[assignment]
-        self.exp_avg = list(state["exp_avg"])  # type: ignore[call-overload]
-        self.exp_avg_sq = list(state["exp_avg_sq"])  # type: ignore[call-overload]

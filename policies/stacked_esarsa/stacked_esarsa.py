@@ -89,11 +89,6 @@ class StackedExpectedSarsa:
                         )
         return learner
 
-    @property
-    def n_members(self) -> int:
-        """S, the members."""
-        return self.q_net.n_members
-
     def sync_target(self) -> None:
         """Copy every member's online weights into its target network (``tau = 1``)."""
         self.q_net_target.copy_from(self.q_net)

@@ -30,11 +30,6 @@ class StackedQNetwork(nn.Module):
         self.weights = nn.ParameterList(nn.Parameter(w.detach().clone()) for w in weights)
         self.biases = nn.ParameterList(nn.Parameter(b.detach().clone()) for b in biases)
 
-    @property
-    def n_members(self) -> int:
-        """S, the members stacked."""
-        return int(self.weights[0].shape[0])
-
     @classmethod
     def from_q_networks(cls, q_nets: Sequence[QNetwork]) -> StackedQNetwork:
         """The stack of SB3 ``QNetwork``s ``q_nets`` (one per member, the same architecture), their

@@ -51,7 +51,16 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dospcot.experiment.report import TrialRun, load_runs, write_report
-from dospcot.experiment.studies import grid, highway, label_sources, minigrid, paper, queries, second_view
+from dospcot.experiment.studies import (
+    batched_seeds,
+    grid,
+    highway,
+    label_sources,
+    minigrid,
+    paper,
+    queries,
+    second_view,
+)
 from dospcot.experiment.studies.declaration import Glance, Study, Sweep
 from dospcot.experiment.studies.pages import GLANCE, glance_cells, page, page_prose, write_glance
 from dospcot.experiment.studies.provenance import header
@@ -84,6 +93,7 @@ STUDIES: dict[str, Study] = {
     **second_view.STUDIES,
     **paper.STUDIES,
     **queries.STUDIES,
+    **batched_seeds.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 
@@ -196,7 +206,10 @@ def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") ->
             for sweep in study.sweeps:
                 spec = sweep_spec(sweep, args.seeds, args.overrides)
                 sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
-                failed = run_sweep(sweep_dir, spec, backend=args.backend, workers=args.workers).failed
+                failed = run_sweep(
+                    sweep_dir, spec, backend=args.backend, workers=args.workers,
+                    batch_seeds=sweep.batch_seeds or args.batch_seeds,
+                ).failed  # fmt: skip
                 if failed:
                     sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
     except SweepError as err:
@@ -234,6 +247,7 @@ def main(argv: Sequence[str] | None = None) -> None:
         "--seeds", type=int, help="seeds 0..N-1 (default: the study's, 5; highway 3, paper 10)"
     )
     parser.add_argument("--workers", type=int, default=2, help="trials at once (default 2)")
+    parser.add_argument("--batch-seeds", type=int, default=1, help="seeds per batch (default 1)")
     parser.add_argument("--backend", choices=["local", "ray"], default="local")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     parser.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"))

@@ -11,11 +11,14 @@ from dospcot.experiment.report import TrialRun
 
 @dataclass(frozen=True)
 class Sweep:
-    """One sweep of a study: its folder's name under --runs-dir, its configs and its grid."""
+    """One sweep of a study: its folder's name under --runs-dir, its configs and its grid; and how many
+    seeds train per batch (docs/batched_seeds.md), where the study fixes it (None: the command's
+    ``--batch-seeds``)."""
 
     name: str
     configs: tuple[str, ...]
     grid: dict[str, tuple[str, ...]]
+    batch_seeds: int | None = None
 
 
 @dataclass(frozen=True)

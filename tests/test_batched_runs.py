@@ -1,0 +1,118 @@
+"""Batched seeds: the seeds of one config in lock step in one process, each writing a run's folder."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import torch as th
+from stable_baselines3 import DQN
+
+from dospcot.cli import main
+from dospcot.config.loading import load_config
+from dospcot.core.batched_runs import BatchedRuns
+from dospcot.experiment.train import build_run
+from dospcot.experiment.train_batch import BATCH_FILE
+
+TINY = ["training.rounds=2", "training.steps_per_round=400"]
+
+
+def _batch(seeds, *overrides: str) -> tuple[BatchedRuns, list[list[dict]]]:
+    runs = [build_run(load_config("tiny", [*TINY, f"seed={seed}", *overrides])) for seed in seeds]
+    batch = BatchedRuns(runs)
+    rows: list[list[dict]] = []
+    batch.run(on_round=rows.append)
+    return batch, rows
+
+
+def test_members_are_independent_another_members_seed_leaves_one_bit_identical():
+    plain, plain_rows = _batch([0, 1, 2])
+    other, other_rows = _batch([0, 1, 5])
+    for member in (0, 1):
+        assert json.dumps([r[member] for r in plain_rows]) == json.dumps([r[member] for r in other_rows])
+        for a, b in zip(plain.runs[member].agents, other.runs[member].agents, strict=True):
+            for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True):
+                assert th.equal(p, q)
+    assert plain_rows[-1][2] != other_rows[-1][2]
+
+
+def test_each_members_saved_agent_loads_with_plain_sb3_and_gives_its_q_values():
+    batch, _ = _batch([3, 4])
+    rng = np.random.default_rng(0)
+    for k, run_agents in enumerate(zip(*(run.agents for run in batch.runs), strict=True)):
+        shape = run_agents[0].observation_space.shape
+        obs = th.as_tensor(rng.random((2, 5, *shape)), dtype=th.float32)
+        stacked = batch.learners[k].q_net(obs).detach()
+        for member, agent in enumerate(run_agents):
+            blob = io.BytesIO()
+            agent.save(blob)
+            blob.seek(0)
+            loaded = DQN.load(blob, device="cpu")
+            np.testing.assert_allclose(loaded.q_net(obs[member]).detach(), stacked[member], atol=1e-5)
+
+
+def test_runs_that_differ_in_more_than_their_seeds_are_refused():
+    runs = [build_run(load_config("tiny", [*TINY, f"seed={s}"])) for s in (0, 1)]
+    runs.append(build_run(load_config("tiny", [*TINY, "seed=2", "training.label_fraction=0.3"])))
+    with pytest.raises(ValueError, match="differ in more than their seeds"):
+        BatchedRuns(runs)
+
+
+def test_a_config_that_cannot_batch_trains_its_seeds_one_after_another_saying_why(tmp_path, capsys):
+    args = ["train", "tiny", "--seeds", "2", "--runs-dir", str(tmp_path), "--no-progress"]
+    assert main([*args, *("--set", 'agent="tabular"'), *(a for s in TINY for a in ("--set", s))]) == 0
+    out = capsys.readouterr().out
+    assert "training the 2 seeds one after another, not as a batch: tabular agents" in out
+    folders = sorted((tmp_path / "tiny").iterdir())
+    assert [json.loads((f / "summary.json").read_text())["seed"] for f in folders] == [0, 1]
+
+
+def test_a_batch_killed_after_a_round_resumes_to_the_files_of_one_never_stopped(tmp_path):
+    overrides = [a for s in ["training.rounds=3", "training.steps_per_round=600"] for a in ("--set", s)]
+    args = ["train", "tiny", "--seeds", "2", "--no-progress", *overrides]
+    assert main([*args, "--runs-dir", str(tmp_path / "full")]) == 0
+    full = sorted((tmp_path / "full" / "tiny").iterdir())
+    assert not any((f / BATCH_FILE).exists() or (f / "checkpoint.pkl").exists() for f in full)
+    cmd = [sys.executable, "-m", "dospcot", *args, "--runs-dir", str(tmp_path / "killed")]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while not list((tmp_path / "killed").glob("tiny/*/checkpoint.pkl")):
+            assert proc.poll() is None and time.monotonic() < deadline, "the batch ended before a checkpoint"
+            time.sleep(0.02)
+        os.kill(proc.pid, signal.SIGKILL)  # in round 2: round 1's checkpoint has just landed
+    finally:
+        proc.wait()
+    killed = sorted((tmp_path / "killed" / "tiny").iterdir())
+    assert all((f / BATCH_FILE).exists() and not (f / "summary.json").exists() for f in killed)
+    # Any member's folder resumes the whole batch.
+    assert main(["train", "--resume", str(killed[1]), "--no-progress"]) == 0
+    for resumed, never_stopped in zip(killed, full, strict=True):
+        for name in ("metrics.csv", "summary.json", "reward_classes.json"):
+            assert (resumed / name).read_bytes() == (never_stopped / name).read_bytes(), (resumed, name)
+        assert json.loads((resumed / "run_info.json").read_text())["sessions"] == 2
+        assert not (resumed / BATCH_FILE).exists()
+
+
+def test_a_sweep_batches_its_seeds_and_a_batchs_grouping_changes_no_members_files(tmp_path):
+    from dospcot.experiment.sweep import run_sweep
+    from dospcot.experiment.sweep_spec import SweepSpec, trial_dir
+
+    spec = SweepSpec(("tiny",), {"training.label_fraction": ("0.2",)}, (0, 1, 2), tuple(TINY))
+    folders = {}
+    for k in (2, 3):
+        result = run_sweep(tmp_path / f"k{k}", spec, workers=1, batch_seeds=k, show_progress=False)
+        assert not result.failed
+        folders[k] = [trial_dir(tmp_path / f"k{k}", trial) for trial in result.trials]
+        infos = [json.loads((f / "run_info.json").read_text()) for f in folders[k]]
+        assert [info.get("batch_members", 1) for info in infos] == ([2, 2, 1] if k == 2 else [3, 3, 3])
+    for two, three in zip(folders[2], folders[3], strict=True):
+        for name in ("metrics.csv", "summary.json"):
+            assert (two / name).read_bytes() == (three / name).read_bytes()
