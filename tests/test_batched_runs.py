@@ -116,3 +116,27 @@ def test_a_sweep_batches_its_seeds_and_a_batchs_grouping_changes_no_members_file
     for two, three in zip(folders[2], folders[3], strict=True):
         for name in ("metrics.csv", "summary.json"):
             assert (two / name).read_bytes() == (three / name).read_bytes()
+
+
+@pytest.mark.parametrize("seeds", [[], ["--seeds", "2"]])
+def test_a_run_or_batch_stopped_in_its_first_round_keeps_its_folders_and_resumes(tmp_path, seeds):
+    steps = ("--set", "training.steps_per_round=4000", "--set", "training.rounds=1")
+    cmd = [sys.executable, "-m", "dospcot", "train", "tiny", *seeds, *steps, "--no-progress"]
+    proc = subprocess.Popen(
+        [*cmd, "--runs-dir", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(tmp_path.glob("tiny/*/tb/*"))) < 2:  # the agents' loggers: the run has begun
+            assert proc.poll() is None and time.monotonic() < deadline, "the run ended before it began"
+            time.sleep(0.02)
+        time.sleep(0.5)  # into round 1
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 130 and "no finished round in" in out
+    folders = sorted((tmp_path / "tiny").iterdir())
+    assert len(folders) == (2 if seeds else 1) and f"dospcot train --resume {folders[0]}" in out
+    assert main(["train", "--resume", str(folders[-1]), "--no-progress"]) == 0
+    assert all((folder / "summary.json").is_file() for folder in folders)

@@ -4,8 +4,10 @@ Each member is an ordinary :class:`~dospcot.core.cotraining_run.CoTrainingRun` o
 task, store, reward table, co-trainer and plain SB3 agents. What the batch shares is the arithmetic of
 the agents' networks: per view, one :class:`~dospcot.policies.stacked_esarsa.StackedExpectedSarsa`
 holds every member's online and target networks and Adam state, so that one forward pass picks every
-member's greedy action and one gradient step updates every member. At these network sizes a CPU
-spends its time in per-call overhead, not arithmetic, so S members cost a few members' time.
+member's greedy action and one gradient step updates every member. What that saves is per-call
+overhead; at 128 hidden units and batches of 64 the arithmetic itself takes most of a gradient step,
+and the classifiers' fits and the envs' steps still run member by member, so the saving is modest
+(docs/batched_seeds.md, "Speed").
 
 One round of the batch, top to bottom (:meth:`BatchedRuns.run_round`):
 
@@ -21,8 +23,8 @@ One round of the batch, top to bottom (:meth:`BatchedRuns.run_round`):
 4. **Age and record**, member by member (:meth:`~dospcot.core.cotraining_run.CoTrainingRun.close_round`).
 
 After each phase that trains, every member's weights and Adam state are written back into its SB3
-agent, so that evaluation, ``agent.save`` and checkpoints see plain SB3 agents, and a member's
-checkpoint is a single run's checkpoint.
+agent, so that evaluation, ``agent.save`` and checkpoints see plain SB3 agents, and each member's part
+of the batch's checkpoint is what a run of its own would checkpoint.
 
 Random draws: a run of its own draws exploration and replay batches from numpy's global generator;
 a member draws them from its own stream per agent (:func:`~dospcot.seeding.batched_draws_seed`), so
@@ -71,7 +73,8 @@ class BatchedRuns:
 
     :param runs: the members, each built (and, to resume, loaded from its checkpoint) as a run of its
         own would be; all at the same round.
-    :raises ValueError: runs that cannot be batched (:func:`batch_refusal`).
+    :raises ValueError: runs that cannot be batched (:func:`config_refusal`, or configs that differ in
+        more than their seeds, or runs at different rounds).
     """
 
     def __init__(self, runs: Sequence[CoTrainingRun]) -> None:

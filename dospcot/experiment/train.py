@@ -41,6 +41,7 @@ from dospcot.config.run_configs import RunConfig, TrainConfig
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import Rater
 from dospcot.core.raters import QueriesPending
+from dospcot.experiment.interrupts import Interrupted
 from dospcot.experiment.run_folder import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
@@ -105,6 +106,8 @@ def train(
     run_dir = new_run_dir(runs_root, cfg.name, cfg.to_dict())
     try:
         return train_at(run_dir, cfg, show_progress=show_progress, command=command)
+    except Interrupted:  # its message names the folder to resume, which starts it again
+        raise
     except Exception:
         if not any((run_dir / name).is_file() for name in (CHECKPOINT_FILE, METRICS_FILE)):
             shutil.rmtree(run_dir, ignore_errors=True)

@@ -21,6 +21,7 @@ from tqdm.auto import tqdm
 
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.batched_runs import BatchedRuns, config_refusal
+from dospcot.experiment.interrupts import Interrupted
 from dospcot.experiment.run_folder import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
@@ -64,6 +65,8 @@ def train_seeds(
     run_dirs = [new_run_dir(runs_root, c.name, c.to_dict()) for c in cfgs]
     try:
         return train_batch_at(run_dirs, cfgs, commands=[command] * len(cfgs), show_progress=show_progress)
+    except Interrupted:  # its message names a folder to resume, which starts the batch again
+        raise
     except Exception:
         if not (run_dirs[0] / CHECKPOINT_FILE).is_file():  # nothing of a batch without a round can resume
             for run_dir in run_dirs:
