@@ -140,3 +140,12 @@ def test_a_run_or_batch_stopped_in_its_first_round_keeps_its_folders_and_resumes
     assert len(folders) == (2 if seeds else 1) and f"dospcot train --resume {folders[0]}" in out
     assert main(["train", "--resume", str(folders[-1]), "--no-progress"]) == 0
     assert all((folder / "summary.json").is_file() for folder in folders)
+
+
+def test_a_batch_reports_its_progress_to_a_sweep_in_trials(tmp_path):
+    from dospcot.experiment.train_batch import train_batch_at
+
+    cfgs = [load_config("tiny", [*TINY, f"seed={seed}"]) for seed in (0, 1)]
+    shares: list[float] = []
+    train_batch_at([tmp_path / "a", tmp_path / "b"], cfgs, commands=["", ""], progress=shares.append)
+    assert sum(shares) == pytest.approx(2.0, abs=0.02)  # two trials, but what is left under the last report

@@ -86,7 +86,8 @@ def train_batch_at(
     ``dospcot sweep`` names its trials), each holding its lock.
 
     :param commands: each member's command line, for its ``run_info.json``.
-    :param progress: called with the share of one member's run each lock step completes (a sweep's bar).
+    :param progress: called with the trials' worth of work done since its last call, summed over the
+        members (a sweep's bar counts trials).
     """
     members = {"members": [str(d.resolve()) for d in run_dirs]}
     for run_dir, cfg in zip(run_dirs, cfgs, strict=True):
@@ -186,7 +187,7 @@ def _train_batch(
 
     def on_steps(steps: int) -> None:
         bar.update(steps)
-        unreported[0] += steps / len(cfgs) / member_steps
+        unreported[0] += steps / member_steps  # each member-step is this share of its member's trial
         if progress is not None and unreported[0] >= 0.01:  # a sweep's queue needs no report per step
             progress(unreported[0])
             unreported[0] = 0.0
