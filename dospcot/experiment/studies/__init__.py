@@ -114,28 +114,33 @@ def header_command(program: Sequence[str], study: str, options: Sequence[str]) -
 
 def study_runs(
     study: Study, runs_dir: Path, suffix: str = ""
-) -> tuple[list[TrialRun], list[Path], list[Path]]:
+) -> tuple[list[TrialRun], list[Path], list[str]]:
     """The finished runs of ``study``'s sweeps under ``runs_dir`` (each sweep's folder name plus
-    ``suffix``), the sweep folders that hold them, and those that hold none (never started)."""
-    runs, sweep_dirs, not_started = [], [], []
+    ``suffix``), the sweep folders that hold them, and each sweep not finished, in words (never
+    started, or how many of its trials have finished)."""
+    runs, sweep_dirs, unfinished = [], [], []
     for sweep in study.sweeps:
         sweep_dir = runs_dir / f"{sweep.name}{suffix}"
         try:
-            runs += load_runs(sweep_dir)[1]
+            spec, finished = load_runs(sweep_dir)
         except SweepError:  # never started, or no trial finished yet: the study was cut short there
-            not_started.append(sweep_dir)
+            unfinished.append(f"`{sweep_dir.name}`")
             continue
+        runs += finished
         sweep_dirs.append(sweep_dir)
-    return runs, sweep_dirs, not_started
+        if len(finished) < len(spec.trials()):
+            unfinished.append(f"`{sweep_dir.name}` ({len(finished)} of its {len(spec.trials())} runs)")
+    return runs, sweep_dirs, unfinished
 
 
 def study_table(
-    study: Study, runs: list[TrialRun], command: str, sweep_dirs: list[Path], not_started: list[Path]
+    study: Study, runs: list[TrialRun], command: str, sweep_dirs: list[Path], unfinished: list[str]
 ) -> str:
     """The study's tables as text: the header (where the figures come from), then its tables."""
     # By name: where the runs folder lies is the reader's, and a sweep not begun has no folder to cite.
-    unfinished = ", ".join(f"`{d.name}`" for d in not_started)
-    missing = [f"Not finished yet, in the runs folder: sweep(s) {unfinished}."] if not_started else []
+    missing = (
+        [f"Not finished yet, in the runs folder: sweep(s) {', '.join(unfinished)}."] if unfinished else []
+    )
     return "\n".join([*header(runs, command, sweep_dirs), *missing, *study.tables(runs)]) + "\n"
 
 
@@ -170,8 +175,8 @@ def render_study(name: str, runs_dir: Path, command: str, suffix: str = "") -> R
     """Study ``name`` rendered from the finished runs under ``runs_dir``, with ``command`` in its
     header; nothing is trained or written."""
     study = get_study(name)
-    runs, sweep_dirs, not_started = study_runs(study, runs_dir, suffix)
-    table = study_table(study, runs, command, sweep_dirs, not_started) if runs else None
+    runs, sweep_dirs, unfinished = study_runs(study, runs_dir, suffix)
+    table = study_table(study, runs, command, sweep_dirs, unfinished) if runs else None
     readme = study.readme(table) if study.readme is not None and table is not None else None
     return Rendered(table, page(name, study, table), glance_cells(study, runs), readme)
 

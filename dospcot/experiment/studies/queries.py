@@ -65,8 +65,17 @@ def _arm_table(runs: list[TrialRun], task: str) -> list[str]:
     return lines
 
 
-def _verdict(held: bool | None) -> str:
-    return "not yet run" if held is None else ("**held**" if held else "**not met**")
+def _verdict(held: bool | None, pairs: int = 0, of: int = 0) -> str:
+    """A hypothesis's verdict; none until both arms have run every pair (``pairs`` of ``of`` so far)."""
+    if held is None:
+        return f"not decided yet ({pairs} of {of} pairs run)" if pairs else "not yet run"
+    return "**held**" if held else "**not met**"
+
+
+def _pair_counts(runs: list[TrialRun], a: str, b: str) -> tuple[int, int]:
+    """The pairs both arms have run, and the pairs either has: a verdict waits until they agree."""
+    first, second = set(_pairs(runs, a)), set(_pairs(runs, b))
+    return len(first & second), len(first | second)
 
 
 def _q1_q2(runs: list[TrialRun], task: str, q1: bool) -> list[str]:
@@ -74,19 +83,20 @@ def _q1_q2(runs: list[TrialRun], task: str, q1: bool) -> list[str]:
     disagreement, uncertainty = "dospcot disagreement @ {f}", "self-training uncertainty @ {f}"
     fraction = next((r.trial.params[FRACTION] for r in runs if FRACTION in r.trial.params), "")
     if q1:
-        diff = _difference(runs, disagreement.format(f="0.02"), "dospcot uniform @ 0.05", "success")
-        held = None if diff.n == 0 else diff.low >= -0.05
+        a, b = disagreement.format(f="0.02"), "dospcot uniform @ 0.05"
+        diff, (pairs, of) = _difference(runs, a, b, "success"), _pair_counts(runs, a, b)
+        held = None if diff.n == 0 or pairs < of else diff.low >= -0.05
         lines.append(
             f"- Q1 ({task}): success of DOSPCoT disagreement at 2% minus DOSPCoT uniform at 5%, paired: "
-            f"{diff} over {diff.n} pairs; lower bound >= -0.05: {_verdict(held)}."
+            f"{diff} over {diff.n} pairs; lower bound >= -0.05: {_verdict(held, pairs, of)}."
         )
     for metric in ("success", "pseudo_accuracy"):
         a, b = disagreement.format(f=fraction), uncertainty.format(f=fraction)
-        diff = _difference(runs, a, b, metric)
-        held = None if diff.n == 0 else diff.low > 0
+        diff, (pairs, of) = _difference(runs, a, b, metric), _pair_counts(runs, a, b)
+        held = None if diff.n == 0 or pairs < of else diff.low > 0
         lines.append(
             f"- Q2 ({task}, {metric}): DOSPCoT disagreement minus self-training uncertainty, paired: {diff} "
-            f"over {diff.n} pairs; interval above 0: {_verdict(held)}."
+            f"over {diff.n} pairs; interval above 0: {_verdict(held, pairs, of)}."
         )
     return lines
 
@@ -99,8 +109,9 @@ def _goal_labelled(run: TrialRun) -> bool:
 def _q3(runs: list[TrialRun], task: str) -> str:
     oracle = [r.summary["mean"]["success"] for r in runs if _arm(r) == "oracle"]
     judged = [r for r in runs if _arm(r) == f"dospcot {Q3_STRATEGY} @ 0.1"]
-    if not oracle or not judged:
-        return f"- Q3 ({task}): {_verdict(None)}."
+    pairs, of = _pair_counts(runs, "oracle", f"dospcot {Q3_STRATEGY} @ 0.1")
+    if not oracle or not judged or pairs < of:
+        return f"- Q3 ({task}): {_verdict(None, pairs if oracle and judged else 0, of)}."
     success = SeedSummary.of([r.summary["mean"]["success"] for r in judged]).mean
     share = success / max(sum(oracle) / len(oracle), 1e-12)
     goal = sum(_goal_labelled(r) for r in judged)
@@ -129,11 +140,12 @@ def _tables(tasks: dict[str, Callable[[TrialRun], bool]], hypotheses: Callable[.
 
 def _glance(runs: list[TrialRun]) -> Glance:
     """Q1's comparison: DOSPCoT disagreement at 2% minus DOSPCoT uniform at 5%, success, paired."""
-    diff = _difference(runs, "dospcot disagreement @ 0.02", "dospcot uniform @ 0.05", "success")
-    held = None if diff.n == 0 else diff.low >= -0.05
+    a, b = "dospcot disagreement @ 0.02", "dospcot uniform @ 0.05"
+    diff, (pairs, of) = _difference(runs, a, b, "success"), _pair_counts(runs, a, b)
+    held = None if diff.n == 0 or pairs < of else diff.low >= -0.05
     return Glance(
         f"grid16 success, DOSPCoT disagreement at 2% minus uniform at 5%, paired: {diff}",
-        f"Q1: {_verdict(held).strip('*')}",
+        f"Q1: {_verdict(held, pairs, of).strip('*')}",
     )
 
 
