@@ -296,28 +296,19 @@ def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
 
 
 def test_a_queries_hypothesis_waits_for_every_pair_of_its_arms():
+    def arm(fraction: str, seeds: range, accuracy: float, **strategy: str) -> list[TrialRun]:
+        mean = {
+            "success": 1.0,
+            "pseudo_accuracy": accuracy,
+            "worst_class_precision": 0.8,
+            "labelled_steps": 17,
+        }
+        params = {"env.layout_seed": "101", "training.label_fraction": fraction, **strategy}
+        return [TrialRun(Trial("grid16-dospcot", "x", params, s), {"mean": mean}, [], Path()) for s in seeds]
+
     def runs_of(reference_seeds: range) -> list[TrialRun]:
-        runs = []
-        for seed in range(4):
-            mean = {
-                "success": 1.0,
-                "pseudo_accuracy": 0.95,
-                "worst_class_precision": 0.8,
-                "labelled_steps": 17,
-            }
-            params = {"env.layout_seed": "101", "training.label_fraction": "0.02"}
-            trial = Trial("grid16-dospcot", "x", {**params, "training.label_strategy": "disagreement"}, seed)
-            runs.append(TrialRun(trial, {"mean": mean}, [], Path()))
-        for seed in reference_seeds:
-            mean = {
-                "success": 1.0,
-                "pseudo_accuracy": 0.99,
-                "worst_class_precision": 0.9,
-                "labelled_steps": 42,
-            }
-            params = {"env.layout_seed": "101", "training.label_fraction": "0.05"}
-            runs.append(TrialRun(Trial("grid16-dospcot", "x", params, seed), {"mean": mean}, [], Path()))
-        return runs
+        disagreement = arm("0.02", range(4), 0.95, **{"training.label_strategy": "disagreement"})
+        return disagreement + arm("0.05", reference_seeds, 0.99)
 
     tables = STUDIES["queries"].tables
     assert "lower bound >= -0.05: not decided yet (2 of 4 pairs run)." in "\n".join(tables(runs_of(range(2))))

@@ -195,19 +195,10 @@ class BatchedRuns:
     def _update(self, k: int) -> None:
         """``update_steps`` gradient steps of every member's agent ``k`` without acting, the targets
         synced as often as during collection (``ExpectedSarsaDQN.update``)."""
-        steps = self.cfg.training.update_steps
-        first = self._agents(k)[0]
-        if steps == 0 or first.replay_buffer is None or first.replay_buffer.size() == 0:
-            return
-        per_env_step = first.gradient_steps / first.train_freq.frequency
-        between_syncs = max(1, round(first.target_update_interval * per_env_step))
-        done = 0
-        while done < steps:
-            chunk = min(between_syncs, steps - done)
+        for chunk in self._agents(k)[0].update_chunks(self.cfg.training.update_steps):
             for _ in range(chunk):
                 self._train_step(k)
             self.learners[k].sync_target()
-            done += chunk
 
     def _train_step(self, k: int) -> None:
         """One stacked gradient step of every member's agent ``k`` on a batch from its own buffer."""

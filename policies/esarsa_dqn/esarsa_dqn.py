@@ -339,19 +339,22 @@ class ExpectedSarsaDQN(DQN):
         The target network is synced as often as during ``learn()``: every
         ``target_update_interval * gradient_steps / train_freq`` gradient steps (and after the last).
         """
-        if gradient_steps < 0:
-            raise ValueError(f"gradient_steps must be >= 0, got {gradient_steps}")
-        if gradient_steps == 0 or self.replay_buffer is None or self.replay_buffer.size() == 0:
-            return
-        per_env_step = self.gradient_steps / self.train_freq.frequency
-        between_syncs = max(1, round(self.target_update_interval * per_env_step))
-        done = 0
-        while done < gradient_steps:
-            chunk = min(between_syncs, gradient_steps - done)
+        for chunk in self.update_chunks(gradient_steps):
             self.train(chunk, self.batch_size)
             polyak_update(self.q_net.parameters(), self.q_net_target.parameters(), self.tau)
             polyak_update(self.batch_norm_stats, self.batch_norm_stats_target, 1.0)
-            done += chunk
+
+    def update_chunks(self, gradient_steps: int) -> list[int]:
+        """:meth:`update`'s ``gradient_steps``, cut where the target network syncs: chunks of
+        ``target_update_interval * gradient_steps / train_freq`` steps (the last may be shorter); none
+        while the replay buffer is empty."""
+        if gradient_steps < 0:
+            raise ValueError(f"gradient_steps must be >= 0, got {gradient_steps}")
+        if gradient_steps == 0 or self.replay_buffer is None or self.replay_buffer.size() == 0:
+            return []
+        per_env_step = self.gradient_steps / self.train_freq.frequency
+        between_syncs = max(1, round(self.target_update_interval * per_env_step))
+        return [min(between_syncs, gradient_steps - done) for done in range(0, gradient_steps, between_syncs)]
 
     def _current_and_next_value(self, obs: th.Tensor, next_obs: th.Tensor) -> tuple[th.Tensor, th.Tensor]:
         """(batch, A) online values at s, with gradient, and (batch,) the bootstrap value at s'."""
