@@ -9,7 +9,7 @@ import torch as th
 from dospcot.config.loading import load_config
 from dospcot.experiment.train import build_run
 from dospcot.policies.esarsa_dqn import ExpectedSarsaDQN, WeightedReplayBufferSamples
-from dospcot.policies.stacked_esarsa import StackedExpectedSarsa
+from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
 
 UPDATES = 100
 
@@ -24,13 +24,6 @@ def _trained_agent(n_steps: int, seed: int = 0) -> ExpectedSarsaDQN:
 def _batches(agent: ExpectedSarsaDQN, count: int, seed: int) -> list[WeightedReplayBufferSamples]:
     np.random.seed(seed)  # noqa: NPY002  (the buffer samples from numpy's global stream, as SB3's)
     return [agent.replay_buffer.sample(agent.batch_size) for _ in range(count)]
-
-
-def _stack(batches: list[WeightedReplayBufferSamples]) -> WeightedReplayBufferSamples:
-    fields = zip(*batches, strict=True)
-    return WeightedReplayBufferSamples(
-        *(None if values[0] is None else th.stack(values) for values in fields)
-    )
 
 
 def _member_parameters(learner: StackedExpectedSarsa, member: int) -> dict[str, th.Tensor]:
@@ -54,7 +47,7 @@ def test_one_member_makes_the_first_100_updates_of_expected_sarsa_dqn_train(n_st
     for data in batches:
         before = [p.detach().clone() for p in agent.q_net.parameters()]
         agent.train(1, agent.batch_size)
-        _, active = learner.train_step(_stack([data]), eps, agent.gamma)
+        _, active = learner.train_step(stack_samples([data]), eps, agent.gamma)
         moved = any(not th.equal(a, p) for a, p in zip(before, agent.q_net.parameters(), strict=True))
         assert bool(active[0]) == moved  # a batch with nothing labelled is skipped by both
         updated += moved
@@ -80,7 +73,7 @@ def test_one_member_makes_expected_sarsa_dqns_updates_with_the_large_margin_loss
         np.random.seed(step)  # noqa: NPY002
         index = np.random.randint(0, len(actions), size=agent.batch_size)  # noqa: NPY002
         demos = (th.as_tensor(states[index])[None], th.as_tensor(actions[index])[None])
-        _, active = learner.train_step(_stack([data]), eps, agent.gamma, demos)
+        _, active = learner.train_step(stack_samples([data]), eps, agent.gamma, demos)
         assert bool(active[0])  # a demonstration always gives a gradient
     for name, value in _member_parameters(learner, 0).items():
         np.testing.assert_allclose(value, agent.q_net.state_dict()[name], atol=1e-5, rtol=0)
@@ -95,7 +88,7 @@ def test_members_are_independent_another_members_data_leaves_one_bit_identical()
         learner = StackedExpectedSarsa.from_agents(members)
         eps = th.tensor([0.3, 0.2, 0.1])
         for step in range(30):
-            learner.train_step(_stack([b[step] for b in batches]), eps, members[0].gamma)
+            learner.train_step(stack_samples([b[step] for b in batches]), eps, members[0].gamma)
             if step % 10 == 9:
                 learner.sync_target()
         return learner

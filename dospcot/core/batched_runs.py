@@ -44,8 +44,7 @@ import torch as th
 
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.policies.esarsa_dqn import WeightedReplayBufferSamples
-from dospcot.policies.stacked_esarsa import StackedExpectedSarsa
+from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
 from dospcot.policies.stacked_esarsa.stacked_q_network import linear_layers
 from dospcot.seeding import batched_draws_seed
 
@@ -215,7 +214,7 @@ class BatchedRuns:
                 demo_actions.append(agent._demo_actions[index])
         eps = th.tensor([agent.exploration_rate for agent in agents], dtype=th.float32)
         demos = (th.stack(demo_states), th.stack(demo_actions)) if demo_states else None
-        self.learners[k].train_step(_stack(batches), eps, first.gamma, demos)
+        self.learners[k].train_step(stack_samples(batches), eps, first.gamma, demos)
         for agent in agents:
             agent._n_updates += 1
 
@@ -233,10 +232,3 @@ class BatchedRuns:
             for i, layer in enumerate(linear_layers(agent.q_net)):
                 for mine, theirs in ((stacked.weights[i], layer.weight), (stacked.biases[i], layer.bias)):
                     optimizer.state[theirs] = adam.member_state(mine, s, tuple(theirs.shape))
-
-
-def _stack(batches: Sequence[WeightedReplayBufferSamples]) -> WeightedReplayBufferSamples:
-    """Each field's (B, ...) tensors of every member stacked to (S, B, ...)."""
-    return WeightedReplayBufferSamples(
-        *(None if values[0] is None else th.stack(values) for values in zip(*batches, strict=True))
-    )

@@ -40,6 +40,9 @@ class StackedAdam:
         self.exp_avg = [th.zeros_like(p) for p in self.params]
         self.exp_avg_sq = [th.zeros_like(p) for p in self.params]
 
+    def _index(self, param: th.Tensor) -> int:
+        return next(i for i, p in enumerate(self.params) if p is param)
+
     @th.no_grad()
     def set_member(
         self, param: th.Tensor, member: int, step: float, exp_avg: th.Tensor, exp_avg_sq: th.Tensor
@@ -47,7 +50,7 @@ class StackedAdam:
         """Member ``member``'s state for ``param`` from one ``torch.optim.Adam``'s: its step count and
         the moments of the matching unstacked parameter (an ``nn.Linear``'s (out, in) weight is
         transposed to the stack's (in, out); a bias gains the stack's middle axis)."""
-        k = next(i for i, p in enumerate(self.params) if p is param)
+        k = self._index(param)
         shape = self.exp_avg[k].shape[1:]
         for mine, theirs in ((self.exp_avg[k], exp_avg), (self.exp_avg_sq[k], exp_avg_sq)):
             mine[member] = (theirs.T if theirs.dim() == 2 else theirs).reshape(shape)
@@ -57,7 +60,7 @@ class StackedAdam:
     def member_state(self, param: th.Tensor, member: int, shape: tuple[int, ...]) -> dict[str, th.Tensor]:
         """Member ``member``'s state for ``param`` as one ``torch.optim.Adam``'s for the matching
         unstacked parameter of shape ``shape`` (the inverse of :meth:`set_member`)."""
-        k = next(i for i, p in enumerate(self.params) if p is param)
+        k = self._index(param)
         moments = []
         for stacked in (self.exp_avg[k], self.exp_avg_sq[k]):
             value = stacked[member].clone()

@@ -168,3 +168,11 @@ class StackedExpectedSarsa:
         scale = (self.max_grad_norm / (total + 1e-6)).clamp(max=1.0)
         for g in grads:
             g.mul_(scale.view((-1,) + (1,) * (g.dim() - 1)))
+
+
+def stack_samples(batches: Sequence[WeightedReplayBufferSamples]) -> WeightedReplayBufferSamples:
+    """Each member's batch (every field (B, ...)) stacked to the (S, B, ...) that
+    :meth:`StackedExpectedSarsa.train_step` reads."""
+    return WeightedReplayBufferSamples(
+        *(None if values[0] is None else th.stack(values) for values in zip(*batches, strict=True))
+    )
