@@ -48,6 +48,16 @@ class StepViews(Mapping[str, np.ndarray]):
             value = self._values[name] = self._observe(name)
         return value
 
+    def __deepcopy__(self, memo: dict[int, Any]) -> StepViews:
+        """A copy of the views read so far, never of the env: SB3's ``DummyVecEnv`` deep-copies every
+        step's infos, and copying ``observe``'s env with them cost a whole env's copy per step. The
+        copy is not current, so a view not read before the copy raises rather than describe a state the
+        copy never saw."""
+        views = StepViews(self._observe, self._names)
+        views._values = {name: value.copy() for name, value in self._values.items()}
+        views.current = False
+        return views
+
     def __iter__(self) -> Iterator[str]:
         return iter(self._names)
 

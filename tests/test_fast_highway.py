@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -345,3 +347,23 @@ def test_lazy_views_are_computed_when_read_once_and_never_for_a_past_state(monke
     with pytest.raises(RuntimeError, match="before the env stepped on"):
         unread["views"]["occupancy"]  # computed now, it would describe a later state
     np.testing.assert_array_equal(info["views"]["occupancy"], info["views"]["occupancy"])  # read in time
+
+
+def test_a_copy_of_lazy_views_keeps_what_was_read_and_never_copies_the_env(monkeypatch: pytest.MonkeyPatch):
+    calls = _counted_view_calls(monkeypatch)
+    env = make_masked_highway("dospcot/FastHighway-v0", "kinematics", VIEW_NAMES)
+    env.set_wrapper_attr("lazy_views", True, force=False)
+    env.reset(seed=0)
+    *_, info = env.step(IDLE)
+
+    def no_copy(self, memo):
+        raise AssertionError("the env was deep-copied with its views")
+
+    monkeypatch.setattr(type(env.unwrapped), "__deepcopy__", no_copy, raising=False)
+    copied = copy.deepcopy(info)  # what SB3's DummyVecEnv does to every step's infos
+    np.testing.assert_array_equal(copied["views"]["kinematics"], info["views"]["kinematics"])
+    assert copied["views"]["kinematics"] is not info["views"]["kinematics"]
+    with pytest.raises(RuntimeError, match="before the env stepped on"):
+        copied["views"]["occupancy"]  # never read before the copy: the copy cannot observe
+    assert calls["occupancy"] == 0
+    np.testing.assert_array_equal(env.unwrapped.observe("occupancy"), info["views"]["occupancy"])  # live
