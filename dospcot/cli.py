@@ -141,10 +141,10 @@ def build_parser() -> argparse.ArgumentParser:
     sweep.add_argument(
         "--batch-seeds",
         type=positive_int,
-        default=1,
         metavar="K",
         help="train each cell's seeds in batches of at most K per process (local backend; "
-        "docs/batched_seeds.md); default 1: every trial alone",
+        "docs/batched_seeds.md); default: the sweep's own, kept in its sweep.json, and 1 (every trial "
+        "alone) for a new sweep",
     )
     sweep.add_argument(
         "--ray-address", metavar="ADDRESS", help="an existing Ray cluster (default: start a local instance)"
@@ -238,7 +238,10 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's)")
     study.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
     study.add_argument(
-        "--batch-seeds", type=positive_int, default=1, metavar="K", help="as dospcot sweep's (default 1)"
+        "--batch-seeds",
+        type=positive_int,
+        metavar="K",
+        help="as dospcot sweep's (default: each sweep's own, 1 for a new one)",
     )
     study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
     study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
@@ -324,8 +327,9 @@ def _train(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.errors import ConfigError
     from dospcot.config.loading import load_config
     from dospcot.config.presets import preset_names
+    from dospcot.experiment.run_folder import batch_members
     from dospcot.experiment.train import resume, run_config, train
-    from dospcot.experiment.train_batch import batch_members, resume_batch, train_seeds
+    from dospcot.experiment.train_batch import resume_batch, train_seeds
 
     torch.set_num_threads(args.threads)
     progress = not args.no_progress

@@ -18,8 +18,8 @@ from stable_baselines3 import DQN
 from dospcot.cli import main
 from dospcot.config.loading import load_config
 from dospcot.core.batched_runs import BatchedRuns
+from dospcot.experiment.run_folder import BATCH_FILE
 from dospcot.experiment.train import build_run
-from dospcot.experiment.train_batch import BATCH_FILE
 
 TINY = ["training.rounds=2", "training.steps_per_round=400"]
 
@@ -149,3 +149,46 @@ def test_a_batch_reports_its_progress_to_a_sweep_in_trials(tmp_path):
     shares: list[float] = []
     train_batch_at([tmp_path / "a", tmp_path / "b"], cfgs, commands=["", ""], progress=shares.append)
     assert sum(shares) == pytest.approx(2.0, abs=0.02)  # two trials, but what is left under the last report
+
+
+@pytest.mark.parametrize(
+    ("started", "other"),
+    [(3, 1), pytest.param(1, 3, marks=pytest.mark.slow)],  # each near 30 s on 2 cores
+)
+def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_never_stopped(
+    tmp_path, capsys, started, other
+):
+    from dospcot.experiment.sweep import run_sweep
+    from dospcot.experiment.sweep_spec import SweepSpec, trial_dir
+
+    steps = ["training.rounds=3", "training.steps_per_round=600"]
+    spec = SweepSpec(("tiny",), {}, (0, 1, 2), tuple(steps))
+    never = run_sweep(tmp_path / "never", spec, workers=1, batch_seeds=started, show_progress=False)
+    cmd = [sys.executable, "-m", "dospcot", "sweep", "tiny", "--seeds", "3", "--workers", "1"]
+    cmd += [*(a for s in steps for a in ("--set", s)), "--batch-seeds", str(started)]
+    cmd += ["--runs-dir", str(tmp_path), "--name", "killed", "--no-progress"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        while not list((tmp_path / "killed").glob("trials/*/*/checkpoint.pkl")):
+            assert proc.poll() is None and time.monotonic() < deadline, "the sweep ended before a checkpoint"
+            time.sleep(0.02)
+        os.killpg(proc.pid, signal.SIGKILL)  # the parent and its worker, in round 2
+    finally:
+        proc.wait()
+    args = ["sweep", "--resume", str(tmp_path / "killed"), "--workers", "1", "--no-progress"]
+    # Another grouping for the rest would mix two ways of training in one sweep: refused, in one line.
+    assert main([*args, "--batch-seeds", str(other)]) == 2
+    begun = 3 if started > 1 else 1  # a batch starts all its members; one trial at a time starts one
+    error = capsys.readouterr().err
+    assert f"trains its trials with --batch-seeds {started} and {begun} of its 3 have started" in error
+    assert main(args) == 0  # the sweep's own, from its sweep.json
+    folders = [trial_dir(tmp_path / "killed", trial) for trial in never.trials]
+    for trial, folder in zip(never.trials, folders, strict=True):
+        for name in ("metrics.csv", "summary.json"):
+            whole = trial_dir(tmp_path / "never", trial) / name
+            assert (folder / name).read_bytes() == whole.read_bytes(), (trial.trial_id, name)
+    infos = [json.loads((folder / "run_info.json").read_text()) for folder in folders]
+    assert [info.get("batch_members", 1) for info in infos] == [started] * 3
+    # The killed trials went on from their checkpoint (a second session), none from scratch.
+    assert [info["sessions"] for info in infos] == ([2, 2, 2] if started > 1 else [2, 1, 1])

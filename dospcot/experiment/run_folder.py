@@ -38,6 +38,8 @@ CHECKPOINT_FORMAT = 1
 LOCK_FILE = ".lock"
 TMP_SUFFIX = ".partial"
 """The ending of a run folder still being made (:func:`new_run_dir`)."""
+BATCH_FILE = "batch.json"
+"""In each member's folder while its batch is unfinished: every member's folder (resume reads it)."""
 
 
 class RunFolderError(RuntimeError):
@@ -194,6 +196,13 @@ def config_digest(run_dir: Path) -> str:
     """The SHA-256 of a run folder's ``config.toml``: a checkpoint keeps it, and a resume refuses a
     config edited since."""
     return hashlib.sha256((run_dir / CONFIG_FILE).read_bytes()).hexdigest()
+
+
+def batch_members(run_dir: Path) -> list[Path] | None:
+    """The folders (absolute) of the unfinished batch ``run_dir`` belongs to (its ``batch.json``), or
+    None."""
+    path = run_dir / BATCH_FILE
+    return [Path(p) for p in json.loads(path.read_text())["members"]] if path.is_file() else None
 
 
 @contextmanager

@@ -46,7 +46,7 @@ from tqdm.auto import tqdm
 
 from dospcot.config.loading import load_config
 from dospcot.experiment.interrupts import Interrupted, leave_interrupts_to_the_parent
-from dospcot.experiment.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
+from dospcot.experiment.run_folder import CONFIG_FILE, SUMMARY_FILE, batch_members, write_json
 from dospcot.experiment.sweep_spec import (
     TRIAL_FILE,
     Backend,
@@ -56,6 +56,8 @@ from dospcot.experiment.sweep_spec import (
     check_not_stale,
     is_finished,
     open_sweep,
+    store_batch_seeds,
+    stored_batch_seeds,
     trial_dir,
 )
 
@@ -90,28 +92,50 @@ def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
     return json.loads((run_dir / SUMMARY_FILE).read_text())
 
 
-def plan_jobs(trials: Sequence[Trial], workers: int, batch_seeds: int = 1) -> list[list[Trial]]:
+def plan_jobs(
+    trials: Sequence[Trial], workers: int, batch_seeds: int = 1, sweep_dir: Path | None = None
+) -> list[list[Trial]]:
     """The local backend's jobs, one process each: a paper-protocol cell's trials (one config and grid
     values, over seeds) split into ``workers`` batches, since its runs vectorise over seeds and a batch
     of seeds costs little more than one; with ``batch_seeds`` K > 1, a train cell's seeds in batches of
-    at most K (docs/batched_seeds.md) where its config can batch; every other trial alone."""
+    at most K (docs/batched_seeds.md) where its config can batch; every other trial alone.
+
+    A trial already started in ``sweep_dir`` goes on as it started, whatever ``batch_seeds`` now says:
+    the members of a killed batch together, a trial started alone alone (:func:`started_as`). So a
+    resumed sweep's files are those of one never stopped, and none of its trials starts over.
+    """
     jobs: list[list[Trial]] = []
     cells: dict[tuple[str, tuple[tuple[str, str], ...]], list[Trial]] = {}
     batches: dict[tuple[str, tuple[tuple[str, str], ...]], list[Trial]] = {}
+    started: dict[tuple[str, ...], list[Trial]] = {}
     for trial in trials:
         cfg = load_config(trial.config, trial.overrides())
         cell = (trial.config, tuple(trial.params.items()))
+        how = None if sweep_dir is None else started_as(sweep_dir, trial)
         if cfg.task_definition.seeds_train_together:
             cells.setdefault(cell, []).append(trial)
-        elif batch_seeds > 1 and _can_batch(cfg):
-            batches.setdefault(cell, []).append(trial)
-        else:
+        elif isinstance(how, tuple):
+            started.setdefault(how, []).append(trial)
+        elif how == "alone" or batch_seeds == 1 or not _can_batch(cfg):
             jobs.append([trial])
+        else:
+            batches.setdefault(cell, []).append(trial)
+    jobs += started.values()
     for members in cells.values():
         jobs += [members[i::workers] for i in range(min(workers, len(members)))]
     for members in batches.values():
         jobs += [members[i : i + batch_seeds] for i in range(0, len(members), batch_seeds)]
     return jobs
+
+
+def started_as(sweep_dir: Path, trial: Trial) -> tuple[str, ...] | str | None:
+    """How ``trial`` started in ``sweep_dir``: the folders of the unfinished batch it belongs to (its
+    ``batch.json``), ``"alone"`` (a run folder of its own), or None (not started)."""
+    run_dir = trial_dir(sweep_dir, trial)
+    if not (run_dir / CONFIG_FILE).is_file():
+        return None
+    members = batch_members(run_dir)
+    return "alone" if members is None else tuple(str(member) for member in members)
 
 
 def _can_batch(cfg: Any) -> bool:
@@ -129,11 +153,17 @@ def run_job(
     """Run one job of :func:`plan_jobs`: a trial, or a batch of one cell's seeds trained together.
 
     :param progress: called with the share of a trial just done (a batch reports as it trains).
-    :param batch_seeds: as :func:`plan_jobs`'s: above 1, a train cell's job is a batch even of one
-        seed, so that no seed's result depends on how the cell's seeds were grouped.
+    :param batch_seeds: as :func:`plan_jobs`'s: above 1, a train cell's job that has not started is a
+        batch even of one seed, so that no seed's result depends on how the cell's seeds were grouped.
     """
     cfg = load_config(trials[0].config, trials[0].overrides())
-    batched = batch_seeds > 1 and not cfg.task_definition.seeds_train_together and _can_batch(cfg)
+    how = started_as(sweep_dir, trials[0])
+    if cfg.task_definition.seeds_train_together:
+        batched = False
+    elif how is None:
+        batched = batch_seeds > 1 and _can_batch(cfg)
+    else:
+        batched = how != "alone"
     if len(trials) == 1 and not batched:
         run_trial(sweep_dir, trials[0])
         return
@@ -155,7 +185,7 @@ def _run_batch(sweep_dir: Path, trials: list[Trial], progress: Callable[[float],
     """Train a batch of one train cell's seeds in one process, each in its trial folder: resumed where
     the same batch was killed, else from the start (members are independent, so a batch's grouping
     changes none of its members' results)."""
-    from dospcot.experiment.train_batch import batch_members, resume_batch, train_batch_at
+    from dospcot.experiment.train_batch import resume_batch, train_batch_at
 
     run_dirs = [trial_dir(sweep_dir, trial) for trial in trials]
     commands = [_command(trial) for trial in trials]
@@ -186,19 +216,22 @@ def run_sweep(
     workers: int = 2,
     ray_address: str | None = None,
     show_progress: bool = True,
-    batch_seeds: int = 1,
+    batch_seeds: int | None = None,
 ) -> SweepResult:
     """Run every unfinished trial of a sweep (``spec=None``: resume the sweep stored in ``sweep_dir``).
 
     :param workers: trials at once (processes for ``local``, concurrent Ray trials for ``ray``).
     :param batch_seeds: K > 1: the local backend trains each train cell's seeds in batches of at most
-        K, one batch per process (docs/batched_seeds.md); 1: every trial alone.
+        K, one batch per process (docs/batched_seeds.md); 1: every trial alone; None: the value the
+        sweep was started with (1 for a new one). Kept in ``sweep.json``.
+    :raises SweepError: ``batch_seeds`` differs from the sweep's own while some of its trials have
+        started and others have not: the rest would train another way than the first.
     :param ray_address: an existing Ray cluster (``ray``); ``None`` starts a local instance with
         ``workers`` CPUs.
     """
     if workers < 1:
         raise SweepError(f"--workers must be at least 1, got {workers}")
-    if batch_seeds < 1 or (batch_seeds > 1 and backend != "local"):
+    if batch_seeds is not None and (batch_seeds < 1 or (batch_seeds > 1 and backend != "local")):
         raise SweepError(
             f"--batch-seeds takes a count >= 1, and more than 1 on the local backend only; got {batch_seeds} "
             f"on {backend}"
@@ -212,14 +245,33 @@ def run_sweep(
     check_not_stale(sweep_dir, trials)
     todo = [t for t in trials if not is_finished(sweep_dir, t)]
     skipped = [t for t in trials if t not in todo]
+    batch_seeds = _batch_seeds(sweep_dir, batch_seeds, trials, todo)
+    if batch_seeds > 1 and backend != "local" and todo:
+        raise SweepError(f"{sweep_dir} batches its seeds (--batch-seeds {batch_seeds}): only the local backend can")
     if backend == "local":
-        jobs = plan_jobs(todo, workers, batch_seeds)
+        jobs = plan_jobs(todo, workers, batch_seeds, sweep_dir)
         failed = _run_local(sweep_dir, jobs, workers, show_progress, batch_seeds)
     elif backend == "ray":
         failed = _run_ray(sweep_dir, todo, workers, ray_address)
     else:
         raise SweepError(f"--backend: {backend!r} is not allowed; allowed: local, ray")
     return SweepResult(sweep_dir, trials, skipped, todo, failed)
+
+
+def _batch_seeds(sweep_dir: Path, given: int | None, trials: list[Trial], todo: list[Trial]) -> int:
+    """The ``--batch-seeds`` to run the sweep's ``todo`` trials with, ``given`` stored where it is new."""
+    stored = stored_batch_seeds(sweep_dir)
+    if given is None or given == stored or not todo:
+        return stored
+    started = sum(started_as(sweep_dir, trial) is not None for trial in trials)
+    if started:
+        raise SweepError(
+            f"{sweep_dir} trains its trials with --batch-seeds {stored} and {started} of its {len(trials)} "
+            f"have started: under --batch-seeds {given} the rest would train another way; omit "
+            f"--batch-seeds to go on, or start the sweep in a new folder"
+        )
+    store_batch_seeds(sweep_dir, given)
+    return given
 
 
 def _run_local(

@@ -216,8 +216,27 @@ def add_seeds(sweep_dir: Path, seeds: Sequence[int]) -> SweepSpec:
             f"give all of its seeds ({', '.join(map(str, stored.seeds))}) and the new ones"
         )
     spec = replace(stored, seeds=tuple(stored.seeds) + tuple(s for s in seeds if s not in stored.seeds))
-    write_json(sweep_dir / SWEEP_FILE, spec.to_dict())
+    batch_seeds = stored_batch_seeds(sweep_dir)
+    write_json(
+        sweep_dir / SWEEP_FILE, spec.to_dict() | ({BATCH_SEEDS: batch_seeds} if batch_seeds > 1 else {})
+    )
     return spec
+
+
+BATCH_SEEDS = "batch_seeds"
+"""The key of ``sweep.json`` that holds the sweep's ``--batch-seeds`` where it is above 1."""
+
+
+def stored_batch_seeds(sweep_dir: Path) -> int:
+    """The ``--batch-seeds`` the sweep in ``sweep_dir`` trains its trials with (1 where not stored)."""
+    return int(json.loads((sweep_dir / SWEEP_FILE).read_text()).get(BATCH_SEEDS, 1))
+
+
+def store_batch_seeds(sweep_dir: Path, batch_seeds: int) -> None:
+    """Make ``batch_seeds`` the ``--batch-seeds`` of the sweep in ``sweep_dir`` (kept in ``sweep.json``)."""
+    data = json.loads((sweep_dir / SWEEP_FILE).read_text())
+    data.pop(BATCH_SEEDS, None)
+    write_json(sweep_dir / SWEEP_FILE, data | ({BATCH_SEEDS: batch_seeds} if batch_seeds > 1 else {}))
 
 
 def _grid_text(grid: dict[str, tuple[str, ...]]) -> str:

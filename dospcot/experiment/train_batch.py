@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import json
 import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -23,10 +22,12 @@ from dospcot.config.run_configs import TrainConfig
 from dospcot.core.batched_runs import BatchedRuns, config_refusal
 from dospcot.experiment.interrupts import Interrupted
 from dospcot.experiment.run_folder import (
+    BATCH_FILE,
     CHECKPOINT_FILE,
     CONFIG_FILE,
     METRICS_FILE,
     RunFolderError,
+    batch_members,
     config_digest,
     new_run_dir,
     read_checkpoint,
@@ -37,8 +38,6 @@ from dospcot.experiment.run_folder import (
 )
 from dospcot.experiment.run_session import RunSession
 
-BATCH_FILE = "batch.json"
-"""In each member's folder while its batch is unfinished: every member's folder (resume reads it)."""
 BATCH_STATES = "batch_states"
 """The batch's checkpoint (in its first member's folder): every member's checkpoint state, in order."""
 DRAWS_KEY = "batched_draws"
@@ -99,13 +98,6 @@ def train_batch_at(
         for run_dir in run_dirs:
             locks.enter_context(run_lock(run_dir))
         return _train_batch(run_dirs, cfgs, None, show_progress, commands, progress)
-
-
-def batch_members(run_dir: Path) -> list[Path] | None:
-    """The folders (absolute) of the unfinished batch ``run_dir`` belongs to (its ``batch.json``), or
-    None."""
-    path = run_dir / BATCH_FILE
-    return [Path(p) for p in json.loads(path.read_text())["members"]] if path.is_file() else None
 
 
 def resume_batch(
