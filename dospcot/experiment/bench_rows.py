@@ -5,10 +5,12 @@ max over repetitions that alternate between the two."""
 from __future__ import annotations
 
 import math
+import multiprocessing
 import statistics
 import tempfile
 import time
 from collections.abc import Callable
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -288,18 +290,101 @@ def _cpu_seconds_per_seed(cfgs: list[TrainConfig], batched: bool) -> float:
     return (time.process_time() - start) / len(cfgs)
 
 
-def bench_batched_seeds(quick: bool, repeats: int) -> Row:
-    """CPU time per seed of ``grid16-dospcot``'s seeds trained as one batch against runs of their own."""
+BATCHED_CELLS: dict[str, tuple[str, ...]] = {
+    "grid16-dospcot": ("training.rounds=2", "training.steps_per_round=3000", "training.update_steps=500"),
+    "grid32-dospcot": ("training.rounds=2", "training.steps_per_round=3000", "training.update_steps=500"),
+    "fasthighway-dospcot": ("training.rounds=2", "training.steps_per_round=1000", "highway.eval_episodes=2"),
+}
+"""The shortened presets of the batched-seeds rows: two rounds, so that a cell of 10 seeds trained
+both ways costs minutes, not hours (the second round is the first that trains the agents' networks
+on a grid: ``learn_from_round = 2``)."""
+
+
+def bench_batched_seeds(
+    quick: bool, repeats: int, preset: str = "grid16-dospcot", target: float = 0.25
+) -> Row:
+    """CPU time per seed of ``preset``'s seeds trained as one batch against runs of their own."""
     seeds = 4 if quick else 10
-    overrides = ["training.rounds=2", "training.steps_per_round=3000", "training.update_steps=500"]
-    cfgs = [load_config("grid16-dospcot", [*overrides, f"seed={seed}"]) for seed in range(seeds)]
+    overrides = BATCHED_CELLS[preset]
+    cfgs = [load_config(preset, [*overrides, f"seed={seed}"]) for seed in range(seeds)]
     ours, peer = _alternating(
         repeats, lambda _: _cpu_seconds_per_seed(cfgs, True), lambda _: _cpu_seconds_per_seed(cfgs, False)
     )
+    shortened = ", ".join(f"`{o}`" for o in overrides)
     return Row.measured(
         "`dospcot train --seeds`, one batch vs runs of their own: CPU time per seed",
-        f"`grid16-dospcot`, seeds 0-{seeds - 1}, 2 rounds x 3,000 steps per agent, 500 update steps",
-        "CPU-s", ours, peer, higher_is_better=False, target=0.25,
+        f"`{preset}`, seeds 0-{seeds - 1}, {shortened}",
+        "CPU-s", ours, peer, higher_is_better=False, target=target,
+    )  # fmt: skip
+
+
+def _sweep_wall_seconds(spec: SweepSpec, batch_seeds: int) -> float:
+    with tempfile.TemporaryDirectory() as tmp:
+        start = time.perf_counter()
+        result = run_sweep(Path(tmp) / "sweep", spec, workers=2, show_progress=False, batch_seeds=batch_seeds)
+        seconds = time.perf_counter() - start
+    if result.failed:
+        raise RuntimeError(f"benchmark sweep trials failed: {result.failed}")
+    return seconds
+
+
+def bench_batched_wall(quick: bool, repeats: int) -> Row:
+    """Wall time of a cell's seeds as two batch processes against ``dospcot sweep --workers 2`` of the
+    same runs, each alone."""
+    seeds = 4 if quick else 10
+    preset = "grid16-dospcot"
+    spec = SweepSpec((preset,), {}, tuple(range(seeds)), BATCHED_CELLS[preset])
+    ours, peer = _alternating(
+        repeats,
+        lambda _: _sweep_wall_seconds(spec, math.ceil(seeds / 2)),
+        lambda _: _sweep_wall_seconds(spec, 1),
+    )
+    return Row.measured(
+        "`dospcot sweep --workers 2 --batch-seeds K`, two batches vs the runs alone: wall time of a cell",
+        f"`{preset}` as in the CPU-time row, seeds 0-{seeds - 1}, K = {math.ceil(seeds / 2)}, "
+        "process start-up included",
+        "s", ours, peer, higher_is_better=False, target=round(1 / 3, 3),
+    )  # fmt: skip
+
+
+def _added_memory_mib(cfgs: list[TrainConfig], batched: bool) -> float:
+    """Peak resident memory (MiB) that training ``cfgs`` adds to a fresh process that has imported
+    everything, per seed; run in a child process of its own."""
+    import resource
+
+    import torch
+
+    torch.set_num_threads(1)
+    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    if batched:
+        BatchedRuns([build_run(cfg) for cfg in cfgs]).run()
+    else:
+        build_run(cfgs[0]).run()
+    added_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before  # Linux: KiB
+    return added_kib / 1024 / (len(cfgs) if batched else 1)
+
+
+def _in_fresh_process(function: Callable[..., float], *args: Any) -> float:
+    context = multiprocessing.get_context("spawn")
+    with ProcessPoolExecutor(1, mp_context=context) as pool:
+        return pool.submit(function, *args).result()
+
+
+def bench_batched_memory(quick: bool, repeats: int) -> Row:
+    """Memory a member of a batch adds against the memory a run of its own adds."""
+    seeds = 4 if quick else 10
+    preset = "grid16-dospcot"
+    cfgs = [load_config(preset, [*BATCHED_CELLS[preset], f"seed={seed}"]) for seed in range(seeds)]
+    ours, peer = _alternating(
+        repeats,
+        lambda _: _in_fresh_process(_added_memory_mib, cfgs, True),
+        lambda _: _in_fresh_process(_added_memory_mib, cfgs[:1], False),
+    )
+    return Row.measured(
+        "`dospcot train --seeds`, a batch's member vs a run of its own: peak memory added to the process",
+        f"`{preset}` as in the CPU-time row; ours: a batch of seeds 0-{seeds - 1}, per seed; "
+        "the peer: seed 0",
+        "MiB", ours, peer, higher_is_better=False, target=1.2,
     )  # fmt: skip
 
 

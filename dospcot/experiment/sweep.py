@@ -247,7 +247,9 @@ def run_sweep(
     skipped = [t for t in trials if t not in todo]
     batch_seeds = _batch_seeds(sweep_dir, batch_seeds, trials, todo)
     if batch_seeds > 1 and backend != "local" and todo:
-        raise SweepError(f"{sweep_dir} batches its seeds (--batch-seeds {batch_seeds}): only the local backend can")
+        raise SweepError(
+            f"{sweep_dir} batches its seeds (--batch-seeds {batch_seeds}): only the local backend can"
+        )
     if backend == "local":
         jobs = plan_jobs(todo, workers, batch_seeds, sweep_dir)
         failed = _run_local(sweep_dir, jobs, workers, show_progress, batch_seeds)
