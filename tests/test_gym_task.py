@@ -6,6 +6,7 @@ import csv
 import json
 import math
 import pickle
+import re
 import subprocess
 import sys
 from functools import partial
@@ -773,3 +774,20 @@ def test_bad_demonstrating_agents_fail_with_one_line(tmp_path, monkeypatch, over
     settings = {**SETTINGS, "demonstrations.agent": str(path), "demonstrations.episodes": 2, **override}
     with pytest.raises(ValueError, match=message):
         build_run(gym_config(make_corridor, VIEWS, settings=settings))
+
+
+def test_a_minigrid_query_names_its_state_by_a_short_digest_the_same_in_every_query():
+    pytest.importorskip("minigrid")
+    settings = ["training.rounds=1", "training.steps_per_round=300", "training.label_strategy=outcomes"]
+    run = build_run(load_config("minigrid-doorkey-dospcot", settings))
+    run.run()
+    store = run.task.store
+    texts = {n: run.task.describe(n)["key"] for n in range(len(store))}
+    for (_, action), n in store.ids.items():  # a state's pairs share its name; no raw map bytes shown
+        assert re.fullmatch(r"state #[0-9a-f]{12}, action \d", texts[n]) and "\\x" not in texts[n]
+        assert texts[n].endswith(f", action {action}")
+    by_state: dict[str, set[str]] = {}
+    for (key, _), n in store.ids.items():
+        by_state.setdefault(key, set()).add(texts[n].rsplit(",", 1)[0])
+    assert all(len(names) == 1 for names in by_state.values())
+    assert len({next(iter(names)) for names in by_state.values()}) == len(by_state)  # states apart

@@ -25,6 +25,7 @@ no exact optimum, so no optimal-action agreement (NaN).
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
@@ -94,6 +95,8 @@ class SensorTask(StoreQueries):
         envs = [make_env(v, cfg.views, fraction, seed) for v, seed in zip(cfg.views, seeds, strict=True)]
         self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in cfg.views}
         self.store = (KeyedStepStore if section.keyed else StepStore)(self.shapes)
+        self._pairs: dict[int, tuple[str, int]] = {}
+        """Sample id -> (its state key as shown to a person, its action), for :meth:`describe`."""
         self.demos = self._read_demonstrations(cfg.demonstrations, make_env)
         draw = cfg.training.rater == "file"
         self._envs = [SensorStoreWrapper(env, self.store, draw) for env in envs]
@@ -123,8 +126,10 @@ class SensorTask(StoreQueries):
         """What a person is shown of sample ``sample``: its (state key, action) pair, or its step, and
         where the env draws itself, PNG frames of s (``frame``) and s' (``next_frame``)."""
         store = self.store
-        pairs = {n: (f"state {key}", action) for (key, action), n in getattr(store, "ids", {}).items()}
-        where, action = pairs.get(sample, (f"step {sample}", int(store.action[sample])))
+        ids = getattr(store, "ids", {})
+        if len(self._pairs) != len(ids):  # pairs only ever join the store: rebuilt once per round's queries
+            self._pairs = {n: (_state_text(key), action) for (key, action), n in ids.items()}
+        where, action = self._pairs.get(sample, (f"step {sample}", int(store.action[sample])))
         described: dict[str, Any] = {"key": f"{where}, action {action}"}
         for column, row in (("frame", store.state_row[sample]), ("next_frame", store.next_row[sample])):
             if int(row) in store.frames:
@@ -311,6 +316,16 @@ def check_sensor_demonstrations(cfg: TrainConfig) -> None:
             load_agent(demos.agent, demos.agent_algorithm)
     except ValueError as err:
         raise ConfigError(f"demonstrations.{err}") from None
+
+
+def _state_text(key: Any, longest: int = 48) -> str:
+    """A state key as a person reads it in a query: as it is where short, else (e.g. a MiniGrid key,
+    which holds the map's encoding as bytes) a 12-digit digest that names the same state the same way
+    in every query; the query's frames show the state itself."""
+    text = str(key)
+    if len(text) > longest:
+        return f"state #{hashlib.sha256(text.encode()).hexdigest()[:12]}"
+    return f"state {text}"
 
 
 __all__ = [
