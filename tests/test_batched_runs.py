@@ -192,3 +192,26 @@ def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_nev
     assert [info.get("batch_members", 1) for info in infos] == [started] * 3
     # The killed trials went on from their checkpoint (a second session), none from scratch.
     assert [info["sessions"] for info in infos] == ([2, 2, 2] if started > 1 else [2, 1, 1])
+
+
+@pytest.mark.parametrize("seeds", [[], ["--seeds", "2"]])
+def test_a_run_or_batch_stopped_while_it_is_built_says_what_it_kept_and_resumes(
+    tmp_path, capsys, monkeypatch, seeds
+):
+    from dospcot.experiment.run_session import RunSession
+
+    built = RunSession.__init__
+
+    def stopped(*args, **kwargs):
+        raise KeyboardInterrupt  # Ctrl-C while the task, its envs and its agents are made
+
+    monkeypatch.setattr(RunSession, "__init__", stopped)
+    sets = [a for s in TINY for a in ("--set", s)]
+    assert main(["train", "tiny", *seeds, *sets, "--runs-dir", str(tmp_path), "--no-progress"]) == 130
+    error = capsys.readouterr().err
+    first = sorted((tmp_path / "tiny").iterdir())[0]
+    assert "interrupted; kept no finished round in" in error
+    assert f"resume with: dospcot train --resume {first}" in error
+    monkeypatch.setattr(RunSession, "__init__", built)
+    assert main(["train", "--resume", str(first), "--no-progress"]) == 0
+    assert all((folder / "summary.json").is_file() for folder in (tmp_path / "tiny").iterdir())

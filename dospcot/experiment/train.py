@@ -119,7 +119,12 @@ def train_at(run_dir: Path, cfg: RunConfig, *, show_progress: bool = True, comma
     the folder's lock."""
     run_dir.mkdir(parents=True, exist_ok=True)
     with run_lock(run_dir):
-        return cfg.task_definition.train_at(run_dir, cfg, show_progress=show_progress, command=command)
+        try:
+            return cfg.task_definition.train_at(run_dir, cfg, show_progress=show_progress, command=command)
+        except KeyboardInterrupt:  # stopped while its task and agents were built: a round had not begun
+            raise Interrupted(
+                f"no finished round in {run_dir}", f"dospcot train --resume {run_dir}"
+            ) from None
 
 
 def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> Path:
@@ -133,7 +138,10 @@ def resume(run_dir: Path, *, show_progress: bool = True, command: str = "") -> P
         )
     with run_lock(run_dir):
         remove_stale_temporaries(run_dir)
-        return cfg.task_definition.resume(run_dir, cfg, show_progress=show_progress, command=command)
+        try:
+            return cfg.task_definition.resume(run_dir, cfg, show_progress=show_progress, command=command)
+        except KeyboardInterrupt:  # stopped while the run was rebuilt from its checkpoint: nothing changed
+            raise Interrupted(f"{run_dir} as it was", f"dospcot train --resume {run_dir}") from None
 
 
 def evaluate(run_dir: Path) -> dict[str, Any]:

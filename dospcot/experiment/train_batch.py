@@ -152,10 +152,16 @@ def _train_batch(
 ) -> list[Path]:
     """Train the batch of ``run_dirs`` (each holding its config and lock), from its members'
     checkpoints ``states`` or from the start."""
-    sessions = [
-        RunSession(run_dir, cfg, None if states is None else states[s], commands[s], batch=len(cfgs))
-        for s, (run_dir, cfg) in enumerate(zip(run_dirs, cfgs, strict=True))
-    ]
+    try:
+        sessions = [
+            RunSession(run_dir, cfg, None if states is None else states[s], commands[s], batch=len(cfgs))
+            for s, (run_dir, cfg) in enumerate(zip(run_dirs, cfgs, strict=True))
+        ]
+    except KeyboardInterrupt:  # stopped while the members were built: no round of this session began
+        kept = "no finished round" if states is None else "the batch's rounds as they were"
+        raise Interrupted(
+            f"{kept} in {run_dirs[0]} and its batch", f"dospcot train --resume {run_dirs[0]}"
+        ) from None
     batch = BatchedRuns([session.run for session in sessions])
     if states is not None:
         batch.set_draws([session.extra[DRAWS_KEY] for session in sessions])
