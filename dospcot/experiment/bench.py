@@ -112,8 +112,9 @@ NOTES = [
     "folders: once with `--batch-seeds K` (two processes, a batch of K seeds each) and once with every "
     "run alone, process start-up included; it needs both cores to itself.",
     "- The batched memory row trains in a fresh process each (spawned): a batch of the cell's seeds, "
-    "and one run of seed 0. Each figure is the peak resident memory (`ru_maxrss`) the training adds to "
-    "a process that has already imported the package, divided by the seeds it trained.",
+    "and one run of seed 0. Each figure is the peak resident memory the training adds to a process that "
+    "has already imported the package (Linux's `VmHWM`, its peak reset after the imports, less the "
+    "`VmRSS` then), divided by the seeds it trained.",
 ]
 
 

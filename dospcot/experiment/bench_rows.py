@@ -77,8 +77,8 @@ class Row:
 
     @property
     def ratio(self) -> float:
-        """Ours over the peer, of the medians."""
-        return self.ours.median / self.peer.median
+        """Ours over the peer, of the medians (infinite over a peer of 0, which no target meets)."""
+        return self.ours.median / self.peer.median if self.peer.median else math.inf
 
     @property
     def met(self) -> bool:
@@ -347,21 +347,28 @@ def bench_batched_wall(quick: bool, repeats: int) -> Row:
     )  # fmt: skip
 
 
+def _status_kib(field: str) -> int:
+    """A memory figure of this process from ``/proc/self/status`` (Linux), in KiB."""
+    for line in Path("/proc/self/status").read_text().splitlines():
+        if line.startswith(f"{field}:"):
+            return int(line.split()[1])
+    raise RuntimeError(f"/proc/self/status has no {field}")
+
+
 def _added_memory_mib(cfgs: list[TrainConfig], batched: bool) -> float:
     """Peak resident memory (MiB) that training ``cfgs`` adds to a fresh process that has imported
-    everything, per seed; run in a child process of its own."""
-    import resource
-
+    everything, per seed; run in a child process of its own (Linux: it resets and reads the peak)."""
     import torch
 
     torch.set_num_threads(1)
-    before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    # Importing torch peaks above what the process then holds: start the peak from here.
+    Path("/proc/self/clear_refs").write_text("5")
+    before = _status_kib("VmRSS")
     if batched:
         BatchedRuns([build_run(cfg) for cfg in cfgs]).run()
     else:
         build_run(cfgs[0]).run()
-    added_kib = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss - before  # Linux: KiB
-    return added_kib / 1024 / (len(cfgs) if batched else 1)
+    return (_status_kib("VmHWM") - before) / 1024 / (len(cfgs) if batched else 1)
 
 
 def _in_fresh_process(function: Callable[..., float], *args: Any) -> float:

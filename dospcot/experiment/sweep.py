@@ -224,10 +224,10 @@ def run_sweep(
     :param batch_seeds: K > 1: the local backend trains each train cell's seeds in batches of at most
         K, one batch per process (docs/batched_seeds.md); 1: every trial alone; None: the value the
         sweep was started with (1 for a new one). Kept in ``sweep.json``.
-    :raises SweepError: ``batch_seeds`` differs from the sweep's own while some of its trials have
-        started and others have not: the rest would train another way than the first.
     :param ray_address: an existing Ray cluster (``ray``); ``None`` starts a local instance with
         ``workers`` CPUs.
+    :raises SweepError: ``batch_seeds`` differs from the sweep's own while some of its trials have
+        started and others have not: the rest would train another way than the first.
     """
     if workers < 1:
         raise SweepError(f"--workers must be at least 1, got {workers}")
