@@ -300,13 +300,18 @@ both ways costs minutes, not hours (the second round is the first that trains th
 on a grid: ``learn_from_round = 2``)."""
 
 
+def _batched_cell(preset: str, seeds: int) -> list[TrainConfig]:
+    """Seeds 0..``seeds``-1 of ``preset`` shortened as :data:`BATCHED_CELLS` says."""
+    return [load_config(preset, [*BATCHED_CELLS[preset], f"seed={seed}"]) for seed in range(seeds)]
+
+
 def bench_batched_seeds(
     quick: bool, repeats: int, preset: str = "grid16-dospcot", target: float = 0.25
 ) -> Row:
     """CPU time per seed of ``preset``'s seeds trained as one batch against runs of their own."""
     seeds = 4 if quick else 10
     overrides = BATCHED_CELLS[preset]
-    cfgs = [load_config(preset, [*overrides, f"seed={seed}"]) for seed in range(seeds)]
+    cfgs = _batched_cell(preset, seeds)
     ours, peer = _alternating(
         repeats, lambda _: _cpu_seconds_per_seed(cfgs, True), lambda _: _cpu_seconds_per_seed(cfgs, False)
     )
@@ -371,22 +376,18 @@ def _added_memory_mib(cfgs: list[TrainConfig], batched: bool) -> float:
     return (_status_kib("VmHWM") - before) / 1024 / (len(cfgs) if batched else 1)
 
 
-def _in_fresh_process(function: Callable[..., float], *args: Any) -> float:
+def _in_fresh_process(function: Callable[[], float]) -> float:
     context = multiprocessing.get_context("spawn")
     with ProcessPoolExecutor(1, mp_context=context) as pool:
-        return pool.submit(function, *args).result()
+        return pool.submit(function).result()
 
 
 def bench_batched_memory(quick: bool, repeats: int) -> Row:
     """Memory a member of a batch adds against the memory a run of its own adds."""
-    seeds = 4 if quick else 10
-    preset = "grid16-dospcot"
-    cfgs = [load_config(preset, [*BATCHED_CELLS[preset], f"seed={seed}"]) for seed in range(seeds)]
-    ours, peer = _alternating(
-        repeats,
-        lambda _: _in_fresh_process(_added_memory_mib, cfgs, True),
-        lambda _: _in_fresh_process(_added_memory_mib, cfgs[:1], False),
-    )
+    seeds, preset = 4 if quick else 10, "grid16-dospcot"
+    cfgs = _batched_cell(preset, seeds)
+    batch, alone = partial(_added_memory_mib, cfgs, True), partial(_added_memory_mib, cfgs[:1], False)
+    ours, peer = _alternating(repeats, lambda _: _in_fresh_process(batch), lambda _: _in_fresh_process(alone))
     return Row.measured(
         "`dospcot train --seeds`, a batch's member vs a run of its own: peak memory added to the process",
         f"`{preset}` as in the CPU-time row; ours: a batch of seeds 0-{seeds - 1}, per seed; "
