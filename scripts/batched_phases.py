@@ -32,7 +32,7 @@ from dospcot.config.loading import load_config
 from dospcot.core.batched_runs import BatchedRuns
 from dospcot.core.classifier import BatchedRewardClassifier
 from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.experiment.bench_rows import BATCHED_CELLS
+from dospcot.experiment.bench_batched import BATCHED_CELLS
 from dospcot.experiment.train import build_run
 from dospcot.policies import ExpectedSarsaDQN
 

@@ -16,11 +16,9 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
+from dospcot.experiment.bench_batched import bench_batched_memory, bench_batched_seeds, bench_batched_wall
 from dospcot.experiment.bench_rows import (
     Row,
-    bench_batched_memory,
-    bench_batched_seeds,
-    bench_batched_wall,
     bench_cotraining_overhead,
     bench_cotraining_scaling,
     bench_esarsa_dqn,

@@ -5,12 +5,10 @@ max over repetitions that alternate between the two."""
 from __future__ import annotations
 
 import math
-import multiprocessing
 import statistics
 import tempfile
 import time
 from collections.abc import Callable
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from functools import partial
 from pathlib import Path
@@ -23,7 +21,6 @@ from stable_baselines3 import DQN
 from dospcot.config.learning_sections import TabularConfig
 from dospcot.config.loading import load_config
 from dospcot.config.run_configs import TrainConfig
-from dospcot.core.batched_runs import BatchedRuns
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.envs import CLIFF_VIEWS, StateActionMask, ViewObservationWrapper
 from dospcot.experiment.sweep import run_sweep
@@ -276,123 +273,6 @@ def bench_cotraining_overhead(quick: bool, repeats: int) -> Row:
         "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time",
         f"`grid16-dospcot` (patch + rays), {cfg.training.rounds} rounds, {steps:,} steps per agent",
         "s", ours, peer, higher_is_better=False, target=1.3,
-    )  # fmt: skip
-
-
-def _cpu_seconds_per_seed(cfgs: list[TrainConfig], batched: bool) -> float:
-    """CPU seconds per seed of training ``cfgs`` (one per seed) as one batch, or one run after another."""
-    start = time.process_time()
-    runs = [build_run(cfg) for cfg in cfgs] if batched else []
-    if batched:
-        BatchedRuns(runs).run()
-    for cfg in [] if batched else cfgs:
-        build_run(cfg).run()
-    return (time.process_time() - start) / len(cfgs)
-
-
-BATCHED_CELLS: dict[str, tuple[str, ...]] = {
-    "grid16-dospcot": ("training.rounds=2", "training.steps_per_round=3000", "training.update_steps=500"),
-    "grid32-dospcot": ("training.rounds=2", "training.steps_per_round=3000", "training.update_steps=500"),
-    "fasthighway-dospcot": ("training.rounds=2", "training.steps_per_round=1000", "highway.eval_episodes=2"),
-}
-"""The shortened presets of the batched-seeds rows: two rounds, so that a cell of 10 seeds trained
-both ways costs minutes, not hours (the second round is the first that trains the agents' networks
-on a grid: ``learn_from_round = 2``)."""
-
-
-def _batched_cell(preset: str, seeds: int) -> list[TrainConfig]:
-    """Seeds 0..``seeds``-1 of ``preset`` shortened as :data:`BATCHED_CELLS` says."""
-    return [load_config(preset, [*BATCHED_CELLS[preset], f"seed={seed}"]) for seed in range(seeds)]
-
-
-def bench_batched_seeds(
-    quick: bool, repeats: int, preset: str = "grid16-dospcot", target: float = 0.25
-) -> Row:
-    """CPU time per seed of ``preset``'s seeds trained as one batch against runs of their own."""
-    seeds = 4 if quick else 10
-    overrides = BATCHED_CELLS[preset]
-    cfgs = _batched_cell(preset, seeds)
-    ours, peer = _alternating(
-        repeats, lambda _: _cpu_seconds_per_seed(cfgs, True), lambda _: _cpu_seconds_per_seed(cfgs, False)
-    )
-    shortened = ", ".join(f"`{o}`" for o in overrides)
-    return Row.measured(
-        "`dospcot train --seeds`, one batch vs runs of their own: CPU time per seed",
-        f"`{preset}`, seeds 0-{seeds - 1}, {shortened}",
-        "CPU-s", ours, peer, higher_is_better=False, target=target,
-    )  # fmt: skip
-
-
-def _sweep_wall_seconds(spec: SweepSpec, batch_seeds: int) -> float:
-    with tempfile.TemporaryDirectory() as tmp:
-        start = time.perf_counter()
-        result = run_sweep(Path(tmp) / "sweep", spec, workers=2, show_progress=False, batch_seeds=batch_seeds)
-        seconds = time.perf_counter() - start
-    if result.failed:
-        raise RuntimeError(f"benchmark sweep trials failed: {result.failed}")
-    return seconds
-
-
-def bench_batched_wall(quick: bool, repeats: int) -> Row:
-    """Wall time of a cell's seeds as two batch processes against ``dospcot sweep --workers 2`` of the
-    same runs, each alone."""
-    seeds = 4 if quick else 10
-    preset = "grid16-dospcot"
-    spec = SweepSpec((preset,), {}, tuple(range(seeds)), BATCHED_CELLS[preset])
-    ours, peer = _alternating(
-        repeats,
-        lambda _: _sweep_wall_seconds(spec, math.ceil(seeds / 2)),
-        lambda _: _sweep_wall_seconds(spec, 1),
-    )
-    return Row.measured(
-        "`dospcot sweep --workers 2 --batch-seeds K`, two batches vs the runs alone: wall time of a cell",
-        f"`{preset}` as in the CPU-time row, seeds 0-{seeds - 1}, K = {math.ceil(seeds / 2)}, "
-        "process start-up included",
-        "s", ours, peer, higher_is_better=False, target=round(1 / 3, 3),
-    )  # fmt: skip
-
-
-def _status_kib(field: str) -> int:
-    """A memory figure of this process from ``/proc/self/status`` (Linux), in KiB."""
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith(f"{field}:"):
-            return int(line.split()[1])
-    raise RuntimeError(f"/proc/self/status has no {field}")
-
-
-def _added_memory_mib(cfgs: list[TrainConfig], batched: bool) -> float:
-    """Peak resident memory (MiB) that training ``cfgs`` adds to a fresh process that has imported
-    everything, per seed; run in a child process of its own (Linux: it resets and reads the peak)."""
-    import torch
-
-    torch.set_num_threads(1)
-    # Importing torch peaks above what the process then holds: start the peak from here.
-    Path("/proc/self/clear_refs").write_text("5")
-    before = _status_kib("VmRSS")
-    if batched:
-        BatchedRuns([build_run(cfg) for cfg in cfgs]).run()
-    else:
-        build_run(cfgs[0]).run()
-    return (_status_kib("VmHWM") - before) / 1024 / (len(cfgs) if batched else 1)
-
-
-def _in_fresh_process(function: Callable[[], float]) -> float:
-    context = multiprocessing.get_context("spawn")
-    with ProcessPoolExecutor(1, mp_context=context) as pool:
-        return pool.submit(function).result()
-
-
-def bench_batched_memory(quick: bool, repeats: int) -> Row:
-    """Memory a member of a batch adds against the memory a run of its own adds."""
-    seeds, preset = 4 if quick else 10, "grid16-dospcot"
-    cfgs = _batched_cell(preset, seeds)
-    batch, alone = partial(_added_memory_mib, cfgs, True), partial(_added_memory_mib, cfgs[:1], False)
-    ours, peer = _alternating(repeats, lambda _: _in_fresh_process(batch), lambda _: _in_fresh_process(alone))
-    return Row.measured(
-        "`dospcot train --seeds`, a batch's member vs a run of its own: peak memory added to the process",
-        f"`{preset}` as in the CPU-time row; ours: a batch of seeds 0-{seeds - 1}, per seed; "
-        "the peer: seed 0",
-        "MiB", ours, peer, higher_is_better=False, target=1.2,
     )  # fmt: skip
 
 
