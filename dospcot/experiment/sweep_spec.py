@@ -217,9 +217,8 @@ def add_seeds(sweep_dir: Path, seeds: Sequence[int]) -> SweepSpec:
         )
     spec = replace(stored, seeds=tuple(stored.seeds) + tuple(s for s in seeds if s not in stored.seeds))
     batch_seeds = stored_batch_seeds(sweep_dir)
-    write_json(
-        sweep_dir / SWEEP_FILE, spec.to_dict() | ({BATCH_SEEDS: batch_seeds} if batch_seeds > 1 else {})
-    )
+    write_json(sweep_dir / SWEEP_FILE, spec.to_dict())
+    store_batch_seeds(sweep_dir, batch_seeds)
     return spec
 
 
