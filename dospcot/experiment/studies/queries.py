@@ -170,8 +170,17 @@ def _of_config(prefix: str) -> Callable[[TrialRun], bool]:
     return lambda run: run.trial.config.startswith(prefix)
 
 
-GRID_SWEEPS = (
-    # The arms of the hypotheses first, so that a study cut short has its verdicts: Q1, then Q2.
+def _minigrid_sweeps(method: str, strategies: tuple[str, ...], name: str) -> tuple[Sweep, ...]:
+    """One sweep per MiniGrid task: ``method``'s runs under ``strategies`` at label fraction 0.1."""
+    budget = {FRACTION: ("0.1",), STRATEGY: strategies} if strategies else {}
+    return tuple(
+        Sweep(f"queries-{task}-{name}", (f"minigrid-{task}-{method}",), budget) for task in MINIGRID_TASKS
+    )
+
+
+# The arms of the hypotheses first, so that a study cut short has its verdicts: on the grid Q1, then
+# Q2; on MiniGrid Q3 (DOSPCoT outcomes and the oracle), then Q2. The order changes no run's settings.
+HYPOTHESIS_SWEEPS = (
     Sweep(
         "queries-grid16-disagreement",
         ("grid16-dospcot",),
@@ -183,6 +192,13 @@ GRID_SWEEPS = (
         ("grid16-self-training",),
         {LAYOUT: UNSEEN_LAYOUTS, FRACTION: ("0.02",), STRATEGY: ("uncertainty", "uniform", "random")},
     ),
+    *_minigrid_sweeps("dospcot", (Q3_STRATEGY,), Q3_STRATEGY),
+    *_minigrid_sweeps("oracle", (), "oracle"),
+    *_minigrid_sweeps("dospcot", ("disagreement",), "disagreement"),
+    *_minigrid_sweeps("self-training", ("uncertainty", "uniform", "random"), "self-training"),
+)
+OTHER_SWEEPS = (
+    *_minigrid_sweeps("dospcot", ("uniform", "random", "uncertainty"), "dospcot"),
     Sweep(
         "queries-grid16-dospcot",
         ("grid16-dospcot",),
@@ -194,13 +210,10 @@ GRID_SWEEPS = (
     ),
     Sweep("queries-grid16-oracle", ("grid16-oracle",), {LAYOUT: UNSEEN_LAYOUTS}),
 )
-MINIGRID_SWEEPS = tuple(
-    sweep for task in MINIGRID_TASKS for sweep in _arms(f"minigrid-{task}", "0.1", {}, f"queries-{task}")
-)
 
 STUDIES: dict[str, Study] = {
     "queries": Study(
-        (*GRID_SWEEPS, *MINIGRID_SWEEPS),
+        (*HYPOTHESIS_SWEEPS, *OTHER_SWEEPS),
         _tables(
             {
                 "grid16, layouts 101, 202, 303": _of_config("grid16-"),
