@@ -235,3 +235,34 @@ def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, mon
     monkeypatch.setattr(bench, "NOTES", ["Notes:", "- measured another way."])
     assert main(["bench", "--only", "B", "--out", str(out)]) == 0
     assert out.read_text().endswith("\nNotes:\n- measured another way.\n")
+
+
+def test_bench_keeps_the_rows_measured_before_a_failing_row_or_a_stop(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench", 3))
+
+    def fails(error: type[BaseException]):
+        def row(quick: bool, repeats: int) -> bench_rows.Row:
+            raise error()
+
+        return row
+
+    # A row that crashes an hour in: the row measured before it is already in the file.
+    monkeypatch.setattr(
+        bench, "BENCHMARKS", {"A": lambda quick, repeats: _row("A", 40.0), "B": fails(RuntimeError)}
+    )
+    with pytest.raises(RuntimeError):
+        bench.run_benchmarks(
+            out, quick=False, repeats=3, command="dospcot bench --only A --only B", only=["A", "B"]
+        )
+    table = {line.split(" | ")[0]: line for line in out.read_text().splitlines() if line.startswith("| ")}
+    assert "| 4.000 |" in table["| A"] and "| 0.600 |" in table["| B"]  # A rerun, B as it was
+    # Ctrl-C in the second row of a full run: the first row kept, and said so in one line.
+    monkeypatch.setattr(
+        bench, "BENCHMARKS", {"A": lambda quick, repeats: _row("A", 20.0), "B": fails(KeyboardInterrupt)}
+    )
+    assert main(["bench", "--out", str(out)]) == 130
+    last = capsys.readouterr().err.splitlines()[-1]  # the lines before it are the progress bar's
+    assert last == f"dospcot bench: interrupted; kept the rows measured before the stop, in {out}: A"
+    table = {line.split(" | ")[0]: line for line in out.read_text().splitlines() if line.startswith("| ")}
+    assert "| 2.000 |" in table["| A"] and "| 0.600 |" in table["| B"]

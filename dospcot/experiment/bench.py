@@ -154,7 +154,8 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
     :param only: run these benchmarks (names of :data:`BENCHMARKS`) alone and put their rows into
         ``out``, a file a full run wrote: each replaces its row of the same benchmark and setting
         (or the benchmark's only row, whose setting has changed), or goes last, and a line above the
-        table names them, the command and the time.
+        table names them, the command and the time. Every row is written as it lands; a full run
+        then writes the file whole.
     :raises ValueError: ``only`` names an unknown benchmark, or ``out`` holds no benchmark table.
     """
     unknown = [name for name in only if name not in BENCHMARKS]
@@ -167,7 +168,10 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
     except OSError as err:
         raise ValueError(f"--out {out}: cannot make its folder ({err.strerror or err})") from None
     torch.set_num_threads(1)
-    rows = []
+    # Each row goes into the file as it lands, so that a stop or a failing row an hour in keeps the
+    # rows before it: merged into the table already there, or, where there is none, a table of its own.
+    table = out.read_text() if out.is_file() and TABLE_HEADER in out.read_text() else None
+    rows: list[Row] = []
     chosen = {name: BENCHMARKS[name] for name in only} if only else BENCHMARKS
     with tqdm(chosen.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
         for name, bench in bar:
@@ -175,11 +179,15 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
             try:
                 rows.append(bench(quick, repeats))
             except KeyboardInterrupt:
-                done = ", ".join(row.name for row in rows) or "none"
+                done = ", ".join(row.name for row in rows)
                 raise Interrupted(
-                    f"nothing: {out} is unchanged (rows measured before the stop: {done})"
+                    f"the rows measured before the stop, in {out}: {done}" if rows else "nothing"
                 ) from None
-    out.write_text(_with_rows(out.read_text(), rows, command) if only else render(rows, command, repeats))
+            out.write_text(
+                render(rows, command, repeats) if table is None else _with_rows(table, rows, command)
+            )
+    if not only:  # a full run's rows are the whole table
+        out.write_text(render(rows, command, repeats))
     return rows
 
 
