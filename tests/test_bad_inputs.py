@@ -215,7 +215,9 @@ def _sweep(runs: Path, *more: str) -> subprocess.Popen:
 
 
 @pytest.mark.slow
-def test_ctrl_c_stops_a_sweep_within_seconds_and_it_resumes_byte_identical(tmp_path):
+def test_ctrl_c_stops_a_sweep_within_seconds_a_second_sweep_is_refused_and_it_resumes_byte_identical(
+    tmp_path,
+):
     sweep = _sweep(tmp_path / "a")
     trials = tmp_path / "a" / "s" / "trials"
     deadline = time.monotonic() + 120
@@ -236,6 +238,14 @@ def test_ctrl_c_stops_a_sweep_within_seconds_and_it_resumes_byte_identical(tmp_p
         time.sleep(0.1)
     assert left == b""
     resume = ["sweep", "--resume", str(tmp_path / "a" / "s"), "--no-progress"]
+    # The stopped sweep let go of its folder; a live second one on it is refused in one line.
+    lock = tmp_path / "a" / "s" / LOCK_FILE
+    assert not lock.exists()
+    lock.write_text(str(os.getpid()))
+    refused = subprocess.run([sys.executable, "-m", "dospcot.cli", *resume], capture_output=True, text=True)
+    assert refused.returncode == 2 and refused.stderr.count("\n") == 1
+    assert f"{tmp_path / 'a' / 's'} is being run by process {os.getpid()}" in refused.stderr
+    lock.write_text("999999999")  # a sweep that is gone: its lock is taken over
     resumed = subprocess.run([sys.executable, "-m", "dospcot.cli", *resume], capture_output=True, text=True)
     assert resumed.returncode == 0, resumed.stderr
     whole = _sweep(tmp_path / "b")

@@ -206,9 +206,12 @@ def batch_members(run_dir: Path) -> list[Path] | None:
 
 
 @contextmanager
-def run_lock(run_dir: Path) -> Iterator[None]:
+def run_lock(
+    run_dir: Path, doing: str = "trained", error: type[Exception] = RunFolderError
+) -> Iterator[None]:
     """Hold ``run_dir/.lock`` (the process id) while training: a second process on the same folder
-    stops with one line naming the holder. A lock whose process is gone is taken over."""
+    stops with one line naming the holder (``error``: the folder "is being ``doing`` by process N").
+    A lock whose process is gone is taken over."""
     lock = run_dir / LOCK_FILE
     for _ in range(2):
         try:
@@ -216,8 +219,8 @@ def run_lock(run_dir: Path) -> Iterator[None]:
         except FileExistsError:
             holder = _lock_holder(lock)
             if holder is not None:
-                raise RunFolderError(
-                    f"{run_dir} is being trained by process {holder} (its {LOCK_FILE}); wait for it or "
+                raise error(
+                    f"{run_dir} is being {doing} by process {holder} (its {LOCK_FILE}); wait for it or "
                     "stop it, then resume"
                 ) from None
             lock.unlink(missing_ok=True)  # its process is gone

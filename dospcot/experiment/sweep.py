@@ -46,7 +46,7 @@ from tqdm.auto import tqdm
 
 from dospcot.config.loading import load_config
 from dospcot.experiment.interrupts import Interrupted, leave_interrupts_to_the_parent
-from dospcot.experiment.run_folder import CONFIG_FILE, SUMMARY_FILE, batch_members, write_json
+from dospcot.experiment.run_folder import CONFIG_FILE, SUMMARY_FILE, batch_members, run_lock, write_json
 from dospcot.experiment.sweep_spec import (
     TRIAL_FILE,
     Backend,
@@ -242,6 +242,21 @@ def run_sweep(
     else:
         trials = spec.trials()  # checked before the folder is made: a bad grid leaves nothing behind
         open_sweep(sweep_dir, spec)
+    # Two sweeps on one folder would fail each other's trials on their run locks, one by one.
+    with run_lock(sweep_dir, "run", SweepError):
+        return _run_trials(sweep_dir, trials, backend, workers, ray_address, show_progress, batch_seeds)
+
+
+def _run_trials(
+    sweep_dir: Path,
+    trials: list[Trial],
+    backend: Backend,
+    workers: int,
+    ray_address: str | None,
+    show_progress: bool,
+    batch_seeds: int | None,
+) -> SweepResult:
+    """:func:`run_sweep`'s work once it holds the sweep's lock."""
     check_not_stale(sweep_dir, trials)
     todo = [t for t in trials if not is_finished(sweep_dir, t)]
     skipped = [t for t in trials if t not in todo]
