@@ -3,6 +3,7 @@
 import csv
 import dataclasses
 import json
+import shutil
 import subprocess
 import sys
 
@@ -83,6 +84,13 @@ def test_the_local_backend_batches_a_paper_cells_seeds_over_its_workers():
 def test_report_of_a_paper_sweep_gives_the_hand_computed_figures(tmp_path):
     spec = SweepSpec(("paper-text",), {}, (0, 1, 2), tuple(QUICK))
     assert not run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False).failed
+    # A paper cell's seeds run together whatever --batch-seeds says: resuming with another K is no
+    # reason to refuse, and the trial run again gives the same file.
+    seed2 = tmp_path / "sweep" / "trials" / "paper-text" / "seed=2"
+    metrics = (seed2 / "metrics.csv").read_bytes()
+    shutil.rmtree(seed2)
+    assert not run_sweep(tmp_path / "sweep", None, workers=2, show_progress=False, batch_seeds=4).failed
+    assert (seed2 / "metrics.csv").read_bytes() == metrics
     paths = write_report(tmp_path / "sweep")
     assert [p.name for p in paths] == ["report.md", "report.csv", "paper_agreement.png"]
     # By hand from the trials' metrics.csv: per seed the mean of the ESARSA pair's two agents at

@@ -138,6 +138,12 @@ def started_as(sweep_dir: Path, trial: Trial) -> tuple[str, ...] | str | None:
     return "alone" if members is None else tuple(str(member) for member in members)
 
 
+def _batchable(trial: Trial) -> bool:
+    """Whether ``--batch-seeds`` decides how ``trial`` trains: a train config whose seeds can batch."""
+    cfg = load_config(trial.config, trial.overrides())
+    return not cfg.task_definition.seeds_train_together and _can_batch(cfg)
+
+
 def _can_batch(cfg: Any) -> bool:
     from dospcot.core.batched_runs import config_refusal  # torch: only where batches are asked for
 
@@ -281,6 +287,8 @@ def _batch_seeds(sweep_dir: Path, given: int | None, trials: list[Trial], todo: 
     if given is None or given == stored or not todo:
         return stored
     started = sum(started_as(sweep_dir, trial) is not None for trial in trials)
+    if started and not any(_batchable(t) for t in todo if started_as(sweep_dir, t) is None):
+        return stored  # no trial left to start would batch (a paper cell's, say): K changes nothing
     if started:
         raise SweepError(
             f"{sweep_dir} trains its trials with --batch-seeds {stored} and {started} of its {len(trials)} "
