@@ -4,6 +4,7 @@ differences and verdicts by hand."""
 import json
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -295,16 +296,39 @@ def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
     )
 
 
-def test_a_queries_hypothesis_waits_for_every_pair_of_its_arms():
+def _queries_arm(
+    folder: Path, fraction: str, seeds: range, accuracy: float, queries: str = "", **strategy: str
+) -> list[TrialRun]:
+    """Runs of one grid16-dospcot arm; ``queries`` the body of each run's queries.csv."""
+    mean = {"success": 1.0, "pseudo_accuracy": accuracy, "worst_class_precision": 0.8, "labelled_steps": 17}
+    params = {"env.layout_seed": "101", "training.label_fraction": fraction, **strategy}
+    runs = []
+    for seed in seeds:
+        run_dir = folder / f"{fraction}-{strategy}-{seed}"
+        run_dir.mkdir(parents=True)
+        (run_dir / "queries.csv").write_text("round,sample,strategy,answer\n" + queries)
+        runs.append(TrialRun(Trial("grid16-dospcot", "x", params, seed), {"mean": mean}, [], run_dir))
+    return runs
+
+
+def test_the_queries_tables_say_who_chose_each_active_arms_queries(tmp_path):
+    disagreement = {"training.label_strategy": "disagreement"}
+    # Per run: 3 queries at random in round 1 (no classifier yet), then in round 2 one at random (the
+    # random share) and one by disagreement. Pooled over 2 runs: 5 per run, 2 of 5 after round 1, 1 of
+    # 5 chosen by the strategy.
+    log = "1,4,random,0\n1,7,random,0\n1,9,random,-1\n2,3,random,0\n2,5,disagreement,1\n"
+    runs = _queries_arm(tmp_path, "0.02", range(2), 0.9, log, **disagreement)
+    runs += _queries_arm(tmp_path, "0.05", range(2), 0.9)  # the uniform mask asks nothing: no row
+    lines = STUDIES["queries"].tables(runs)
+    at = lines.index(
+        "| grid16, layouts 101, 202, 303: queries | per run | after round 1 | chosen by the strategy | runs |"
+    )
+    assert lines[at + 2 :][:2] == ["| dospcot disagreement @ 0.02 | 5.0 | 40.0% | 20.0% | 2 |", ""]
+
+
+def test_a_queries_hypothesis_waits_for_every_pair_of_its_arms(tmp_path):
     def arm(fraction: str, seeds: range, accuracy: float, **strategy: str) -> list[TrialRun]:
-        mean = {
-            "success": 1.0,
-            "pseudo_accuracy": accuracy,
-            "worst_class_precision": 0.8,
-            "labelled_steps": 17,
-        }
-        params = {"env.layout_seed": "101", "training.label_fraction": fraction, **strategy}
-        return [TrialRun(Trial("grid16-dospcot", "x", params, s), {"mean": mean}, [], Path()) for s in seeds]
+        return _queries_arm(Path(tempfile.mkdtemp(dir=tmp_path)), fraction, seeds, accuracy, **strategy)
 
     def runs_of(reference_seeds: range) -> list[TrialRun]:
         disagreement = arm("0.02", range(4), 0.95, **{"training.label_strategy": "disagreement"})

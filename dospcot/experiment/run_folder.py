@@ -33,6 +33,8 @@ CONFIG_FILE = "config.toml"
 METRICS_FILE = "metrics.csv"
 SUMMARY_FILE = "summary.json"
 REWARD_CLASSES_FILE = "reward_classes.json"
+QUERIES_FILE = "queries.csv"
+"""Every label a rater gave: round, sample, how it was chosen, answer (active label strategies)."""
 CHECKPOINT_FILE = "checkpoint.pkl"
 CHECKPOINT_FORMAT = 1
 LOCK_FILE = ".lock"

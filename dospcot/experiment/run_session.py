@@ -24,6 +24,7 @@ from dospcot.experiment.plots import plot_learning_curves
 from dospcot.experiment.run_folder import (
     CHECKPOINT_FILE,
     METRICS_FILE,
+    QUERIES_FILE,
     REWARD_CLASSES_FILE,
     SUMMARY_FILE,
     atomic_write,
@@ -41,8 +42,6 @@ ROUND_SCALARS = (
     "normalised_score", "agreement", "labelled_steps",
 )  # fmt: skip
 """The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
-QUERIES_FILE = "queries.csv"
-"""Every label a rater gave: round, sample, how it was chosen, answer (active label strategies)."""
 QUERIES_FOLDER = "queries"
 """Where a file rater writes each round's queries, ``round_<r>.csv``, for a person to answer."""
 SEGMENT_SCALARS = ("step_reward_error",)

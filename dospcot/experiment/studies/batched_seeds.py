@@ -44,8 +44,7 @@ def _held(diff: SeedSummary) -> bool:
 def tables(runs: list[TrialRun]) -> list[str]:
     """Per preset and path: success, agreement and CPU time per run; then each difference."""
     lines = [
-        "Each cell: mean over seeds [95% bootstrap interval] of the run's mean over its agents, last round.",
-        "",
+        "",  # the table a block of its own, after the page's provenance lines
         "| preset | trained | success | agreement | CPU time per run | seeds |",
         "|---|---|---|---|---|---|",
     ]

@@ -3,11 +3,12 @@ grid16's unseen layouts, MiniGrid and the fast highway, with the pre-registered 
 
 from __future__ import annotations
 
+import csv
 import json
 from collections.abc import Callable
 
 from dospcot.experiment.report import TrialRun
-from dospcot.experiment.run_folder import REWARD_CLASSES_FILE
+from dospcot.experiment.run_folder import QUERIES_FILE, REWARD_CLASSES_FILE
 from dospcot.experiment.studies.declaration import Glance, Study, Sweep
 from dospcot.experiment.studies.grid import LAYOUT, UNSEEN_LAYOUTS
 from dospcot.experiment.studies.tables import FRACTION, MINIGRID_TASKS, over_seeds
@@ -63,6 +64,31 @@ def _arm_table(runs: list[TrialRun], task: str) -> list[str]:
         cells = " | ".join(over_seeds(members, column) for column in COLUMNS)
         lines.append(f"| {arm} | {cells} | {len(members)} |")
     return lines
+
+
+def _chosen_table(runs: list[TrialRun], task: str) -> list[str]:
+    """Who chose each active arm's queries, from its runs' ``queries.csv``: the queries per run, the
+    share asked after round 1 (the first round with a fitted classifier) and the share the arm's
+    strategy chose itself rather than at random (its random share, or no classifier yet)."""
+    lines = [
+        f"| {task}: queries | per run | after round 1 | chosen by the strategy | runs |",
+        "|---|---|---|---|---|",
+    ]
+    for arm in dict.fromkeys(_arm(r) for r in runs):
+        members = [r for r in runs if _arm(r) == arm]
+        strategy = members[0].trial.params.get(STRATEGY, "uniform")
+        if strategy == "uniform":
+            continue  # a fixed mask (or the oracle): nothing was asked
+        rows = []
+        for run in members:
+            with (run.run_dir / QUERIES_FILE).open(newline="") as handle:
+                rows += list(csv.DictReader(handle))
+        later = sum(int(row["round"]) > 1 for row in rows) / max(len(rows), 1)
+        chosen = sum(row["strategy"] == strategy for row in rows) / max(len(rows), 1)
+        lines.append(
+            f"| {arm} | {len(rows) / len(members):.1f} | {later:.1%} | {chosen:.1%} | {len(members)} |"
+        )
+    return lines if len(lines) > 2 else []
 
 
 def _verdict(held: bool | None, pairs: int = 0, of: int = 0) -> str:
@@ -125,14 +151,18 @@ def _q3(runs: list[TrialRun], task: str) -> str:
 def _tables(tasks: dict[str, Callable[[TrialRun], bool]], hypotheses: Callable[..., list[str]]) -> Callable:
     def tables(runs: list[TrialRun]) -> list[str]:
         lines = [
-            "Each cell: mean over seeds [95% bootstrap interval] of the run's mean over its agents, last "
-            "round; the arm names the method, its label strategy and its label fraction (docs/queries.md). "
+            "The arm names the method, its label strategy and its label fraction (docs/queries.md). "
+            "Under each task, who chose the active arms' queries (their runs' queries.csv, pooled): every "
+            "strategy draws its random share at random, and uncertainty and disagreement also draw at "
+            "random where no classifier has been fitted yet (all of round 1). "
             "Differences are paired by seed (and layout on the grid).",
         ]
         for task, belongs in tasks.items():
             members = [r for r in runs if belongs(r)]
             if members:
-                lines += ["", *_arm_table(members, task), "", *hypotheses(members, task)]
+                chosen = _chosen_table(members, task)
+                lines += ["", *_arm_table(members, task), *(["", *chosen] if chosen else [])]
+                lines += ["", *hypotheses(members, task)]
         return lines
 
     return tables
