@@ -224,10 +224,11 @@ HYPOTHESIS_SWEEPS = (
     ),
     *_minigrid_sweeps("dospcot", (Q3_STRATEGY,), Q3_STRATEGY),
     *_minigrid_sweeps("oracle", (), "oracle"),
+    *_minigrid_sweeps("self-training", ("uncertainty",), "uncertainty"),
     *_minigrid_sweeps("dospcot", ("disagreement",), "disagreement"),
-    *_minigrid_sweeps("self-training", ("uncertainty", "uniform", "random"), "self-training"),
 )
 OTHER_SWEEPS = (
+    *_minigrid_sweeps("self-training", ("uniform", "random"), "self-training"),
     *_minigrid_sweeps("dospcot", ("uniform", "random", "uncertainty"), "dospcot"),
     Sweep(
         "queries-grid16-dospcot",
