@@ -287,8 +287,8 @@ def _batch_seeds(sweep_dir: Path, given: int | None, trials: list[Trial], todo: 
     if given is None or given == stored or not todo:
         return stored
     started = sum(started_as(sweep_dir, trial) is not None for trial in trials)
-    if started and not any(_batchable(t) for t in todo if started_as(sweep_dir, t) is None):
-        return stored  # no trial left to start would batch (a paper cell's, say): K changes nothing
+    if started and not any(_batchable(t) for t in trials):
+        return stored  # no trial of it can batch (a paper sweep's run their cells' seeds together)
     if started:
         raise SweepError(
             f"{sweep_dir} trains its trials with --batch-seeds {stored} and {started} of its {len(trials)} "
