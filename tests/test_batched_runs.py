@@ -14,6 +14,7 @@ import numpy as np
 import pytest
 import torch as th
 from stable_baselines3 import DQN
+from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from dospcot.cli import main
 from dospcot.config.loading import load_config
@@ -56,6 +57,38 @@ def test_each_members_saved_agent_loads_with_plain_sb3_and_gives_its_q_values():
             blob.seek(0)
             loaded = DQN.load(blob, device="cpu")
             np.testing.assert_allclose(loaded.q_net(obs[member]).detach(), stacked[member], atol=1e-5)
+
+
+def _scalars(run_dir, view: str) -> dict[str, list]:
+    events = EventAccumulator(str(run_dir / "tb" / f"agent_{view}")).Reload()
+    return {tag: events.Scalars(tag) for tag in events.Tags()["scalars"]}
+
+
+def test_a_members_tensorboard_holds_the_scalars_of_a_run_alone(tmp_path):
+    sets = [a for s in TINY for a in ("--set", s)]
+    assert (
+        main(["train", "tiny", "--seeds", "2", "--runs-dir", str(tmp_path / "b"), "--no-progress", *sets])
+        == 0
+    )
+    assert main(["train", "tiny", "--runs-dir", str(tmp_path / "a"), "--no-progress", *sets]) == 0
+    (alone,) = (tmp_path / "a" / "tiny").iterdir()
+    members = sorted((tmp_path / "b" / "tiny").iterdir())
+    for view in load_config("tiny").views:
+        expected = _scalars(alone, view)
+        assert {
+            "rollout/ep_rew_mean",
+            "rollout/ep_len_mean",
+            "rollout/exploration_rate",
+            "train/loss",
+        } <= set(expected)
+        for member in members:
+            logged = _scalars(member, view)
+            assert set(logged) == set(expected), member  # SB3's rollout/, train/ and time/, and dospcot/
+            # Dumped every 4 episodes (DQN.learn's default): the steps of the dumps are the member's own.
+            lengths = [e.value for e in logged["rollout/ep_len_mean"]]
+            assert len(lengths) >= 2 and all(1 <= n <= 400 for n in lengths)
+            steps = [e.step for e in logged["rollout/exploration_rate"]]
+            assert steps == sorted(steps) and steps[-1] <= 800
 
 
 def test_runs_that_differ_in_more_than_their_seeds_are_refused():

@@ -51,6 +51,9 @@ from dospcot.seeding import batched_draws_seed
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
 
+LOG_INTERVAL = 4
+"""Episodes between two dumps of a member's SB3 scalars: ``DQN.learn``'s default, as a run alone."""
+
 
 def config_refusal(cfg: TrainConfig) -> str | None:
     """Why the seeds of ``cfg`` cannot train as one batch (one line), or None where they can."""
@@ -179,13 +182,16 @@ class BatchedRuns:
                 agent._update_info_buffer(infos, dones)
                 agent._store_transition(agent.replay_buffer, action, new_obs, rewards, dones, infos)
                 agent._n_calls += 1
-                agent._episode_num += int(dones.sum())
+                agent.logger.record("rollout/exploration_rate", agent.exploration_rate)  # as DQN._on_step
+                for _ in range(int(dones.sum())):  # as SB3's collect_rollouts: its rollout/ scalars
+                    agent._episode_num += 1
+                    if agent._episode_num % LOG_INTERVAL == 0:
+                        agent.dump_logs()
             if first._n_calls % syncs_every == 0:
                 learner.sync_target()
             if step % train_every == 0 and first.num_timesteps > first.learning_starts:
                 # gradient_steps = -1: as many as the env steps since the last training (SB3's rule).
-                for _ in range(first.gradient_steps if first.gradient_steps >= 0 else train_every):
-                    self._train_step(k)
+                self._train(k, first.gradient_steps if first.gradient_steps >= 0 else train_every)
             if on_steps is not None:
                 on_steps(self.n_members)
         for agent in agents:
@@ -195,12 +201,29 @@ class BatchedRuns:
         """``update_steps`` gradient steps of every member's agent ``k`` without acting, the targets
         synced as often as during collection (``ExpectedSarsaDQN.update``)."""
         for chunk in self._agents(k)[0].update_chunks(self.cfg.training.update_steps):
-            for _ in range(chunk):
-                self._train_step(k)
+            self._train(k, chunk)
             self.learners[k].sync_target()
 
-    def _train_step(self, k: int) -> None:
-        """One stacked gradient step of every member's agent ``k`` on a batch from its own buffer."""
+    def _train(self, k: int, gradient_steps: int) -> None:
+        """``gradient_steps`` stacked steps of every member's agent ``k``, logged as one
+        ``ExpectedSarsaDQN.train`` call logs them: the updates so far, and the mean loss of the steps
+        that updated."""
+        agents = self._agents(k)
+        losses: list[list[float]] = [[] for _ in agents]
+        for _ in range(gradient_steps):
+            loss, updated = self._train_step(k)
+            for mine, value, took in zip(losses, loss.tolist(), updated.tolist(), strict=True):
+                if took:
+                    mine.append(value)
+        for agent, mine in zip(agents, losses, strict=True):
+            agent.logger.record("train/learning_rate", agent.lr_schedule(agent._current_progress_remaining))
+            agent.logger.record("train/n_updates", agent._n_updates, exclude="tensorboard")
+            if mine:
+                agent.logger.record("train/loss", float(np.mean(mine)))
+
+    def _train_step(self, k: int) -> tuple[th.Tensor, th.Tensor]:
+        """One stacked gradient step of every member's agent ``k`` on a batch from its own buffer;
+        returns (S,) each member's loss and (S,) bool, which members updated."""
         agents, draws = self._agents(k), self.draws[k]
         first = agents[0]
         batches, demo_states, demo_actions = [], [], []
@@ -214,9 +237,10 @@ class BatchedRuns:
                 demo_actions.append(agent._demo_actions[index])
         eps = th.tensor([agent.exploration_rate for agent in agents], dtype=th.float32)
         demos = (th.stack(demo_states), th.stack(demo_actions)) if demo_states else None
-        self.learners[k].train_step(stack_samples(batches), eps, first.gamma, demos)
+        losses, updated = self.learners[k].train_step(stack_samples(batches), eps, first.gamma, demos)
         for agent in agents:
             agent._n_updates += 1
+        return losses, updated
 
     def _write_back(self, k: int) -> None:
         """Every member's agent ``k`` gets its weights and Adam state from the stack."""
