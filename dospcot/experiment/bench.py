@@ -161,16 +161,17 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
     unknown = [name for name in only if name not in BENCHMARKS]
     if unknown:
         raise ValueError(f"unknown benchmark(s) {unknown}; allowed: {', '.join(BENCHMARKS)}")
-    if only and (not out.is_file() or TABLE_HEADER not in out.read_text()):
+    # Each row goes into the file as it lands, so that a stop or a failing row an hour in keeps the
+    # rows before it: merged into the table already there, or, where there is none, a table of its own.
+    text = out.read_text() if out.is_file() else ""
+    table = text if TABLE_HEADER in text else None
+    if only and table is None:
         raise ValueError(f"--only updates the table of a file a full `dospcot bench` wrote; {out} holds none")
     try:  # before the rows, which take most of an hour, not after
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ValueError(f"--out {out}: cannot make its folder ({err.strerror or err})") from None
     torch.set_num_threads(1)
-    # Each row goes into the file as it lands, so that a stop or a failing row an hour in keeps the
-    # rows before it: merged into the table already there, or, where there is none, a table of its own.
-    table = out.read_text() if out.is_file() and TABLE_HEADER in out.read_text() else None
     rows: list[Row] = []
     chosen = {name: BENCHMARKS[name] for name in only} if only else BENCHMARKS
     with tqdm(chosen.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
