@@ -138,13 +138,11 @@ def started_as(sweep_dir: Path, trial: Trial) -> tuple[str, ...] | str | None:
     return "alone" if members is None else tuple(str(member) for member in members)
 
 
-def _batchable(trial: Trial) -> bool:
-    """Whether ``--batch-seeds`` decides how ``trial`` trains: a train config whose seeds can batch."""
-    cfg = load_config(trial.config, trial.overrides())
-    return not cfg.task_definition.seeds_train_together and _can_batch(cfg)
-
-
 def _can_batch(cfg: Any) -> bool:
+    """Whether ``--batch-seeds`` decides how a trial of ``cfg`` trains: a train config whose seeds can
+    batch (not a paper config, whose cell's seeds train together whatever it says)."""
+    if cfg.task_definition.seeds_train_together:
+        return False
     from dospcot.core.batched_runs import config_refusal  # torch: only where batches are asked for
 
     return config_refusal(cfg) is None
@@ -164,9 +162,7 @@ def run_job(
     """
     cfg = load_config(trials[0].config, trials[0].overrides())
     how = started_as(sweep_dir, trials[0])
-    if cfg.task_definition.seeds_train_together:
-        batched = False
-    elif how is None:
+    if how is None:
         batched = batch_seeds > 1 and _can_batch(cfg)
     else:
         batched = how != "alone"
@@ -287,7 +283,7 @@ def _batch_seeds(sweep_dir: Path, given: int | None, trials: list[Trial], todo: 
     if given is None or given == stored or not todo:
         return stored
     started = sum(started_as(sweep_dir, trial) is not None for trial in trials)
-    if started and not any(_batchable(t) for t in trials):
+    if started and not any(_can_batch(load_config(t.config, t.overrides())) for t in trials):
         return stored  # no trial of it can batch (a paper sweep's run their cells' seeds together)
     if started:
         raise SweepError(
