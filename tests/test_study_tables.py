@@ -337,3 +337,47 @@ def test_a_queries_hypothesis_waits_for_every_pair_of_its_arms(tmp_path):
     tables = STUDIES["queries"].tables
     assert "lower bound >= -0.05: not decided yet (2 of 4 pairs run)." in "\n".join(tables(runs_of(range(2))))
     assert "lower bound >= -0.05: **held**." in "\n".join(tables(runs_of(range(4))))
+
+
+def test_the_minigrid_tables_count_goal_labels_and_compare_outcomes_with_the_blind_mask(tmp_path):
+    """On MiniGrid a seed whose labels hold no goal step cannot learn the goal: the table counts them,
+    and the unregistered differences are paired by seed over the pairs both arms have run."""
+
+    def arm(strategy: str, successes: list[float], goal: list[bool]) -> list[TrialRun]:
+        params = {"training.label_fraction": "0.1", "training.label_strategy": strategy}
+        runs = []
+        for seed, (success, labelled) in enumerate(zip(successes, goal, strict=True)):
+            run_dir = tmp_path / f"{strategy}-{seed}"
+            run_dir.mkdir()
+            (run_dir / "reward_classes.json").write_text(
+                json.dumps({"rewards": [0.0, 0.5 if labelled else 0.0]})
+            )
+            (run_dir / "queries.csv").write_text("round,sample,strategy,answer\n")
+            mean = {
+                "success": success,
+                "pseudo_accuracy": 1.0,
+                "worst_class_precision": 1.0,
+                "labelled_steps": 9,
+            }
+            runs.append(
+                TrialRun(Trial("minigrid-lavagap-dospcot", "x", params, seed), {"mean": mean}, [], run_dir)
+            )
+        return runs
+
+    # outcomes minus uniform over seeds 0-2 (the pairs both have): 0.9 - 0.1, 0.8 - 0.8, 0.7 - 0.4.
+    runs = arm("outcomes", [0.9, 0.8, 0.7, 0.6], [True] * 4) + arm(
+        "uniform", [0.1, 0.8, 0.4], [False, True, True]
+    )
+    lines = STUDIES["queries"].tables(runs)
+    assert (
+        "| MiniGrid-LavaGapS7-v0 | success | pseudo_accuracy | worst_class_precision | labelled_steps "
+        "| goal labelled | seeds |" in lines
+    )
+    assert [line.split(" | ")[-2] for line in lines if line.startswith("| dospcot ")][:2] == ["4/4", "2/3"]
+    diff = SeedSummary.of([0.8, 0.0, 0.3])
+    assert (
+        "- Descriptive, not registered (MiniGrid-LavaGapS7-v0): success of dospcot outcomes minus dospcot "
+        f"uniform (labels placed on episode ends against the blind mask), paired: {diff} over 3 pairs."
+    ) in lines
+    assert diff.mean == pytest.approx(1.1 / 3)
+    assert not any("dospcot disagreement minus" in line for line in lines)  # one arm of it has not run
