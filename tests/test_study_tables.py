@@ -307,6 +307,7 @@ def _queries_arm(
         run_dir = folder / f"{fraction}-{strategy}-{seed}"
         run_dir.mkdir(parents=True)
         (run_dir / "queries.csv").write_text("round,sample,strategy,answer\n" + queries)
+        (run_dir / "metrics.csv").write_text(f"round,pseudo_accuracy\n1,{accuracy}\n")
         runs.append(TrialRun(Trial("grid16-dospcot", "x", params, seed), {"mean": mean}, [], run_dir))
     return runs
 
@@ -353,6 +354,7 @@ def test_the_minigrid_tables_count_goal_labels_and_compare_outcomes_with_the_bli
                 json.dumps({"rewards": [0.0, 0.5 if labelled else 0.0]})
             )
             (run_dir / "queries.csv").write_text("round,sample,strategy,answer\n")
+            (run_dir / "metrics.csv").write_text(f"round,success\n1,{success}\n")
             mean = {
                 "success": success,
                 "pseudo_accuracy": 1.0,
@@ -381,3 +383,19 @@ def test_the_minigrid_tables_count_goal_labels_and_compare_outcomes_with_the_bli
     ) in lines
     assert diff.mean == pytest.approx(1.1 / 3)
     assert not any("dospcot disagreement minus" in line for line in lines)  # one arm of it has not run
+
+
+def test_the_queries_tables_name_arms_that_trained_the_same_runs(tmp_path):
+    """Two strategies that asked the same queries train the same agents: the tables count the seeds
+    whose metrics.csv match byte for byte, over the pairs both arms have run."""
+    runs = _queries_arm(tmp_path / "a", "0.02", range(3), 0.9, **{"training.label_strategy": "uncertainty"})
+    runs += _queries_arm(tmp_path / "b", "0.02", range(2), 0.9, **{"training.label_strategy": "random"})
+    for run in runs:
+        same = run.trial.seed == 0 or run.trial.params["training.label_strategy"] == "uncertainty"
+        (run.run_dir / "metrics.csv").write_text(
+            "round,success\n1,1.0\n" if same else "round,success\n1,0.5\n"
+        )
+    assert (
+        "- Identical runs (grid16, layouts 101, 202, 303): dospcot uncertainty @ 0.02 and dospcot random "
+        "@ 0.02 trained byte-identical runs (metrics.csv) on 1 of their 2 pairs."
+    ) in STUDIES["queries"].tables(runs)

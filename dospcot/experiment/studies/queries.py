@@ -8,7 +8,7 @@ import json
 from collections.abc import Callable
 
 from dospcot.experiment.report import TrialRun
-from dospcot.experiment.run_folder import QUERIES_FILE, REWARD_CLASSES_FILE
+from dospcot.experiment.run_folder import METRICS_FILE, QUERIES_FILE, REWARD_CLASSES_FILE
 from dospcot.experiment.studies.declaration import Glance, Study, Sweep
 from dospcot.experiment.studies.grid import LAYOUT, UNSEEN_LAYOUTS
 from dospcot.experiment.studies.tables import FRACTION, MINIGRID_TASKS, over_seeds
@@ -177,6 +177,28 @@ def _q3(runs: list[TrialRun], task: str) -> str:
     )
 
 
+def _metrics(run: TrialRun) -> bytes:
+    return (run.run_dir / METRICS_FILE).read_bytes()
+
+
+def _identical(runs: list[TrialRun], task: str) -> list[str]:
+    """Arms that trained the same runs: pairs whose ``metrics.csv`` match byte for byte (an active
+    strategy that found nothing to prefer asks what another asks, and trains the same agents)."""
+    arms = list(dict.fromkeys(_arm(r) for r in runs))
+    lines = []
+    for i, a in enumerate(arms):
+        for b in arms[i + 1 :]:
+            first, second = _pairs(runs, a), _pairs(runs, b)
+            both = set(first) & set(second)
+            same = sum(_metrics(first[k]) == _metrics(second[k]) for k in both)
+            if same:
+                lines.append(
+                    f"- Identical runs ({task}): {a} and {b} trained byte-identical runs (metrics.csv) on "
+                    f"{same} of their {len(both)} pairs."
+                )
+    return lines
+
+
 def _tables(tasks: dict[str, Callable[[TrialRun], bool]], hypotheses: Callable[..., list[str]]) -> Callable:
     def tables(runs: list[TrialRun]) -> list[str]:
         lines = [
@@ -194,6 +216,7 @@ def _tables(tasks: dict[str, Callable[[TrialRun], bool]], hypotheses: Callable[.
                 chosen = _chosen_table(members, task)
                 lines += ["", *_arm_table(members, task), *(["", *chosen] if chosen else [])]
                 lines += ["", *hypotheses(members, task), *_descriptive(members, task)]
+                lines += _identical(members, task)
         return lines
 
     return tables
