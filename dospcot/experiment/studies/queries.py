@@ -80,10 +80,16 @@ DESCRIPTIVE = (
 no threshold and no verdict."""
 
 
+def _study_fraction(runs: list[TrialRun]) -> str:
+    """The task's label fraction of the study's equal budget: the first arm's (the sweeps run an arm at
+    it first on every task; Q1's reference at 0.05 comes after)."""
+    return next((r.trial.params[FRACTION] for r in runs if FRACTION in r.trial.params), "")
+
+
 def _descriptive(runs: list[TrialRun], task: str) -> list[str]:
     """The :data:`DESCRIPTIVE` differences in success at the task's study fraction, over the pairs both
     arms have run so far."""
-    fraction = "0.02" if task.startswith("grid16") else "0.1"
+    fraction = _study_fraction(runs)
     lines = []
     for a, b, question in DESCRIPTIVE:
         diff = _difference(runs, f"{a} @ {fraction}", f"{b} @ {fraction}", "success")
@@ -136,7 +142,7 @@ def _pair_counts(runs: list[TrialRun], a: str, b: str) -> tuple[int, int]:
 def _q1_q2(runs: list[TrialRun], task: str, q1: bool) -> list[str]:
     lines = []
     disagreement, uncertainty = "dospcot disagreement @ {f}", "self-training uncertainty @ {f}"
-    fraction = next((r.trial.params[FRACTION] for r in runs if FRACTION in r.trial.params), "")
+    fraction = _study_fraction(runs)
     if q1:
         a, b = disagreement.format(f="0.02"), "dospcot uniform @ 0.05"
         diff, (pairs, of) = _difference(runs, a, b, "success"), _pair_counts(runs, a, b)
