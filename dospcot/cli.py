@@ -225,6 +225,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         help=f"output file (default BENCHMARKS.md; with --quick {QUICK_BENCH_OUT}, never BENCHMARKS.md)",
     )
+    bench.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        default="cpu",
+        help="cuda: measure the rows that have a GPU form on the GPU, into the GPU column of --out's "
+        "table (default cpu)",
+    )
     study = commands.add_parser(
         "study",
         description="Run a study's sweeps (only the trials not yet finished), then print its tables from "
@@ -309,7 +316,7 @@ def _run(args: argparse.Namespace, command: str) -> int:
             )
             return 2
         try:
-            rows = run_benchmarks(args.out, args.quick, args.repeats, command, args.only)
+            rows = run_benchmarks(args.out, args.quick, args.repeats, command, args.only, args.device)
         except ValueError as err:
             print(f"dospcot bench: error: {err}", file=sys.stderr)
             return 2

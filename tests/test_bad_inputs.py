@@ -98,7 +98,9 @@ def _train_or_refuse(runs: Path, override: str) -> None:
 @pytest.mark.parametrize(
     "override",
     ["env.lava_density=2", "env.lava_density=0.8", "env.step_cost=nan", "cotraining.classifier.epochs=0",
-     "cotraining.classifier.lr=nan", "dqn.buffer_size=8", 'name="tiny2', "training.rounds=0"],
+     "cotraining.classifier.lr=nan", "dqn.buffer_size=8", 'name="tiny2', "training.rounds=0",
+     # A device that is no device, and a GPU where torch sees none (a machine with one trains).
+     "dqn.device=gpu", "dqn.device=cuda:7"],
 )  # fmt: skip
 def test_the_reported_bad_inputs_exit_2_in_one_line_before_a_folder(tmp_path, override):
     _train_or_refuse(tmp_path / "runs", override)
@@ -290,3 +292,36 @@ def test_an_empty_config_and_a_report_folder_that_cannot_be_made_are_one_line(tm
     assert main(["report", "runs/sweeps/grid16", "--out", "/proc/nope/report"]) == 2
     err = capsys.readouterr().err
     assert "--out /proc/nope/report: cannot make the folder" in err and err.count("\n") == 1
+
+
+def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on(
+    tmp_path, capsys, monkeypatch
+):
+    """SIGTERM after one sweep's last trial, before the next sweep starts: one line, not a bare
+    "interrupted", and the study's own command to go on."""
+    from types import SimpleNamespace
+
+    from dospcot.experiment import studies
+
+    started = []
+
+    def run_sweep(sweep_dir, spec, **options):
+        started.append(sweep_dir.name)
+        if len(started) == 2:
+            raise KeyboardInterrupt  # what SIGTERM raises (stop_on_signals)
+        return SimpleNamespace(failed={})
+
+    monkeypatch.setattr(studies, "run_sweep", run_sweep)
+    runs = tmp_path / "sweeps"
+    assert main(["study", "minigrid", "--runs-dir", str(runs)]) == 130
+    assert len(started) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"dospcot study: interrupted; kept every trial that finished, under {runs}; "
+        f"resume with: dospcot study minigrid --runs-dir {runs}\n"
+    )
+    started.clear()
+    with pytest.raises(SystemExit) as stop:  # the script says the same
+        studies.main(["minigrid", "--runs-dir", str(runs)])
+    assert stop.value.code == 130
+    assert capsys.readouterr().err.startswith("study.py: interrupted; kept every trial that finished")

@@ -274,3 +274,92 @@ def test_bench_keeps_the_rows_measured_before_a_failing_row_or_a_stop(tmp_path, 
     assert last == f"dospcot bench: interrupted; kept the rows measured before the stop, in {out}: A"
     table = {line.split(" | ")[0]: line for line in out.read_text().splitlines() if line.startswith("| ")}
     assert "| 2.000 |" in table["| A"] and "| 0.600 |" in table["| B"]
+
+
+def test_bench_gpu_column_holds_the_gpu_figures_beside_the_cpu_ones(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench", 3))
+    assert main(["bench", "--device", "cuda", "--out", str(out)]) == 2  # this machine has no GPU
+    err = capsys.readouterr().err
+    assert "sees no CUDA device" in err and err.count("\n") == 1
+    monkeypatch.setattr(bench.torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(bench.torch.cuda, "get_device_name", lambda: "Test GPU")
+    assert main(["bench", "--device", "cuda", "--only", "tabular", "--out", str(out)]) == 2
+    assert "unknown benchmark(s) on cuda ['tabular']" in capsys.readouterr().err
+    gpu = {"A": lambda quick, repeats: _row("A", 8.0), "D": lambda quick, repeats: _row("D", 40.0)}
+    monkeypatch.setattr(bench, "GPU_BENCHMARKS", gpu)
+    assert main(["bench", "--device", "cuda", "--repeats", "3", "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    table = {line.split(" | ")[0]: line for line in lines if line.startswith("| ")}
+    # A's CPU figures stay (ratio 0.5); its GPU cell: ratio 8/10, target 0.5 met, the two medians.
+    assert table["| A"].endswith("| 0.500 | >= 0.5 | yes | 0.800, yes (8.00 steps/s vs 10.00 steps/s) |")
+    assert table["| B"].endswith("| >= 0.5 | yes | – |")  # no GPU form: a dash
+    assert (
+        table["| D"]
+        == "| D | setting | – | – | – | >= 0.5 | – | 4.000, yes (40.00 steps/s vs 10.00 steps/s) |"
+    )
+    gpu_notes = [line for line in lines if line.startswith("GPU column by")]
+    assert len(gpu_notes) == 1 and "(Test GPU, torch " in gpu_notes[0] and gpu_notes[0].endswith(": A; D.")
+    # A CPU rerun of A keeps its GPU figure; a full CPU run keeps every GPU figure and the GPU note.
+    monkeypatch.setattr(bench, "BENCHMARKS", {"A": lambda quick, repeats: _row("A", 20.0)})
+    assert main(["bench", "--only", "A", "--out", str(out)]) == 0
+    table = {line.split(" | ")[0]: line for line in out.read_text().splitlines() if line.startswith("| ")}
+    assert "| 2.000 | >= 0.5 | yes | 0.800, yes (8.00 steps/s vs 10.00 steps/s) |" in table["| A"]
+    monkeypatch.setattr(
+        bench,
+        "BENCHMARKS",
+        {"A": lambda quick, repeats: _row("A", 2.0), "B": lambda quick, repeats: _row("B", 1)},
+    )
+    assert main(["bench", "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    table = {line.split(" | ")[0]: line for line in lines if line.startswith("| ")}
+    assert table["| A"].endswith("| 0.200 | >= 0.5 | no | 0.800, yes (8.00 steps/s vs 10.00 steps/s) |")
+    assert (
+        set(table) == {"| benchmark", "| A", "| B"}
+        and [line for line in lines if line.startswith("GPU")] == gpu_notes
+    )
+    # A GPU rerun of A alone keeps the note that names A and D (D's figure is from then), and adds one.
+    monkeypatch.setattr(bench, "GPU_BENCHMARKS", {"A": lambda quick, repeats: _row("A", 9.0)})
+    assert main(["bench", "--device", "cuda", "--only", "A", "--out", str(out)]) == 0
+    notes = [line for line in out.read_text().splitlines() if line.startswith("GPU column by")]
+    assert len(notes) == 2 and notes[0] == gpu_notes[0] and notes[1].endswith(": A.")
+
+
+def test_bench_gives_a_table_written_before_the_gpu_column_the_column(tmp_path, monkeypatch):
+    out = tmp_path / "BENCHMARKS.md"
+    text = bench.render([_row("A", 5.0)], "dospcot bench", 3).replace(bench.TABLE_HEADER, bench.WITHOUT_GPU)
+    out.write_text(
+        text.replace("|---|---|---|---|---|---|---|---|", "|---|---|---|---|---|---|---|").replace(
+            " – |\n", "\n"
+        )
+    )
+    assert bench.TABLE_HEADER not in out.read_text()
+    monkeypatch.setattr(bench, "BENCHMARKS", {"B": lambda quick, repeats: _row("B", 6.0)})
+    assert main(["bench", "--only", "B", "--out", str(out)]) == 0
+    lines = out.read_text().splitlines()
+    at = lines.index(bench.TABLE_HEADER)
+    assert lines[at + 1] == "|---|---|---|---|---|---|---|---|"
+    assert lines[at + 2].endswith("| 0.500 | >= 0.5 | yes | – |") and lines[at + 3].endswith(
+        "| 0.600 | >= 0.5 | yes | – |"
+    )
+
+
+def test_bench_note_of_a_row_stays_when_another_row_of_its_name_is_rerun(tmp_path, monkeypatch):
+    """The ExpectedSarsaDQN rows share a name and differ in their setting: a GPU rerun of one keeps the
+    line that says where the other's GPU figure came from."""
+    out = tmp_path / "BENCHMARKS.md"
+    wide = dataclasses.replace(_row("A", 5.0), setting="wide")
+    out.write_text(bench.render([_row("A", 5.0), wide], "dospcot bench", 3))
+    monkeypatch.setattr(bench.torch.cuda, "is_available", lambda: True)
+    monkeypatch.setattr(bench.torch.cuda, "get_device_name", lambda: "Test GPU")
+    gpu = {"narrow": lambda quick, repeats: _row("A", 7.0), "wide": lambda quick, repeats: wide}
+    monkeypatch.setattr(bench, "GPU_BENCHMARKS", gpu)
+    assert main(["bench", "--device", "cuda", "--only", "wide", "--out", str(out)]) == 0
+    assert main(["bench", "--device", "cuda", "--only", "narrow", "--out", str(out)]) == 0
+    notes = [line for line in out.read_text().splitlines() if line.startswith("GPU column by")]
+    assert [note.rsplit(": ", 1)[1] for note in notes] == ["wide.", "narrow."]
+    cells = [line.rsplit(" | ", 1)[1] for line in out.read_text().splitlines() if line.startswith("| A | ")]
+    assert cells == [
+        "0.700, yes (7.00 steps/s vs 10.00 steps/s) |",
+        "0.500, yes (5.00 steps/s vs 10.00 steps/s) |",
+    ]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import dataclasses
 import inspect
+import re
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -15,6 +16,9 @@ from dospcot.config.checks import check_at_least, check_positive, check_within
 from dospcot.core.selection import QUOTAS, WEIGHTINGS, Quota, Weighting
 from dospcot.envs.masking import check_label_fraction
 from dospcot.policies import ExpectedSarsaDQN
+
+DEVICE_PATTERN = re.compile(r"cpu|cuda(:\d+)?")
+"""The devices a ``[dqn]`` section may name besides SB3's ``"auto"``."""
 
 ModelKind = Literal["mlp", "linear"]
 LossKind = Literal["cross_entropy", "hinge"]
@@ -118,6 +122,9 @@ DQN_DEFAULTS: dict[str, Any] = {
     "batch_size": 64,
     "gamma": 0.97,
     "target_update_interval": 500,
+    # SB3's "auto" takes a GPU wherever torch sees one; a run stays on the CPU unless asked, where it is
+    # deterministic for its seed and where networks this small train faster (BENCHMARKS.md, GPU column).
+    "device": "cpu",
 }
 """Where a ``[dqn]`` default differs from stable-baselines3's ``DQN``; every other default is SB3's."""
 
@@ -134,13 +141,14 @@ DQN_SET_ELSEWHERE: dict[str, str] = {
 
 
 def _sb3_dqn_fields() -> list[tuple[str, type, Any]]:
-    """SB3 ``DQN``'s keyword arguments that a TOML value can hold (a bool, an int or a float), read from
-    its signature: (name, type, default), with dospcot's default where :data:`DQN_DEFAULTS` has one."""
+    """SB3 ``DQN``'s keyword arguments that a TOML value can hold (a bool, an int, a float or, for
+    ``device``, a string), read from its signature: (name, type, default), with dospcot's default where
+    :data:`DQN_DEFAULTS` has one."""
     fields = []
     for name, param in inspect.signature(DQN.__init__).parameters.items():
         # learning_rate may be a schedule and train_freq a tuple: a config gives the plain number.
         hint = param.annotation if param.annotation in (bool, int, float) else type(param.default)
-        if name.startswith("_") or name in DQN_SET_ELSEWHERE or hint not in (bool, int, float):
+        if name.startswith("_") or name in DQN_SET_ELSEWHERE or hint not in (bool, int, float, str):
             continue
         fields.append((name, hint, field(default=hint(DQN_DEFAULTS.get(name, param.default)))))
     return fields
@@ -169,6 +177,8 @@ class _DQNChecks:
             raise ValueError(
                 f"net_arch needs one or more hidden layer widths, each >= 1, got {list(self.net_arch)}"
             )
+        if self.device != "auto" and DEVICE_PATTERN.fullmatch(self.device) is None:
+            raise ValueError(f"device must be 'cpu', 'cuda', 'cuda:<index>' or 'auto', got {self.device!r}")
 
     def sb3_kwargs(self) -> dict[str, Any]:
         """The agents' keyword arguments: SB3 ``DQN``'s and ``cut_windows``."""

@@ -168,9 +168,11 @@ class BatchedRuns:
             warmup = first.num_timesteps < first.learning_starts
             greedy = None
             if flag or not warmup:
-                obs = th.as_tensor(np.stack([agent._last_obs for agent in agents]), dtype=th.float32)
+                obs = th.as_tensor(
+                    np.stack([agent._last_obs for agent in agents]), dtype=th.float32, device=first.device
+                )
                 with th.no_grad():
-                    greedy = learner.q_net(obs).argmax(dim=2).numpy()  # (S, 1)
+                    greedy = learner.q_net(obs).argmax(dim=2).cpu().numpy()  # (S, 1)
             for s, (agent, env) in enumerate(zip(agents, envs, strict=True)):
                 if warmup or draws[s].rand() < agent.exploration_rate:
                     action = np.array([agent.action_space.sample()])
@@ -235,7 +237,7 @@ class BatchedRuns:
                 index = th.as_tensor(draw.randint(0, agent.n_demonstrations, size=first.batch_size))
                 demo_states.append(agent._demo_obs[index])
                 demo_actions.append(agent._demo_actions[index])
-        eps = th.tensor([agent.exploration_rate for agent in agents], dtype=th.float32)
+        eps = th.tensor([agent.exploration_rate for agent in agents], dtype=th.float32, device=first.device)
         demos = (th.stack(demo_states), th.stack(demo_actions)) if demo_states else None
         losses, updated = self.learners[k].train_step(stack_samples(batches), eps, first.gamma, demos)
         for agent in agents:

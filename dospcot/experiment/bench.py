@@ -16,7 +16,12 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
-from dospcot.experiment.bench_batched import bench_batched_memory, bench_batched_seeds, bench_batched_wall
+from dospcot.experiment.bench_batched import (
+    bench_batched_memory,
+    bench_batched_seeds,
+    bench_batched_wall,
+    bench_stacked_update,
+)
 from dospcot.experiment.bench_rows import (
     Row,
     bench_cotraining_overhead,
@@ -30,27 +35,28 @@ from dospcot.experiment.bench_rows import (
 )
 from dospcot.experiment.interrupts import Interrupted
 
+
+def _esarsa_dqn(net: list[int], batch: int, **options: str) -> Callable[[bool, int], Row]:
+    """The ExpectedSarsaDQN-against-DQN row at ``net`` and ``batch`` (``options``: target, greedy, device)."""
+    return lambda quick, repeats: bench_esarsa_dqn(3_000 if quick else 20_000, repeats, net, batch, **options)
+
+
 BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "tabular": bench_tabular,
     # SB3's defaults: a small network, where the fixed per-update cost of the extra target ops shows most.
-    "esarsa_dqn": lambda quick, repeats: bench_esarsa_dqn(3_000 if quick else 20_000, repeats, [64, 64], 32),
-    "esarsa_dqn_wide": lambda quick, repeats: bench_esarsa_dqn(
-        3_000 if quick else 20_000, repeats, [256, 256], 256
-    ),
+    "esarsa_dqn": _esarsa_dqn([64, 64], 32),
+    "esarsa_dqn_wide": _esarsa_dqn([256, 256], 256),
     # The option the default trades away: pi_eps around the online network's greedy action.
-    "esarsa_dqn_online_wide": lambda quick, repeats: bench_esarsa_dqn(
-        3_000 if quick else 20_000, repeats, [256, 256], 256, greedy="online"
-    ),
+    "esarsa_dqn_online_wide": _esarsa_dqn([256, 256], 256, greedy="online"),
     # The same agent with SB3's max target: what relabelling and weighting alone cost.
-    "esarsa_dqn_q_target": lambda quick, repeats: bench_esarsa_dqn(
-        3_000 if quick else 20_000, repeats, [256, 256], 256, target="q"
-    ),
+    "esarsa_dqn_q_target": _esarsa_dqn([256, 256], 256, target="q"),
     "cotraining_overhead": bench_cotraining_overhead,
     "sweep_throughput": bench_sweep_throughput,
     "store_memory": bench_store_memory,
     "cotraining_scaling": bench_cotraining_scaling,
     "fast_highway": bench_fast_highway,
     "minigrid_wrappers": bench_minigrid_wrappers,
+    "stacked_update": bench_stacked_update,
     "batched_seeds": bench_batched_seeds,
     "batched_seeds_grid32": lambda quick, repeats: bench_batched_seeds(quick, repeats, "grid32-dospcot", 0.4),
     "batched_seeds_fasthighway": lambda quick, repeats: bench_batched_seeds(
@@ -60,6 +66,14 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "batched_memory": bench_batched_memory,
 }
 
+GPU_BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
+    "esarsa_dqn": _esarsa_dqn([64, 64], 32, device="cuda"),
+    "esarsa_dqn_wide": _esarsa_dqn([256, 256], 256, device="cuda"),
+    "stacked_update": lambda quick, repeats: bench_stacked_update(quick, repeats, device="cuda"),
+    "batched_seeds": lambda quick, repeats: bench_batched_seeds(quick, repeats, device="cuda"),
+}
+"""The rows ``dospcot bench --device cuda`` measures on a GPU, into the GPU column of the row of the same
+benchmark and setting: both sides on the GPU, in wall time."""
 
 NOTES = [
     "Notes:",
@@ -113,23 +127,49 @@ NOTES = [
     "and one run of seed 0. Each figure is the peak resident memory the training adds to a process that "
     "has already imported the package (Linux's `VmHWM`, its peak reset after the imports, less the "
     "`VmRSS` then), divided by the seeds it trained.",
+    "- The stacked-update row takes the gradient steps of 10 ExpectedSarsaDQN members (seeds 0-9, each "
+    "with its own replay buffer of random steps) as one stacked step of all members "
+    "(`dospcot.policies.stacked_esarsa.StackedExpectedSarsa`, as a batch of seeds takes them) and as each "
+    "member's own `train()`, one member after another; it isolates what stacking saves per update, "
+    "without the envs and classifiers of the batched-seeds rows.",
+    "- The GPU column holds the rows that have a GPU form, measured by `dospcot bench --device cuda` on "
+    "the machine its line above the table names: ours and the peer both on the GPU (`dqn.device = "
+    "'cuda'` for the batched-seeds row, whose classifiers and envs stay on the CPU), in wall time, since "
+    "the CPU only queues a GPU's work; the cell gives the ratio, whether it meets the row's target, and "
+    "the two medians. A dash: not measured on a GPU.",
 ]
 
 
-TABLE_HEADER = "| benchmark | setting | ours | peer | ratio | target | met |"
+TABLE_HEADER = "| benchmark | setting | ours | peer | ratio | target | met | GPU: ratio, met (ours vs peer) |"
+WITHOUT_GPU = "| benchmark | setting | ours | peer | ratio | target | met |"
+"""The header of a table written before the GPU column, which a rerun gives the column."""
 RERUN_NOTE = "Rerun alone by"
+GPU_NOTE = "GPU column by"
+NO_FIGURE = "–"
 
 
-def _table_line(row: Row) -> str:
+def _cells(line: str) -> list[str]:
+    return [cell.strip() for cell in line.strip().strip("|").split(" | ")]
+
+
+def _gpu_cell(row: Row) -> str:
+    return f"{row.ratio:.3f}, {'yes' if row.met else 'no'} ({row.ours.brief} vs {row.peer.brief})"
+
+
+def _table_line(row: Row, gpu: str = NO_FIGURE) -> str:
     sign = ">=" if row.higher_is_better else "<="
     return (
         f"| {row.name} | {row.setting} | {row.ours} | {row.peer} | {row.ratio:.3f} | "
-        f"{sign} {row.target} | {'yes' if row.met else 'no'} |"
+        f"{sign} {row.target} | {'yes' if row.met else 'no'} | {gpu} |"
     )
 
 
-def render(rows: list[Row], command: str, repeats: int) -> str:
-    """The text of BENCHMARKS.md."""
+def render(rows: list[Row], command: str, repeats: int, kept: str = "") -> str:
+    """The text of BENCHMARKS.md.
+
+    :param kept: the file a full run replaces: its GPU figures and notes stay, where a row's benchmark
+        and setting are unchanged (they were measured on another machine, which this run does not use).
+    """
     cpu = platform.processor() or platform.machine()
     lines = [
         "# Benchmarks",
@@ -139,16 +179,19 @@ def render(rows: list[Row], command: str, repeats: int) -> str:
         f"torch {torch.__version__}; no GPU.  ",
         f"Each figure: median of {repeats} repetitions [min, max]; "
         "ours and the peer alternate in the same run.",
-        "",
-        TABLE_HEADER,
-        "|---|---|---|---|---|---|---|",
     ]
-    lines += [_table_line(row) for row in rows]
+    old = kept.splitlines() if TABLE_HEADER in kept else []
+    gpu = {tuple(_cells(line)[:2]): _cells(line)[-1] for line in old if line.startswith("| ")}
+    lines += [part for line in old if line.startswith(GPU_NOTE) for part in ("", line)]
+    lines += ["", TABLE_HEADER, "|---|---|---|---|---|---|---|---|"]
+    lines += [_table_line(row, gpu.get((row.name, row.setting), NO_FIGURE)) for row in rows]
     lines += ["", *NOTES]
     return "\n".join(lines) + "\n"
 
 
-def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Sequence[str] = ()) -> list[Row]:
+def run_benchmarks(
+    out: Path, quick: bool, repeats: int, command: str, only: Sequence[str] = (), device: str = "cpu"
+) -> list[Row]:
     """Run every benchmark and write ``out`` (on one torch thread, as ``dospcot train`` runs).
 
     :param only: run these benchmarks (names of :data:`BENCHMARKS`) alone and put their rows into
@@ -156,24 +199,34 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
         (or the benchmark's only row, whose setting has changed), or goes last, and a line above the
         table names them, the command and the time. Every row is written as it lands; a full run
         then writes the file whole.
-    :raises ValueError: ``only`` names an unknown benchmark, or ``out`` holds no benchmark table.
+    :param device: ``"cuda"``: run :data:`GPU_BENCHMARKS` (those of ``only``, or all) on the GPU and
+        write their figures into the GPU column of ``out``'s rows of the same benchmark and setting,
+        leaving the rest of each row as it was; a line above the table names the GPU and the rows.
+    :raises ValueError: ``only`` names an unknown benchmark (or one without a GPU form, on a GPU),
+        ``out`` holds no benchmark table where one is needed, or torch sees no GPU for ``device``.
     """
-    unknown = [name for name in only if name not in BENCHMARKS]
+    catalogue = BENCHMARKS if device == "cpu" else GPU_BENCHMARKS
+    unknown = [name for name in only if name not in catalogue]
     if unknown:
-        raise ValueError(f"unknown benchmark(s) {unknown}; allowed: {', '.join(BENCHMARKS)}")
+        what = "benchmark(s)" if device == "cpu" else f"benchmark(s) on {device}"
+        raise ValueError(f"unknown {what} {unknown}; allowed: {', '.join(catalogue)}")
+    if device != "cpu" and not torch.cuda.is_available():
+        raise ValueError(f"--device {device}: torch {torch.__version__} sees no CUDA device")
     # Each row goes into the file as it lands, so that a stop or a failing row an hour in keeps the
     # rows before it: merged into the table already there, or, where there is none, a table of its own.
     text = out.read_text() if out.is_file() else ""
-    table = text if TABLE_HEADER in text else None
-    if only and table is None:
-        raise ValueError(f"--only updates the table of a file a full `dospcot bench` wrote; {out} holds none")
+    table = text if TABLE_HEADER in text or WITHOUT_GPU in text else None
+    if (only or device != "cpu") and table is None:
+        raise ValueError(
+            f"--only and --device update the table of a file a full `dospcot bench` wrote; {out} holds none"
+        )
     try:  # before the rows, which take most of an hour, not after
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise ValueError(f"--out {out}: cannot make its folder ({err.strerror or err})") from None
     torch.set_num_threads(1)
     rows: list[Row] = []
-    chosen = {name: BENCHMARKS[name] for name in only} if only else BENCHMARKS
+    chosen = {name: catalogue[name] for name in only} if only else catalogue
     with tqdm(chosen.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
         for name, bench in bar:
             bar.set_postfix_str(name)
@@ -184,17 +237,53 @@ def run_benchmarks(out: Path, quick: bool, repeats: int, command: str, only: Seq
                 raise Interrupted(
                     f"the rows measured before the stop, in {out}: {done}" if rows else "nothing"
                 ) from None
-            out.write_text(
-                render(rows, command, repeats) if table is None else _with_rows(table, rows, command)
-            )
-    if not only:  # a full run's rows are the whole table
-        out.write_text(render(rows, command, repeats))
+            if device != "cpu":
+                out.write_text(_with_gpu_rows(table, rows, list(chosen)[: len(rows)], command, repeats))
+            elif table is None:
+                out.write_text(render(rows, command, repeats))
+            else:
+                out.write_text(_with_rows(table, rows, list(chosen)[: len(rows)], command))
+    if not only and device == "cpu":  # a full run's rows are the whole table
+        out.write_text(render(rows, command, repeats, text))
     return rows
 
 
-def _with_rows(text: str, rows: list[Row], command: str) -> str:
-    """``text`` (a BENCHMARKS.md) with ``rows`` in its table and a line saying when they were rerun."""
+def _table_lines(text: str) -> list[str]:
+    """``text``'s lines, a table written before the GPU column given it (no figure in it yet)."""
     lines = text.splitlines()
+    if WITHOUT_GPU in lines:
+        at = lines.index(WITHOUT_GPU)
+        lines[at : at + 2] = [TABLE_HEADER, "|---|---|---|---|---|---|---|---|"]
+        lines = [
+            f"{line} {NO_FIGURE} |" if line.startswith("| ") and i > at + 1 else line
+            for i, line in enumerate(lines)
+        ]
+    return lines
+
+
+def _drop_superseded(lines: list[str], prefix: str, rerun: set[str]) -> None:
+    """Delete the notes starting ``prefix`` whose benchmarks are all in ``rerun`` (rewritten now).
+
+    A note names benchmarks (:data:`BENCHMARKS`' keys), not rows: two rows can share a name (the
+    ExpectedSarsaDQN rows differ in their setting alone), and a rerun of one must keep the other's note.
+    """
+    for i in reversed(range(len(lines))):
+        if lines[i].startswith(prefix) and set(lines[i].split(" UTC: ", 1)[1][:-1].split("; ")) <= rerun:
+            del lines[i - 1 : i + 1]  # the note and the blank line above it
+
+
+def _add_note(lines: list[str], note: str) -> None:
+    """``note`` as a paragraph of its own above the table; the code's notes below it."""
+    if "Notes:" in lines:  # the notes say how rows are measured: the code's are the current ones
+        lines[lines.index("Notes:") :] = NOTES
+    header = lines.index(TABLE_HEADER)
+    lines[header - 1 : header - 1] = ["", note]
+
+
+def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> str:
+    """``text`` (a BENCHMARKS.md) with ``rows`` (of the benchmarks ``names``) in its table and a line
+    saying when they were rerun; each row keeps its GPU figure."""
+    lines = _table_lines(text)
     for row in rows:
         key = f"| {row.name} | {row.setting} |"
         at = next((i for i, line in enumerate(lines) if line.startswith(key)), None)
@@ -205,15 +294,34 @@ def _with_rows(text: str, rows: list[Row], command: str) -> str:
             at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
             lines.insert(at, _table_line(row))
         else:
-            lines[at] = _table_line(row)
-    rerun = {row.name for row in rows}
-    for i in reversed(range(len(lines))):  # a note whose rows are all rerun now is out of date
-        if lines[i].startswith(RERUN_NOTE) and set(lines[i].split(" UTC: ", 1)[1][:-1].split("; ")) <= rerun:
-            del lines[i - 1 : i + 1]  # the note and the blank line above it
-    if "Notes:" in lines:  # the notes say how rows are measured: the code's are the current ones
-        lines[lines.index("Notes:") :] = NOTES
-    header = lines.index(TABLE_HEADER)
-    names = "; ".join(row.name for row in rows)
-    note = f"{RERUN_NOTE} `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {names}."
-    lines[header - 1 : header - 1] = ["", note]  # a paragraph of its own above the table
+            same = lines[at].startswith(key)  # a GPU figure of another setting describes this one no more
+            lines[at] = _table_line(row, _cells(lines[at])[-1] if same else NO_FIGURE)
+    _drop_superseded(lines, RERUN_NOTE, set(names))
+    _add_note(
+        lines, f"{RERUN_NOTE} `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {'; '.join(names)}."
+    )
+    return "\n".join(lines) + "\n"
+
+
+def _with_gpu_rows(text: str, rows: list[Row], names: list[str], command: str, repeats: int) -> str:
+    """``text`` (a BENCHMARKS.md) with ``rows`` (of the benchmarks ``names``), measured on the GPU, in
+    the GPU column of its rows of the same benchmark and setting (a row the table lacks goes last, with
+    no CPU figure), and a line naming the GPU, the command and the benchmarks."""
+    lines = _table_lines(text)
+    for row in rows:
+        key = f"| {row.name} | {row.setting} |"
+        at = next((i for i, line in enumerate(lines) if line.startswith(key)), None)
+        if at is None:
+            at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
+            sign = ">=" if row.higher_is_better else "<="
+            cpu = [NO_FIGURE] * 3 + [f"{sign} {row.target}", NO_FIGURE]
+            lines.insert(at, "| " + " | ".join([row.name, row.setting, *cpu, NO_FIGURE]) + " |")
+        lines[at] = "| " + " | ".join([*_cells(lines[at])[:-1], _gpu_cell(row)]) + " |"
+    _drop_superseded(lines, GPU_NOTE, set(names))
+    gpu = f"{torch.cuda.get_device_name()}, torch {torch.__version__}, Python {platform.python_version()}"
+    _add_note(
+        lines,
+        f"{GPU_NOTE} `{command}` ({gpu}; wall time, median of {repeats} repetitions) "
+        f"on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {'; '.join(names)}.",
+    )
     return "\n".join(lines) + "\n"

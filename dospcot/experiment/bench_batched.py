@@ -12,24 +12,30 @@ from concurrent.futures import ProcessPoolExecutor
 from functools import partial
 from pathlib import Path
 
+import torch as th
+
 from dospcot.config.loading import load_config
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.batched_runs import BatchedRuns
-from dospcot.experiment.bench_rows import Row, _alternating
+from dospcot.experiment.bench_rows import Clock, Row, _alternating, onehot_cliff
 from dospcot.experiment.sweep import run_sweep
 from dospcot.experiment.sweep_spec import SweepSpec
 from dospcot.experiment.train import build_run
+from dospcot.policies import ExpectedSarsaDQN
+from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
 
 
-def _cpu_seconds_per_seed(cfgs: list[TrainConfig], batched: bool) -> float:
-    """CPU seconds per seed of training ``cfgs`` (one per seed) as one batch, or one run after another."""
-    start = time.process_time()
+def _seconds_per_seed(cfgs: list[TrainConfig], batched: bool) -> float:
+    """Seconds (:class:`Clock`: CPU time, or wall time on a GPU) per seed of training ``cfgs`` (one per
+    seed) as one batch, or one run after another."""
+    clock = Clock(cfgs[0].dqn.device)
+    clock.start()
     runs = [build_run(cfg) for cfg in cfgs] if batched else []
     if batched:
         BatchedRuns(runs).run()
     for cfg in [] if batched else cfgs:
         build_run(cfg).run()
-    return (time.process_time() - start) / len(cfgs)
+    return clock.stop() / len(cfgs)
 
 
 BATCHED_CELLS: dict[str, tuple[str, ...]] = {
@@ -42,26 +48,80 @@ both ways costs minutes, not hours (the second round is the first that trains th
 on a grid: ``learn_from_round = 2``)."""
 
 
-def _batched_cell(preset: str, seeds: int) -> list[TrainConfig]:
-    """Seeds 0..``seeds``-1 of ``preset`` shortened as :data:`BATCHED_CELLS` says."""
-    return [load_config(preset, [*BATCHED_CELLS[preset], f"seed={seed}"]) for seed in range(seeds)]
+def _batched_cell(preset: str, seeds: int, device: str = "cpu") -> list[TrainConfig]:
+    """Seeds 0..``seeds``-1 of ``preset`` shortened as :data:`BATCHED_CELLS` says, on ``device``."""
+    overrides = [*BATCHED_CELLS[preset], f"dqn.device={device}"]
+    return [load_config(preset, [*overrides, f"seed={seed}"]) for seed in range(seeds)]
 
 
 def bench_batched_seeds(
-    quick: bool, repeats: int, preset: str = "grid16-dospcot", target: float = 0.25
+    quick: bool, repeats: int, preset: str = "grid16-dospcot", target: float = 0.25, device: str = "cpu"
 ) -> Row:
-    """CPU time per seed of ``preset``'s seeds trained as one batch against runs of their own."""
+    """Time per seed of ``preset``'s seeds trained as one batch against runs of their own, the agents
+    on ``device`` (the classifiers and envs stay on the CPU)."""
     seeds = 4 if quick else 10
-    overrides = BATCHED_CELLS[preset]
-    cfgs = _batched_cell(preset, seeds)
+    cfgs = _batched_cell(preset, seeds, device)
     ours, peer = _alternating(
-        repeats, lambda _: _cpu_seconds_per_seed(cfgs, True), lambda _: _cpu_seconds_per_seed(cfgs, False)
+        repeats, lambda _: _seconds_per_seed(cfgs, True), lambda _: _seconds_per_seed(cfgs, False)
     )
-    shortened = ", ".join(f"`{o}`" for o in overrides)
+    shortened = ", ".join(f"`{o}`" for o in BATCHED_CELLS[preset])
     return Row.measured(
         "`dospcot train --seeds`, one batch vs runs of their own: CPU time per seed",
         f"`{preset}`, seeds 0-{seeds - 1}, {shortened}",
-        "CPU-s", ours, peer, higher_is_better=False, target=target,
+        Clock(device).unit, ours, peer, higher_is_better=False, target=target,
+    )  # fmt: skip
+
+
+STACKED_MEMBERS, STACKED_NET, STACKED_BATCH = 10, [128, 128], 64
+"""The stacked-update row: the members, and the presets' ``dqn.net_arch`` and ``dqn.batch_size``."""
+
+
+def _filled_agents(device: str, fill: int) -> list[ExpectedSarsaDQN]:
+    """:data:`STACKED_MEMBERS` agents of seeds 0, 1, ..., their buffers holding ``fill`` random steps."""
+    agents = []
+    for seed in range(STACKED_MEMBERS):
+        agent = ExpectedSarsaDQN(
+            "MlpPolicy", onehot_cliff(), learning_starts=fill, buffer_size=fill, batch_size=STACKED_BATCH,
+            policy_kwargs={"net_arch": STACKED_NET}, seed=seed, device=device,
+        )  # fmt: skip
+        agent.learn(fill)  # uniform actions until learning_starts: no gradient step yet
+        agents.append(agent)
+    return agents
+
+
+def _member_updates_per_second(agents: list[ExpectedSarsaDQN], steps: int, stacked: bool) -> float:
+    """Gradient updates per second, counted over all members, of ``steps`` updates of every agent: one
+    stacked step of all members at a time (as :class:`BatchedRuns` takes them), or each agent's own
+    ``train`` one agent after another. Both sample each member's batch from its own buffer."""
+    clock = Clock(str(agents[0].device))
+    clock.start()
+    if stacked:
+        learner = StackedExpectedSarsa.from_agents(agents)
+        eps = th.tensor([a.exploration_rate for a in agents], dtype=th.float32, device=agents[0].device)
+        for _ in range(steps):
+            batches = [agent.replay_buffer.sample(STACKED_BATCH) for agent in agents]
+            learner.train_step(stack_samples(batches), eps, agents[0].gamma)
+    else:
+        for agent in agents:
+            agent.train(steps, STACKED_BATCH)
+    return steps * len(agents) / clock.stop()
+
+
+def bench_stacked_update(quick: bool, repeats: int, device: str = "cpu") -> Row:
+    """Member updates per second of the stacked gradient step against each member's ``train``."""
+    steps, fill = (100, 1_000) if quick else (500, 5_000)
+    agents = _filled_agents(device, fill)
+    ours, peer = _alternating(
+        repeats,
+        lambda _: _member_updates_per_second(agents, steps, True),
+        lambda _: _member_updates_per_second(agents, steps, False),
+    )
+    return Row.measured(
+        f"One stacked gradient step of {STACKED_MEMBERS} members vs each member's "
+        "`ExpectedSarsaDQN.train()`: member updates per second",
+        f"CliffWalking-v1 one-hot, MlpPolicy {STACKED_NET}, batch {STACKED_BATCH}, {STACKED_MEMBERS} "
+        f"members, {steps} updates each, every batch sampled from the member's buffer",
+        f"updates/{Clock(device).unit}", ours, peer, higher_is_better=True, target=2.0,
     )  # fmt: skip
 
 

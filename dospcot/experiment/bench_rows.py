@@ -16,6 +16,7 @@ from typing import Any
 
 import gymnasium as gym
 import numpy as np
+import torch
 from stable_baselines3 import DQN
 
 from dospcot.config.learning_sections import TabularConfig
@@ -48,9 +49,17 @@ class Measurement:
         """The median, min and max of repeated measurements ``values``, in ``unit``."""
         return cls(statistics.median(values), min(values), max(values), unit)
 
+    @property
+    def _format(self) -> str:
+        return ",.0f" if self.median >= 100 else ".2f"
+
+    @property
+    def brief(self) -> str:
+        """The median and the unit alone."""
+        return f"{self.median:{self._format}} {self.unit}"
+
     def __str__(self) -> str:
-        fmt = ",.0f" if self.median >= 100 else ".2f"
-        return f"{self.median:{fmt}} {self.unit} [{self.low:{fmt}}, {self.high:{fmt}}]"
+        return f"{self.brief} [{self.low:{self._format}}, {self.high:{self._format}}]"
 
 
 @dataclass(frozen=True)
@@ -95,14 +104,45 @@ def _alternating(
     return results
 
 
-def _onehot_cliff() -> gym.Env:
+def onehot_cliff() -> gym.Env:
+    """CliffWalking with one-hot observations, 100 steps an episode: the agent rows' task."""
     return ViewObservationWrapper(gym.make("CliffWalking-v1", max_episode_steps=100), CLIFF_VIEWS["onehot"])
 
 
-def _steps_per_second(make: Callable[..., DQN], steps: int, seed: int, net: list[int], batch: int) -> float:
+class Clock:
+    """Seconds spent between :meth:`start` and :meth:`stop`: the process's CPU time on the CPU (see
+    NOTES), wall time on a GPU, whose work the CPU only queues (the GPU finishes its queue first)."""
+
+    def __init__(self, device: str) -> None:
+        self.device = device
+        self._started = 0.0
+
+    @property
+    def unit(self) -> str:
+        """``"CPU-s"`` or ``"s"``."""
+        return "CPU-s" if self.device == "cpu" else "s"
+
+    def _now(self) -> float:
+        if self.device == "cpu":
+            return time.process_time()
+        torch.cuda.synchronize(self.device)
+        return time.perf_counter()
+
+    def start(self) -> None:
+        """Start counting."""
+        self._started = self._now()
+
+    def stop(self) -> float:
+        """The seconds since :meth:`start`."""
+        return self._now() - self._started
+
+
+def _steps_per_second(
+    make: Callable[..., DQN], steps: int, seed: int, net: list[int], batch: int, device: str
+) -> float:
     model = make(
         "MlpPolicy",
-        _onehot_cliff(),
+        onehot_cliff(),
         learning_starts=500,
         train_freq=4,
         gradient_steps=1,
@@ -110,10 +150,12 @@ def _steps_per_second(make: Callable[..., DQN], steps: int, seed: int, net: list
         buffer_size=50_000,
         policy_kwargs={"net_arch": net},
         seed=seed,
+        device=device,
     )
-    start = time.process_time()  # CPU time: see NOTES
+    clock = Clock(device)
+    clock.start()
     model.learn(steps)
-    return steps / (time.process_time() - start)
+    return steps / clock.stop()
 
 
 def bench_esarsa_dqn(
@@ -123,20 +165,22 @@ def bench_esarsa_dqn(
     batch: int,
     target: str = "expected_sarsa",
     greedy: str = "target",
+    device: str = "cpu",
 ) -> Row:
-    """Env steps per second of ExpectedSarsaDQN against SB3 DQN with identical settings."""
+    """Env steps per second of ExpectedSarsaDQN against SB3 DQN with identical settings, both on
+    ``device``."""
     ours_make = partial(ExpectedSarsaDQN, target=target, greedy=greedy)
     ours, peer = _alternating(
         repeats,
-        lambda rep: _steps_per_second(ours_make, steps, rep, net, batch),
-        lambda rep: _steps_per_second(DQN, steps, rep, net, batch),
+        lambda rep: _steps_per_second(ours_make, steps, rep, net, batch, device),
+        lambda rep: _steps_per_second(DQN, steps, rep, net, batch, device),
     )
     return Row.measured(
         f"ExpectedSarsaDQN (target={target!r}"
         + (f", greedy={greedy!r}" if target == "expected_sarsa" else "")
         + ") vs SB3 DQN: env steps per second",
         f"CliffWalking-v1 one-hot, {steps:,} steps, MlpPolicy {net}, train_freq 4, batch {batch}",
-        "steps/CPU-s", ours, peer, higher_is_better=True, target=0.95,
+        f"steps/{Clock(device).unit}", ours, peer, higher_is_better=True, target=0.95,
     )  # fmt: skip
 
 

@@ -33,9 +33,11 @@ from typing import Any
 
 import numpy as np
 import stable_baselines3
+import torch
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm.auto import tqdm
 
+from dospcot.config.errors import ConfigError
 from dospcot.config.loading import load_run_config
 from dospcot.config.run_configs import RunConfig, TrainConfig
 from dospcot.core.cotraining_run import CoTrainingRun
@@ -86,8 +88,17 @@ class _StepBar(BaseCallback):
 
 def check_config(cfg: RunConfig) -> None:
     """The task's check step (:meth:`~dospcot.tasks.registry.Task.check`): what only files, imports or
-    the env can tell, before any run folder is made."""
+    the env can tell, before any run folder is made; and that a GPU the ``[dqn]`` section names is there.
+    """
     cfg.task_definition.check(cfg)
+    if isinstance(cfg, TrainConfig) and set(cfg.agent_kinds) - {"tabular"}:
+        device = cfg.dqn.device
+        index = int(device.partition(":")[2] or 0)
+        if device.startswith("cuda") and index >= torch.cuda.device_count():
+            raise ConfigError(
+                f"dqn.device = {device!r}, but torch sees {torch.cuda.device_count()} CUDA device(s) "
+                f"(torch {torch.__version__}); set dqn.device = 'cpu'"
+            )
 
 
 def train(

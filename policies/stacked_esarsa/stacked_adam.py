@@ -35,7 +35,7 @@ class StackedAdam:
         self.params = list(params)
         self.lr, self.betas, self.eps = float(lr), betas, float(eps)
         n = int(self.params[0].shape[0])
-        self.steps = th.zeros(n, dtype=th.float64)
+        self.steps = th.zeros(n, dtype=th.float64, device=self.params[0].device)
         """(S,) the updates each member has taken."""
         self.exp_avg = [th.zeros_like(p) for p in self.params]
         self.exp_avg_sq = [th.zeros_like(p) for p in self.params]

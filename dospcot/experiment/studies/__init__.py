@@ -50,6 +50,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from dospcot.experiment.interrupts import Interrupted, stop_on_signals
 from dospcot.experiment.report import TrialRun, load_runs, write_report
 from dospcot.experiment.studies import (
     batched_seeds,
@@ -219,6 +220,8 @@ def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") ->
                     sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
     except SweepError as err:
         sys.exit(f"{prog}: {err}")
+    except KeyboardInterrupt:  # a stop between two sweeps, or as one closed: no trial was mid-run
+        raise Interrupted(f"every trial that finished, under {args.runs_dir}", command) from None
     written = []
     for sweep in study.sweeps:
         with contextlib.suppress(SweepError):  # a sweep not started has no report
@@ -261,4 +264,12 @@ def main(argv: Sequence[str] | None = None) -> None:
     )
     parser.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
     args = parser.parse_args(argv)
-    run_study(args, header_command(("python", "scripts/study.py"), args.study, argv[1:]))
+    try:
+        with stop_on_signals():
+            run_study(args, header_command(("python", "scripts/study.py"), args.study, argv[1:]))
+    except Interrupted as stop:  # as `dospcot study` says it: what was kept, and how to go on
+        print(f"study.py: interrupted; kept {stop}", file=sys.stderr)
+        raise SystemExit(130) from None
+    except KeyboardInterrupt:
+        print("study.py: interrupted", file=sys.stderr)
+        raise SystemExit(130) from None
