@@ -325,3 +325,29 @@ def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on
         studies.main(["minigrid", "--runs-dir", str(runs)])
     assert stop.value.code == 130
     assert capsys.readouterr().err.startswith("study.py: interrupted; kept every trial that finished")
+
+
+def test_a_stop_as_a_sweep_closes_counts_what_finished(tmp_path, monkeypatch):
+    """SIGTERM after the last trial ended, while the sweep shuts its workers down: the line still says
+    what was kept, not a bare "interrupted"."""
+    from dospcot.experiment import sweep as sweep_module
+    from dospcot.experiment.interrupts import Interrupted
+    from dospcot.experiment.sweep_spec import SweepSpec
+
+    class StoppedAsItCloses(sweep_module.tqdm):
+        stops = 1  # once: tqdm closes again when collected
+
+        def close(self):
+            super().close()
+            if StoppedAsItCloses.stops:
+                StoppedAsItCloses.stops -= 1
+                raise KeyboardInterrupt  # what SIGTERM raises (stop_on_signals)
+
+    monkeypatch.setattr(sweep_module, "tqdm", StoppedAsItCloses)
+    spec = SweepSpec(("tiny",), {}, (0,), tuple(SHORT))
+    with pytest.raises(Interrupted) as stop:
+        sweep_module.run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)
+    assert str(stop.value) == (
+        "1 finished trial(s) of the 1 to run; none stopped mid-run; "
+        f"resume with: dospcot sweep --resume {tmp_path / 's'}"
+    )

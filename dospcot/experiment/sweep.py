@@ -347,20 +347,35 @@ def _run_local(
         for process in list(pool._processes.values()):
             process.terminate()
         pool.shutdown(wait=True, cancel_futures=True)
-        trials = [trial for job in jobs for trial in job]
-        finished = sum(is_finished(sweep_dir, trial) for trial in trials)
-        started = [t for t in trials if (trial_dir(sweep_dir, t) / CONFIG_FILE).is_file()]
-        stopped = [t.trial_id for t in started if not is_finished(sweep_dir, t)]
-        raise Interrupted(
-            f"{finished} finished trial(s) of the {total} to run; {len(stopped)} stopped mid-run "
-            f"({', '.join(stopped) or 'none'}), which resume from their last finished round",
-            f"dospcot sweep --resume {sweep_dir}",
-        ) from None
+        raise _interrupted(sweep_dir, jobs) from None
     finally:
-        bar.close()
-        pool.shutdown(wait=True)
-        manager.shutdown()
+        # A stop as the sweep closes (its trials have ended, or were stopped) still closes the rest.
+        stop = False
+        for close in (bar.close, partial(pool.shutdown, wait=True), manager.shutdown):
+            try:
+                close()
+            except KeyboardInterrupt:
+                stop = True
+        if stop:
+            raise _interrupted(sweep_dir, jobs) from None
     return failed
+
+
+def _interrupted(sweep_dir: Path, jobs: list[list[Trial]]) -> Interrupted:
+    """What a stopped sweep kept, counted on disk, and the command that goes on."""
+    trials = [trial for job in jobs for trial in job]
+    finished = sum(is_finished(sweep_dir, trial) for trial in trials)
+    started = [t for t in trials if (trial_dir(sweep_dir, t) / CONFIG_FILE).is_file()]
+    stopped = [t.trial_id for t in started if not is_finished(sweep_dir, t)]
+    mid_run = (
+        f"{len(stopped)} stopped mid-run ({', '.join(stopped)}), which resume from their last finished round"
+        if stopped
+        else "none stopped mid-run"
+    )
+    return Interrupted(
+        f"{finished} finished trial(s) of the {len(trials)} to run; {mid_run}",
+        f"dospcot sweep --resume {sweep_dir}",
+    )
 
 
 def _worker_start(parent: int) -> None:
