@@ -156,12 +156,21 @@ def _gpu_cell(row: Row) -> str:
     return f"{row.ratio:.3f}, {'yes' if row.met else 'no'} ({row.ours.brief} vs {row.peer.brief})"
 
 
+def _target(row: Row) -> str:
+    return f"{'>=' if row.higher_is_better else '<='} {row.target}"
+
+
 def _table_line(row: Row, gpu: str = NO_FIGURE) -> str:
-    sign = ">=" if row.higher_is_better else "<="
     return (
         f"| {row.name} | {row.setting} | {row.ours} | {row.peer} | {row.ratio:.3f} | "
-        f"{sign} {row.target} | {'yes' if row.met else 'no'} | {gpu} |"
+        f"{_target(row)} | {'yes' if row.met else 'no'} | {gpu} |"
     )
+
+
+def _row_at(lines: list[str], row: Row) -> int | None:
+    """The index of ``row``'s line in ``lines``: the same benchmark name and setting; None if none."""
+    key = f"| {row.name} | {row.setting} |"
+    return next((i for i, line in enumerate(lines) if line.startswith(key)), None)
 
 
 def render(rows: list[Row], command: str, repeats: int, kept: str = "") -> str:
@@ -285,8 +294,8 @@ def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> st
     saying when they were rerun; each row keeps its GPU figure."""
     lines = _table_lines(text)
     for row in rows:
-        key = f"| {row.name} | {row.setting} |"
-        at = next((i for i, line in enumerate(lines) if line.startswith(key)), None)
+        at = _row_at(lines, row)
+        same = at is not None  # only then does the old GPU figure describe this row
         named = [i for i, line in enumerate(lines) if line.startswith(f"| {row.name} | ")]
         if at is None and len(named) == 1 and [r.name for r in rows].count(row.name) == 1:
             at = named[0]  # the benchmark's setting changed: its one old row describes it no more
@@ -294,7 +303,6 @@ def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> st
             at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
             lines.insert(at, _table_line(row))
         else:
-            same = lines[at].startswith(key)  # a GPU figure of another setting describes this one no more
             lines[at] = _table_line(row, _cells(lines[at])[-1] if same else NO_FIGURE)
     _drop_superseded(lines, RERUN_NOTE, set(names))
     _add_note(
@@ -309,12 +317,10 @@ def _with_gpu_rows(text: str, rows: list[Row], names: list[str], command: str, r
     no CPU figure), and a line naming the GPU, the command and the benchmarks."""
     lines = _table_lines(text)
     for row in rows:
-        key = f"| {row.name} | {row.setting} |"
-        at = next((i for i, line in enumerate(lines) if line.startswith(key)), None)
+        at = _row_at(lines, row)
         if at is None:
             at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
-            sign = ">=" if row.higher_is_better else "<="
-            cpu = [NO_FIGURE] * 3 + [f"{sign} {row.target}", NO_FIGURE]
+            cpu = [NO_FIGURE] * 3 + [_target(row), NO_FIGURE]
             lines.insert(at, "| " + " | ".join([row.name, row.setting, *cpu, NO_FIGURE]) + " |")
         lines[at] = "| " + " | ".join([*_cells(lines[at])[:-1], _gpu_cell(row)]) + " |"
     _drop_superseded(lines, GPU_NOTE, set(names))
