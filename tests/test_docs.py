@@ -57,7 +57,7 @@ def test_a_study_without_runs_publishes_no_figure(rendered):
     """The unpublished studies' pages and rows name no number of theirs, only what would produce them."""
     unpublished = [name for name, result in rendered.items() if result.table is None]
     assert set(unpublished) == {
-        "demo-labels", "equal-effort", "equal-effort-highway", "highway", "queries-highway",
+        "demo-labels", "equal-effort", "equal-effort-highway", "highway",
     }  # fmt: skip
     for name in unpublished:
         page = rendered[name].page
