@@ -173,6 +173,11 @@ def _row_at(lines: list[str], row: Row) -> int | None:
     return next((i for i, line in enumerate(lines) if line.startswith(key)), None)
 
 
+def _after_table(lines: list[str]) -> int:
+    """The index just past the table's last row: where a row the table lacks goes."""
+    return max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
+
+
 def render(rows: list[Row], command: str, repeats: int, kept: str = "") -> str:
     """The text of BENCHMARKS.md.
 
@@ -299,8 +304,8 @@ def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> st
         named = [i for i, line in enumerate(lines) if line.startswith(f"| {row.name} | ")]
         if at is None and len(named) == 1 and [r.name for r in rows].count(row.name) == 1:
             at = named[0]  # the benchmark's setting changed: its one old row describes it no more
-        if at is None:  # a new row: after the table's last
-            at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
+        if at is None:  # a new row
+            at = _after_table(lines)
             lines.insert(at, _table_line(row))
         else:
             lines[at] = _table_line(row, _cells(lines[at])[-1] if same else NO_FIGURE)
@@ -319,7 +324,7 @@ def _with_gpu_rows(text: str, rows: list[Row], names: list[str], command: str, r
     for row in rows:
         at = _row_at(lines, row)
         if at is None:
-            at = max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
+            at = _after_table(lines)
             cpu = [NO_FIGURE] * 3 + [_target(row), NO_FIGURE]
             lines.insert(at, "| " + " | ".join([row.name, row.setting, *cpu, NO_FIGURE]) + " |")
         lines[at] = "| " + " | ".join([*_cells(lines[at])[:-1], _gpu_cell(row)]) + " |"
