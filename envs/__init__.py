@@ -32,12 +32,12 @@ register(
     entry_point="dospcot.envs.highway:make_masked_highway",
     kwargs={"env_id": "dospcot/FastHighway-v0"},
 )
-for _task in ("highway-fast-v0", "merge-v0", "roundabout-v0"):
-    _name = "".join(part.capitalize() for part in _task[:-3].split("-"))
+for _env_id in ("highway-fast-v0", "merge-v0", "roundabout-v0"):
+    _name = "".join(part.capitalize() for part in _env_id[:-3].split("-"))
     register(
         id=f"dospcot/Masked{_name}-v0",
         entry_point="dospcot.envs.highway:make_masked_highway",
-        kwargs={"env_id": _task},
+        kwargs={"env_id": _env_id},
     )
 
 __all__ = [

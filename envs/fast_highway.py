@@ -9,8 +9,9 @@ numpy calls whatever the number of envs. :class:`FastHighwayEnv` wraps one such 
 ``DiscreteMetaAction`` action space and the default ``Kinematics`` observation.
 
 Two views of the state are computed exactly as highway-env computes them for the same vehicles
-(see :data:`VIEW_NAMES`): ``"kinematics"`` (``KinematicObservation`` with default arguments, the
-env's observation) and ``"occupancy"`` (``OccupancyGridObservation`` with default arguments).
+(:mod:`dospcot.envs.fast_highway_views`): ``"kinematics"`` (``KinematicObservation`` with default
+arguments, the env's observation) and ``"occupancy"`` (``OccupancyGridObservation`` with default
+arguments).
 
 What is copied from highway-env (``HighwayEnvFast``):
 
@@ -57,51 +58,33 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 
-VIEW_NAMES: tuple[str, ...] = ("kinematics", "occupancy")
-
-# highway-env's constants (vehicle/kinematics.py, vehicle/controller.py, vehicle/behavior.py, road/lane.py).
-LANE_WIDTH = 4.0  # [m]
-LENGTH = 5.0  # [m]
-WIDTH = 2.0  # [m]
-MAX_SPEED = 40.0  # [m/s]
-MIN_SPEED = -40.0  # [m/s]
-SPEED_LIMIT = 30.0  # [m/s], of every lane of the straight road
-TARGET_SPEEDS = np.array([20.0, 25.0, 30.0])  # [m/s], MDPVehicle.DEFAULT_TARGET_SPEEDS
-EGO_INITIAL_SPEED = 25.0  # [m/s]
-KP_A = 1 / 0.6  # [1/s]
-KP_HEADING = 1 / 0.2  # [1/s]
-KP_LATERAL = 1 / 0.6  # [1/s]
-MAX_STEERING_ANGLE = np.pi / 3  # [rad]
-IDM_ACC_MAX = 6.0  # [m/s2]
-IDM_COMFORT_ACC_MAX = 3.0  # [m/s2]
-IDM_COMFORT_ACC_MIN = -5.0  # [m/s2]
-IDM_DISTANCE_WANTED = 5.0 + LENGTH  # [m]
-IDM_TIME_WANTED = 1.5  # [s]
-IDM_DELTA_RANGE = (3.5, 4.5)
-PERCEPTION_DISTANCE = 5.0 * MAX_SPEED  # [m]
-
-# Observation defaults (envs/common/observation.py).
-KIN_VEHICLES = 5
-KIN_FEATURES = 5  # presence, x, y, vx, vy
-GRID_LOW = -27.5  # [m], both axes
-GRID_STEP = 5.0  # [m]
-GRID_CELLS = 11
-GRID_FEATURES = 4  # presence, vx, vy, on_road
-ROAD_PERCEPTION = 100.0  # [m], fill_road_layer_by_lanes' lane_perception_distance
+from dospcot.envs.fast_highway_views import VIEW_FUNCTIONS, VIEW_NAMES, view_space
+from dospcot.envs.highway_constants import (
+    EGO_INITIAL_SPEED,
+    IDM_ACC_MAX,
+    IDM_COMFORT_ACC_MAX,
+    IDM_COMFORT_ACC_MIN,
+    IDM_DELTA_RANGE,
+    IDM_DISTANCE_WANTED,
+    IDM_TIME_WANTED,
+    KIN_FEATURES,
+    KIN_VEHICLES,
+    KP_A,
+    KP_HEADING,
+    KP_LATERAL,
+    LANE_WIDTH,
+    LENGTH,
+    MAX_SPEED,
+    MAX_STEERING_ANGLE,
+    MIN_SPEED,
+    SPEED_LIMIT,
+    TARGET_SPEEDS,
+    WIDTH,
+    lmap,
+    not_zero,
+)
 
 LANE_LEFT, IDLE, LANE_RIGHT, FASTER, SLOWER = range(5)
-
-_VIEW_SHAPES: dict[str, tuple[int, ...]] = {
-    "kinematics": (KIN_VEHICLES, KIN_FEATURES),
-    "occupancy": (GRID_FEATURES, GRID_CELLS, GRID_CELLS),
-}
-
-
-def view_space(name: str) -> gym.spaces.Box:
-    """The ``Box(-inf, inf, shape, float32)`` of a view: (5, 5) kinematics, (4, 11, 11) occupancy."""
-    if name not in _VIEW_SHAPES:
-        raise ValueError(f"unknown view {name!r}; allowed: {list(VIEW_NAMES)}")
-    return gym.spaces.Box(-np.inf, np.inf, shape=_VIEW_SHAPES[name], dtype=np.float32)
 
 
 @dataclass(frozen=True)
@@ -173,125 +156,10 @@ class FastHighwayConfig:
             )
 
 
-def _lmap(v: np.ndarray, x0: float, x1: float, y0: float, y1: float) -> np.ndarray:
-    """highway-env's ``utils.lmap``, with the same operation order so that results match to the bit."""
-    return y0 + (v - x0) * (y1 - y0) / (x1 - x0)
-
-
-def _not_zero(x: np.ndarray, eps: float = 1e-2) -> np.ndarray:
-    """highway-env's ``utils.not_zero``: values within ``eps`` of 0 become ``±eps``."""
-    return np.where(np.abs(x) > eps, x, np.where(x >= 0, eps, -eps))
-
-
 def _speed_to_index(speed: np.ndarray) -> np.ndarray:
     """``MDPVehicle.speed_to_index``: the index of the target speed nearest to ``speed``."""
     x = (speed - TARGET_SPEEDS[0]) / (TARGET_SPEEDS[-1] - TARGET_SPEEDS[0])
     return np.clip(np.round(x * (TARGET_SPEEDS.size - 1)), 0, TARGET_SPEEDS.size - 1).astype(np.intp)
-
-
-def kinematics_view(
-    x: np.ndarray, y: np.ndarray, speed: np.ndarray, heading: np.ndarray, lanes_count: int
-) -> np.ndarray:
-    """highway-env's default ``KinematicObservation`` of the ego (column 0) in each env.
-
-    :param x, y: positions [m], shape (n, V), ego in column 0.
-    :param speed: [m/s], shape (n, V).
-    :param heading: [rad], shape (n, V).
-    :param lanes_count: number of lanes; sets the y normalisation range ``±4 * lanes_count`` m.
-    :return: (n, 5, 5) float32 rows (presence, x, y, vx, vy): the ego absolute, then up to 4 vehicles
-        relative to it, nearest first; everything normalised and clipped to [-1, 1], missing rows 0.
-    """
-    n, n_vehicles = x.shape
-    vx = speed * np.cos(heading)
-    vy = speed * np.sin(heading)
-    y_max = LANE_WIDTH * lanes_count
-    ranges = ((-PERCEPTION_DISTANCE, PERCEPTION_DISTANCE), (-y_max, y_max), (-2 * MAX_SPEED, 2 * MAX_SPEED))
-    obs = np.zeros((n, KIN_VEHICLES, KIN_FEATURES))
-    obs[:, 0, 0] = 1.0
-    for k, (values, (lo, hi)) in enumerate(zip((x, y, vx, vy), ranges + ranges[-1:], strict=True)):
-        obs[:, 0, 1 + k] = _lmap(values[:, 0], lo, hi, -1.0, 1.0)
-    n_rows = min(KIN_VEHICLES - 1, n_vehicles - 1)
-    if n_rows > 0:
-        dx = x[:, 1:] - x[:, :1]
-        dy = y[:, 1:] - y[:, :1]
-        # Road.close_objects_to(see_behind=False): nearer than PERCEPTION_DISTANCE and less than two
-        # lengths behind, sorted (stably, in road order) by the longitudinal distance.
-        visible = (np.sqrt(dx * dx + dy * dy) < PERCEPTION_DISTANCE) & (dx > -2 * LENGTH)
-        key = np.where(visible, np.abs(dx), np.inf)
-        order = np.argsort(key, axis=1, kind="stable")[:, :n_rows]
-        shown = np.take_along_axis(visible, order, axis=1)
-        rel = (dx, dy, vx[:, 1:] - vx[:, :1], vy[:, 1:] - vy[:, :1])
-        obs[:, 1 : 1 + n_rows, 0] = shown
-        for k, (values, (lo, hi)) in enumerate(zip(rel, ranges + ranges[-1:], strict=True)):
-            picked = _lmap(np.take_along_axis(values, order, axis=1), lo, hi, -1.0, 1.0)
-            obs[:, 1 : 1 + n_rows, 1 + k] = np.where(shown, picked, 0.0)
-    return np.clip(obs, -1.0, 1.0).astype(np.float32)
-
-
-def occupancy_view(
-    x: np.ndarray, y: np.ndarray, speed: np.ndarray, heading: np.ndarray, lanes_count: int
-) -> np.ndarray:
-    """highway-env's default ``OccupancyGridObservation`` around the ego (column 0) in each env.
-
-    :param x, y: positions [m], shape (n, V), ego in column 0.
-    :param speed: [m/s], shape (n, V).
-    :param heading: [rad], shape (n, V).
-    :param lanes_count: number of lanes (centres at y = 0, 4, ...), for the on-road layer.
-    :return: (n, 4, 11, 11) float32 layers (presence, vx, vy, on_road) over 5 m cells from -27.5 m to
-        27.5 m around the ego, world-aligned, indexed ``[layer, x cell, y cell]``; velocities relative
-        to the ego with ±80 m/s mapped to ±1 and clipped. The ego itself occupies the centre cell.
-    """
-    n, n_vehicles = x.shape
-    vx = speed * np.cos(heading)
-    vy = speed * np.sin(heading)
-    ix = np.floor((x - x[:, :1] - GRID_LOW) / GRID_STEP)
-    iy = np.floor((y - y[:, :1] - GRID_LOW) / GRID_STEP)
-    inside = (ix >= 0) & (ix < GRID_CELLS) & (iy >= 0) & (iy < GRID_CELLS)
-    n_cells = GRID_CELLS * GRID_CELLS
-    cell = (np.arange(n)[:, None] * n_cells + ix * GRID_CELLS + iy).astype(np.intp)
-    # highway-env writes the vehicles in reverse road order, so the earliest vehicle of a shared
-    # cell (the ego first) is the one left in it: keep the smallest vehicle index per cell.
-    winner = np.full(n * n_cells, n_vehicles, dtype=np.intp)
-    vehicle_index = np.broadcast_to(np.arange(n_vehicles), (n, n_vehicles))
-    np.minimum.at(winner, cell[inside], vehicle_index[inside])
-    winner = winner.reshape(n, n_cells)
-    occupied = winner < n_vehicles
-    source = np.where(occupied, winner, 0)
-
-    grid = np.zeros((n, GRID_FEATURES, n_cells))
-    grid[:, 0] = occupied
-    for layer, v in ((1, vx), (2, vy)):
-        normalised = _lmap(v - v[:, :1], -2 * MAX_SPEED, 2 * MAX_SPEED, -1.0, 1.0)
-        grid[:, layer] = np.where(occupied, np.take_along_axis(normalised, source, axis=1), 0.0)
-    grid = grid.reshape(n, GRID_FEATURES, GRID_CELLS, GRID_CELLS)
-
-    # fill_road_layer_by_lanes: waypoints every 5 m within ±100 m of the ego along each lane,
-    # generated exactly as np.arange does (start, start + step, then start + i * delta).
-    start = x[:, 0] - ROAD_PERCEPTION
-    stop = x[:, 0] + ROAD_PERCEPTION
-    n_waypoints = np.ceil((stop - start) / GRID_STEP).astype(np.intp)
-    steps = np.arange(int(n_waypoints.max()) if n else 0)
-    delta = (start + GRID_STEP) - start
-    waypoints = start[:, None] + steps * delta[:, None]
-    waypoints = np.clip(waypoints, 0.0, None)  # lanes start at x = 0 (their 10 km end is never in range)
-    wx = np.floor((waypoints - x[:, :1] - GRID_LOW) / GRID_STEP)
-    lane_y = LANE_WIDTH * np.arange(lanes_count)
-    wy = np.floor((lane_y[None, :] - y[:, :1] - GRID_LOW) / GRID_STEP)  # (n, lanes)
-    wx_all = np.broadcast_to(wx[:, None, :], (n, lanes_count, steps.size))
-    wy_all = np.broadcast_to(wy[:, :, None], (n, lanes_count, steps.size))
-    valid = (
-        (steps[None, None, :] < n_waypoints[:, None, None])
-        & (wx_all >= 0)
-        & (wx_all < GRID_CELLS)
-        & (wy_all >= 0)
-        & (wy_all < GRID_CELLS)
-    )
-    env_index = np.broadcast_to(np.arange(n)[:, None, None], valid.shape)
-    grid[env_index[valid], 3, wx_all[valid].astype(np.intp), wy_all[valid].astype(np.intp)] = 1.0
-    return np.clip(grid, -1.0, 1.0).astype(np.float32)
-
-
-_VIEW_FUNCTIONS = {"kinematics": kinematics_view, "occupancy": occupancy_view}
 
 
 class FastHighwayVec:
@@ -389,9 +257,9 @@ class FastHighwayVec:
 
     def observe(self, name: str) -> np.ndarray:
         """One view of every env's current state: (n, *view_space(name).shape) float32."""
-        if name not in _VIEW_FUNCTIONS:
+        if name not in VIEW_FUNCTIONS:
             raise ValueError(f"unknown view {name!r}; allowed: {list(VIEW_NAMES)}")
-        return _VIEW_FUNCTIONS[name](self.x, self.y, self.speed, self.heading, self.config.lanes_count)
+        return VIEW_FUNCTIONS[name](self.x, self.y, self.speed, self.heading, self.config.lanes_count)
 
     def _apply_meta_actions(self, actions: np.ndarray) -> None:
         """``MDPVehicle.act``: move the ego's speed index or target lane."""
@@ -417,7 +285,7 @@ class FastHighwayVec:
         ego_speed, ego_heading = speed[:, 0], heading[:, 0]
 
         # Ego: ControlledVehicle.steering_control / speed_control on a straight lane.
-        ego_not_zero = _not_zero(ego_speed)
+        ego_not_zero = not_zero(ego_speed)
         lateral = y[:, 0] - LANE_WIDTH * self.target_lane
         heading_command = np.arcsin(np.clip(-KP_LATERAL * lateral / ego_not_zero, -1, 1))
         heading_ref = np.clip(heading_command, -np.pi / 4, np.pi / 4)
@@ -441,7 +309,7 @@ class FastHighwayVec:
             front_x = np.where(ahead, x[:, None, :], np.inf)[:, :, ::-1]
             front = self.n_vehicles - 1 - np.argmin(front_x, axis=2)
             has_front = ahead.any(axis=2)
-            target = _not_zero(self.target_speed[:, 1:])
+            target = not_zero(self.target_speed[:, 1:])
             free = IDM_COMFORT_ACC_MAX * (
                 1 - np.power(np.maximum(v_o, 0) / np.abs(target), self.idm_delta[:, 1:])
             )
@@ -449,7 +317,7 @@ class FastHighwayVec:
             dv = v_o - np.take_along_axis(vx, front, axis=1)
             ab = -IDM_COMFORT_ACC_MAX * IDM_COMFORT_ACC_MIN
             desired = IDM_DISTANCE_WANTED + v_o * IDM_TIME_WANTED + v_o * dv / (2 * np.sqrt(ab))
-            interaction = IDM_COMFORT_ACC_MAX * np.power(desired / _not_zero(gap), 2)
+            interaction = IDM_COMFORT_ACC_MAX * np.power(desired / not_zero(gap), 2)
             acc[:, 1:] = np.clip(free - np.where(has_front, interaction, 0.0), -IDM_ACC_MAX, IDM_ACC_MAX)
 
         # Vehicle.clip_actions: crashed vehicles brake to a stop and steer straight; speed limits.
@@ -485,7 +353,7 @@ class FastHighwayVec:
         return {
             "collision_reward": self.crashed.astype(np.float64),
             "right_lane_reward": self.target_lane / max(cfg.lanes_count - 1, 1),
-            "high_speed_reward": np.clip(_lmap(forward_speed, low, high, 0.0, 1.0), 0.0, 1.0),
+            "high_speed_reward": np.clip(lmap(forward_speed, low, high, 0.0, 1.0), 0.0, 1.0),
             "on_road_reward": on_road.astype(np.float64),
         }
 
@@ -498,7 +366,7 @@ class FastHighwayVec:
             + cfg.high_speed_reward * terms["high_speed_reward"]
         )
         if cfg.normalize_reward:
-            reward = _lmap(
+            reward = lmap(
                 reward, cfg.collision_reward, cfg.high_speed_reward + cfg.right_lane_reward, 0.0, 1.0
             )
         return reward * terms["on_road_reward"]

@@ -19,18 +19,18 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from dospcot.envs.fast_highway import VIEW_NAMES, FastHighwayEnv
+from dospcot.config.task_sections import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS, HIGHWAY_ENV_VIEWS, HighwayConfig
+from dospcot.envs.fast_highway import FastHighwayEnv
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.sensors import SensorViewWrapper
 
-HIGHWAY_ENV_IDS: tuple[str, ...] = ("highway-fast-v0", "highway-v0", "merge-v0", "roundabout-v0")
-"""The highway-env tasks the adapter supports (discrete meta-actions, one controlled vehicle)."""
-FAST_HIGHWAY_ID = "dospcot/FastHighway-v0"
-HIGHWAY_VIEW_TYPES: dict[str, dict[str, Any]] = {
-    "kinematics": {"type": "Kinematics"},
-    "occupancy": {"type": "OccupancyGrid"},
-    "ttc": {"type": "TimeToCollision"},
-}
+HIGHWAY_VIEW_TYPES: dict[str, dict[str, Any]] = dict(
+    zip(
+        HIGHWAY_ENV_VIEWS,
+        ({"type": "Kinematics"}, {"type": "OccupancyGrid"}, {"type": "TimeToCollision"}),
+        strict=True,
+    )
+)
 """Each view's highway-env observation config (highway-env's defaults for that type)."""
 # Keys the adapter owns: the views replace the observation, DQN needs the discrete meta-actions.
 _OWNED_KEYS = {"observation": "set the views instead", "action": "agents need DiscreteMetaAction"}
@@ -107,17 +107,10 @@ def _default_config(env_id: str) -> dict[str, Any]:
 
 def check_views(env_id: str, views: Sequence[str]) -> None:
     """Raise ``ValueError`` for a view the task ``env_id`` lacks, naming the allowed ones."""
-    allowed = highway_view_names(env_id)
+    allowed = HighwayConfig(env_id=env_id).view_names
     for view in views:
         if view not in allowed:
             raise ValueError(f"{env_id} has no view {view!r}; allowed: {', '.join(allowed)}")
-
-
-def highway_view_names(env_id: str) -> tuple[str, ...]:
-    """The views of a highway task: our fast env lacks ``ttc``."""
-    if env_id == FAST_HIGHWAY_ID:
-        return VIEW_NAMES
-    return tuple(HIGHWAY_VIEW_TYPES)
 
 
 class HighwayEnvSensors(gym.Wrapper, gym.utils.RecordConstructorArgs):

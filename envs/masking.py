@@ -39,23 +39,13 @@ from typing import Any, Literal
 import gymnasium as gym
 import numpy as np
 
+from dospcot.config.checks import check_label_fraction
+
 MaskMode = Literal["state-action", "transition", "key"]
 MASK_MODES: tuple[str, ...] = ("state-action", "transition", "key")
 REWARD_INFO_KEYS: tuple[str, ...] = ("rewards",)
 """``info`` keys in which an env reports its reward's parts (highway-env and our fast highway do):
 a masked step drops them."""
-
-
-def check_label_fraction(label_fraction: float, *, queried: bool = False) -> float:
-    """Return ``label_fraction`` as a float, or raise ``ValueError`` if it is outside (0, 1].
-
-    :param queried: also allow 0, a mask with no random share: the rewards are bought by queries
-        instead (:mod:`dospcot.core.queries`), and only monitors and demonstrations reveal any up front.
-    """
-    fraction = float(label_fraction)
-    if not (0.0 < fraction <= 1.0 or (queried and fraction == 0.0)):
-        raise ValueError(f"label_fraction must lie in (0, 1], got {label_fraction!r}")
-    return fraction
 
 
 def key_is_labelled(key: Hashable, action: int, label_fraction: float, seed: int) -> bool:

@@ -28,13 +28,13 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from dospcot.config.loading import load_config
 from dospcot.core.batched_runs import BatchedRuns
 from dospcot.core.classifier import BatchedRewardClassifier
 from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.experiment.bench_batched import BATCHED_CELLS
-from dospcot.experiment.train import build_run
+from dospcot.lab.bench_batched import BATCHED_CELLS
 from dospcot.policies import ExpectedSarsaDQN
+from dospcot.run.cotraining import build_run
+from dospcot.tasks import load_config
 
 PHASES: dict[str, tuple[type, str]] = {
     "collect": (ExpectedSarsaDQN, "learn"),

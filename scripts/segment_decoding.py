@@ -18,9 +18,9 @@ import argparse
 import numpy as np
 
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
 from dospcot.core.segments import fit_step_rewards
-from dospcot.experiment.train import build_run
+from dospcot.run.cotraining import build_run
+from dospcot.tasks import load_config
 
 
 def _cells(decoded: np.ndarray, hidden: np.ndarray, value: float) -> str:

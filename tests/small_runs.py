@@ -8,7 +8,7 @@ from typing import Any
 from dospcot.config.loading import from_mapping
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.tasks.grid import GridTask
+from dospcot.tasks.adapters.grid import GridAdapter
 
 SB3_DQN = {"learning_rate": 1e-4, "batch_size": 32, "gamma": 0.99, "target_update_interval": 10_000}
 """stable-baselines3 ``DQN``'s own defaults where ``[dqn]``'s differ: the small-grid tests were tuned
@@ -40,4 +40,4 @@ def grid_run(
     monitored: Any = None,
 ) -> CoTrainingRun:
     """A co-training run of ``cfg`` on a grid-like task of the test's own (``make_env`` and its views)."""
-    return CoTrainingRun(GridTask(cfg, make_env, views, monitored), cfg)
+    return CoTrainingRun(GridAdapter(cfg, make_env, views, monitored), cfg)

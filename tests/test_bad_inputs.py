@@ -23,12 +23,12 @@ from hypothesis import strategies as st
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
 from dospcot.config.run_configs import TrainConfig
 from dospcot.envs import EnvRaisedError
-from dospcot.experiment.python_api import train_env
-from dospcot.experiment.run_folder import LOCK_FILE
-from dospcot.experiment.train import check_config
+from dospcot.run.checks import check_config
+from dospcot.run.python_api import train_env
+from dospcot.run.run_folder import LOCK_FILE
+from dospcot.tasks import load_config
 
 SHORT = ["training.rounds=1", "training.steps_per_round=60", "dqn.learning_starts=20"]
 
@@ -301,7 +301,7 @@ def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on
     "interrupted", and the study's own command to go on."""
     from types import SimpleNamespace
 
-    from dospcot.experiment import studies
+    from dospcot.lab import studies
 
     started = []
 
@@ -330,9 +330,9 @@ def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on
 def test_a_stop_as_a_sweep_closes_counts_what_finished(tmp_path, monkeypatch):
     """SIGTERM after the last trial ended, while the sweep shuts its workers down: the line still says
     what was kept, not a bare "interrupted"."""
-    from dospcot.experiment import sweep as sweep_module
-    from dospcot.experiment.interrupts import Interrupted
-    from dospcot.experiment.sweep_spec import SweepSpec
+    from dospcot.lab import sweep as sweep_module
+    from dospcot.lab.sweep_spec import SweepSpec
+    from dospcot.run.interrupts import Interrupted
 
     class StoppedAsItCloses(sweep_module.tqdm):
         stops = 1  # once: tqdm closes again when collected

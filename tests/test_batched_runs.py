@@ -17,10 +17,10 @@ from stable_baselines3 import DQN
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
 from dospcot.cli import main
-from dospcot.config.loading import load_config
 from dospcot.core.batched_runs import BatchedRuns
-from dospcot.experiment.run_folder import BATCH_FILE
-from dospcot.experiment.train import build_run
+from dospcot.run.cotraining import build_run
+from dospcot.run.run_folder import BATCH_FILE
+from dospcot.tasks import load_config
 
 TINY = ["training.rounds=2", "training.steps_per_round=400"]
 
@@ -135,8 +135,8 @@ def test_a_batch_killed_after_a_round_resumes_to_the_files_of_one_never_stopped(
 
 
 def test_a_sweep_batches_its_seeds_and_a_batchs_grouping_changes_no_members_files(tmp_path):
-    from dospcot.experiment.sweep import run_sweep
-    from dospcot.experiment.sweep_spec import SweepSpec, trial_dir
+    from dospcot.lab.sweep import run_sweep
+    from dospcot.lab.sweep_spec import SweepSpec, trial_dir
 
     spec = SweepSpec(("tiny",), {"training.label_fraction": ("0.2",)}, (0, 1, 2), tuple(TINY))
     folders = {}
@@ -176,7 +176,7 @@ def test_a_run_or_batch_stopped_in_its_first_round_keeps_its_folders_and_resumes
 
 
 def test_a_batch_reports_its_progress_to_a_sweep_in_trials(tmp_path):
-    from dospcot.experiment.train_batch import train_batch_at
+    from dospcot.run.train_batch import train_batch_at
 
     cfgs = [load_config("tiny", [*TINY, f"seed={seed}"]) for seed in (0, 1)]
     shares: list[float] = []
@@ -191,8 +191,8 @@ def test_a_batch_reports_its_progress_to_a_sweep_in_trials(tmp_path):
 def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_never_stopped(
     tmp_path, capsys, started, other
 ):
-    from dospcot.experiment.sweep import run_sweep
-    from dospcot.experiment.sweep_spec import SweepSpec, trial_dir
+    from dospcot.lab.sweep import run_sweep
+    from dospcot.lab.sweep_spec import SweepSpec, trial_dir
 
     steps = ["training.rounds=3", "training.steps_per_round=600"]
     spec = SweepSpec(("tiny",), {}, (0, 1, 2), tuple(steps))
@@ -231,7 +231,7 @@ def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_nev
 def test_a_run_or_batch_stopped_while_it_is_built_says_what_it_kept_and_resumes(
     tmp_path, capsys, monkeypatch, seeds
 ):
-    from dospcot.experiment.run_session import RunSession
+    from dospcot.run.run_session import RunSession
 
     built = RunSession.__init__
 

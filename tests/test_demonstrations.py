@@ -21,15 +21,15 @@ from test_neural_cotraining import (  # the small grid of the co-training tests
 )
 
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.demonstrations import Demonstrations, expert_demonstrations
 from dospcot.envs import GridWorld, StateActionMask, View, ViewObservationWrapper
 from dospcot.envs.highway import FAST_HIGHWAY_ID, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper
-from dospcot.experiment.train import build_run
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn import large_margin_loss
+from dospcot.run.cotraining import build_run
+from dospcot.tasks import load_config
 
 
 def test_the_large_margin_loss_by_hand():

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from dospcot.experiment.studies import STUDIES, check_record, get_study, header_command, render_study
-from dospcot.experiment.studies.pages import GLANCE, PAGES, TABLE, glance_table
-from dospcot.experiment.studies.readme import README, RESULTS, read_block
+from dospcot.lab.studies import STUDIES, check_record, get_study, header_command, render_study
+from dospcot.lab.studies.pages import GLANCE, PAGES, TABLE, glance_table
+from dospcot.lab.studies.readme import README, RESULTS, read_block
 
 ROOT = Path(__file__).resolve().parents[1]
 RECORD = ROOT / "runs" / "sweeps"

@@ -8,13 +8,8 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-from dospcot.envs.fast_highway import (
-    VIEW_NAMES,
-    FastHighwayConfig,
-    FastHighwayEnv,
-    FastHighwayVec,
-    view_space,
-)
+from dospcot.envs.fast_highway import FastHighwayConfig, FastHighwayEnv, FastHighwayVec
+from dospcot.envs.fast_highway_views import VIEW_NAMES, view_space
 from dospcot.envs.highway import make_masked_highway
 
 IDLE, FASTER = 1, 3
@@ -308,13 +303,13 @@ def _counted_view_calls(monkeypatch: pytest.MonkeyPatch) -> dict[str, int]:
     from dospcot.envs import fast_highway
 
     calls = {name: 0 for name in VIEW_NAMES}
-    for name, fn in list(fast_highway._VIEW_FUNCTIONS.items()):
+    for name, fn in list(fast_highway.VIEW_FUNCTIONS.items()):
 
         def counted(*args, _name=name, _fn=fn):
             calls[_name] += 1
             return _fn(*args)
 
-        monkeypatch.setitem(fast_highway._VIEW_FUNCTIONS, name, counted)
+        monkeypatch.setitem(fast_highway.VIEW_FUNCTIONS, name, counted)
     return calls
 
 

@@ -132,7 +132,7 @@ def test_masked_gridworld_has_views_and_hides_rewards():
 
 
 def test_tabular_cotraining_learns_a_masked_grid_with_two_and_three_views():
-    from dospcot.paper.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
+    from dospcot.core.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
 
     env = GridWorld(size=8, layout_seed=0)
     mdp = TabularMDP.from_env(env, grid_views(env.layout, patch_size=3), max_episode_steps=64)

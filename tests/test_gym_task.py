@@ -19,7 +19,6 @@ import stable_baselines3
 import torch
 
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.raters import QueriesPending
 from dospcot.demonstrations import Demonstrations
@@ -31,11 +30,14 @@ from dospcot.envs.gym_sensors import (
     make_masked_gym,
 )
 from dospcot.envs.masking import key_is_labelled
-from dospcot.experiment.python_api import gym_config, train_env
-from dospcot.experiment.run_folder import RunFolderError
-from dospcot.experiment.train import build_run, check_config, evaluate, resume, train
-from dospcot.tasks.sensor import SensorTask
-from dospcot.tasks.sensor_store import KeyedStepStore
+from dospcot.run.checks import check_config
+from dospcot.run.cotraining import build_run
+from dospcot.run.python_api import gym_config, train_env
+from dospcot.run.run_folder import RunFolderError
+from dospcot.run.train import evaluate, resume, train
+from dospcot.tasks import load_config
+from dospcot.tasks.adapters.sensor import SensorAdapter
+from dospcot.tasks.adapters.sensor_store import KeyedStepStore
 
 LENGTH = 10
 
@@ -226,7 +228,7 @@ def test_a_toml_config_with_a_dotted_path_view_is_the_python_entry_points_config
     from_toml = load_config(str(_corridor_toml(tmp_path)))
     from_python = gym_config(make_corridor, VIEWS, label_fraction=0.1, name="corridor", settings=SETTINGS)
     assert from_toml == from_python  # the same run, which the test above trains
-    assert isinstance(build_run(from_toml).task, SensorTask)
+    assert isinstance(build_run(from_toml).task, SensorAdapter)
 
 
 def test_success_counts_returns_above_the_threshold_and_the_score_needs_a_max_return(tmp_path):
@@ -280,7 +282,7 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
     plain.run()
     make = partial(make_masked_gym, cfg.gym.env_id, view_specs=cfg.gym.views, state_key=cfg.gym.state_key)
     scrambled = CoTrainingRun(
-        SensorTask(cfg, cfg.gym, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
+        SensorAdapter(cfg, cfg.gym, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
     )
     scrambled.run()
     n = len(plain.store)

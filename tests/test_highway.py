@@ -16,13 +16,15 @@ from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.raters import QueriesPending
 from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.envs.highway import make_masked_highway
-from dospcot.experiment.train import build_run, check_config, evaluate, train
-from dospcot.tasks.sensor import SensorTask
+from dospcot.run.checks import check_config
+from dospcot.run.cotraining import build_run
+from dospcot.run.train import evaluate, train
+from dospcot.tasks import load_config
+from dospcot.tasks.adapters.sensor import SensorAdapter
 
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
 
@@ -220,7 +222,7 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_id
         reveal_first_steps=cfg.highway.reveal_first_steps,
     )  # fmt: skip
     scrambled = CoTrainingRun(
-        SensorTask(cfg, cfg.highway, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
+        SensorAdapter(cfg, cfg.highway, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
     )
     scrambled.run()
     n = len(plain.store)

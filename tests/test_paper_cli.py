@@ -12,14 +12,15 @@ import pytest
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
 from dospcot.config.presets import PAPER_PRESETS
-from dospcot.experiment import bench, bench_rows
-from dospcot.experiment.report import write_report
-from dospcot.experiment.sweep import plan_jobs, run_sweep
-from dospcot.experiment.sweep_spec import SweepError, SweepSpec, Trial
+from dospcot.lab import bench, bench_measure
+from dospcot.lab.paper_tables import cell_summary
+from dospcot.lab.report import write_report
+from dospcot.lab.sweep import plan_jobs, run_sweep
+from dospcot.lab.sweep_spec import SweepError, SweepSpec, Trial
 from dospcot.metrics import SeedSummary
-from dospcot.paper.protocol import cell_summary, protocol_specs, train_protocol_at
+from dospcot.run.paper_protocol import protocol_specs, train_protocol_at
+from dospcot.tasks import load_config
 
 # Five episodes a round and short classifier fits: every file and figure of the protocol in seconds.
 QUICK = ["tabular.episodes_per_round=5", "tabular.cotraining.classifier.epochs=10"]
@@ -202,9 +203,11 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert "| ratio | target | met |" in text
 
 
-def _row(name: str, ours: float) -> bench_rows.Row:
-    steps = bench_rows.Measurement.of([ours, ours, ours], "steps/s")
-    return bench_rows.Row(name, "setting", steps, bench_rows.Measurement.of([10.0] * 3, "steps/s"), True, 0.5)
+def _row(name: str, ours: float) -> bench_measure.Row:
+    steps = bench_measure.Measurement.of([ours, ours, ours], "steps/s")
+    return bench_measure.Row(
+        name, "setting", steps, bench_measure.Measurement.of([10.0] * 3, "steps/s"), True, 0.5
+    )
 
 
 def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, monkeypatch):
@@ -250,7 +253,7 @@ def test_bench_keeps_the_rows_measured_before_a_failing_row_or_a_stop(tmp_path, 
     out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench", 3))
 
     def fails(error: type[BaseException]):
-        def row(quick: bool, repeats: int) -> bench_rows.Row:
+        def row(quick: bool, repeats: int) -> bench_measure.Row:
             raise error()
 
         return row

@@ -14,7 +14,6 @@ from test_neural_cotraining import assert_same_learners
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import (
     choose_queries,
@@ -26,9 +25,10 @@ from dospcot.core.queries import (
 from dospcot.core.raters import FileRater, QueriesPending, RaterError, SimulatedRater
 from dospcot.envs import GridWorld
 from dospcot.envs.highway import make_masked_highway
-from dospcot.experiment.train import build_run
-from dospcot.tasks.grid import GridTask, grid_world
-from dospcot.tasks.sensor import SensorTask
+from dospcot.run.cotraining import build_run
+from dospcot.tasks import load_config
+from dospcot.tasks.adapters.grid import GridAdapter, grid_world
+from dospcot.tasks.adapters.sensor import SensorAdapter
 
 # Two views, four samples, three classes.
 PROBABILITIES = np.array(
@@ -146,7 +146,7 @@ def _grid_run(strategy: str, *overrides: str, make_env=None, seed: int = 3) -> C
     if make_env is None:
         return build_run(cfg)
     _, views, _ = grid_world(cfg)
-    return CoTrainingRun(GridTask(cfg, make_env, views), cfg)
+    return CoTrainingRun(GridAdapter(cfg, make_env, views), cfg)
 
 
 @pytest.mark.parametrize("strategy", ["random", "outcomes", "uncertainty", "disagreement"])
@@ -237,7 +237,7 @@ def test_leakage_on_the_fast_highway_scrambling_unqueried_hidden_rewards_changes
     plain.run()
     queried = set(np.flatnonzero(plain.queries.revealed).tolist())
     make = partial(make_masked_highway, cfg.highway.env_id, config=cfg.highway.config, queried=True)
-    task = SensorTask(cfg, cfg.highway, lambda *args: _ScrambleUnqueried(make(*args), queried))
+    task = SensorAdapter(cfg, cfg.highway, lambda *args: _ScrambleUnqueried(make(*args), queried))
     for env in task._envs:
         env.env.store = task.store
     other = CoTrainingRun(task, cfg)

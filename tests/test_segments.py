@@ -17,7 +17,6 @@ from test_neural_cotraining import LAYOUT, SECTIONS, assert_same_learners, confi
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import ClassifierConfig
-from dospcot.config.loading import load_config
 from dospcot.core.cotrainer import RunPool
 from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.core.segments import (
@@ -28,8 +27,9 @@ from dospcot.core.segments import (
     step_rewards,
 )
 from dospcot.envs import GridWorld, RewardMaskWrapper
-from dospcot.experiment.python_api import gym_config
-from dospcot.experiment.train import build_run
+from dospcot.run.cotraining import build_run
+from dospcot.run.python_api import gym_config
+from dospcot.tasks import load_config
 
 REWARDS = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0]
 

@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 import torch as th
 
-from dospcot.config.loading import load_config
-from dospcot.experiment.train import build_run
 from dospcot.policies.esarsa_dqn import ExpectedSarsaDQN, WeightedReplayBufferSamples
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
+from dospcot.run.cotraining import build_run
+from dospcot.tasks import load_config
 
 UPDATES = 100
 

@@ -1,4 +1,4 @@
-"""The study tables of dospcot.experiment.studies (the pre-registered second-view tables first): paired
+"""The study tables of dospcot.lab.studies (the pre-registered second-view tables first): paired
 differences and verdicts by hand."""
 
 import json
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from dospcot.experiment.report import TrialRun
-from dospcot.experiment.studies import STUDIES
-from dospcot.experiment.studies.label_sources import (
+from dospcot.lab.report import TrialRun
+from dospcot.lab.studies import STUDIES
+from dospcot.lab.studies.label_sources import (
     DEMO_ARMS,
     EFFORT_ARMS,
     EFFORT_HIGHWAY_ARMS,
@@ -19,14 +19,14 @@ from dospcot.experiment.studies.label_sources import (
     demonstration_tables,
     effort_tables,
 )
-from dospcot.experiment.studies.minigrid import minigrid_tables
-from dospcot.experiment.studies.provenance import header
-from dospcot.experiment.studies.second_view import second_view_tables
-from dospcot.experiment.sweep import Trial
+from dospcot.lab.studies.minigrid import minigrid_tables
+from dospcot.lab.studies.provenance import header
+from dospcot.lab.studies.second_view import second_view_tables
+from dospcot.lab.sweep import Trial
 from dospcot.metrics import SeedSummary
 
 STUDY_SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "study.py"
-"""The command the docs name, a shim of :func:`dospcot.experiment.studies.main`."""
+"""The command the docs name, a shim of :func:`dospcot.lab.studies.main`."""
 
 INDEPENDENT = {"env.blind_spot_rate": "0.5", "env.blind_spots": "independent", "agent": "dqn"}
 IDENTICAL = {**INDEPENDENT, "env.blind_spots": "identical"}
@@ -107,8 +107,8 @@ def test_a_setting_with_a_method_not_yet_run_says_so():
 
 
 def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_success(tmp_path):
-    from dospcot.config.loading import load_config
-    from dospcot.experiment.run_folder import write_toml
+    from dospcot.run.run_folder import write_toml
+    from dospcot.tasks import load_config
 
     config = load_config("minigrid-lavagap-oracle").to_dict()
 
@@ -278,8 +278,8 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
 
 def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path):
     """A table rebuilt from a record must not count a run under a preset that has changed since."""
-    from dospcot.config.loading import load_config
-    from dospcot.experiment.run_folder import write_toml
+    from dospcot.run.run_folder import write_toml
+    from dospcot.tasks import load_config
 
     trial = "grid16-masked-zero/training.label_fraction=0.01__seed=0"
     stored = tmp_path / "label-fraction/trials" / trial / "config.toml"

@@ -15,11 +15,11 @@ import torch
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import load_config
-from dospcot.experiment import run_folder
-from dospcot.experiment.report import load_runs, write_report
-from dospcot.experiment.sweep import run_sweep
-from dospcot.experiment.sweep_spec import SweepError, SweepSpec, Trial, open_sweep, parse_grid
+from dospcot.lab.report import load_runs, write_report
+from dospcot.lab.sweep import run_sweep
+from dospcot.lab.sweep_spec import SweepError, SweepSpec, Trial, open_sweep, parse_grid
+from dospcot.run import run_folder
+from dospcot.tasks import load_config
 
 GRID = {"training.label_fraction": ("0.1", "0.5"), "cotraining.consensus_weight": ("0", "0.3")}
 

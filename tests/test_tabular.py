@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from dospcot import metrics
+from dospcot.core.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
 from dospcot.envs import StateActionMask
-from dospcot.paper.protocol import cliffwalking_mdp
-from dospcot.paper.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
 from dospcot.policies.tabular import TabularAgents, epsilon_greedy_probs, expected_value
+from dospcot.run.paper_protocol import cliffwalking_mdp
 
 
 def test_expected_sarsa_target_with_tied_maxima_by_hand():
@@ -114,7 +114,7 @@ def test_a_run_is_the_same_alone_or_in_a_batch(mdp):
 def test_the_benchmarks_per_step_python_loop_is_the_same_learner(mdp):
     """The tabular benchmark's reference does the vectorised agents' work one step at a time: every
     kind, every method, the same Q-tables and records bit for bit, and the same step count."""
-    from dospcot.experiment.bench_rows import PerStepTabularCoTraining
+    from dospcot.lab.bench_rows import PerStepTabularCoTraining
 
     ours = TabularCoTraining(mdp, ALL_METHODS, SMALL)
     loop = PerStepTabularCoTraining(mdp, ALL_METHODS, SMALL)

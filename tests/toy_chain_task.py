@@ -12,7 +12,7 @@ import numpy as np
 
 from dospcot.config.run_configs import TrainConfig
 from dospcot.envs.views import View
-from dospcot.tasks.grid import GridTask
+from dospcot.tasks.adapters.grid import GridAdapter
 from dospcot.tasks.registry import Task, register
 
 
@@ -59,5 +59,5 @@ class ChainTask(Task):
     def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
         return ("cell", "progress")
 
-    def build(self, cfg: TrainConfig) -> GridTask:
-        return GridTask(cfg, partial(Chain, cfg.env.size), chain_views(cfg.env.size))
+    def build(self, cfg: TrainConfig) -> GridAdapter:
+        return GridAdapter(cfg, partial(Chain, cfg.env.size), chain_views(cfg.env.size))

@@ -5,25 +5,25 @@ co-trainer and its reward classifiers), and the paper protocol's ``[tabular]``."
 from __future__ import annotations
 
 import dataclasses
-import inspect
 import re
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
-from stable_baselines3 import DQN
-
-from dospcot.config.checks import check_at_least, check_positive, check_within
-from dospcot.core.selection import QUOTAS, WEIGHTINGS, Quota, Weighting
-from dospcot.envs.masking import check_label_fraction
-from dospcot.policies import ExpectedSarsaDQN
+from dospcot.config.checks import check_at_least, check_label_fraction, check_positive, check_within
+from dospcot.config.choices import (
+    LOSS_KINDS,
+    MODEL_KINDS,
+    QUOTAS,
+    WEIGHTINGS,
+    LabelStrategy,
+    LossKind,
+    ModelKind,
+    Quota,
+    Weighting,
+)
 
 DEVICE_PATTERN = re.compile(r"cpu|cuda(:\d+)?")
 """The devices a ``[dqn]`` section may name besides SB3's ``"auto"``."""
-
-ModelKind = Literal["mlp", "linear"]
-LossKind = Literal["cross_entropy", "hinge"]
-MODEL_KINDS: tuple[str, ...] = ("mlp", "linear")
-LOSS_KINDS: tuple[str, ...] = ("cross_entropy", "hinge")
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,7 @@ class TrainingConfig:
     update_steps: int = 0
     learn_from_round: int = 1
     segment_length: int = 1
-    label_strategy: Literal["uniform", "random", "outcomes", "uncertainty", "disagreement"] = "uniform"
+    label_strategy: LabelStrategy = "uniform"
     query_random_share: float = 0.2
     query_recent_rounds: int = 0
     rater: Literal["simulated", "file"] = "simulated"
@@ -93,12 +93,17 @@ class TrainingConfig:
             raise ValueError(
                 f"learn_from_round must lie in [1, rounds = {self.rounds}], got {self.learn_from_round}"
             )
-        if not 0 < self.label_fraction <= 1:
-            raise ValueError(f"label_fraction must lie in (0, 1], got {self.label_fraction}")
+        check_label_fraction(self.label_fraction)
         check_within(self, 0, 1, "eps_start", "eps_end", "query_random_share")
         check_at_least(self, 0, "query_recent_rounds")
-        if self.rater == "file" and self.label_strategy == "uniform":
+        if self.rater == "file" and not self.queries:
             raise ValueError('rater = "file" answers queries: set label_strategy to an active strategy')
+
+    @property
+    def queries(self) -> bool:
+        """Whether a rater answers queries for the labels (an active ``label_strategy``), rather than
+        the fixed random mask of share ``label_fraction`` revealing them."""
+        return self.label_strategy != "uniform"
 
     @property
     def total_steps(self) -> int:
@@ -140,21 +145,52 @@ DQN_SET_ELSEWHERE: dict[str, str] = {
 """SB3 ``DQN`` arguments a ``[dqn]`` section may not hold, and what sets them instead."""
 
 
-def _sb3_dqn_fields() -> list[tuple[str, type, Any]]:
-    """SB3 ``DQN``'s keyword arguments that a TOML value can hold (a bool, an int, a float or, for
-    ``device``, a string), read from its signature: (name, type, default), with dospcot's default where
-    :data:`DQN_DEFAULTS` has one."""
-    fields = []
-    for name, param in inspect.signature(DQN.__init__).parameters.items():
-        # learning_rate may be a schedule and train_freq a tuple: a config gives the plain number.
-        hint = param.annotation if param.annotation in (bool, int, float) else type(param.default)
-        if name.startswith("_") or name in DQN_SET_ELSEWHERE or hint not in (bool, int, float, str):
-            continue
-        fields.append((name, hint, field(default=hint(DQN_DEFAULTS.get(name, param.default)))))
-    return fields
+@dataclass(frozen=True)
+class DQNConfig:
+    """Keyword arguments of every neural agent: each of stable-baselines3 ``DQN``'s that a TOML value
+    can hold, under its own name and with its own default except those of :data:`DQN_DEFAULTS`; the
+    arguments a ``[dqn]`` section may not hold are :data:`DQN_SET_ELSEWHERE`
+    (``tests/test_config.py`` checks both against SB3's signature). Two fields are dospcot's:
+    ``net_arch`` and ``cut_windows``.
 
+    :param learning_rate: Adam's step size (a number; SB3 also takes a schedule).
+    :param buffer_size: replay capacity, in steps (a run caps it at its total steps).
+    :param learning_starts: env steps before the first gradient step.
+    :param batch_size: replayed samples per gradient step.
+    :param tau: the target network's soft-update coefficient (1: a hard copy).
+    :param gamma: the agents' discount (not the co-regularisation weight, ``cotraining.consensus_weight``).
+    :param train_freq: env steps between updates.
+    :param gradient_steps: gradient steps per update (-1: as many as env steps).
+    :param optimize_memory_usage: SB3's memory-efficient replay buffer.
+    :param n_steps: the longest n-step window of a replayed sample.
+    :param target_update_interval: env steps between target-network updates.
+    :param max_grad_norm: the gradient-clipping norm.
+    :param stats_window_size: episodes SB3's rollout statistics average over.
+    :param device: ``"cpu"``, ``"cuda"``, ``"cuda:<i>"`` or SB3's ``"auto"``.
+    :param net_arch: hidden layer widths of the Q-network (SB3's ``policy_kwargs["net_arch"]``).
+    :param cut_windows: :class:`~dospcot.policies.ExpectedSarsaDQN`'s own: under the max target
+        (``agent = "dqn"``), end n-step windows before the first exploratory action.
+    """
 
-class _DQNChecks:
+    learning_rate: float = DQN_DEFAULTS["learning_rate"]
+    buffer_size: int = DQN_DEFAULTS["buffer_size"]
+    learning_starts: int = DQN_DEFAULTS["learning_starts"]
+    batch_size: int = DQN_DEFAULTS["batch_size"]
+    tau: float = 1.0
+    gamma: float = DQN_DEFAULTS["gamma"]
+    train_freq: int = 4
+    gradient_steps: int = 1
+    optimize_memory_usage: bool = False
+    n_steps: int = 1
+    target_update_interval: int = DQN_DEFAULTS["target_update_interval"]
+    max_grad_norm: float = 10.0
+    stats_window_size: int = 100
+    device: str = DQN_DEFAULTS["device"]
+    net_arch: tuple[int, ...] = (128, 128)
+    cut_windows: bool = True
+
+    set_elsewhere: ClassVar[dict[str, str]] = DQN_SET_ELSEWHERE
+
     def __post_init__(self) -> None:
         check_at_least(
             self, 1, "buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"
@@ -185,33 +221,6 @@ class _DQNChecks:
         kwargs = dataclasses.asdict(self)
         kwargs["policy_kwargs"] = {"net_arch": list(kwargs.pop("net_arch"))}
         return kwargs
-
-
-DQNConfig = dataclasses.make_dataclass(
-    "DQNConfig",
-    [
-        *_sb3_dqn_fields(),
-        ("net_arch", tuple[int, ...], field(default=(128, 128))),
-        (
-            "cut_windows",
-            bool,
-            field(default=inspect.signature(ExpectedSarsaDQN.__init__).parameters["cut_windows"].default),
-        ),
-    ],
-    bases=(_DQNChecks,),
-    frozen=True,
-)
-DQNConfig.__module__ = __name__  # so pickle and the docs find it here
-DQNConfig.__doc__ = f"""Keyword arguments of every neural agent: each of stable-baselines3 ``DQN``'s that a
-TOML value can hold, under its own name and with its own default except {", ".join(DQN_DEFAULTS)}
-(:data:`DQN_DEFAULTS`); the fields are read from ``DQN``'s signature, not written out again. Two
-fields are dospcot's:
-
-:param net_arch: hidden layer widths of the Q-network (SB3's ``policy_kwargs["net_arch"]``).
-:param cut_windows: :class:`~dospcot.policies.ExpectedSarsaDQN`'s own: under the max target
-    (``agent = "dqn"``), end n-step windows before the first exploratory action.
-"""
-DQNConfig.set_elsewhere = DQN_SET_ELSEWHERE
 
 
 @dataclass(frozen=True)

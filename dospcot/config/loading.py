@@ -1,5 +1,6 @@
 """Reading a config: TOML presets and files, ``extends`` chains, ``--set`` overrides, and the checked
-conversion of the resulting table into the config tree (:mod:`dospcot.config.run_configs`).
+conversion of the resulting table into the config tree (:mod:`dospcot.config.run_configs`). The
+task's own checks follow in :func:`dospcot.tasks.load_config`, which most callers want.
 
 A config is a TOML table read with the stdlib's :mod:`tomllib`. Its keys mirror
 :class:`~dospcot.config.run_configs.TrainConfig`; sections (``[env]``, ``[training]``, ``[dqn]``,
@@ -28,8 +29,6 @@ from typing import Any, Literal
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.presets import read_config_text
-from dospcot.config.run_configs import RunConfig
-from dospcot.tasks.registry import get_task
 
 BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.:/-]*")
 """A value ``--set`` takes as a string without TOML's quotes: a name, a dotted path or a file path."""
@@ -86,11 +85,9 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return merged
 
 
-def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
-    """Read a preset or a TOML file, apply ``--set`` overrides and validate the result (no I/O beyond
-    the file): the root dataclass of its task (``task``, default ``"grid"``): a
-    :class:`~dospcot.config.run_configs.PaperConfig` for ``"paper"``, else a
-    :class:`~dospcot.config.run_configs.TrainConfig`."""
+def config_table(config: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
+    """The table of a preset or a TOML file with its ``extends`` chain merged in and the ``--set``
+    overrides applied, not yet checked against the config tree (no I/O beyond the files)."""
     data = read_config_data(config)
     for override in overrides:
         path, value = parse_override(override)
@@ -100,21 +97,13 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
                 f'holding extends = "{value}" and your keys, and pass its path as CONFIG'
             )
         set_key(data, path, value, f"--set {override}")
-    return from_mapping(get_task(data.get("task", "grid")).config_type(), data)
+    return data
 
 
-def load_run_config(path: Path) -> RunConfig:
-    """The config a run folder holds (its ``config.toml``), validated as :func:`load_config` does, but
-    with every key renamed since the folder was written read under its new name: a run folder outlives
-    its code (the record's do), while a config a person writes with an old key is refused."""
-    data = read_config_data(str(path))
-    cls = get_task(data.get("task", "grid")).config_type()
-    return from_mapping(cls, _renamed_to_now(cls, data))
-
-
-def _renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
+def renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
     """``data`` with the renamed keys of ``cls`` and of its sections (``renamed_keys``) under their new
-    names."""
+    names: a run folder outlives its code (the record's do), so its ``config.toml`` is read this way,
+    while a config a person writes with an old key is refused (:func:`from_mapping`)."""
     renamed: dict[str, str] = getattr(cls, "renamed_keys", {})
     hints = typing.get_type_hints(cls)
     out = {}
@@ -122,7 +111,7 @@ def _renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
         key = renamed.get(key, key)
         hint = hints.get(key)
         section = dataclasses.is_dataclass(hint) and isinstance(value, Mapping)
-        out[key] = _renamed_to_now(hint, value) if section else value
+        out[key] = renamed_to_now(hint, value) if section else value
     return out
 
 

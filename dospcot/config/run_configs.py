@@ -1,9 +1,9 @@
 """The root of a config: :class:`TrainConfig` (one run of SB3 agents on a task) and
 :class:`PaperConfig` (one seed of the seed paper's tabular protocol).
 
-Every field is checked without I/O when the dataclass is built. What a task adds to that (its views,
-what its sections allow together) is asked of the task registry (:mod:`dospcot.tasks.registry`), so
-no check here names a task.
+Every field is checked without I/O when the dataclass is built, and nothing here knows a task: what a
+task adds to the checks (its views, what its sections allow together) is the task spec's
+(:meth:`dospcot.tasks.registry.Task.check_config`), which :func:`dospcot.tasks.load_config` applies.
 """
 
 from __future__ import annotations
@@ -21,7 +21,6 @@ from dospcot.config.learning_sections import (
     TrainingConfig,
 )
 from dospcot.config.task_sections import DemonstrationsConfig, EnvConfig, GymConfig, HighwayConfig
-from dospcot.tasks.registry import Task, get_task, task_sections
 
 RUN_AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
 
@@ -62,14 +61,6 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_name_and_seed(self.name, self.seed)
-        task = self.task_definition  # an unknown task fails here, naming the registered ones
-        task.validate(self)
-        allowed = ", ".join(self.view_names)
-        if not self.views:
-            raise ConfigError(f"views: need at least one view; allowed: {allowed}")
-        for view in self.views:
-            if view not in self.view_names:
-                raise ConfigError(f"views: the {self.task_name} has no view {view!r}; allowed: {allowed}")
         if len(set(self.views)) != len(self.views):
             raise ConfigError(f"views: each view may appear once, got {list(self.views)}")
         if self.agents and len(self.agents) != len(self.views):
@@ -81,21 +72,6 @@ class TrainConfig:
             unknown = [kind for kind in kinds if kind not in RUN_AGENT_KINDS]
             if unknown:
                 raise ConfigError(f"{key}: unknown agent kind {unknown[0]!r}; allowed: {allowed_kinds}")
-        # Another task's section would be accepted and change nothing; at its defaults (as in the
-        # config.toml of a run folder written before it was left out) it says nothing either.
-        for unread in self._unread_sections:
-            if getattr(self, unread) != type(getattr(self, unread))():
-                raise ConfigError(
-                    f'{unread}: a task = "{self.task}" run does not read the [{unread}] section; its task '
-                    f"is set in [{task.section}]"
-                )
-        if not task.discrete_states and "tabular" in self.agent_kinds:
-            key = "agents" if self.agents else "agent"
-            neural = ", ".join(kind for kind in RUN_AGENT_KINDS if kind != "tabular")
-            raise ConfigError(
-                f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on "
-                f"{self.task_name}: {neural}"
-            )
         self._check_demonstrations()
         self._check_segments()
         self._check_queries()
@@ -106,11 +82,6 @@ class TrainConfig:
             raise ConfigError(
                 "demonstrations.margin_loss_weight: tabular agents have no large-margin loss; set it to 0 "
                 "to use the demonstrations as labels only"
-            )
-        if demos.agent and demos.agent_view and demos.agent_view not in self.view_names:
-            raise ConfigError(
-                f"demonstrations.agent_view: the {self.task_name} has no view {demos.agent_view!r}; "
-                f"allowed: {', '.join(self.view_names)}"
             )
 
     def _check_segments(self) -> None:
@@ -126,15 +97,10 @@ class TrainConfig:
                 "training.segment_length: segment labels reveal no single reward, so demonstrations "
                 "cannot be labels too; set demonstrations.labels = false"
             )
-        if self.task_definition.has_monitor(self):
-            raise ConfigError(
-                "training.segment_length: segment labels reveal no single reward, so they cannot be "
-                "combined with a reward monitor"
-            )
 
     def _check_queries(self) -> None:
         strategy = self.training.label_strategy
-        if strategy == "uniform":
+        if not self.training.queries:
             return
         if self.method != "cotrain":
             raise ConfigError(
@@ -153,25 +119,6 @@ class TrainConfig:
             )
 
     @property
-    def task_definition(self) -> Task:
-        """The registered task this run trains on."""
-        return get_task(self.task)
-
-    @property
-    def _unread_sections(self) -> list[str]:
-        return [section for section in task_sections() if section != self.task_definition.section]
-
-    @property
-    def task_name(self) -> str:
-        """The task, in words."""
-        return self.task_definition.title(self)
-
-    @property
-    def view_names(self) -> tuple[str, ...]:
-        """The views the task offers."""
-        return self.task_definition.view_names(self)
-
-    @property
     def agent_kinds(self) -> tuple[str, ...]:
         """The agent kind of each view."""
         return self.agents or (self.agent,) * len(self.views)
@@ -182,20 +129,26 @@ class TrainConfig:
         capping it changes nothing but memory and the size of every checkpoint."""
         return min(self.dqn.buffer_size, self.training.total_steps)
 
+    @property
+    def mask_fraction(self) -> float:
+        """The random share of the run's reward mask: every reward for the oracle, none where a rater
+        buys the labels (``training.queries``), else ``training.label_fraction``."""
+        if self.method == "oracle":
+            return 1.0
+        return 0.0 if self.training.queries else self.training.label_fraction
+
     def to_dict(self) -> dict[str, Any]:
-        """The config as plain TOML-ready values (tuples become lists), without the sections of the
-        other tasks, which this run does not read."""
-        data = plain(dataclasses.asdict(self))
-        for unread in self._unread_sections:
-            del data[unread]
-        return data
+        """The config as plain TOML-ready values (tuples become lists), every section included; a run
+        folder's ``config.toml`` leaves out the sections its task does not read
+        (:meth:`dospcot.tasks.registry.Task.config_table`)."""
+        return plain(dataclasses.asdict(self))
 
 
 @dataclass(frozen=True)
 class PaperConfig:
     """One seed of the seed paper's protocol on masked CliffWalking (``task = "paper"``).
 
-    The protocol fixes its runs (:func:`dospcot.paper.protocol.protocol_specs`: 26 tabular runs, 37
+    The protocol fixes its runs (:func:`dospcot.run.paper_protocol.protocol_specs`: 26 tabular runs, 37
     agents, per seed: every agent kind alone under each baseline, homogeneous pairs at three gammas,
     Expected SARSA with the other kinds); a config sets the seed and the hyperparameters every run shares.
 
@@ -211,11 +164,6 @@ class PaperConfig:
 
     def __post_init__(self) -> None:
         check_name_and_seed(self.name, self.seed)
-
-    @property
-    def task_definition(self) -> Task:
-        """The registered task this run trains on."""
-        return get_task(self.task)
 
     def to_dict(self) -> dict[str, Any]:
         """The config as plain TOML-ready values."""

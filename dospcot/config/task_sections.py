@@ -95,6 +95,17 @@ class EnvConfig:
         return self.max_episode_steps or 4 * self.size
 
 
+HIGHWAY_ENV_IDS: tuple[str, ...] = ("highway-fast-v0", "highway-v0", "merge-v0", "roundabout-v0")
+"""The highway-env tasks a ``[highway]`` section may name (discrete meta-actions, one controlled
+vehicle; the ``highway`` extra)."""
+FAST_HIGHWAY_ID = "dospcot/FastHighway-v0"
+"""The project's own numpy highway (:class:`dospcot.envs.FastHighwayEnv`)."""
+HIGHWAY_ENV_VIEWS: tuple[str, ...] = ("kinematics", "occupancy", "ttc")
+"""The views of a highway-env task: highway-env's observation types of those names."""
+FAST_HIGHWAY_VIEWS: tuple[str, ...] = ("kinematics", "occupancy")
+"""The views of the fast highway, which has no time-to-collision grid."""
+
+
 @dataclass(frozen=True)
 class HighwayConfig:
     """A highway task (``task = "highway"``): highway-env's or our fast env, with sensor views.
@@ -126,6 +137,11 @@ class HighwayConfig:
             )
         if self.reveal_first_steps < 0:
             raise ValueError(f"reveal_first_steps must be >= 0, got {self.reveal_first_steps}")
+
+    @property
+    def view_names(self) -> tuple[str, ...]:
+        """The views of the task ``env_id``."""
+        return FAST_HIGHWAY_VIEWS if self.env_id == FAST_HIGHWAY_ID else HIGHWAY_ENV_VIEWS
 
     # The sensor adapter reads these of every sensor task's section (dospcot.tasks.sensor).
     success_return = None

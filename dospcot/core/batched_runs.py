@@ -42,6 +42,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 import torch as th
 
+from dospcot.core import sb3_engine as sb3
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
@@ -50,9 +51,6 @@ from dospcot.seeding import batched_draws_seed
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
-
-LOG_INTERVAL = 4
-"""Episodes between two dumps of a member's SB3 scalars: ``DQN.learn``'s default, as a run alone."""
 
 
 def config_refusal(cfg: TrainConfig) -> str | None:
@@ -158,8 +156,8 @@ class BatchedRuns:
         agents, learner, draws = self._agents(k), self.learners[k], self.draws[k]
         first = agents[0]
         steps = self.cfg.training.steps_per_round
-        for agent in agents:  # what learn() sets up: the env's seeded reset, the episode buffers
-            agent._setup_learn(steps, reset_num_timesteps=False)
+        for agent in agents:
+            sb3.start_collection(agent, steps)
         envs = [agent.get_env() for agent in agents]
         # Windows cut at exploratory actions need the greedy action even during the uniform warm-up.
         flag = first.cut_windows and first.target == "q" and first.n_steps > 1
@@ -169,7 +167,9 @@ class BatchedRuns:
             greedy = None
             if flag or not warmup:
                 obs = th.as_tensor(
-                    np.stack([agent._last_obs for agent in agents]), dtype=th.float32, device=first.device
+                    np.stack([sb3.last_observation(agent) for agent in agents]),
+                    dtype=th.float32,
+                    device=first.device,
                 )
                 with th.no_grad():
                     greedy = learner.q_net(obs).argmax(dim=2).cpu().numpy()  # (S, 1)
@@ -180,16 +180,8 @@ class BatchedRuns:
                     action = greedy[s]
                 agent._explored = (action != greedy[s]) if flag else None
                 new_obs, rewards, dones, infos = env.step(action)
-                agent.num_timesteps += 1
-                agent._update_info_buffer(infos, dones)
-                agent._store_transition(agent.replay_buffer, action, new_obs, rewards, dones, infos)
-                agent._n_calls += 1
-                agent.logger.record("rollout/exploration_rate", agent.exploration_rate)  # as DQN._on_step
-                for _ in range(int(dones.sum())):  # as SB3's collect_rollouts: its rollout/ scalars
-                    agent._episode_num += 1
-                    if agent._episode_num % LOG_INTERVAL == 0:
-                        agent.dump_logs()
-            if first._n_calls % syncs_every == 0:
+                sb3.record_step(agent, action, new_obs, rewards, dones, infos)
+            if sb3.calls(first) % syncs_every == 0:
                 learner.sync_target()
             if step % train_every == 0 and first.num_timesteps > first.learning_starts:
                 # gradient_steps = -1: as many as the env steps since the last training (SB3's rule).
@@ -218,10 +210,7 @@ class BatchedRuns:
                 if took:
                     mine.append(value)
         for agent, mine in zip(agents, losses, strict=True):
-            agent.logger.record("train/learning_rate", agent.lr_schedule(agent._current_progress_remaining))
-            agent.logger.record("train/n_updates", agent._n_updates, exclude="tensorboard")
-            if mine:
-                agent.logger.record("train/loss", float(np.mean(mine)))
+            sb3.record_update(agent, float(np.mean(mine)) if mine else None)
 
     def _train_step(self, k: int) -> tuple[th.Tensor, th.Tensor]:
         """One stacked gradient step of every member's agent ``k`` on a batch from its own buffer;
@@ -232,7 +221,7 @@ class BatchedRuns:
         for agent, draw in zip(agents, draws, strict=True):
             buffer = agent.replay_buffer
             upper = buffer.buffer_size if buffer.full else buffer.pos
-            batches.append(buffer._get_samples(draw.randint(0, upper, size=first.batch_size)))
+            batches.append(sb3.samples_at(buffer, draw.randint(0, upper, size=first.batch_size)))
             if agent.n_demonstrations and agent.demo_loss_weight:
                 index = th.as_tensor(draw.randint(0, agent.n_demonstrations, size=first.batch_size))
                 demo_states.append(agent._demo_obs[index])
@@ -241,7 +230,7 @@ class BatchedRuns:
         demos = (th.stack(demo_states), th.stack(demo_actions)) if demo_states else None
         losses, updated = self.learners[k].train_step(stack_samples(batches), eps, first.gamma, demos)
         for agent in agents:
-            agent._n_updates += 1
+            sb3.count_gradient_step(agent)
         return losses, updated
 
     def _write_back(self, k: int) -> None:

@@ -29,7 +29,7 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
 folder, TensorBoard and checkpoints) hangs on its ``on_round`` hook. The run reads its config
 (:class:`~dospcot.config.run_configs.TrainConfig`) directly.
 
-What a task supplies (:class:`CoTrainingTask`, built by the task registry, :mod:`dospcot.tasks`):
+What a task supplies (:class:`TaskAdapter`, built by the task registry, :mod:`dospcot.tasks`):
 each agent's env (masked, writing the store), its reward classes, the pool, each sample's true class
 (metrics only) and the evaluator. The grid adapter (:mod:`dospcot.tasks.grid`) pools (s, a) keys and
 measures against the exact optimum; the sensor adapter (:mod:`dospcot.tasks.sensor`) pools every step
@@ -74,7 +74,7 @@ AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expecte
 and the tabular Expected-SARSA agent."""
 
 
-class CoTrainingTask(QueriedTask, Protocol):
+class TaskAdapter(QueriedTask, Protocol):
     """What a task adapter supplies to :class:`CoTrainingRun` (and, for reward queries, what
     :class:`~dospcot.core.queries.QueriedTask` asks, plus ``hidden_reward(ids)`` for the simulated
     rater alone)."""
@@ -177,12 +177,12 @@ class CoTrainingRun:
         simulated rater, which answers from the hidden reward.
     """
 
-    def __init__(self, task: CoTrainingTask, cfg: TrainConfig, rater: Rater | None = None) -> None:
+    def __init__(self, task: TaskAdapter, cfg: TrainConfig, rater: Rater | None = None) -> None:
         self.task, self.cfg = task, cfg
         training = cfg.training
         self.queries: RewardQueries | None = None
         """The reward queries of an active label strategy, or None (the uniform mask)."""
-        if training.label_strategy != "uniform":
+        if training.queries:
             rater = rater or SimulatedRater(task.hidden_reward)
             self.queries = RewardQueries(
                 training.label_strategy, training.label_fraction, training.query_random_share,
@@ -404,10 +404,11 @@ class CoTrainingRun:
         self.store.load_state_dict(state["store"])  # in place: the store wrappers keep pointing at it
         if self.segments is not None:
             self.segments.load_state_dict(state["segments"])
-        self.segment_classes = state.get("segment_classes", self.segment_classes)  # older checkpoints lack it
+        if state["segment_classes"] is not None:  # None: a checkpoint written before they were kept
+            self.segment_classes = state["segment_classes"]
         self.table.load_state_dict(state["table"])
         self.task.classes, self.trainer = state["classes"], state["trainer"]
-        self.collected = state.get("collected", False)  # older checkpoints: at a round's end
+        self.collected = state["collected"]
         if self.queries is not None:
             self.queries.revealed, self.queries.met_round, self.queries.log = state["queries"]
         for k, agent in enumerate(self.agents):

@@ -36,12 +36,10 @@ from typing import Any, Protocol
 
 import numpy as np
 
-STRATEGIES: tuple[str, ...] = ("uniform", "random", "outcomes", "uncertainty", "disagreement")
-"""``training.label_strategy`` values; ``"uniform"`` is the fixed random mask and buys nothing."""
-CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")
+from dospcot.config.choices import CLASSIFIER_STRATEGIES
+
 LOG_COLUMNS: tuple[str, ...] = ("round", "sample", "strategy", "answer")
 """The columns of a run's ``queries.csv``."""
-"""The strategies that read the reward classifiers (so need co-training)."""
 
 
 class Rater(Protocol):
@@ -152,7 +150,7 @@ def choose_queries(
 ) -> tuple[np.ndarray, np.ndarray]:
     """The samples to query now and, for each, whether it was drawn at random.
 
-    :param strategy: one of :data:`STRATEGIES` but ``"uniform"``.
+    :param strategy: one of :data:`~dospcot.config.choices.LABEL_STRATEGIES` but ``"uniform"``.
     :param candidates: (N,) bool, the samples that may be queried (met, not yet labelled).
     :param n: how many to query (at most the candidates).
     :param rng: the round's query stream (:func:`dospcot.seeding.query_seed`).

@@ -1,5 +1,5 @@
 """What a co-training round reports, for every kind of run (the SB3 runs of
-:mod:`dospcot.core.cotraining_run` and the batched tabular runs of :mod:`dospcot.paper.tabular_cotraining`):
+:mod:`dospcot.core.cotraining_run` and the batched tabular runs of :mod:`dospcot.core.tabular_cotraining`):
 the co-trainer's figures for the round and the head that names each record (one row of
 ``metrics.csv`` per run, round and agent).
 

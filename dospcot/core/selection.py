@@ -24,14 +24,10 @@ For one view j, over a batch of B independent runs and a pool of N samples:
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
-Weighting = Literal["hard", "soft"]
-WEIGHTINGS: tuple[str, ...] = ("hard", "soft")
-Quota = Literal["label-share", "candidates"]
-QUOTAS: tuple[str, ...] = ("label-share", "candidates")
+from dospcot.config.choices import QUOTAS, WEIGHTINGS, Quota, Weighting
 
 
 @dataclass(frozen=True)

@@ -1,7 +1,7 @@
 """The gym task (``task = "gym"``, the ``[gym]`` section): any gymnasium env with discrete actions,
 its views computed from its observation (:mod:`dospcot.envs.gym_sensors`; docs/your_env.md). Every step
 is one pool sample, or with ``gym.state_key`` every (state key, action) pair; the sensor adapter
-(:mod:`dospcot.tasks.sensor`) pools them."""
+(:mod:`dospcot.tasks.adapters.sensor`) pools them."""
 
 from __future__ import annotations
 
@@ -9,16 +9,16 @@ from functools import partial
 from typing import TYPE_CHECKING
 
 from dospcot.config.errors import ConfigError
-from dospcot.envs.gym_sensors import check_gym_task, make_masked_gym
 from dospcot.tasks.registry import register
-from dospcot.tasks.sensor import SensorTask, SensorTaskBase
+from dospcot.tasks.sensor import SensorTask
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
+    from dospcot.tasks.adapters.sensor import SensorAdapter
 
 
 @register
-class GymTask(SensorTaskBase):
+class GymTask(SensorTask):
     """A gymnasium env: an episode whose true return exceeds ``gym.success_return`` is a success."""
 
     name = "gym"
@@ -45,6 +45,8 @@ class GymTask(SensorTaskBase):
             )
 
     def check(self, cfg: TrainConfig) -> None:
+        from dospcot.envs.gym_sensors import check_gym_task
+
         gym = cfg.gym
         try:
             check_gym_task(
@@ -54,12 +56,15 @@ class GymTask(SensorTaskBase):
             raise ConfigError(str(err)) from err.__cause__
         super().check(cfg)
 
-    def build(self, cfg: TrainConfig) -> SensorTask:
+    def build(self, cfg: TrainConfig) -> SensorAdapter:
+        from dospcot.envs.gym_sensors import make_masked_gym
+        from dospcot.tasks.adapters.sensor import SensorAdapter
+
         gym = cfg.gym
         make_eval_env = partial(
             make_masked_gym, gym.env_id, view_specs=gym.views, env_kwargs=gym.env_kwargs,
             wrappers=gym.wrappers, state_key=gym.state_key,
         )  # fmt: skip
-        queried, frames = cfg.training.label_strategy != "uniform", cfg.training.rater == "file"
+        queried, frames = cfg.training.queries, cfg.training.rater == "file"
         make_env = partial(make_eval_env, train_wrappers=gym.train_wrappers, queried=queried, frames=frames)
-        return SensorTask(cfg, gym, make_env, make_eval_env)
+        return SensorAdapter(cfg, gym, make_env, make_eval_env)

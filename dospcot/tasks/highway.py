@@ -1,6 +1,6 @@
 """The highway task (``task = "highway"``, the ``[highway]`` section): highway-env's driving tasks
 (the ``highway`` extra) or the project's fast numpy highway, with sensor views and rewards revealed per
-step; the sensor adapter (:mod:`dospcot.tasks.sensor`) pools every step."""
+step; the sensor adapter (:mod:`dospcot.tasks.adapters.sensor`) pools every step."""
 
 from __future__ import annotations
 
@@ -8,23 +8,17 @@ from functools import partial
 from typing import TYPE_CHECKING
 
 from dospcot.config.errors import ConfigError
-from dospcot.envs.fast_highway import FastHighwayEnv
-from dospcot.envs.highway import (
-    FAST_HIGHWAY_ID,
-    HIGHWAY_ENV_IDS,
-    highway_view_names,
-    make_masked_highway,
-    try_highway_config,
-)
+from dospcot.config.task_sections import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS
 from dospcot.tasks.registry import register
-from dospcot.tasks.sensor import SensorTask, SensorTaskBase
+from dospcot.tasks.sensor import SensorTask
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
+    from dospcot.tasks.adapters.sensor import SensorAdapter
 
 
 @register
-class HighwayTask(SensorTaskBase):
+class HighwayTask(SensorTask):
     """A highway: an episode that lasts all its ``episode_steps`` (no crash) is a success."""
 
     name = "highway"
@@ -40,9 +34,12 @@ class HighwayTask(SensorTaskBase):
         return cfg.highway.reveal_first_steps > 0
 
     def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
-        return highway_view_names(cfg.highway.env_id)
+        return cfg.highway.view_names
 
     def check(self, cfg: TrainConfig) -> None:
+        from dospcot.envs.fast_highway import FastHighwayEnv
+        from dospcot.envs.highway import try_highway_config
+
         highway = cfg.highway
         if highway.env_id == FAST_HIGHWAY_ID:
             check = FastHighwayEnv.check_overrides
@@ -54,12 +51,15 @@ class HighwayTask(SensorTaskBase):
             raise ConfigError(f"highway.config: {err}") from None
         super().check(cfg)
 
-    def build(self, cfg: TrainConfig) -> SensorTask:
+    def build(self, cfg: TrainConfig) -> SensorAdapter:
+        from dospcot.envs.highway import make_masked_highway
+        from dospcot.tasks.adapters.sensor import SensorAdapter
+
         highway = cfg.highway
         make_eval_env = partial(
             make_masked_highway, highway.env_id, config=highway.config,
-            reveal_first_steps=highway.reveal_first_steps, queried=cfg.training.label_strategy != "uniform",
+            reveal_first_steps=highway.reveal_first_steps, queried=cfg.training.queries,
         )  # fmt: skip
         # A file rater's queries show frames: the training envs draw them, the evaluation envs need not.
         make_env = partial(make_eval_env, frames=cfg.training.rater == "file")
-        return SensorTask(cfg, highway, make_env, make_eval_env)
+        return SensorAdapter(cfg, highway, make_env, make_eval_env)

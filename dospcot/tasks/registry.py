@@ -1,12 +1,14 @@
 """The task registry: every task a config can name (``task = "..."``) is one module of
 :mod:`dospcot.tasks` that subclasses :class:`Task` and registers it with :func:`register`.
 
-A task says what its config allows (its views, what its section may hold together), checks what needs
-files, imports or an env before anything trains, and builds the adapter a
-:class:`~dospcot.core.cotraining_run.CoTrainingRun` drives (its env, views, pool and evaluation). A
-task whose runs are not co-training runs of SB3 agents (the paper's tabular protocol) also says how it
-trains, resumes, evaluates and reports a run folder. Nothing outside this package branches on a task's
-name: adding a task is one new module here and its presets (docs/design.md, "Adding a task").
+A task is a spec: it says what its config allows (its views, what its section may hold together),
+checks what needs files, imports or an env before anything trains, and builds the adapter a
+:class:`~dospcot.core.cotraining_run.CoTrainingRun` drives (its env, views, pool and evaluation;
+:mod:`dospcot.tasks.adapters`). A spec module imports neither torch nor an env at import time, so
+reading a config costs no training stack. How a run of a task trains is not the spec's to say: the
+run layer chooses by the type of its config (:mod:`dospcot.run.runners`). Nothing outside this
+package branches on a task's name: adding a task is one new module here and its presets
+(docs/design.md, "Adding a task").
 
 The modules are found, not listed: the first look-up imports every module of this package, so that
 each registers itself.
@@ -16,22 +18,20 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar
 
 from dospcot.config.errors import ConfigError
+from dospcot.config.run_configs import RUN_AGENT_KINDS, RunConfig, TrainConfig
 
 if TYPE_CHECKING:
-    from dospcot.config.run_configs import RunConfig, TrainConfig
-    from dospcot.core.cotraining_run import CoTrainingTask
-    from dospcot.experiment.sweep_spec import SweepSpec
+    from dospcot.core.cotraining_run import TaskAdapter
 
 _TASKS: dict[str, Task] = {}
 
 
 class Task:
-    """A task of the registry; the defaults serve a co-training run of SB3 agents
-    (:mod:`dospcot.experiment.train`)."""
+    """A task of the registry, its config a :class:`~dospcot.config.run_configs.TrainConfig` unless
+    :meth:`config_type` says otherwise."""
 
     name: ClassVar[str]
     """The value of ``task`` in a config."""
@@ -39,15 +39,9 @@ class Task:
     """The config section that sets the task up."""
     discrete_states: ClassVar[bool] = False
     """Whether every state and its views are known in advance, as ``tabular`` agents need."""
-    seeds_train_together: ClassVar[bool] = False
-    """Whether a sweep trains several seeds of one config in one process: such a task also has
-    ``train_seeds_at(cfg, run_dirs, commands, progress)``, which trains each seed in its folder and
-    calls ``progress`` with the share of one seed just done (the paper protocol's)."""
 
     def config_type(self) -> type:
         """The root dataclass of the task's configs."""
-        from dospcot.config.run_configs import TrainConfig  # a task module is found by the config it serves
-
         return TrainConfig
 
     def title(self, cfg: TrainConfig) -> str:
@@ -69,50 +63,63 @@ class Task:
         """Raise :class:`ConfigError` for what only files, imports or the env can tell (an unknown env
         id, a demonstrations file that does not load); runs before any run folder is made."""
 
-    def build(self, cfg: TrainConfig) -> CoTrainingTask:
-        """The adapter of one run (:class:`~dospcot.core.cotraining_run.CoTrainingTask`)."""
+    def build(self, cfg: TrainConfig) -> TaskAdapter:
+        """The adapter of one run (:class:`~dospcot.core.cotraining_run.TaskAdapter`)."""
         raise NotImplementedError
 
-    def train_at(self, run_dir: Path, cfg: RunConfig, *, show_progress: bool, command: str) -> Path:
-        """Train ``cfg`` in ``run_dir``, which holds nothing yet."""
-        from dospcot.experiment.train import train_cotraining_run
+    def check_config(self, cfg: RunConfig) -> None:
+        """Every check of ``cfg`` that needs the task (no I/O): the views it offers, the sections it
+        reads, the agents its states allow, then the task's own :meth:`validate`.
 
-        return train_cotraining_run(run_dir, cfg, show_progress=show_progress, command=command)
+        :raises ConfigError: one line naming the key and what is allowed.
+        """
+        if not isinstance(cfg, TrainConfig):
+            return
+        self.validate(cfg)
+        views = self.view_names(cfg)
+        allowed, task_name = ", ".join(views), self.title(cfg)
+        if not cfg.views:
+            raise ConfigError(f"views: need at least one view; allowed: {allowed}")
+        for view in cfg.views:
+            if view not in views:
+                raise ConfigError(f"views: the {task_name} has no view {view!r}; allowed: {allowed}")
+        # Another task's section would be accepted and change nothing; at its defaults (as in the
+        # config.toml of a run folder written before it was left out) it says nothing either.
+        for unread in self._unread_sections():
+            if getattr(cfg, unread) != type(getattr(cfg, unread))():
+                raise ConfigError(
+                    f'{unread}: a task = "{cfg.task}" run does not read the [{unread}] section; its task '
+                    f"is set in [{self.section}]"
+                )
+        if not self.discrete_states and "tabular" in cfg.agent_kinds:
+            key = "agents" if cfg.agents else "agent"
+            neural = ", ".join(kind for kind in RUN_AGENT_KINDS if kind != "tabular")
+            raise ConfigError(
+                f"{key}: 'tabular' needs a discrete task (task = \"grid\"); allowed on {task_name}: {neural}"
+            )
+        demos = cfg.demonstrations
+        if demos.agent and demos.agent_view and demos.agent_view not in views:
+            raise ConfigError(
+                f"demonstrations.agent_view: the {task_name} has no view {demos.agent_view!r}; "
+                f"allowed: {allowed}"
+            )
+        if cfg.training.segment_length > 1 and self.has_monitor(cfg):
+            raise ConfigError(
+                "training.segment_length: segment labels reveal no single reward, so they cannot be "
+                "combined with a reward monitor"
+            )
 
-    def resume(self, run_dir: Path, cfg: RunConfig, *, show_progress: bool, command: str) -> Path:
-        """Continue the unfinished run of ``cfg`` in ``run_dir``."""
-        from dospcot.experiment.train import resume_cotraining_run
+    def config_table(self, cfg: RunConfig) -> dict[str, Any]:
+        """What a run folder's ``config.toml`` holds: ``cfg`` as plain TOML values, without the
+        sections of the other tasks, which this run does not read."""
+        data = cfg.to_dict()
+        if isinstance(cfg, TrainConfig):
+            for unread in self._unread_sections():
+                del data[unread]
+        return data
 
-        return resume_cotraining_run(run_dir, cfg, show_progress=show_progress, command=command)
-
-    def evaluate(self, run_dir: Path, cfg: RunConfig) -> dict[str, Any]:
-        """Re-evaluate the saved agents of a run folder."""
-        from dospcot.experiment.train import evaluate_cotraining_run
-
-        return evaluate_cotraining_run(run_dir, cfg)
-
-    def result_line(self, run_dir: Path, summary: dict[str, Any]) -> str:
-        """What ``dospcot train`` prints of a finished run's ``summary.json``."""
-        mean = summary["mean"]
-        figures = ", ".join(
-            f"{name.replace('_', ' ')} {mean[name]:.{digits}f}"
-            for name, digits in (("normalised_score", 3), ("agreement", 3), ("success", 2))
-        )
-        return f"{run_dir}: {figures} (mean over {summary['m']} agent(s), round {summary['rounds']})"
-
-    def write_report(self, spec: SweepSpec, runs: list[Any], out_dir: Path) -> list[Path]:
-        """Write a sweep's report into ``out_dir``; return the files."""
-        from dospcot.experiment.report import write_cotraining_report
-
-        return write_cotraining_report(spec, runs, out_dir)
-
-
-def mask_fraction(cfg: TrainConfig) -> float:
-    """The random share of a run's reward mask: every reward for the oracle, none where a rater buys
-    the labels (an active ``training.label_strategy``), else ``training.label_fraction``."""
-    if cfg.method == "oracle":
-        return 1.0
-    return cfg.training.label_fraction if cfg.training.label_strategy == "uniform" else 0.0
+    def _unread_sections(self) -> list[str]:
+        return [section for section in task_sections() if section != self.section]
 
 
 def register(cls: type[Task]) -> type[Task]:
@@ -143,6 +150,4 @@ def get_task(name: str) -> Task:
 
 def task_sections() -> list[str]:
     """The sections of :class:`~dospcot.config.run_configs.TrainConfig` that set up a task."""
-    from dospcot.config.run_configs import TrainConfig
-
     return sorted({task.section for task in tasks().values() if task.config_type() is TrainConfig})

@@ -16,7 +16,7 @@ from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.vec_env import VecNormalize
 
-from dospcot.core.in_place_state import InPlaceState
+from dospcot.policies.in_place_state import InPlaceState
 
 
 class WeightedReplayBufferSamples(NamedTuple):

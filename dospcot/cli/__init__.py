@@ -1,0 +1,61 @@
+"""The ``dospcot`` command line: ``dospcot --help`` lists its commands (:mod:`dospcot.cli.parser`);
+each has one handler (:mod:`dospcot.cli.commands`), whose bad inputs end in one line and exit status 2."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections.abc import Sequence
+
+from dospcot.cli.commands import RUN_COMMANDS, bench
+from dospcot.cli.parser import build_parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    args = build_parser().parse_args(argv)
+    command = shlex.join(["dospcot", *argv])
+    if args.command == "train" and args.list:  # before any import of torch: a list answers at once
+        from dospcot.config.presets import preset_names
+
+        print("\n".join(preset_names()))
+        return 0
+    from dospcot.run.interrupts import Interrupted, stop_on_signals
+
+    try:
+        with stop_on_signals():
+            return _run(args, command)
+    except Interrupted as stop:  # Ctrl-C or SIGTERM: what was kept, and how to go on
+        print(f"dospcot {args.command}: interrupted; kept {stop}", file=sys.stderr)
+        return 130
+    except KeyboardInterrupt:
+        print(f"dospcot {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+def _run(args: argparse.Namespace, command: str) -> int:
+    """Run the parsed command; its bad inputs end in one line on stderr and exit status 2."""
+    if args.command in RUN_COMMANDS:  # torch and the training stack: only past --help and usage errors
+        from dospcot.config.errors import ConfigError
+        from dospcot.core.raters import QueriesPending, RaterError
+        from dospcot.envs import EnvRaisedError, NonFiniteError
+        from dospcot.lab.sweep_spec import SweepError
+        from dospcot.run.run_folder import RunFolderError
+
+        try:
+            return RUN_COMMANDS[args.command](args, command)
+        except QueriesPending as pending:  # not an error: the run waits for a person's answers
+            run_dir = pending.path.parent.parent
+            print(
+                f"{run_dir}: {pending.count} reward queries wait in {pending.path}; write each answer in its "
+                f"reward column, then: dospcot train --resume {run_dir}"
+            )
+            return 0
+        except (ConfigError, RunFolderError, SweepError, RaterError) as err:
+            print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+            return 2
+        except (NonFiniteError, EnvRaisedError) as err:  # the env's fault, not the command line's
+            print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+            return 1
+    return bench(args, command)

@@ -1,0 +1,3 @@
+from dospcot.cli import main
+
+raise SystemExit(main())

@@ -1,0 +1,202 @@
+"""One handler per command of the ``dospcot`` command line: each reads its parsed arguments, imports
+what it needs (torch only where it trains) and returns the exit status."""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from pathlib import Path
+
+from dospcot.cli.parser import QUICK_BENCH_OUT
+
+
+def _train(args: argparse.Namespace, command: str) -> int:
+    import torch
+
+    from dospcot.config.errors import ConfigError
+    from dospcot.config.presets import preset_names
+    from dospcot.run.run_folder import batch_members
+    from dospcot.run.train import result_line, resume, train
+    from dospcot.run.train_batch import resume_batch, train_seeds
+    from dospcot.tasks import load_config
+
+    torch.set_num_threads(args.threads)
+    progress = not args.no_progress
+    if args.resume is not None:
+        if args.config or args.overrides or args.seeds:
+            raise ConfigError(
+                "--resume RUN_DIR takes no CONFIG, --set or --seeds: the run folder holds its config"
+            )
+        if batch_members(args.resume) is not None:
+            run_dirs = resume_batch(args.resume, show_progress=progress, command=command)
+        else:
+            run_dirs = [resume(args.resume, show_progress=progress, command=command)]
+    else:
+        if not args.config:
+            raise ConfigError(f"give a CONFIG: a preset ({', '.join(preset_names())}) or a path to a .toml")
+        cfg = load_config(args.config, args.overrides)
+        if args.seeds is not None:
+            run_dirs = train_seeds(cfg, args.seeds, args.runs_dir, show_progress=progress, command=command)
+        else:
+            run_dirs = [train(cfg, args.runs_dir, show_progress=progress, command=command)]
+    for run_dir in run_dirs:
+        print(result_line(run_dir))
+    return 0
+
+
+def _evaluate(args: argparse.Namespace, command: str) -> int:
+    from dospcot.run.train import evaluate
+
+    result = evaluate(args.run_dir)
+    state = "finished" if result["finished"] else "unfinished"
+    print(f"{args.run_dir}: the agents of round {result['round']} of {result['rounds']} ({state})")
+    for view, row in result["per_view"].items():
+        print(
+            f"{view:>8}: return {row['greedy_return']:8.1f}  success {row['success']:.0f}  "
+            f"normalised score {row['normalised_score']:.3f}  agreement {row['agreement']:.3f}"
+        )
+    if result["finished"]:
+        print(f"wrote {args.run_dir / 'evaluation.json'}")
+    else:
+        print("nothing written: the run is unfinished, and a resume would make a file of it stale")
+    return 0
+
+
+def _sweep(args: argparse.Namespace, command: str) -> int:
+    from dospcot.config.errors import ConfigError
+    from dospcot.lab.sweep import default_sweep_dir, run_sweep
+    from dospcot.lab.sweep_spec import SweepSpec
+
+    if args.ray_address and args.backend != "ray":
+        raise ConfigError("--ray-address names a Ray cluster: it needs --backend ray")
+    if args.resume is not None:
+        if args.configs or args.grid or args.overrides or args.name:
+            raise ConfigError(
+                "--resume SWEEP_DIR takes no CONFIG, --grid, --set or --name: the folder holds them"
+            )
+        sweep_dir, spec = args.resume, None
+        if args.seeds is not None:
+            from dospcot.lab.sweep_spec import add_seeds
+
+            spec = add_seeds(sweep_dir, args.seeds)
+    else:
+        if not args.configs:
+            raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
+        from dospcot.lab.sweep_spec import parse_grid
+
+        seeds = tuple(args.seeds or (0,))
+        spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), seeds, tuple(args.overrides))
+        sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
+    result = run_sweep(
+        sweep_dir, spec, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
+        show_progress=not args.no_progress, batch_seeds=args.batch_seeds,
+    )  # fmt: skip
+    print(
+        f"{sweep_dir}: {len(result.trials)} trials; {len(result.skipped)} already finished, "
+        f"{len(result.ran) - len(result.failed)} run now, {len(result.failed)} failed "
+        f"({args.backend} backend)"
+    )
+    for trial_id, error in result.failed.items():
+        print(f"dospcot sweep: trial {trial_id} failed: {error}", file=sys.stderr)
+    if not result.failed:
+        print(f"next: dospcot report {sweep_dir}")
+    return 1 if result.failed else 0
+
+
+def _report(args: argparse.Namespace, command: str) -> int:
+    from dospcot.lab.report import write_report
+
+    paths = write_report(args.sweep_dir, args.out)
+    print(paths[0].read_text())
+    print("wrote " + ", ".join(str(p) for p in paths))
+    return 0
+
+
+def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
+    import time
+
+    from dospcot.config.errors import ConfigError
+    from dospcot.config.presets import PAPER_PRESETS
+    from dospcot.lab.report import write_report
+    from dospcot.lab.sweep import run_sweep
+    from dospcot.lab.sweep_spec import SweepError, SweepSpec
+    from dospcot.run.run_folder import new_run_dir
+
+    for option, key in (("--label-fraction", "label_fraction"), ("--episodes", "episodes_per_round")):
+        given = [o for o in args.overrides if o.partition("=")[0].strip() == f"tabular.{key}"]
+        if given and getattr(args, option[2:].replace("-", "_")) is not None:
+            raise ConfigError(f"{option} and --set {given[0]} both set tabular.{key}: give it once")
+    if len(args.seeds) < 2:
+        raise ConfigError(
+            f"--seeds gives one seed ({args.seeds[0]}): the protocol's verdicts are intervals over seeds, "
+            "which one seed cannot give; give 2 or more (default 10)"
+        )
+    overrides = [
+        *([f"tabular.label_fraction={args.label_fraction}"] if args.label_fraction is not None else []),
+        *([f"tabular.episodes_per_round={args.episodes}"] if args.episodes is not None else []),
+        *args.overrides,
+    ]
+    spec = SweepSpec((PAPER_PRESETS[args.preset],), {}, tuple(args.seeds), tuple(overrides))
+    spec.trials()  # a bad --set fails here, before the folder is made
+    sweep_dir = new_run_dir(args.out, "")
+    started = time.perf_counter()
+    result = run_sweep(sweep_dir, spec, workers=args.workers, show_progress=not args.no_progress)
+    wall = time.perf_counter() - started
+    if result.failed:
+        raise SweepError(f"{len(result.failed)} trials failed: {'; '.join(result.failed.values())}")
+    paths = write_report(sweep_dir)
+    target = next(line for line in paths[0].read_text().splitlines() if line.startswith("**Target**"))
+    print(target.replace("**", ""))
+    print(f"wrote {', '.join(str(p) for p in paths)}")
+    print(f"wall time: {wall:.1f} s ({len(args.seeds)} seeds, {args.workers} workers)")
+    print(f"the sweep behind it: dospcot sweep --resume {sweep_dir}; its tables: dospcot report {sweep_dir}")
+    return 0
+
+
+def _study(args: argparse.Namespace, command: str) -> int:
+    from dospcot.config.errors import ConfigError
+    from dospcot.lab.studies import get_study, header_command, run_study
+
+    try:
+        get_study(args.study)
+    except ValueError as err:
+        raise ConfigError(str(err)) from None
+    options = shlex.split(command)[3:]  # what follows "dospcot study STUDY"
+    run_study(args, header_command(("dospcot", "study"), args.study, options), prog="dospcot study: error")
+    return 0
+
+
+RUN_COMMANDS = {
+    "train": _train,
+    "evaluate": _evaluate,
+    "sweep": _sweep,
+    "report": _report,
+    "reproduce-paper": _reproduce_paper,
+    "study": _study,
+}
+"""Commands whose bad configs and folders end in one line on stderr and exit status 2."""
+
+
+def bench(args: argparse.Namespace, command: str) -> int:
+    """``dospcot bench``: every benchmark, or those of ``--only``, written to ``--out``."""
+    from dospcot.lab.bench import run_benchmarks
+
+    if args.out is None:
+        args.out = QUICK_BENCH_OUT if args.quick else Path("BENCHMARKS.md")
+    elif args.quick and args.out.name == "BENCHMARKS.md":
+        print(
+            "dospcot bench: error: --quick figures are a smoke test and never go into BENCHMARKS.md; "
+            f"leave out --out (they go to {QUICK_BENCH_OUT}) or name another file",
+            file=sys.stderr,
+        )
+        return 2
+    try:
+        rows = run_benchmarks(args.out, args.quick, args.repeats, command, args.only, args.device)
+    except ValueError as err:
+        print(f"dospcot bench: error: {err}", file=sys.stderr)
+        return 2
+    for row in rows:
+        print(f"{row.name}: ratio {row.ratio:.3f} (target {row.target}, {'met' if row.met else 'not met'})")
+    print(f"wrote {args.out}")
+    return 0

@@ -1,0 +1,255 @@
+"""The ``dospcot`` command line's parser: building it imports neither torch nor stable-baselines3, so
+that ``--help`` and usage errors answer at once."""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any, NoReturn
+
+QUICK_BENCH_OUT = Path("runs/bench-quick.md")
+"""Where ``dospcot bench --quick`` writes its smoke-test figures."""
+
+
+def parse_seeds(text: str) -> list[int]:
+    """``"10"`` -> seeds 0..9; ``"3,5,7"`` -> those seeds."""
+    try:
+        if "," in text:
+            seeds = [int(s) for s in text.split(",") if s.strip()]
+        else:
+            seeds = list(range(int(text)))
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"--seeds takes a count (10) or a list (0,3,7), got {text!r}"
+        ) from None
+    if not seeds:
+        raise argparse.ArgumentTypeError(
+            f"--seeds {text} gives no seed: give a count >= 1 (10) or a list of seeds (0,3,7)"
+        )
+    if any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+        raise argparse.ArgumentTypeError(f"--seeds takes distinct seeds >= 0, got {text!r}")
+    return seeds
+
+
+def _number(text: str, kind: type, allowed: Callable[[Any], bool], unreadable: str, outside: str) -> Any:
+    """``text`` read as a ``kind`` that ``allowed`` accepts; otherwise an argparse error, ``unreadable``
+    or ``outside`` with ``{text}`` filled in."""
+    try:
+        value = kind(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(unreadable.format(text=repr(text))) from None
+    if not allowed(value):
+        raise argparse.ArgumentTypeError(outside.format(text=value))
+    return value
+
+
+def parse_fraction(text: str) -> float:
+    unreadable = "--label-fraction takes a number in (0, 1], got {text}"
+    outside = "--label-fraction must lie in (0, 1], got {text}"
+    return _number(text, float, lambda v: 0 < v <= 1, unreadable, outside)
+
+
+def positive_int(text: str) -> int:
+    wanted = "expected a positive integer, got {text}"
+    return _number(text, int, lambda v: v >= 1, wanted, wanted)
+
+
+def add_overrides(parser: argparse.ArgumentParser, help: str) -> None:
+    """The ``--set KEY=VALUE`` option (repeatable) of a command that reads configs."""
+    parser.add_argument(
+        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=help
+    )
+
+
+class OneLineParser(argparse.ArgumentParser):
+    """An ``ArgumentParser`` whose usage errors are one line (and exit status 2), as every other
+    error of the CLI."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The parser of every command; building it imports neither torch nor stable-baselines3, so that
+    ``--help`` and usage errors answer at once."""
+    from dospcot.config.presets import PAPER_PRESETS
+
+    parser = OneLineParser(prog="dospcot", description=__doc__)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+    train = commands.add_parser(
+        "train",
+        help="train one run of a config (a shipped preset or a .toml path)",
+        description="Train one neural run and write runs/<name>/<stamp>/ (config, TensorBoard, "
+        "metrics.csv, summary.json, agents, classifiers, plots, checkpoint).",
+    )
+    train.add_argument("config", nargs="?", help="a preset name (see --list) or a path to a .toml")
+    add_overrides(train, "override a config key, e.g. --set training.rounds=3 --set seed=2 (repeatable)")
+    train.add_argument(
+        "--resume", type=Path, metavar="RUN_DIR", help="continue a killed run from its checkpoint"
+    )
+    train.add_argument("--runs-dir", type=Path, default=Path("runs"), help="where runs write (default runs)")
+    train.add_argument(
+        "--seeds",
+        type=parse_seeds,
+        help="train these seeds of the config as one batch in one process, a run folder each: a count "
+        "(10 means seeds 0-9) or a comma list (docs/batched_seeds.md)",
+    )
+    train.add_argument("--list", action="store_true", help="list the shipped presets and exit")
+    train.add_argument(
+        "--threads",
+        type=positive_int,
+        default=1,
+        help="torch threads (default 1: small networks run fastest on one, and parallel runs do not "
+        "oversubscribe the cores)",
+    )
+    train.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    evaluate = commands.add_parser(
+        "evaluate",
+        help="re-evaluate the saved agents of a run folder",
+        description="Load agent_<view>.zip with plain stable_baselines3.DQN.load and evaluate them "
+        "greedily on the run's task; writes evaluation.json.",
+    )
+    evaluate.add_argument("run_dir", type=Path, help="a run folder, runs/<name>/<stamp>")
+    sweep = commands.add_parser(
+        "sweep",
+        help="train every combination of a grid of config values over seeds, each as its own run",
+        description="Train every config x grid combination x seed as a run folder under "
+        "SWEEP_DIR/trials/. Running the same command again (or --resume) runs only the unfinished trials.",
+    )
+    sweep.add_argument("configs", nargs="*", metavar="CONFIG", help="one or more presets or .toml paths")
+    sweep.add_argument(
+        "--grid",
+        action="extend",
+        nargs="+",
+        default=[],
+        metavar="KEY=V1,V2",
+        help="a config key and its values, e.g. training.label_fraction=0.01,0.1 "
+        "cotraining.consensus_weight=0,0.3",
+    )
+    sweep.add_argument(
+        "--seeds",
+        type=parse_seeds,
+        help="a count (5 means seeds 0-4) or a comma list (default 1); with --resume, seeds to add "
+        "to the sweep (a count or list that holds its own seeds): only the new seeds' trials run",
+    )
+    add_overrides(sweep, "override a key in every trial (repeatable)")
+    sweep.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
+    sweep.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    sweep.add_argument(
+        "--batch-seeds",
+        type=positive_int,
+        metavar="K",
+        help="train each cell's seeds in batches of at most K per process (local backend; "
+        "docs/batched_seeds.md); default: the sweep's own, kept in its sweep.json, and 1 (every trial "
+        "alone) for a new sweep",
+    )
+    sweep.add_argument(
+        "--ray-address", metavar="ADDRESS", help="an existing Ray cluster (default: start a local instance)"
+    )
+    sweep.add_argument(
+        "--name", help="the sweep folder's name under --runs-dir (default: from the first config's name)"
+    )
+    sweep.add_argument(
+        "--runs-dir", type=Path, default=Path("runs/sweeps"), help="where sweeps write (default runs/sweeps)"
+    )
+    sweep.add_argument(
+        "--resume", type=Path, metavar="SWEEP_DIR", help="run the unfinished trials of a sweep"
+    )
+    sweep.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    report = commands.add_parser(
+        "report",
+        help="aggregate a sweep's runs: tables (mean, 95%% bootstrap interval, IQM) and plots",
+        description="Write report.md, report.csv and PNG plots from the finished trials of a sweep.",
+    )
+    report.add_argument("sweep_dir", type=Path, help="a sweep folder, runs/sweeps/<name>")
+    report.add_argument("--out", type=Path, help="output folder (default: the sweep folder)")
+    paper = commands.add_parser(
+        "reproduce-paper",
+        help="the seed paper's CliffWalking protocol (Tables 1-4) with real reward masking",
+        description="Sweep a paper-protocol preset over seeds and report it: dospcot sweep PRESET --seeds "
+        "... --runs-dir OUT --name <stamp>, then dospcot report on that folder (report.md, report.csv, "
+        "paper_agreement.png).",
+    )
+    paper.add_argument(
+        "--preset",
+        choices=sorted(PAPER_PRESETS),
+        default="paper-text",
+        help="paper-text: the paper's stated hyperparameters; published-code: its code's "
+        "(the config presets paper-text and paper-published-code)",
+    )
+    paper.add_argument(
+        "--label-fraction",
+        type=parse_fraction,
+        help="share of (state, action) keys whose reward is revealed (default: the preset's, 0.1)",
+    )
+    paper.add_argument(
+        "--seeds",
+        type=parse_seeds,
+        default=list(range(10)),
+        help="a count (10 means seeds 0-9) or a comma list (default 10)",
+    )
+    paper.add_argument(
+        "--episodes",
+        type=positive_int,
+        help="episodes per agent per round (default: the preset's, 500, the paper's; fewer for a quick look)",
+    )
+    add_overrides(paper, "override a key of the preset, e.g. --set tabular.replay_sweeps=0 (repeatable)")
+    paper.add_argument("--workers", type=positive_int, default=2, help="processes (default 2)")
+    paper.add_argument(
+        "--out",
+        type=Path,
+        default=Path("runs/paper"),
+        help="where the sweep folder goes (default runs/paper)",
+    )
+    paper.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    bench = commands.add_parser(
+        "bench",
+        help="measure performance claims against their peers and write BENCHMARKS.md",
+        description="Run every benchmark (ours and a peer in the same run) and write BENCHMARKS.md.",
+    )
+    bench.add_argument("--quick", action="store_true", help="short runs: a smoke test, not a measurement")
+    bench.add_argument("--repeats", type=positive_int, default=3, help="repetitions per figure (default 3)")
+    bench.add_argument(
+        "--only",
+        action="append",
+        default=[],
+        metavar="NAME",
+        help="run this benchmark alone (repeatable) and replace its row in --out, which a full run "
+        "wrote; a line above the table says when",
+    )
+    bench.add_argument(
+        "--out",
+        type=Path,
+        help=f"output file (default BENCHMARKS.md; with --quick {QUICK_BENCH_OUT}, never BENCHMARKS.md)",
+    )
+    bench.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        default="cpu",
+        help="cuda: measure the rows that have a GPU form on the GPU, into the GPU column of --out's "
+        "table (default cpu)",
+    )
+    study = commands.add_parser(
+        "study",
+        description="Run a study's sweeps (only the trials not yet finished), then print its tables from "
+        "every finished run; with --docs also write docs/results/<study>.md and its row of the results "
+        "at a glance.",
+        help="one of the published studies: its sweeps, then its tables (with --docs, its docs page)",
+    )
+    add_overrides(study, "override a key in every trial (repeatable; the study then writes its own sweeps)")
+    # No choices: the studies' names live with their declarations, which import torch.
+    study.add_argument("study", metavar="STUDY", help="the study, e.g. grid16 (a wrong name lists them)")
+    study.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's)")
+    study.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    study.add_argument(
+        "--batch-seeds",
+        type=positive_int,
+        metavar="K",
+        help="as dospcot sweep's (default: each sweep's own, 1 for a new one)",
+    )
+    study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
+    study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
+    study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
+    study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
+    return parser

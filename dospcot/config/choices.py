@@ -1,0 +1,24 @@
+"""The named choices of a config, each spelled once: a ``Literal`` type for the fields and the
+dataclass checks, and its values as a tuple for messages and for the code that branches on them."""
+
+from __future__ import annotations
+
+from typing import Literal, get_args
+
+Weighting = Literal["hard", "soft"]
+"""Self-paced weights: 1 when admitted (SPaMCo's default), or a ramp over the threshold."""
+Quota = Literal["label-share", "candidates"]
+"""How add_num splits over the reward classes (:mod:`dospcot.core.selection`)."""
+LabelStrategy = Literal["uniform", "random", "outcomes", "uncertainty", "disagreement"]
+"""How labels are chosen: ``"uniform"`` is the paper's fixed random mask, the others query a rater
+(:mod:`dospcot.core.queries`)."""
+ModelKind = Literal["mlp", "linear"]
+LossKind = Literal["cross_entropy", "hinge"]
+
+WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
+QUOTAS: tuple[str, ...] = get_args(Quota)
+LABEL_STRATEGIES: tuple[str, ...] = get_args(LabelStrategy)
+CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")
+"""The strategies that read the views' reward classifiers to choose their queries."""
+MODEL_KINDS: tuple[str, ...] = get_args(ModelKind)
+LOSS_KINDS: tuple[str, ...] = get_args(LossKind)

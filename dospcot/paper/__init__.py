@@ -1,1 +1,0 @@
-"""The seed paper's protocol on masked CliffWalking, with the batched tabular co-training it runs."""

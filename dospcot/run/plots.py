@@ -1,0 +1,93 @@
+"""PNG plots of a run's learning curves and of a sweep's cells (matplotlib, no display needed)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+from functools import partial
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")  # headless: runs write PNGs on machines without a display
+import matplotlib.pyplot as plt
+import numpy as np
+
+from dospcot.run.run_folder import atomic_write
+
+PANELS = (
+    ("greedy_return", "greedy return"),
+    ("agreement", "optimal-action agreement"),
+    ("pseudo_accuracy", "pseudo-reward accuracy"),
+    ("coverage", "coverage of U"),
+)
+
+
+def plot_learning_curves(records: list[dict], path: Path, title: str = "") -> None:
+    """Four panels against each agent's env steps: greedy return, agreement, pseudo-reward accuracy
+    and coverage (the last two only where the run co-trains), one line per view."""
+    fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), constrained_layout=True)
+    for ax, (key, label) in zip(axes.flat, PANELS, strict=True):
+        for view in dict.fromkeys(r["view"] for r in records):
+            rows = [r for r in records if r["view"] == view]
+            steps = np.array([r["env_steps"] for r in rows])
+            values = np.array([r[key] for r in rows], dtype=float)
+            if np.isfinite(values).any():
+                ax.plot(steps, values, marker="o", label=view)
+        ax.set_title(label)
+        ax.set_xlabel("env steps per agent")
+        ax.grid(alpha=0.3)
+        if ax.has_data():
+            ax.legend(fontsize="small")
+        else:
+            ax.text(0.5, 0.5, "no co-training in this run", ha="center", va="center", transform=ax.transAxes)
+    fig.suptitle(title)
+    atomic_write(path, partial(fig.savefig, dpi=100, format="png"))
+    plt.close(fig)
+
+
+@dataclass(frozen=True)
+class Band:
+    """A line and its band: ``mean`` against ``x``, shaded from ``low`` to ``high`` (equal lengths)."""
+
+    label: str
+    x: np.ndarray
+    mean: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    def labelled(self, label: str) -> Band:
+        """The same band under another legend label."""
+        return replace(self, label=label)
+
+
+def plot_bands(
+    panels: dict[str, list[Band]],
+    xlabel: str,
+    ylabel: str,
+    path: Path,
+    *,
+    log_x: bool = False,
+    markers: bool = False,
+    share_y: bool = True,
+) -> None:
+    """One panel per key of ``panels`` (its title), each line with its shaded band."""
+    cols = min(3, len(panels))
+    rows = -(-len(panels) // cols)
+    fig, axes = plt.subplots(
+        rows, cols, figsize=(5.2 * cols, 3.8 * rows), squeeze=False, constrained_layout=True, sharey=share_y
+    )
+    for ax, (title, bands) in zip(axes.flat, panels.items(), strict=False):
+        for band in bands:
+            (line,) = ax.plot(band.x, band.mean, marker="o" if markers else None, ms=4, label=band.label)
+            ax.fill_between(band.x, band.low, band.high, color=line.get_color(), alpha=0.2, linewidth=0)
+        ax.set_title(title)
+        ax.set_xlabel(xlabel)
+        ax.set_ylabel(ylabel)
+        if log_x:
+            ax.set_xscale("log")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize="small")
+    for ax in list(axes.flat)[len(panels) :]:
+        ax.set_visible(False)
+    atomic_write(path, partial(fig.savefig, dpi=100, format="png"))
+    plt.close(fig)

@@ -1,0 +1,278 @@
+"""Every published study, each one command: its sweeps (``dospcot sweep``), their reports
+(``dospcot report``) and its tables.
+
+    dospcot study label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~2.5 h)
+    dospcot study grid16 --docs           # 6 grid16 presets x seeds 0-9
+    dospcot study grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
+    dospcot study grid32 --docs           # 4 grid32 presets x seeds 0-4
+    dospcot study grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
+    dospcot study fasthighway --docs      # 4 fasthighway presets x seeds 0-4
+    dospcot study minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
+    dospcot study highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
+    dospcot study paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
+    dospcot study paper-published-code --docs   # the same with its published code's settings
+    dospcot study demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
+    dospcot study equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
+    dospcot study equal-effort-highway --docs  # the same on the fast highway, 5 seeds
+    dospcot study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
+    dospcot study second-view-highway --docs   # its highway monitor setting x seeds 0-4
+
+(``python scripts/study.py`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
+rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
+finished run folder (``--render-only`` trains nothing). The grid tables lead with success (the share
+of seeds x agents whose greedy policy reaches the goal from the map's start) and optimal-action
+agreement; the normalised score follows, with its caveat in each table's header (a policy that never
+reaches the goal but avoids lava scores high).
+
+With ``--docs`` the study's page ``docs/results/<study>.md`` is written: the prose of
+``pages/<study>.md`` in this package with the tables in place (a study whose record holds no run
+gets a page that says so), its plot goes to ``docs/results/``, its row of the results at a glance
+is rewritten in README.md and ``docs/results/index.md`` (between the ``results-at-a-glance``
+markers), and a study with a README block (the paper protocol's headline) rewrites it between its
+``<!-- <study>-table:start -->`` and ``<!-- <study>-table:end -->`` markers. No number is typed by
+hand.
+"""
+
+# The package: each study is declared once, beside its tables, in the module of its group (grid,
+# highway, minigrid, label_sources, second_view, paper), with its page's prose in pages/<study>.md;
+# declaration.py says what a study is, tables.py and provenance.py hold what their tables share,
+# pages.py makes a page and a row of the results at a glance, readme.py where --docs writes. This
+# module gathers them into STUDIES and runs one (``main``, behind scripts/study.py).
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import shlex
+import shutil
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+from dospcot.lab.report import TrialRun, load_runs, write_report
+from dospcot.lab.studies import (
+    batched_seeds,
+    grid,
+    highway,
+    label_sources,
+    minigrid,
+    paper,
+    queries,
+    second_view,
+)
+from dospcot.lab.studies.declaration import Glance, Study, Sweep
+from dospcot.lab.studies.pages import GLANCE, glance_cells, page, page_prose, write_glance
+from dospcot.lab.studies.provenance import header
+from dospcot.lab.studies.readme import README, RESULTS, read_block, replace_block
+from dospcot.lab.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
+from dospcot.run.interrupts import Interrupted, stop_on_signals
+
+__all__ = [
+    "STUDIES",
+    "Glance",
+    "Rendered",
+    "Study",
+    "Sweep",
+    "check_record",
+    "get_study",
+    "header",
+    "header_command",
+    "main",
+    "render_study",
+    "run_study",
+    "study_runs",
+    "study_table",
+    "sweep_spec",
+]
+
+STUDIES: dict[str, Study] = {
+    **grid.STUDIES,
+    **highway.STUDIES,
+    **minigrid.STUDIES,
+    **label_sources.STUDIES,
+    **second_view.STUDIES,
+    **paper.STUDIES,
+    **queries.STUDIES,
+    **batched_seeds.STUDIES,
+}
+"""Every study by name, in the order the command's help lists them."""
+
+
+def get_study(name: str) -> Study:
+    """The study called ``name``; ``ValueError``, naming every study, where there is none."""
+    try:
+        return STUDIES[name]
+    except KeyError:
+        raise ValueError(f"no study {name!r}; the studies: {', '.join(STUDIES)}") from None
+
+
+def header_command(program: Sequence[str], study: str, options: Sequence[str]) -> str:
+    """The command a study's header names: ``program``, the study and its options, less
+    ``--render-only``, so that tables rebuilt from finished runs name the command that trained them."""
+    return shlex.join([*program, study, *(option for option in options if option != "--render-only")])
+
+
+def study_runs(
+    study: Study, runs_dir: Path, suffix: str = ""
+) -> tuple[list[TrialRun], list[Path], list[str]]:
+    """The finished runs of ``study``'s sweeps under ``runs_dir`` (each sweep's folder name plus
+    ``suffix``), the sweep folders that hold them, and each sweep not finished, in words (never
+    started, or how many of its trials have finished)."""
+    runs, sweep_dirs, unfinished = [], [], []
+    for sweep in study.sweeps:
+        sweep_dir = runs_dir / f"{sweep.name}{suffix}"
+        try:
+            spec, finished = load_runs(sweep_dir)
+        except SweepError:  # never started, or no trial finished yet: the study was cut short there
+            unfinished.append(f"`{sweep_dir.name}`")
+            continue
+        runs += finished
+        sweep_dirs.append(sweep_dir)
+        if len(finished) < len(spec.trials()):
+            unfinished.append(f"`{sweep_dir.name}` ({len(finished)} of its {len(spec.trials())} runs)")
+    return runs, sweep_dirs, unfinished
+
+
+def study_table(
+    study: Study, runs: list[TrialRun], command: str, sweep_dirs: list[Path], unfinished: list[str]
+) -> str:
+    """The study's tables as text: the header (where the figures come from), then its tables."""
+    # By name: where the runs folder lies is the reader's, and a sweep not begun has no folder to cite.
+    missing = (
+        [f"Not finished yet, in the runs folder: sweep(s) {', '.join(unfinished)}."] if unfinished else []
+    )
+    return (
+        "\n".join([*header(runs, command, sweep_dirs, study.cells_explained), *missing, *study.tables(runs)])
+        + "\n"
+    )
+
+
+def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = ()) -> SweepSpec:
+    """The spec of one of a study's sweeps over seeds 0..seeds-1, with ``overrides`` (``--set``)."""
+    return SweepSpec(sweep.configs, sweep.grid, tuple(range(seeds)), tuple(overrides))
+
+
+def check_record(
+    study: Study, runs_dir: Path, seeds: int, overrides: Sequence[str] = (), suffix: str = ""
+) -> None:
+    """Raise :class:`SweepError` where a finished trial of the study was trained under another config
+    than its preset and overrides give now: the record cannot stand for the study then."""
+    for sweep in study.sweeps:
+        sweep_dir = runs_dir / f"{sweep.name}{suffix}"
+        if sweep_dir.is_dir():  # a sweep never started has nothing stale
+            check_not_stale(sweep_dir, sweep_spec(sweep, seeds, overrides).trials())
+
+
+@dataclass(frozen=True)
+class Rendered:
+    """What ``--docs`` writes of a study: its tables (None where the record holds no run), its page,
+    its cells in the results at a glance, and its README block (None where it has none)."""
+
+    table: str | None
+    page: str
+    glance: list[str]
+    readme: str | None
+
+
+def render_study(name: str, runs_dir: Path, command: str, suffix: str = "") -> Rendered:
+    """Study ``name`` rendered from the finished runs under ``runs_dir``, with ``command`` in its
+    header; nothing is trained or written."""
+    study = get_study(name)
+    runs, sweep_dirs, unfinished = study_runs(study, runs_dir, suffix)
+    table = study_table(study, runs, command, sweep_dirs, unfinished) if runs else None
+    readme = study.readme(table) if study.readme is not None and table is not None else None
+    return Rendered(table, page(name, study, table), glance_cells(study, runs), readme)
+
+
+def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") -> None:
+    """Run the study ``args.study`` (its unfinished trials; none with ``args.render_only``), then print
+    its tables and, with ``args.docs``, write its page, plot, row of the results at a glance and README
+    block (docs/results/, README.md). ``command`` is the header's command line
+    (:func:`header_command`); ``prog`` starts each one-line error, on which it exits with status 1.
+    ``args`` holds what :func:`main` parses: study, seeds, workers, backend, overrides, runs_dir, docs
+    and render_only. With ``--render-only --docs`` a study whose record holds no run gets a page that
+    says so."""
+    study = get_study(args.study)
+    block = f"{args.study}-table"
+    if args.docs:
+        try:  # before hours of training, not after
+            page_prose(args.study)
+            read_block(README, GLANCE)
+            read_block(RESULTS / "index.md", GLANCE)
+            if study.readme is not None:
+                read_block(README, block)
+        except ValueError as err:
+            sys.exit(f"{prog}: {err}")
+    args.seeds = args.seeds or study.seeds
+    # Another --seeds or --set is another sweep: it gets its own folder.
+    default = (args.seeds, args.overrides) == (study.seeds, [])
+    suffix = "" if default else f"-{args.seeds}seeds-{len(args.overrides)}sets"
+    try:  # trials run under a preset that has changed since are neither resumed nor tabled
+        if args.render_only:
+            check_record(study, args.runs_dir, args.seeds, args.overrides, suffix)
+        else:
+            for sweep in study.sweeps:
+                spec = sweep_spec(sweep, args.seeds, args.overrides)
+                sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
+                failed = run_sweep(
+                    sweep_dir, spec, backend=args.backend, workers=args.workers,
+                    batch_seeds=sweep.batch_seeds or args.batch_seeds,
+                ).failed  # fmt: skip
+                if failed:
+                    sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
+    except SweepError as err:
+        sys.exit(f"{prog}: {err}")
+    except KeyboardInterrupt:  # a stop between two sweeps, or as one closed: no trial was mid-run
+        raise Interrupted(f"every trial that finished, under {args.runs_dir}", command) from None
+    written = []
+    for sweep in study.sweeps:
+        with contextlib.suppress(SweepError):  # a sweep not started has no report
+            written += write_report(args.runs_dir / f"{sweep.name}{suffix}")
+    rendered = render_study(args.study, args.runs_dir, command, suffix)
+    if rendered.table is None and not (args.docs and args.render_only and default):
+        sys.exit(f"{prog}: no finished run of this study under {args.runs_dir}; run it without --render-only")
+    if rendered.table is None:
+        print(f"no finished run of {args.study} under {args.runs_dir}: its page says it is unpublished")
+    else:
+        print(rendered.table)
+    if args.docs:
+        (RESULTS / f"{args.study}.md").write_text(rendered.page)
+        plot = next((p for p in written if study.plot and p.name == study.plot[0]), None)
+        if plot is not None:
+            shutil.copyfile(plot, RESULTS / study.plot[1])
+        write_glance(args.study, rendered.glance, list(STUDIES))
+        if rendered.readme is not None:
+            replace_block(README, block, rendered.readme)
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    """``python scripts/study.py STUDY [options]``: parse ``argv`` (by default ``sys.argv[1:]``) and
+    run the study; its header names the command as ``python scripts/study.py`` with these options."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    parser = argparse.ArgumentParser(
+        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    parser.add_argument("study", choices=list(STUDIES))
+    parser.add_argument(
+        "--seeds", type=int, help="seeds 0..N-1 (default: the study's, 5; highway 3, paper 10)"
+    )
+    parser.add_argument("--workers", type=int, default=2, help="trials at once (default 2)")
+    parser.add_argument("--batch-seeds", type=int, default=1, help="seeds per batch (default 1)")
+    parser.add_argument("--backend", choices=["local", "ray"], default="local")
+    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    parser.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"))
+    parser.add_argument(
+        "--docs", action="store_true", help="also write docs/results/<study>.md and its README.md rows"
+    )
+    parser.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
+    args = parser.parse_args(argv)
+    try:
+        with stop_on_signals():
+            run_study(args, header_command(("python", "scripts/study.py"), args.study, argv[1:]))
+    except Interrupted as stop:  # as `dospcot study` says it: what was kept, and how to go on
+        print(f"study.py: interrupted; kept {stop}", file=sys.stderr)
+        raise SystemExit(130) from None
+    except KeyboardInterrupt:
+        print("study.py: interrupted", file=sys.stderr)
+        raise SystemExit(130) from None

@@ -1,0 +1,53 @@
+"""How a study is declared: its sweeps (each a folder under ``--runs-dir``), its tables, its row in the
+results at a glance, and its page (the prose of ``pages/<study>.md`` around the generated table)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+
+from dospcot.lab.report import TrialRun
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """One sweep of a study: its folder's name under --runs-dir, its configs and its grid; and how many
+    seeds train per batch (docs/batched_seeds.md), where the study fixes it (None: the command's
+    ``--batch-seeds``)."""
+
+    name: str
+    configs: tuple[str, ...]
+    grid: dict[str, tuple[str, ...]]
+    batch_seeds: int | None = None
+
+
+@dataclass(frozen=True)
+class Glance:
+    """A study's row in "Results at a glance": its headline comparison with the 95% interval, and the
+    verdict that interval gives (both generated from the runs, never typed)."""
+
+    headline: str
+    verdict: str
+
+
+@dataclass(frozen=True)
+class Study:
+    """A study: its sweeps, the tables built from their finished runs, its page's title, the task it
+    runs on (in words, for the results at a glance) and its seeds (0..seeds-1 unless --seeds says
+    otherwise). Its page's prose, the text above and below the table (what the study runs, the reading
+    of its table, its history), is ``pages/<study>.md`` beside this module."""
+
+    sweeps: tuple[Sweep, ...]
+    tables: Callable[[list[TrialRun]], list[str]]
+    title: str
+    task: str
+    glance: Callable[[list[TrialRun]], Glance]
+    seeds: int = 5
+    readme: Callable[[str], str] | None = None
+    """The README block from the study's table text; ``None``: the study has no README block."""
+    plot: tuple[str, str] | None = None
+    """A plot of the report that goes into ``docs/results/``: (its name in the sweep folder, its name
+    there)."""
+    cells_explained: bool = False
+    """Whether its tables say what a cell is themselves (the paper's): the header then says only where
+    the figures come from."""

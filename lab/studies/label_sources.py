@@ -1,0 +1,224 @@
+"""The label-source studies on grid16-dospcot and fasthighway-dospcot: expert demonstrations against
+per-step labels, and per-step labels, segment sums and demonstrations at equal rater effort. Each arm
+is a set of overrides of the preset, one sweep each."""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Sequence
+from functools import partial
+
+from dospcot.lab.report import TrialRun
+from dospcot.lab.studies.declaration import Glance, Study, Sweep
+from dospcot.lab.studies.tables import COLUMNS, FRACTION, over_seeds, paired, verdict
+
+# A first comparison of label sources: expert demonstrations with 1% per-step labels against 5% per-step
+# labels, on grid16-dospcot, seeds 0-9. Each arm is a set of overrides of the preset, one sweep each.
+DEMOS, MARGIN_WEIGHT, DEMO_LABELS = (
+    "demonstrations.episodes",
+    "demonstrations.margin_loss_weight",
+    "demonstrations.labels",
+)
+DEMO_ARMS: dict[str, dict[str, str]] = {  # the target's two arms first: a partial sweep has them
+    "labels 5%": {FRACTION: "0.05"},
+    "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10"},
+    "labels 1%": {FRACTION: "0.01"},
+    "labels 1% + 10 demonstrations, as labels only": {FRACTION: "0.01", DEMOS: "10", MARGIN_WEIGHT: "0"},
+    "labels 1% + 10 demonstrations, margin loss only": {FRACTION: "0.01", DEMOS: "10", DEMO_LABELS: "false"},
+}
+DEMO_COLUMNS = ("success", "agreement", "pseudo_accuracy", "worst_class_precision")
+DEMO_TARGET = ("labels 1% + 10 demonstrations", "labels 5%")
+"""The target on grid16: the first arm's success at least the second's."""
+
+
+def _by_arm(runs: list[TrialRun], arms: dict[str, dict[str, str]]) -> dict[str, dict[int, TrialRun]]:
+    """The runs of each arm (its overrides of the preset), by seed; every run belongs to one."""
+    by_arm: dict[str, dict[int, TrialRun]] = {}
+    for run in runs:
+        params = {k: v for k, v in run.trial.params.items() if k != "seed"}
+        arm = next(name for name, keys in arms.items() if keys == params)
+        by_arm.setdefault(arm, {})[run.trial.seed] = run
+    return by_arm
+
+
+def _arm_sweeps(
+    prefix: str, arms: dict[str, dict[str, str]], shared: dict[str, str], preset: str = "grid16-dospcot"
+) -> tuple[Sweep, ...]:
+    """One sweep of ``preset`` per arm, named after it; ``shared`` names arms that another study's
+    sweep already holds (the same trials: they run once)."""
+    return tuple(
+        Sweep(
+            shared.get(arm) or prefix + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
+            (preset,),
+            {key: (value,) for key, value in keys.items()},
+        )
+        for arm, keys in arms.items()
+    )
+
+
+def _arm_rows(
+    by_arm: dict[str, dict[int, TrialRun]], arms: Sequence[str], columns: Sequence[str], names: dict[str, str]
+) -> list[str]:
+    """A table's header and one row per arm that ran: its seeds, then ``columns`` over seeds."""
+    lines = [
+        "| arm | seeds | " + " | ".join(names[c] for c in columns) + " |",
+        "|---|---|" + "---|" * len(columns),
+    ]
+    for arm in arms:
+        if arm in by_arm:
+            cells_ = [over_seeds(list(by_arm[arm].values()), c) for c in columns]
+            lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
+    return lines
+
+
+def demonstration_tables(runs: list[TrialRun]) -> list[str]:
+    """One row per arm over seeds, then the target's paired difference in success."""
+    by_arm = _by_arm(runs, DEMO_ARMS)
+    lines = [
+        "Every arm is `grid16-dospcot` with the overrides named; demonstrations are value iteration's "
+        "optimal episodes, the first from the map's start (docs/demonstrations.md).",
+        "",
+        *_arm_rows(by_arm, DEMO_ARMS, DEMO_COLUMNS, COLUMNS),
+    ]
+    ours, theirs = DEMO_TARGET
+    if ours in by_arm and theirs in by_arm:
+        diff = paired(by_arm[ours], by_arm[theirs], "success")
+        met = "**met**" if diff.mean >= 0 else "**not met**"
+        lines += [
+            "",
+            f"- success, {ours} minus {theirs} (paired by seed): {diff}; target (at least 0): {met}",
+        ]
+    return lines
+
+
+# Label sources at equal rater effort, counted in labelled env steps (docs/segments.md): per-step
+# labels, segment sums (k = 4 and 8) and demonstrations, on grid16-dospcot, seeds 0-9.
+SEGMENT = "training.segment_length"
+EQUAL_EFFORT_FRACTION = "0.0006"
+"""The segments' label fraction at the per-step arm's effort. A grid run's per-step labels reveal 5% of
+the 1,024 (s, a) keys, each labelled once for every visit: at most 51 labelled steps. Its agents take
+80,000 steps, so segments labelled with probability 0.0006 hold about 48 labelled steps, whatever k.
+The table shows the effort each arm measured."""
+EFFORT_ARMS: dict[str, dict[str, str]] = {  # the target's arms first: a partial study has them
+    "per-step labels, 5% of keys": {FRACTION: "0.05"},
+    "segments of 4, equal effort": {FRACTION: EQUAL_EFFORT_FRACTION, SEGMENT: "4"},
+    "segments of 8, equal effort": {FRACTION: EQUAL_EFFORT_FRACTION, SEGMENT: "8"},
+    "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10"},
+    "segments of 4, 5% of segments": {FRACTION: "0.05", SEGMENT: "4"},
+}
+EFFORT_SHARED = {"labels 1% + 10 demonstrations": "demonstrations-labels-1-10-demonstrations"}
+EFFORT_COLUMNS = ("labelled_steps", "success", "agreement", "pseudo_accuracy")
+
+
+def effort_tables(
+    runs: list[TrialRun],
+    arms: dict[str, dict[str, str]] = EFFORT_ARMS,
+    columns: tuple[str, ...] = EFFORT_COLUMNS,
+    preset: str = "grid16-dospcot",
+) -> list[str]:
+    """One row per arm over seeds (effort first), then each arm's paired differences from the first
+    arm (per-step labels) in the outcome columns (return, where shown, and success); the preset's
+    oracle, where the study ran it, as a last row."""
+    base = next(iter(arms))
+    by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
+    oracle = [run for run in runs if run.trial.config != preset]
+    names = {**COLUMNS, "labelled_steps": "labelled steps (effort)", "greedy_return": "return"}
+    if preset.startswith("fasthighway"):
+        names["success"] = "no-crash episodes"
+    lines = [
+        f"Every arm is `{preset}` with the overrides named. Effort is the labelled env steps a "
+        "rater watched: labelled samples under per-step labels ((s, a) keys on the grid, steps on "
+        "highway), the summed length of the labelled segments under segment labels, and the "
+        "demonstrations' steps on top of their arm's labels (docs/segments.md). Under segment labels "
+        "the pseudo-reward accuracy is that of the segments' sums (their quantile classes), not of "
+        "single steps.",
+        "",
+        *_arm_rows(by_arm, arms, columns, names),
+    ]
+    if oracle:
+        cells_ = [over_seeds(oracle, c) if c != "labelled_steps" else "every step" for c in columns]
+        lines.append(f"| oracle (`{oracle[0].trial.config}`) | {len(oracle)} | " + " | ".join(cells_) + " |")
+    lines += [
+        "",
+        "n/a: not recorded before the effort column existed, or undefined (an oracle has no pseudo-rewards).",
+    ]
+    if base in by_arm:
+        lines.append("")
+        outcomes = [c for c in ("greedy_return", "success") if c in columns]
+        for arm in arms:
+            if arm != base and arm in by_arm:
+                for column in outcomes:
+                    diff = paired(by_arm[arm], by_arm[base], column)
+                    lines.append(f"- {names[column]}, {arm} minus {base} (paired by seed): {diff}")
+    return lines
+
+
+# The fast-highway half: labels reveal each step with probability p, so segments at the same p cost
+# the same effort. The demonstrator is the study's own oracle run of seed 0 (its kinematics agent).
+EXPERT = "runs/sweeps/effort-highway-oracle/trials/fasthighway-oracle/seed=0/agent_kinematics.zip"
+EFFORT_HIGHWAY_ARMS: dict[str, dict[str, str]] = {
+    "per-step labels, 5% of steps": {FRACTION: "0.05"},
+    "segments of 4, 5% of segments": {FRACTION: "0.05", SEGMENT: "4"},
+    "segments of 8, 5% of segments": {FRACTION: "0.05", SEGMENT: "8"},
+    "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10", "demonstrations.agent": f'"{EXPERT}"'},
+}
+EFFORT_HIGHWAY_COLUMNS = ("labelled_steps", "greedy_return", "success", "pseudo_accuracy")
+
+
+def arms_glance(
+    runs: list[TrialRun],
+    arms: dict[str, dict[str, str]],
+    ours: str,
+    theirs: str,
+    metric: str = "success",
+    preset: str = "grid16-dospcot",
+) -> Glance:
+    """``metric`` of arm ``ours`` minus arm ``theirs`` (overrides of ``preset``), paired by seed."""
+    by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
+    diff = paired(by_arm.get(ours, {}), by_arm.get(theirs, {}), metric)
+    words = metric.replace("greedy_", "")
+    return Glance(f"{words}, {ours} minus {theirs}, paired by seed: {diff}", verdict(diff, ours, theirs))
+
+
+STUDIES: dict[str, Study] = {
+    "demo-labels": Study(
+        _arm_sweeps("demonstrations-", DEMO_ARMS, {}),
+        demonstration_tables,
+        "Expert demonstrations against per-step labels (grid16)",
+        "16 x 16 grid, layout 0: demonstrations or labels",
+        partial(arms_glance, arms=DEMO_ARMS, ours=DEMO_TARGET[0], theirs=DEMO_TARGET[1]),
+        seeds=10,
+    ),
+    "equal-effort": Study(
+        _arm_sweeps("effort-", EFFORT_ARMS, EFFORT_SHARED),
+        effort_tables,
+        "Label sources at equal effort: per-step labels, segments, demonstrations (grid16)",
+        "16 x 16 grid, layout 0: label sources at equal effort",
+        partial(
+            arms_glance, arms=EFFORT_ARMS, ours="segments of 4, equal effort", theirs=next(iter(EFFORT_ARMS))
+        ),
+        seeds=10,
+    ),
+    "equal-effort-highway": Study(
+        (
+            Sweep("effort-highway-oracle", ("fasthighway-oracle",), {}),  # first: it trains the expert
+            *_arm_sweeps("effort-highway-", EFFORT_HIGHWAY_ARMS, {}, "fasthighway-dospcot"),
+        ),
+        partial(
+            effort_tables,
+            arms=EFFORT_HIGHWAY_ARMS,
+            columns=EFFORT_HIGHWAY_COLUMNS,
+            preset="fasthighway-dospcot",
+        ),
+        "Label sources at equal effort: per-step labels, segments, demonstrations (fast highway)",
+        "our fast highway: label sources at equal effort",
+        partial(
+            arms_glance,
+            arms=EFFORT_HIGHWAY_ARMS,
+            ours="segments of 4, 5% of segments",
+            theirs=next(iter(EFFORT_HIGHWAY_ARMS)),
+            metric="greedy_return",
+            preset="fasthighway-dospcot",
+        ),
+    ),
+}

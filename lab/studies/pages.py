@@ -1,0 +1,99 @@
+"""A study's page and its row in the results at a glance, both generated: the page is the prose of
+``pages/<study>.md`` with the study's tables where its ``<!-- table -->`` line stands; the row is the
+study's headline comparison, read from the same runs."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+from dospcot.lab.report import TrialRun
+from dospcot.lab.studies.declaration import Study
+from dospcot.lab.studies.readme import README, RESULTS, read_block, replace_block
+
+PAGES = Path(__file__).resolve().parent / "pages"
+"""The prose of each study's page, ``<study>.md``: what it runs above the table, its reading and
+history below."""
+TABLE = "<!-- table -->"
+"""The line of a page's prose that the generated tables replace."""
+GLANCE = "results-at-a-glance"
+"""The generated block of README.md and docs/results/index.md: one row per study."""
+GLANCE_HEAD = (
+    "| study | task | headline comparison: mean [95% interval] | seeds | verdict |",
+    "|---|---|---|---|---|",
+)
+
+
+def page_prose(name: str) -> str:
+    """The prose of study ``name``'s page; ``ValueError`` unless it holds the table line once."""
+    prose = (PAGES / f"{name}.md").read_text()
+    if prose.splitlines().count(TABLE) != 1:
+        raise ValueError(f"{PAGES / name}.md needs one {TABLE!r} line, where the tables go")
+    return prose
+
+
+def page(name: str, study: Study, table: str | None) -> str:
+    """Study ``name``'s page: its title, then its prose with ``table`` (the study's tables, as
+    :func:`dospcot.lab.studies.run_study` prints them) in place, or, where the record holds no
+    run of the study (``None``), a notice that says so and how to produce it."""
+    body = unpublished(name, study) if table is None else table.replace("](docs/results/", "](")
+    return f"# {study.title}\n\n" + page_prose(name).replace(TABLE, body.rstrip("\n"))
+
+
+def unpublished(name: str, study: Study) -> str:
+    """The notice in place of a table that the record cannot rebuild."""
+    sweeps = ", ".join(f"`{sweep.name}`" for sweep in study.sweeps)
+    return (
+        "**Unpublished: the record holds no runs of this study**, so this page shows no table and no "
+        "figure of it (a table is published only where `--render-only` rebuilds it from the runs in "
+        f"`runs/sweeps/`). `dospcot study {name} --docs` trains it into `runs/sweeps/` "
+        f"({len(study.sweeps)} sweep(s), seeds 0-{study.seeds - 1}: {sweeps}; several CPU-hours on 2 "
+        "cores) and writes this page with its tables."
+    )
+
+
+def glance_cells(study: Study, runs: list[TrialRun]) -> list[str]:
+    """The study's cells in the results at a glance, after its name: task, headline, seeds, verdict."""
+    if not runs:
+        return [study.task, "unpublished: the record holds no runs of it", "", "no verdict"]
+    glance = study.glance(runs)
+    seeds = sorted({run.trial.seed for run in runs})
+    return [study.task, glance.headline, f"{len(seeds)} ({seeds[0]}-{seeds[-1]})", glance.verdict]
+
+
+def glance_table(rows: dict[str, list[str]], order: list[str], link: str) -> str:
+    """The results at a glance: a row per study of ``order`` (``rows`` holds each one's cells; a study
+    without them is named with the command that renders it), each study linked to its page under
+    ``link`` (``docs/results/`` from the README, nothing beside the pages), and a line that counts the
+    studies whose headline finds DOSPCoT above self-training."""
+    lines = list(GLANCE_HEAD)
+    for name in order:
+        cells = rows.get(name) or ["", "not rendered yet", "", f"`dospcot study {name} --render-only --docs`"]
+        lines.append(f"| [{name}]({link}{name}.md) | " + " | ".join(cells) + " |")
+    paired = [cells for cells in rows.values() if "DOSPCoT minus self-training" in cells[1]]
+    above = [cells for cells in paired if "DOSPCoT above self-training" in cells[3]]
+    lines += [
+        "",
+        f"Of the {len(paired)} studies whose headline is DOSPCoT minus self-training, the interval lies "
+        f"above 0 in {len(above)}.",
+    ]
+    return "\n".join(lines)
+
+
+def glance_rows(text: str) -> dict[str, list[str]]:
+    """The rows of a results-at-a-glance table (:func:`glance_table`) by study name."""
+    rows = {}
+    for line in text.splitlines()[len(GLANCE_HEAD) :]:
+        match = re.match(r"\| \[([^\]]+)\]\([^)]*\) \| (.*) \|$", line)
+        if match:
+            rows[match.group(1)] = match.group(2).split(" | ")
+    return rows
+
+
+def write_glance(name: str, cells: list[str], order: list[str]) -> None:
+    """Replace study ``name``'s row of the results at a glance in README.md and docs/results/index.md,
+    keeping the other studies' rows as their last render wrote them."""
+    rows = glance_rows(read_block(README, GLANCE))
+    rows[name] = cells
+    replace_block(README, GLANCE, glance_table(rows, order, "docs/results/"))
+    replace_block(RESULTS / "index.md", GLANCE, glance_table(rows, order, ""))

@@ -1,0 +1,154 @@
+"""What the studies' tables share: the presets' names in words, the metric columns, and the cells over
+seeds (a method's runs, a view's agents, two arms paired by seed)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from typing import Any
+
+from dospcot.lab.report import TrialRun, cells
+from dospcot.lab.studies.declaration import Glance
+from dospcot.metrics import SeedSummary
+
+GRID_METHODS = {
+    "oracle": "oracle (all rewards)",
+    "masked-zero": "masked-zero",
+    "labels-only": "labels-only",
+    "self-training": "self-training (m = 1, patch)",
+    "dospcot": "DOSPCoT (m = 2, patch + rays)",
+    "m3": "m = 3 (patch + rays + coords)",
+}
+METHODS = {
+    **{f"{grid}-{method}": label for grid in ("grid16", "grid32") for method, label in GRID_METHODS.items()},
+    **{
+        f"{base}-{method}": label
+        for base in ("highway", "fasthighway")
+        for method, label in {
+            "oracle": "oracle (all rewards)",
+            "masked-zero": "masked-zero",
+            "self-training": "self-training (m = 1, kinematics)",
+            "dospcot": "DOSPCoT (m = 2, kinematics + occupancy)",
+        }.items()
+    },
+}
+MINIGRID_TASKS = {"lavagap": "MiniGrid-LavaGapS7-v0", "doorkey": "MiniGrid-DoorKey-5x5-v0"}
+METHODS.update(
+    {
+        f"minigrid-{task}-{method}": label
+        for task in MINIGRID_TASKS
+        for method, label in {
+            "oracle": "oracle (all rewards)",
+            "masked-zero": "masked-zero",
+            "self-training": "self-training (m = 1, image)",
+            "dospcot": "DOSPCoT (m = 2, image + egocentric map)",
+        }.items()
+    }
+)
+COLUMNS = {
+    "success": "success",
+    "agreement": "optimal-action agreement",
+    "normalised_score": "normalised score",
+    "pseudo_accuracy": "pseudo-reward accuracy",
+    "worst_class_precision": "worst-class precision",
+    "coverage": "coverage",
+}
+FRACTION = "training.label_fraction"
+GRID16_PRESETS = tuple(name for name in METHODS if name.startswith("grid16-"))
+
+
+def by_method(runs: list[TrialRun]) -> dict[tuple[str, tuple], list[TrialRun]]:
+    """The sweep cells in the order of :data:`METHODS`, then by rounds."""
+    order = list(METHODS)
+    return dict(
+        sorted(cells(runs).items(), key=lambda item: (order.index(item[0][0]), item[1][0].summary["rounds"]))
+    )
+
+
+def cell_labels(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> dict[tuple[str, tuple], str]:
+    """Each cell's method, in words; with its rounds where the cells differ in them."""
+    rounds = {key: members[0].summary["rounds"] for key, members in grouped.items()}
+    with_rounds = len(set(rounds.values())) > 1
+    suffix = {key: f", {n} rounds" if with_rounds else "" for key, n in rounds.items()}
+    return {key: METHODS.get(key[0], key[0]) + suffix[key] for key in grouped}
+
+
+def over_seeds(members: list[TrialRun], key: str, view: str | None = None) -> str:
+    """A metric over the seeds of a cell, of the run mean or (``view``) of one view's agent."""
+    # Runs written before a metric existed read NaN there, which the summary leaves out.
+    return str(
+        SeedSummary.of(
+            [(r.summary["per_view"][view] if view else r.summary["mean"]).get(key, math.nan) for r in members]
+        )
+    )
+
+
+def per_view_rows(
+    grouped: dict[tuple[str, tuple], list[TrialRun]],
+    keys: list[str],
+    first: Callable[[str], str] | None = None,
+) -> list[str]:
+    """One table row per method and view: ``keys`` over seeds; ``first`` gives a leading cell from
+    the preset's name (a task column)."""
+    labels = cell_labels(grouped)
+    return [
+        ("" if first is None else f"| {first(key[0])} ")
+        + f"| {labels[key]} | {view} | "
+        + " | ".join(over_seeds(members, k, view) for k in keys)
+        + " |"
+        for key, members in grouped.items()
+        for view in members[0].summary["views"]
+    ]
+
+
+def mean_over_oracles(grouped: dict[tuple[str, tuple], list[TrialRun]], metric: str) -> float:
+    """``metric``'s mean over the seeds of the oracle cells (NaN without one)."""
+    values = [r.summary["mean"][metric] for (n, _), m in grouped.items() if n.endswith("-oracle") for r in m]
+    return SeedSummary.of(values).mean if values else math.nan
+
+
+def run_value(run: TrialRun, metric: str) -> float:
+    """A run's mean over its agents of ``metric``; NaN where the run did not record it."""
+    return run.summary["mean"].get(metric, math.nan)
+
+
+def paired(a: dict[int, TrialRun], b: dict[int, TrialRun], metric: str) -> SeedSummary:
+    """``metric`` of a minus b, paired by seed: mean and 95% bootstrap interval over the seeds both ran."""
+    return SeedSummary.of(
+        [run_value(a[s], metric) - run_value(b[s], metric) for s in sorted(set(a) & set(b))]
+    )
+
+
+def verdict(diff: SeedSummary, ours: str = "DOSPCoT", theirs: str = "self-training") -> str:
+    """What a paired difference ``ours`` minus ``theirs`` shows: one above the other where its 95%
+    interval excludes 0, else no difference."""
+    if diff.n == 0:
+        return "not run"
+    if diff.low > 0:
+        return f"{ours} above {theirs}"
+    if diff.high < 0:
+        return f"{ours} below {theirs}"
+    return "no difference shown (the interval holds 0)"
+
+
+def versus(
+    runs: list[TrialRun],
+    ours: str,
+    theirs: str,
+    metric: str,
+    key: Callable[[TrialRun], Any] = lambda run: run.trial.seed,
+) -> SeedSummary:
+    """``metric`` of the runs of preset ``ours`` minus those of ``theirs``, paired by ``key`` (the
+    seed; on several maps, the map and the seed)."""
+    a, b = ({key(r): r for r in runs if r.trial.name == name} for name in (ours, theirs))
+    return paired(a, b, metric)
+
+
+def glance_versus(
+    runs: list[TrialRun], prefix: str, metric: str, paired_by: str = "seed", **kwargs
+) -> Glance:
+    """The usual headline: ``metric``, DOSPCoT minus self-training (the presets ``<prefix>-dospcot``
+    and ``<prefix>-self-training``), paired by seed, with its verdict."""
+    diff = versus(runs, f"{prefix}-dospcot", f"{prefix}-self-training", metric, **kwargs)
+    name = COLUMNS.get(metric, metric.replace("_", " "))
+    return Glance(f"{name}, DOSPCoT minus self-training, paired by {paired_by}: {diff}", verdict(diff))

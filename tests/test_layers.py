@@ -1,0 +1,152 @@
+"""The package's layers import downward only (docs/design.md, "Layers"): config -> the parts (envs,
+policies, seeding, metrics, demonstrations) -> core -> tasks -> run -> lab -> cli, with no import
+circle among the modules; and reading a config costs no training stack."""
+
+from __future__ import annotations
+
+import ast
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).parents[1]
+FOLDERS = {"dospcot": ROOT / "dospcot", "dospcot.envs": ROOT / "envs", "dospcot.policies": ROOT / "policies",
+           "dospcot.lab": ROOT / "lab"}  # fmt: skip
+"""Where each installed package's files lie (pyproject.toml's package-dir)."""
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("dospcot.config", "dospcot"),
+    ("dospcot.envs", "dospcot.policies", "dospcot.seeding", "dospcot.metrics", "dospcot.demonstrations"),
+    ("dospcot.core",),
+    ("dospcot.tasks",),
+    ("dospcot.run",),
+    ("dospcot.lab",),
+    ("dospcot.cli", "dospcot.__main__"),
+)
+"""Each layer's modules by prefix, bottom first; a module belongs to the longest prefix it starts with."""
+
+
+def _modules() -> dict[str, Path]:
+    found = {}
+    for package, folder in FOLDERS.items():
+        for path in folder.rglob("*.py"):
+            parts = path.relative_to(folder).with_suffix("").parts
+            name = ".".join((package, *(parts[:-1] if parts[-1] == "__init__" else parts)))
+            if package == "dospcot" and parts[0] in ("envs", "policies", "lab"):
+                continue  # never a folder of dospcot/: they install from the top level
+            found[name] = path
+    return found
+
+
+MODULES = _modules()
+
+
+def _owner(name: str) -> str | None:
+    """The module a dotted import name lands in (a package's ``__init__`` for a name it defines)."""
+    while name and name not in MODULES:
+        name = name.rpartition(".")[0]
+    return name or None
+
+
+def imports_of(name: str) -> set[str]:
+    """Every dospcot module ``name`` imports, at the top, inside a function or for type checking."""
+    path = MODULES[name]
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        targets = []
+        if isinstance(node, ast.Import):
+            targets = [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join([*anchor, *([node.module] if node.module else [])])
+            targets = [
+                f"{base}.{alias.name}" if f"{base}.{alias.name}" in MODULES else base for alias in node.names
+            ]
+        found |= {
+            owner for t in targets if t.startswith("dospcot") and (owner := _owner(t)) not in (None, name)
+        }
+    return found
+
+
+def layer_of(name: str) -> int:
+    matches = [(len(prefix), rank) for rank, layer in enumerate(LAYERS) for prefix in layer
+               if name == prefix or name.startswith(prefix + ".")]  # fmt: skip
+    assert matches, f"{name} belongs to no layer: add it to LAYERS and docs/design.md"
+    return max(matches)[1]
+
+
+def import_circles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan's algorithm)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = [stack.pop()]
+            while component[-1] != v:
+                component.append(stack.pop())
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return circles
+
+
+def test_the_checks_find_a_circle_and_an_upward_import():
+    assert import_circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert import_circles({"a": {"b"}, "b": set()}) == []
+    assert (
+        layer_of("dospcot.config.loading")
+        < layer_of("dospcot.core.cotrainer")
+        < layer_of("dospcot.lab.sweep")
+    )
+    assert layer_of("dospcot.tasks.adapters.grid") == layer_of("dospcot.tasks")
+    assert "dospcot.tasks.registry" in imports_of("dospcot.tasks.loading")
+    assert "dospcot.lab.report" in imports_of("dospcot.lab.sweep") or "dospcot.lab.sweep_spec" in imports_of(
+        "dospcot.lab.sweep"
+    )
+
+
+def test_no_import_circle_among_the_modules():
+    graph = {name: imports_of(name) for name in MODULES}
+    assert import_circles(graph) == []
+
+
+def test_every_import_runs_down_the_layers():
+    upward = [
+        f"{name} -> {target}"
+        for name in sorted(MODULES)
+        for target in sorted(imports_of(name))
+        if layer_of(target) > layer_of(name)
+    ]
+    assert upward == []
+
+
+@pytest.mark.parametrize("preset", ["grid16-dospcot", "minigrid-lavagap-dospcot", "fasthighway-dospcot",
+                                    "paper-text", "tiny"])  # fmt: skip
+def test_reading_a_config_imports_no_training_stack(preset):
+    script = (
+        "import json, sys\n"
+        "from dospcot.tasks import load_config\n"
+        f"assert load_config({preset!r}).name\n"
+        "print(json.dumps(sorted(m for m in ('torch', 'stable_baselines3', 'scipy') if m in sys.modules)))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout) == []
