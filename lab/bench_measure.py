@@ -12,7 +12,6 @@ from typing import Any
 
 import gymnasium as gym
 import torch
-from stable_baselines3 import DQN
 
 from dospcot.envs import CLIFF_VIEWS, ViewObservationWrapper
 
@@ -117,24 +116,3 @@ class Clock:
     def stop(self) -> float:
         """The seconds since :meth:`start`."""
         return self._now() - self._started
-
-
-def steps_per_second(
-    make: Callable[..., DQN], steps: int, seed: int, net: list[int], batch: int, device: str
-) -> float:
-    model = make(
-        "MlpPolicy",
-        onehot_cliff(),
-        learning_starts=500,
-        train_freq=4,
-        gradient_steps=1,
-        batch_size=batch,
-        buffer_size=50_000,
-        policy_kwargs={"net_arch": net},
-        seed=seed,
-        device=device,
-    )
-    clock = Clock(device)
-    clock.start()
-    model.learn(steps)
-    return steps / clock.stop()

@@ -18,7 +18,7 @@ from dospcot.config.learning_sections import TabularConfig
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.tabular_cotraining import TabularCoTraining
 from dospcot.envs import ViewObservationWrapper
-from dospcot.lab.bench_measure import Clock, Row, alternating, steps_per_second
+from dospcot.lab.bench_measure import Clock, Row, alternating, onehot_cliff
 from dospcot.lab.sweep import run_sweep
 from dospcot.lab.sweep_spec import SweepSpec
 from dospcot.policies import ExpectedSarsaDQN
@@ -28,6 +28,27 @@ from dospcot.run.cotraining import build_run
 from dospcot.seeding import agent_seed
 from dospcot.tasks import load_config
 from dospcot.tasks.adapters.grid import grid_world
+
+
+def _steps_per_second(
+    make: Callable[..., DQN], steps: int, seed: int, net: list[int], batch: int, device: str
+) -> float:
+    model = make(
+        "MlpPolicy",
+        onehot_cliff(),
+        learning_starts=500,
+        train_freq=4,
+        gradient_steps=1,
+        batch_size=batch,
+        buffer_size=50_000,
+        policy_kwargs={"net_arch": net},
+        seed=seed,
+        device=device,
+    )
+    clock = Clock(device)
+    clock.start()
+    model.learn(steps)
+    return steps / clock.stop()
 
 
 def bench_esarsa_dqn(
@@ -44,8 +65,8 @@ def bench_esarsa_dqn(
     ours_make = partial(ExpectedSarsaDQN, target=target, greedy=greedy)
     ours, peer = alternating(
         repeats,
-        lambda rep: steps_per_second(ours_make, steps, rep, net, batch, device),
-        lambda rep: steps_per_second(DQN, steps, rep, net, batch, device),
+        lambda rep: _steps_per_second(ours_make, steps, rep, net, batch, device),
+        lambda rep: _steps_per_second(DQN, steps, rep, net, batch, device),
     )
     return Row.measured(
         f"ExpectedSarsaDQN (target={target!r}"

@@ -5,9 +5,9 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
-from dospcot.config.loading import from_mapping
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.tasks import config_from_table
 from dospcot.tasks.adapters.grid import GridAdapter
 
 SB3_DQN = {"learning_rate": 1e-4, "batch_size": 32, "gamma": 0.99, "target_update_interval": 10_000}
@@ -30,7 +30,7 @@ def grid_config(
     data = {"method": method, "agents": list(agents), "views": list(views), "seed": seed, **sections}
     data["dqn"] = {**SB3_DQN, **sections.get("dqn", {})}
     data["tabular_agent"] = {**SB3_TABULAR, **sections.get("tabular_agent", {})}
-    return from_mapping(TrainConfig, data)
+    return config_from_table(data)
 
 
 def grid_run(

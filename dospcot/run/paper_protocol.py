@@ -163,6 +163,7 @@ class PaperProtocolRunner:
 
     @staticmethod
     def train_at(run_dir: Path, cfg: PaperConfig, *, show_progress: bool, command: str) -> Path:
+        """Train one seed's 26 runs in ``run_dir`` (a progress bar in episodes)."""
         with tqdm(
             total=episodes_per_seed(cfg), unit="ep", desc=f"{cfg.name} seed {cfg.seed}",
             disable=not show_progress, mininterval=1.0, dynamic_ncols=True,
@@ -177,10 +178,12 @@ class PaperProtocolRunner:
 
     @classmethod
     def resume(cls, run_dir: Path, cfg: PaperConfig, *, show_progress: bool, command: str) -> Path:
+        """Train the seed again from the start: it keeps no checkpoint."""
         return cls.train_at(run_dir, cfg, show_progress=show_progress, command=command)
 
     @staticmethod
     def evaluate(run_dir: Path, cfg: PaperConfig) -> dict[str, Any]:
+        """Refused: a paper run keeps no agents."""
         raise RunFolderError(
             f"{run_dir} is a paper-protocol run: it keeps no agents (its figures are in {METRICS_FILE})"
         )
@@ -201,6 +204,7 @@ class PaperProtocolRunner:
 
     @staticmethod
     def result_line(run_dir: Path, summary: dict[str, Any]) -> str:
+        """The seed's ESARSA pair's agreement beside the oracle's."""
         mean = summary["mean"]
         return (
             f"{run_dir}: ESARSA-ESARSA DOSPCoT agreement {mean['dospcot_agreement']:.3f}, oracle "

@@ -27,10 +27,11 @@ from typing import Any
 import gymnasium as gym
 import torch as th
 
-from dospcot.config.loading import from_mapping, set_key
+from dospcot.config.loading import set_key
 from dospcot.config.run_configs import TrainConfig
 from dospcot.envs.gym_sensors import dotted_path
 from dospcot.run.train import train
+from dospcot.tasks import config_from_table
 
 ViewSpec = str | Callable[[Any], Any]
 """A view: a function of the observation (defined at module level), or a name: ``"observation"``, a
@@ -79,7 +80,7 @@ def gym_config(
         )
     for key, value in (settings or {}).items():
         set_key(data, key.split("."), value, f"settings[{key!r}]")
-    return from_mapping(TrainConfig, data)
+    return config_from_table(data)
 
 
 def train_env(

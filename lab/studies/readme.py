@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[3]
+ROOT = Path(__file__).resolve().parents[2]
 """The checkout this package sits in (an editable install): ``--docs`` writes its docs/ and README.md."""
 README = ROOT / "README.md"
 RESULTS = ROOT / "docs" / "results"
