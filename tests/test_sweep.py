@@ -201,8 +201,9 @@ def _synthetic_sweep(root: Path, scores: dict[str, list[float]]) -> Path:
             folder.mkdir(parents=True)
             data = {"config": "a", "name": "a", "params": trial.params, "seed": seed, "base_overrides": []}
             (folder / "trial.json").write_text(json.dumps(data))
+            # A run folder holds its config, written first.
             cfg = load_config("tiny", [f"training.label_fraction={fraction}", f"seed={seed}"])
-            run_folder.write_toml(folder / "config.toml", cfg.to_dict())  # a run folder holds its config, first
+            run_folder.write_toml(folder / "config.toml", cfg.to_dict())
             if math.isinf(score):  # an unfinished trial: no summary.json
                 continue
             mean = {"normalised_score": score, "success": 1.0, "agreement": 0.5, "pseudo_accuracy": math.nan}
