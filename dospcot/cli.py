@@ -76,6 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; building it imports neither torch nor stable-baselines3, so that
     ``--help`` and usage errors answer at once."""
     from dospcot.config.presets import PAPER_PRESETS
+    from dospcot.rating import add_rate_parser
 
     parser = OneLineParser(prog="dospcot", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
@@ -254,6 +255,7 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
     study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
     study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
+    add_rate_parser(commands)
     return parser
 
 
@@ -485,6 +487,16 @@ def _study(args: argparse.Namespace, command: str) -> int:
     return 0
 
 
+def _rate(args: argparse.Namespace, command: str) -> int:
+    from dospcot.rating.server import rate  # the web server only here: --help stays light
+
+    if rate(args) and args.then_train:  # every query answered, and the page asked to resume
+        options = {"config": None, "overrides": [], "seeds": None, "threads": 1}
+        resume = argparse.Namespace(resume=args.run_dir, no_progress=args.no_progress, **options)
+        return _train(resume, command)
+    return 0
+
+
 RUN_COMMANDS = {
     "train": _train,
     "evaluate": _evaluate,
@@ -492,6 +504,7 @@ RUN_COMMANDS = {
     "report": _report,
     "reproduce-paper": _reproduce_paper,
     "study": _study,
+    "rate": _rate,
 }
 """Commands whose bad configs and folders end in one line on stderr and exit status 2."""
 
