@@ -330,10 +330,11 @@ def _same_files(run_dir: Path, simulated: Path) -> None:
 
 
 def _answered_in_chromium(
-    tmp_path: Path, preset: str, sets: list[str], screenshot: Path | None = None
+    tmp_path: Path, preset: str, sets: list[str], then_train: bool, screenshot: Path | None = None
 ) -> None:
-    """Train ``preset`` simulated and with the file rater; answer each round's queries in Chromium
-    (the last round through ``dospcot rate --then-train``) and check the two runs' files are equal."""
+    """Train ``preset`` simulated and with the file rater; answer each round's queries in Chromium and
+    resume (the last round through ``dospcot rate --then-train`` where ``then_train``); check the two
+    runs' files are equal. ``screenshot``: the page of the last round's second query."""
     options = [a for s in sets for a in ("--set", s)]
     assert _train("train", preset, *options, "--runs-dir", str(tmp_path / "simulated")) == 0
     (simulated,) = (tmp_path / "simulated" / preset).iterdir()
@@ -345,37 +346,45 @@ def _answered_in_chromium(
     with playwright as p:
         browser = p.chromium.launch(**launch)
         page = browser.new_page(viewport={"width": 1000, "height": 820})
-        with _serve(run_dir / "queries" / "round_1.csv") as url:
-            _answer_in_the_page(page, f"{url}/?token={TOKEN}", hidden, screenshot)
-        assert _train("train", "--resume", str(run_dir)) == 0
-        process, address = _start_rate(run_dir, "--then-train", "--no-progress")
-        try:
-            _answer_in_the_page(page, address, hidden)
-            page.keyboard.press("Enter")  # the done screen's "Resume training"
-            out, err = process.communicate(timeout=600)
-        finally:
-            process.kill()
+        for round_ in (1, 2):
+            if round_ == 2 and then_train:
+                process, address = _start_rate(run_dir, "--then-train", "--no-progress")
+                try:
+                    _answer_in_the_page(page, address, hidden, screenshot)
+                    page.keyboard.press("Enter")  # the done screen's "Resume training"
+                    out, err = process.communicate(timeout=600)
+                finally:
+                    process.kill()
+                assert process.returncode == 0, err
+                assert f"{run_dir}: " in out
+                continue
+            with _serve(run_dir / "queries" / f"round_{round_}.csv") as url:
+                _answer_in_the_page(
+                    page, f"{url}/?token={TOKEN}", hidden, screenshot if round_ == 2 else None
+                )
+            assert _train("train", "--resume", str(run_dir)) == 0
         browser.close()
-    assert process.returncode == 0, err
-    assert f"{run_dir}: " in out and not (run_dir / "checkpoint.pkl").exists()  # the run finished
+    assert not (run_dir / "checkpoint.pkl").exists()  # the run finished
     _same_files(run_dir, simulated)
 
 
-TINY_SETS = ["training.label_fraction=0.2", 'training.label_strategy="disagreement"']
+TINY_SETS = [
+    "training.steps_per_round=150", "training.label_fraction=0.2", 'training.label_strategy="disagreement"',
+]  # fmt: skip
 MINIGRID_SETS = [
-    "training.rounds=2", "training.steps_per_round=300", "dqn.learning_starts=50", "gym.eval_episodes=2",
-    'training.label_strategy="outcomes"',
+    "training.rounds=2", "training.steps_per_round=200", "dqn.learning_starts=50", "gym.eval_episodes=1",
+    'training.label_strategy="disagreement"',
 ]  # fmt: skip
 
 
 def test_a_tiny_run_answered_in_chromium_equals_the_simulated_run(tmp_path):
-    _answered_in_chromium(tmp_path, "tiny", TINY_SETS)
+    _answered_in_chromium(tmp_path, "tiny", TINY_SETS, then_train=True)
 
 
 def test_a_minigrid_run_answered_in_chromium_equals_the_simulated_run(tmp_path):
     pytest.importorskip("minigrid")
     screenshot = tmp_path / "rating-page.png"
-    _answered_in_chromium(tmp_path, "minigrid-doorkey-dospcot", MINIGRID_SETS, screenshot)
+    _answered_in_chromium(tmp_path, "minigrid-doorkey-dospcot", MINIGRID_SETS, False, screenshot)
     assert screenshot.read_bytes().startswith(b"\x89PNG")
     if os.environ.get("DOSPCOT_WRITE_SCREENSHOT"):  # the guide's picture: docs/guide/rating.md
         shutil.copy(screenshot, Path(__file__).parents[1] / "docs" / "guide" / "rating-page.png")
