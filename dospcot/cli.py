@@ -10,6 +10,8 @@ from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
+from dospcot.rating import add_rate_parser, rate_command  # torch-free: rate imports its server when it runs
+
 QUICK_BENCH_OUT = Path("runs/bench-quick.md")
 """Where ``dospcot bench --quick`` writes its smoke-test figures."""
 
@@ -76,7 +78,6 @@ def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; building it imports neither torch nor stable-baselines3, so that
     ``--help`` and usage errors answer at once."""
     from dospcot.config.presets import PAPER_PRESETS
-    from dospcot.rating import add_rate_parser
 
     parser = OneLineParser(prog="dospcot", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
@@ -386,7 +387,7 @@ def _evaluate(args: argparse.Namespace, command: str) -> int:
 def _sweep(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.errors import ConfigError
     from dospcot.experiment.sweep import default_sweep_dir, run_sweep
-    from dospcot.experiment.sweep_spec import SweepSpec
+    from dospcot.experiment.sweep_spec import SweepSpec, add_seeds, parse_grid
 
     if args.ray_address and args.backend != "ray":
         raise ConfigError("--ray-address names a Ray cluster: it needs --backend ray")
@@ -397,14 +398,10 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
             )
         sweep_dir, spec = args.resume, None
         if args.seeds is not None:
-            from dospcot.experiment.sweep_spec import add_seeds
-
             spec = add_seeds(sweep_dir, args.seeds)
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
-        from dospcot.experiment.sweep_spec import parse_grid
-
         seeds = tuple(args.seeds or (0,))
         spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), seeds, tuple(args.overrides))
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
@@ -487,16 +484,6 @@ def _study(args: argparse.Namespace, command: str) -> int:
     return 0
 
 
-def _rate(args: argparse.Namespace, command: str) -> int:
-    from dospcot.rating.server import rate  # the web server only here: --help stays light
-
-    if rate(args) and args.then_train:  # every query answered, and the page asked to resume
-        options = {"config": None, "overrides": [], "seeds": None, "threads": 1}
-        resume = argparse.Namespace(resume=args.run_dir, no_progress=args.no_progress, **options)
-        return _train(resume, command)
-    return 0
-
-
 RUN_COMMANDS = {
     "train": _train,
     "evaluate": _evaluate,
@@ -504,7 +491,7 @@ RUN_COMMANDS = {
     "report": _report,
     "reproduce-paper": _reproduce_paper,
     "study": _study,
-    "rate": _rate,
+    "rate": lambda args, command: rate_command(args, command, train=_train),  # --then-train: _train resumes
 }
 """Commands whose bad configs and folders end in one line on stderr and exit status 2."""
 

@@ -8,6 +8,7 @@ the web server (:mod:`dospcot.rating.server`, the ``rate`` extra) nor torch.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Callable
 from pathlib import Path
 
 
@@ -54,3 +55,21 @@ def add_rate_parser(commands: argparse._SubParsersAction) -> argparse.ArgumentPa
     )
     rate.add_argument("--no-progress", action="store_true", help="with --then-train: hide the progress bar")
     return rate
+
+
+def rate_command(
+    args: argparse.Namespace, command: str, train: Callable[[argparse.Namespace, str], int]
+) -> int:
+    """The handler of ``dospcot rate``: serve the page (:func:`dospcot.rating.server.rate`) and, where
+    ``--then-train`` was given and the page asked to resume, resume the run.
+
+    :param train: the CLI's ``train`` handler, which resumes the run as ``dospcot train --resume`` does.
+    """
+    from dospcot.rating.server import rate  # the web server, imported only when the command runs
+
+    if rate(args) and args.then_train:  # every query answered, and the page asked to resume
+        options = {"config": None, "overrides": [], "seeds": None, "threads": 1}
+        return train(
+            argparse.Namespace(resume=args.run_dir, no_progress=args.no_progress, **options), command
+        )
+    return 0
