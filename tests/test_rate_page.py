@@ -288,12 +288,32 @@ def _train(*argv: str) -> int:
     return main([*argv, "--no-progress"])
 
 
+def _shown(page) -> int:
+    return int(page.get_attribute("#query", "data-sample"))
+
+
+def _skip_back_and_list(page, samples: list[int]) -> None:
+    """Skip (arrow key), back (button), the progress, and the list view, whose rows open their query."""
+    first = _shown(page)
+    assert page.text_content("#progress") == f"{samples.index(first) + 1} of {len(samples)} · 0 answered"
+    page.keyboard.press("ArrowRight")
+    assert _shown(page) == samples[(samples.index(first) + 1) % len(samples)]
+    page.click("#back")
+    assert _shown(page) == first
+    page.keyboard.press("l")
+    assert page.is_hidden("#query") and page.locator("#rows tr").count() == len(samples)
+    page.click(f"#rows tr >> nth={len(samples) - 1}")
+    assert page.is_visible("#query") and _shown(page) == samples[-1]
+
+
 def _answer_in_the_page(page, address: str, hidden: dict[int, float], screenshot: Path | None = None) -> None:
     """Answer every query of the page at ``address`` with its hidden reward: a number key where the
     value is one of the buttons (a click past the ninth), else typed, and confirmed where it is new."""
     page.goto(address)
     page.wait_for_selector("#query:not([hidden]), #done:not([hidden])")
-    total = len(page.evaluate("round.queries"))
+    samples = [q["sample"] for q in page.evaluate("round.queries")]
+    total = len(samples)
+    _skip_back_and_list(page, samples)
     for step in range(total):
         page.wait_for_selector("#query:not([hidden])")
         sample = int(page.get_attribute("#query", "data-sample"))

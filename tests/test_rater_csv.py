@@ -99,6 +99,13 @@ def test_a_semicolon_separated_file_with_decimal_commas_is_read(tmp_path):
     )
 
 
+def test_sample_numbers_a_spreadsheet_saved_as_decimals_are_read(tmp_path):
+    rater, _ = _round(tmp_path, [("4.0", "-1"), ("8", "0"), ("15.0", "0")])
+    assert rater.answer(2, IDS, []).tolist() == [-1.0, 0.0, 0.0]
+    rater, _ = _round(tmp_path / "b", [("4.5", "-1"), ("8", "0"), ("15", "0")])
+    _one_line(rater, "line 2: '4.5' in the sample column is not a sample number")
+
+
 def test_a_tab_separated_file_is_read(tmp_path):
     rater, path = _round(tmp_path)
     _write(path, [{"sample": s, "reward": r} for s, r in ((4, "-1"), (8, "0"), (15, "0"))], delimiter="\t")

@@ -126,6 +126,17 @@ def rewards_seen(folder: Path, round_: int) -> list[float]:
     return sorted(seen)
 
 
+def _sample_number(text: str) -> int:
+    """A sample number as written, ``7`` or as a spreadsheet may save it, ``7.0``.
+
+    :raises ValueError: not a whole number.
+    """
+    value = float(text.strip())
+    if not value.is_integer():
+        raise ValueError(text)
+    return int(value)
+
+
 def confirmed(row: dict[str, str]) -> bool:
     """Whether a row's ``confirm_new`` column confirms its reward as a new value."""
     return (row.get("confirm_new") or "").strip().lower() in CONFIRMED
@@ -152,7 +163,7 @@ def read_answers(
     for line, row in rows:
         text = row.get("sample") or ""
         try:
-            sample = int(text.strip())
+            sample = _sample_number(text)
         except ValueError:
             raise RaterError(
                 f"{path} line {line}: {text!r} in the sample column is not a sample number; restore the "
