@@ -181,6 +181,18 @@ def test_a_new_reward_value_is_kept_only_once_confirmed(tmp_path):
     assert read_answers(path, [5, 9, 12], [-1.0, 0.0]).tolist() == [42.0, 42.0, -1.0]
 
 
+def test_a_file_edited_by_hand_while_served_is_one_line_not_a_crash(tmp_path):
+    run_dir = _fake_run(tmp_path)
+    path = run_dir / "queries" / "round_2.csv"
+    with _serve(path) as url:
+        _write(path, [ROUND_2[0], ROUND_2[2]])  # sample 9's row deleted
+        status, body = _request(url + "/api/answer", {"sample": 9, "reward": "0"})
+        assert (status, body["error"]) == (400, f"sample 9 is no longer in {path}: restore its row")
+        _write(path, [{**ROUND_2[0], "sample": "five"}])
+        status, body = _request(url + "/api/round")
+        assert status == 400 and "line 2: 'five' in the sample column is not a sample number" in body["error"]
+
+
 def test_two_tabs_answering_the_same_query_the_last_answer_wins(tmp_path):
     run_dir = _fake_run(tmp_path)
     path = run_dir / "queries" / "round_2.csv"

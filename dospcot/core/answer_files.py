@@ -126,7 +126,7 @@ def rewards_seen(folder: Path, round_: int) -> list[float]:
     return sorted(seen)
 
 
-def _sample_number(text: str) -> int:
+def sample_number(text: str) -> int:
     """A sample number as written, ``7`` or as a spreadsheet may save it, ``7.0``.
 
     :raises ValueError: not a whole number.
@@ -163,7 +163,7 @@ def read_answers(
     for line, row in rows:
         text = row.get("sample") or ""
         try:
-            sample = _sample_number(text)
+            sample = sample_number(text)
         except ValueError:
             raise RaterError(
                 f"{path} line {line}: {text!r} in the sample column is not a sample number; restore the "

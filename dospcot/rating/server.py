@@ -28,6 +28,7 @@ from dospcot.core.answer_files import (
     read_rows,
     rewards_seen,
     round_of,
+    sample_number,
     show,
     write_rows,
 )
@@ -76,10 +77,27 @@ class RoundAnswers:
         self.seen = rewards_seen(self.folder, self.round)
         """The rewards of the earlier rounds' answers: the values that need no confirmation."""
         self.lock = threading.Lock()
-        fields, rows, _ = read_rows(path)
-        self.samples = [int(row["sample"]) for _, row in rows]
+        fields, rows, _ = self._rows()
+        self.samples = [sample for sample, _ in rows]
         """The round's queries in the file's order; no other sample is answered."""
         self.views = [f.removesuffix("_predicts") for f in fields if f.endswith("_predicts")]
+
+    def _rows(self) -> tuple[list[str], list[tuple[int, dict[str, str]]], bool]:
+        """The file's columns, its rows with their sample numbers, and whether it is ``;`` separated.
+
+        :raises RaterError: a row without a sample number (the file was edited by hand).
+        """
+        fields, rows, comma = read_rows(self.path)
+        numbered = []
+        for line, row in rows:
+            try:
+                numbered.append((sample_number(row.get("sample") or ""), row))
+            except ValueError:
+                raise RaterError(
+                    f"{self.path} line {line}: {row.get('sample')!r} in the sample column is not a sample "
+                    "number; restore the number the run wrote"
+                ) from None
+        return fields, numbered, comma
 
     def _known(self, rows: list[dict[str, str]], comma: bool) -> list[float]:
         """The values a person may give at one keystroke: the earlier rounds' and this round's confirmed."""
@@ -96,10 +114,10 @@ class RoundAnswers:
     def state(self, token: str) -> dict[str, Any]:
         """The round as the page shows it."""
         with self.lock:
-            _, rows, comma = read_rows(self.path)
+            _, rows, comma = self._rows()
         rows_ = [row for _, row in rows]
         queries = []
-        for row in rows_:
+        for sample, row in rows:
             frames, text = [], None
             for column, caption in FRAME_COLUMNS.items():
                 value = row.get(column) or ""
@@ -109,7 +127,7 @@ class RoundAnswers:
                     text = value
             queries.append(
                 {
-                    "sample": int(row["sample"]),
+                    "sample": sample,
                     "key": row.get("key", ""),
                     "frames": frames,
                     "text_frame": text,
@@ -157,14 +175,16 @@ class RoundAnswers:
                 f"the reward of sample {sample}: {why.removeprefix('is ')}; answer with a number"
             ) from None
         with self.lock:  # two tabs: one writes after the other, and the last answer stays
-            fields, rows, comma = read_rows(self.path)
+            fields, rows, comma = self._rows()
             rows_ = [row for _, row in rows]
+            if sample not in [s for s, _ in rows]:
+                raise RaterError(f"sample {sample} is no longer in {self.path}: restore its row")
             known = self._known(rows_, comma)
             if value not in known and not confirm:
                 listed = ", ".join(show(v) for v in known) or "none yet"
                 raise NewReward(f"{show(value)} is a new reward value (seen so far: {listed})")
-            for row in rows_:
-                if int(row["sample"]) == sample:
+            for row_sample, row in rows:
+                if row_sample == sample:
                     row["reward"] = text
                 # A new value is confirmed on every row that gives it, so it stays so when one row changes.
                 try:
@@ -210,7 +230,10 @@ def make_app(answers: RoundAnswers, token: str, then_train: bool = False) -> Any
         return HTMLResponse(page, headers={"Cache-Control": "no-store", "Referrer-Policy": "no-referrer"})
 
     async def state(request: Request) -> JSONResponse:
-        return JSONResponse({**answers.state(token), "then_train": then_train})
+        try:
+            return JSONResponse({**answers.state(token), "then_train": then_train})
+        except RaterError as err:  # the file was edited by hand meanwhile
+            return error(err)
 
     async def answer(request: Request) -> JSONResponse:
         try:
