@@ -5,14 +5,14 @@ PY := $(VENV)/bin/python
 PIP := $(VENV)/bin/pip
 STAMP := $(VENV)/.installed
 
-.PHONY: install run test test-slow lint bench docs clean
+.PHONY: install run test test-slow lint bench docs clean chromium
 
 # torch is installed first, through the constraints file, so that no dependency can pull the
 # registry's CUDA build of torch.
 $(STAMP): pyproject.toml constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install -q -c constraints.txt torch
-	$(PIP) install -q -c constraints.txt -e ".[dev,docs,ray,highway,minigrid]"
+	$(PIP) install -q -c constraints.txt -e ".[dev,docs,ray,highway,minigrid,rate]"
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -20,7 +20,12 @@ install: $(STAMP)
 run: $(STAMP)  ## the main job on its embedded default: the seed paper's protocol, 10 seeds
 	$(VENV)/bin/dospcot reproduce-paper
 
-test: $(STAMP)  ## the tests not marked slow, ruff, and the documentation site with --strict
+# The rating page's browser test drives Debian's Chromium (Playwright cannot download its own browser).
+chromium:
+	@test -x /usr/bin/chromium || (apt-get update -qq && apt-get install -y -qq chromium) \
+		|| echo "chromium not installed: tests/test_rate_page.py skips its browser test outside CI"
+
+test: $(STAMP) chromium  ## the tests not marked slow, ruff, and the documentation site with --strict
 	$(PY) -m pytest -q -n 2
 	$(VENV)/bin/ruff check .
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict

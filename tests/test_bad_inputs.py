@@ -174,7 +174,7 @@ def _stopped_for_answers(tmp_path: Path, capsys) -> Path:
     with path.open("w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
         writer.writeheader()
-        writer.writerows({**row, "reward": "-1"} for row in rows)
+        writer.writerows({**row, "reward": "-1", "confirm_new": "yes"} for row in rows)  # -1: new in round 1
     assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 0  # round 1, then round 2 asks
     assert (run_dir / "queries" / "round_2.csv").is_file() and (run_dir / "checkpoint.pkl").is_file()
     capsys.readouterr()

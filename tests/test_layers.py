@@ -1,6 +1,6 @@
 """The package's layers import downward only (docs/design.md, "Layers"): config -> the parts (envs,
-policies, seeding, metrics, demonstrations) -> core -> tasks -> run -> lab -> cli, with no import
-circle among the modules; and reading a config costs no training stack."""
+policies, seeding, metrics, demonstrations) -> core -> tasks -> run (and the rating page) -> lab -> cli,
+with no import circle among the modules; and reading a config costs no training stack."""
 
 from __future__ import annotations
 
@@ -21,7 +21,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("dospcot.envs", "dospcot.policies", "dospcot.seeding", "dospcot.metrics", "dospcot.demonstrations"),
     ("dospcot.core",),
     ("dospcot.tasks",),
-    ("dospcot.run",),
+    ("dospcot.run", "dospcot.rating"),
     ("dospcot.lab",),
     ("dospcot.cli", "dospcot.__main__"),
 )

@@ -121,7 +121,8 @@ def test_the_file_rater_writes_the_queries_then_reads_a_persons_answers(tmp_path
         rater.answer(2, ids, [{"key": "s=1 a=3"}, {"key": "s=0 a=3"}])
     assert pending.value.count == 2 and pending.value.path == tmp_path / "queries" / "round_2.csv"
     lines = pending.value.path.read_text().splitlines()
-    assert lines == ["sample,key,reward", "7,s=1 a=3,", "3,s=0 a=3,"]
+    header = "sample,key,reward,confirm_new,rewards_seen"
+    assert lines == [header, "7,s=1 a=3,,,none yet", "3,s=0 a=3,,,none yet"]
     with pytest.raises(RaterError, match=r"line 2: sample '7' has no numeric reward \(''\)"):
         rater.answer(2, ids, [])
     pending.value.path.write_text("sample,key,reward\n7,s=1 a=3,-1\n3,s=0 a=3,nan\n")
@@ -130,7 +131,11 @@ def test_the_file_rater_writes_the_queries_then_reads_a_persons_answers(tmp_path
     pending.value.path.write_text("sample,key,reward\n7,s=1 a=3,-1\n")
     with pytest.raises(RaterError, match=r"1 of its 2 queries have no answer \(e.g. sample 3\)"):
         rater.answer(2, ids, [])
-    pending.value.path.write_text("sample,key,reward\n3,s=0 a=3,0.5\n7,s=1 a=3,-1\n")
+    # No round before: each value is new, and is taken once confirmed.
+    pending.value.path.write_text("sample,key,reward,confirm_new\n3,s=0 a=3,0.5,yes\n7,s=1 a=3,-1,\n")
+    with pytest.raises(RaterError, match="line 3: sample 7's reward -1 is new"):
+        rater.answer(2, ids, [])
+    pending.value.path.write_text("sample,key,reward,confirm_new\n3,s=0 a=3,0.5,yes\n7,s=1 a=3,-1,yes\n")
     assert rater.answer(2, ids, []).tolist() == [-1.0, 0.5]
 
 
@@ -272,8 +277,9 @@ def test_a_run_answered_through_files_equals_the_simulated_run(tmp_path, capsys)
         state = int(rows[0]["key"].split(",")[0].removeprefix("state "))
         assert rows[0]["frame"].replace("\n", "")[state] == "A"
         # A bad answer file is one line, and nothing is lost: the resume after it goes on.
-        for row in rows:
+        for row in rows:  # a value no earlier round answered is confirmed as new
             row["reward"] = repr(float(rewards[int(row["sample"])]))
+            row["confirm_new"] = "yes"
         _write_rows(path, [{**rows[0], "reward": "x"}, *rows[1:]])
         assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
         err = capsys.readouterr().err

@@ -9,6 +9,7 @@ import sys
 from pathlib import Path
 
 from dospcot.cli.parser import QUICK_BENCH_OUT
+from dospcot.rating import rate_command
 
 
 def _train(args: argparse.Namespace, command: str) -> int:
@@ -174,6 +175,7 @@ RUN_COMMANDS = {
     "report": _report,
     "reproduce-paper": _reproduce_paper,
     "study": _study,
+    "rate": lambda args, command: rate_command(args, command, train=_train),  # --then-train: _train resumes
 }
 """Commands whose bad configs and folders end in one line on stderr and exit status 2."""
 

@@ -8,6 +8,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
+from dospcot.rating import add_rate_parser  # torch-free: rate imports its server when it runs
+
 QUICK_BENCH_OUT = Path("runs/bench-quick.md")
 """Where ``dospcot bench --quick`` writes its smoke-test figures."""
 
@@ -252,4 +254,5 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
     study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
     study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
+    add_rate_parser(commands)
     return parser

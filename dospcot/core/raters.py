@@ -11,17 +11,25 @@
 
 from __future__ import annotations
 
-import csv
 import io
-import math
+import json
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from PIL import Image
 
-QUERY_COLUMNS = ("sample", "key", "reward")
-"""The first columns of a round's query file; each view's predicted class and confidence follow."""
+from dospcot.core.answer_files import QUERY_COLUMNS, RaterError, read_answers, rewards_seen, show, write_rows
+
+__all__ = ["FileRater", "QueriesPending", "RaterError", "SimulatedRater", "action_names", "encode_png"]
+
+ACTION_NAMES = {
+    "GridWorld": ("up", "right", "down", "left"),
+    "CliffWalkingEnv": ("up", "right", "down", "left"),
+}
+"""What the actions of the envs that do not name them mean, by the unwrapped env's class."""
 
 
 def encode_png(image: np.ndarray) -> bytes:
@@ -37,10 +45,6 @@ class QueriesPending(Exception):
     def __init__(self, count: int, path: Path) -> None:
         super().__init__(f"{count} reward queries wait in {path}: fill in its reward column, then resume")
         self.count, self.path = count, path
-
-
-class RaterError(ValueError):
-    """An answer file that cannot be read: one line, nothing trained, nothing lost."""
 
 
 class SimulatedRater:
@@ -61,10 +65,13 @@ class FileRater:
     """Writes each round's queries for a person and reads the answers back.
 
     :param folder: where the query files go (``<run>/queries``).
+    :param views: the run's view names, which name each view's prediction column.
     """
 
-    def __init__(self, folder: Path) -> None:
-        self.folder = folder
+    def __init__(self, folder: Path, views: Sequence[str] = ()) -> None:
+        self.folder, self.views = folder, tuple(views)
+        self.actions: tuple[str, ...] | None = None
+        """What each action means (:func:`action_names`), shown beside its number; None: unknown."""
 
     def path(self, round_: int) -> Path:
         """The query file of round ``round_``."""
@@ -74,58 +81,82 @@ class FileRater:
         """The rewards a person wrote for ``ids``; the first time, write the queries and raise
         :class:`QueriesPending`.
 
-        :raises RaterError: the file does not answer every query with a finite number.
+        :raises RaterError: the file does not answer every query with a finite number, or gives a
+            reward not seen in an earlier round without its confirmation (:mod:`dospcot.core.answer_files`).
         """
         path = self.path(round_)
+        seen = rewards_seen(self.folder, round_)
         if not path.is_file():
             self.folder.mkdir(parents=True, exist_ok=True)
+            listed = ", ".join(show(v) for v in seen) or "none yet"
+            classes = self._class_values()
             rows = [
-                {"sample": int(i), **self._write_frames(round_, int(i), row), "reward": ""}
+                {"sample": int(i), **self._shown(round_, int(i), row, classes), "rewards_seen": listed}
                 for i, row in zip(ids, described, strict=True)
             ]
             fields = list(dict.fromkeys([*QUERY_COLUMNS, *(k for row in rows for k in row)]))
-            temporary = path.with_suffix(".csv.tmp")
-            with temporary.open("w", newline="") as handle:
-                writer = csv.DictWriter(handle, fieldnames=fields)
-                writer.writeheader()
-                writer.writerows(rows)
-            temporary.replace(path)
+            write_rows(path, fields, rows)
             raise QueriesPending(len(ids), path)
-        return self._read(path, ids)
+        return read_answers(path, ids, seen, self.folder.parent)
 
-    def _write_frames(self, round_: int, sample: int, described: dict[str, object]) -> dict[str, object]:
-        """``described`` with each PNG written to ``round_<r>/<sample>_<column>.png`` and named in its
-        place (relative to the queries folder)."""
-        row = dict(described)
+    def _class_values(self) -> list[float]:
+        """The reward of each class of the run's classifiers, as its last finished round wrote them
+        (``reward_classes.json`` beside the queries folder); empty before."""
+        path = self.folder.parent / "reward_classes.json"
+        return json.loads(path.read_text())["rewards"] if path.is_file() else []
+
+    def _shown(
+        self, round_: int, sample: int, described: dict[str, object], classes: Sequence[float]
+    ) -> dict[str, object]:
+        """What a person reads of a query: ``described`` with each PNG written to
+        ``round_<r>/<sample>_<column>.png`` and named in its place (relative to the queries folder),
+        the action's meaning beside its number, and each view's prediction as a reward, named by view."""
+        row: dict[str, Any] = {}
         for column, value in described.items():
             if isinstance(value, bytes):
                 name = Path(f"round_{round_}") / f"{sample}_{column}.png"
                 (self.folder / name).parent.mkdir(exist_ok=True)
                 (self.folder / name).write_bytes(value)
-                row[column] = name.as_posix()
+                value = name.as_posix()
+            prediction = re.fullmatch(r"view(\d+)_(class|confidence)", column)
+            if prediction is not None and int(prediction.group(1)) < len(self.views):
+                view = self.views[int(prediction.group(1))]
+                if prediction.group(2) == "class":
+                    column = f"{view}_predicts"
+                    value = show(classes[int(value)]) if int(value) < len(classes) else f"class {value}"
+                else:
+                    column = f"{view}_confidence"
+            if column == "key" and self.actions is not None:
+                action = re.search(r"action (\d+)$", str(value))
+                if action is not None and int(action.group(1)) < len(self.actions):
+                    value = f"{value} ({self.actions[int(action.group(1))]})"
+            row[column] = value
         return row
 
-    @staticmethod
-    def _read(path: Path, ids: np.ndarray) -> np.ndarray:
-        with path.open(newline="") as handle:
-            rows = list(csv.DictReader(handle))
-        if rows and ("sample" not in rows[0] or "reward" not in rows[0]):
-            raise RaterError(f"{path}: needs the columns sample and reward, has {', '.join(rows[0])}")
-        answers: dict[int, float] = {}
-        for line, row in enumerate(rows, start=2):
-            try:
-                sample, reward = int(row["sample"]), float(row["reward"])
-            except (TypeError, ValueError):
-                raise RaterError(
-                    f"{path} line {line}: sample {row.get('sample')!r} has no numeric reward "
-                    f"({row.get('reward')!r}); answer every query with a number"
-                ) from None
-            if not math.isfinite(reward):
-                raise RaterError(f"{path} line {line}: the reward of sample {sample} is {reward}, not finite")
-            answers[sample] = reward
-        missing = [int(i) for i in ids if int(i) not in answers]
-        if missing:
-            raise RaterError(
-                f"{path}: {len(missing)} of its {len(ids)} queries have no answer (e.g. sample {missing[0]})"
-            )
-        return np.array([answers[int(i)] for i in ids], dtype=np.float64)
+
+def action_names(task: Any) -> tuple[str, ...] | None:
+    """What each action of a task's env means, where the env tells it (MiniGrid, highway-env) or
+    :data:`ACTION_NAMES` knows it; None otherwise.
+
+    :param task: a task adapter, whose ``eval_envs`` or ``make_env()`` gives an env of the task.
+    """
+    envs = getattr(task, "eval_envs", None)
+    env = envs[0] if envs else getattr(task, "make_env", lambda: None)()
+    env = getattr(env, "envs", [env])[0]  # an SB3 VecEnv's first env
+    if env is None:
+        return None
+    base = env.unwrapped
+    if base.__class__.__name__ in ACTION_NAMES:
+        return ACTION_NAMES[base.__class__.__name__]
+    enum = getattr(base, "actions", None)  # MiniGrid: an IntEnum of its actions
+    if enum is not None and hasattr(enum, "__members__"):
+        try:
+            kept = env.get_wrapper_attr("actions")  # a wrapper that keeps some of them, in order
+        except AttributeError:
+            kept = enum
+        kept = list(enum) if kept is enum else kept
+        return tuple(enum(int(a)).name.replace("_", " ") for a in kept)
+    meta = getattr(getattr(base, "action_type", None), "actions", None)  # highway-env's meta actions
+    if isinstance(meta, dict):
+        return tuple(str(meta[i]).replace("_", " ").lower() for i in sorted(meta))
+    return None

@@ -18,7 +18,7 @@ from dospcot.config.run_configs import TrainConfig
 from dospcot.core.classifier import save_classifier
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import LOG_COLUMNS
-from dospcot.core.raters import FileRater
+from dospcot.core.raters import FileRater, action_names
 from dospcot.run.interrupts import Interrupted
 from dospcot.run.plots import plot_learning_curves
 from dospcot.run.run_folder import (
@@ -72,8 +72,10 @@ class RunSession:
         self.started, self.started_cpu = time.perf_counter(), time.process_time()
         self.run_dir, self.cfg, self.command, self.batch = run_dir, cfg, command, batch
         # Checked before the folder was made (train) or the sweep began (its trials): built at once here.
-        rater = FileRater(run_dir / QUERIES_FOLDER) if cfg.training.rater == "file" else None
+        rater = FileRater(run_dir / QUERIES_FOLDER, cfg.views) if cfg.training.rater == "file" else None
         self.run = CoTrainingRun(get_task(cfg.task).build(cfg), cfg, rater)
+        if rater is not None:
+            rater.actions = action_names(self.run.task)
         self.records: list[dict] = []
         self.elapsed, self.cpu, self.sessions, self.commits = 0.0, 0.0, 1, [source_commit()]
         self.extra: dict[str, Any] = {}
