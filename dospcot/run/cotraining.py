@@ -51,21 +51,21 @@ from dospcot.run.run_folder import (
     write_json,
     write_toml,
 )
-from dospcot.run.run_session import RunSession
+from dospcot.run.run_session import RunSession, new_run
 from dospcot.tasks import get_task
 
 EVALUATION_FILE = "evaluation.json"
 
 
 def build_run(cfg: TrainConfig, rater: Rater | None = None) -> CoTrainingRun:
-    """The co-training run of a config, before its first round: its task's adapter
-    (``Task.build``) driven by :class:`~dospcot.core.cotraining_run.CoTrainingRun`.
+    """The co-training run of a config, checked first as ``train`` checks it (:func:`new_run` builds
+    it), for a user who drives its rounds from Python.
 
     :param rater: answers an active label strategy's queries; None: the simulated rater.
     :raises ConfigError: what the config's check step finds (files, imports, the env), as for ``train``.
     """
     check_config(cfg)
-    return CoTrainingRun(get_task(cfg.task).build(cfg), cfg, rater)
+    return new_run(cfg, rater)
 
 
 class _StepBar(BaseCallback):

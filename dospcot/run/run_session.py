@@ -17,7 +17,7 @@ from torch.utils.tensorboard import SummaryWriter
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.classifier import save_classifier
 from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.core.queries import LOG_COLUMNS
+from dospcot.core.queries import LOG_COLUMNS, Rater
 from dospcot.core.raters import FileRater, action_names
 from dospcot.run.interrupts import Interrupted
 from dospcot.run.plots import plot_learning_curves
@@ -53,6 +53,15 @@ SUMMARY_METRICS = (
 )  # fmt: skip
 
 
+def new_run(cfg: TrainConfig, rater: Rater | None = None) -> CoTrainingRun:
+    """The co-training run of a config, before its first round: its task's adapter (``Task.build``)
+    driven by :class:`~dospcot.core.cotraining_run.CoTrainingRun`; the one place that builds it.
+
+    :param rater: answers an active label strategy's queries; None: the simulated rater.
+    """
+    return CoTrainingRun(get_task(cfg.task).build(cfg), cfg, rater)
+
+
 class RunSession:
     """One session of training in a run folder: the run built (and continued from a checkpoint), its
     agents' TensorBoard loggers, the files every finished round rewrites and the checkpoint, and the
@@ -73,7 +82,7 @@ class RunSession:
         self.run_dir, self.cfg, self.command, self.batch = run_dir, cfg, command, batch
         # Checked before the folder was made (train) or the sweep began (its trials): built at once here.
         rater = FileRater(run_dir / QUERIES_FOLDER, cfg.views) if cfg.training.rater == "file" else None
-        self.run = CoTrainingRun(get_task(cfg.task).build(cfg), cfg, rater)
+        self.run = new_run(cfg, rater)
         if rater is not None:
             rater.actions = action_names(self.run.task)
         self.records: list[dict] = []
