@@ -55,6 +55,9 @@ PHASES = (
 """The rows of the table, in a round's order."""
 
 
+NOTES = "\n<!-- notes: written by hand, kept when the script rewrites the tables above -->\n"
+
+
 class PhaseTimer:
     """Exclusive CPU seconds per phase: a phase entered inside another is subtracted from it."""
 
@@ -222,14 +225,15 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--out", type=Path, help="write the markdown page here")
     parser.add_argument("--json", type=Path, help="write the raw figures here")
     parser.add_argument("--baseline", type=Path, help="raw figures of an earlier profile: before → after")
+    parser.add_argument("--results", type=Path, help="render figures --json wrote, not train")
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:
         print(json.dumps(child(args.child, args.rounds, args.seed)))
         return 0
     families = args.family or list(FAMILIES)
-    results: dict[str, dict] = {}
-    for family in families:
+    results: dict[str, dict] = json.loads(args.results.read_text()) if args.results else {}
+    for family in [] if args.results else families:
         for preset in FAMILIES[family]:
             results[preset] = run_case(preset, args.rounds, args.seed)
             print(f"{preset}: {results[preset]['total']:.1f} CPU s", file=sys.stderr)
@@ -259,7 +263,9 @@ def main(argv: list[str] | None = None) -> int:
     page = "\n".join([*head, *table(results, baseline)])
     print(page)
     if args.out:
-        args.out.write_text(page)
+        # What the page says below the marker is written by hand: kept as it is.
+        kept = args.out.read_text().partition(NOTES)[2] if args.out.is_file() else ""
+        args.out.write_text(page + (NOTES + kept if kept else ""))
     return 0
 
 

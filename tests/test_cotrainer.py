@@ -270,3 +270,12 @@ def test_numerics_2_fits_in_float32_and_a_trainer_pickled_before_numerics_reads_
     assert RunCoTrainer([3], config, 0, 2).numerics == CURRENT_NUMERICS
     with pytest.raises(ValueError, match="numerics"):
         SelfPacedCoTrainer([3], 1, config, [0], 2, numerics=7)
+
+
+def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path):
+    import json
+
+    from dospcot.experiment.run_folder import write_run_info
+
+    write_run_info(tmp_path, "dospcot train tiny", 1.0)
+    assert json.loads((tmp_path / "run_info.json").read_text())["numerics"] == CURRENT_NUMERICS == 2

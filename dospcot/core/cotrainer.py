@@ -53,7 +53,7 @@ from the last fit's parameters. On the fits of a LavaGap run's ego view (2,156 s
 inputs) float32 took 5.3 CPU s against float64's 30.5, every sample predicted the same class and no
 score moved by more than 1e-4 (docs/guide/profile.md)."""
 
-CURRENT_NUMERICS = 1
+CURRENT_NUMERICS = 2
 """The version a new SB3 co-training run (:class:`RunCoTrainer`) fits with, named in its
 ``run_info.json``."""
 

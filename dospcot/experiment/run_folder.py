@@ -28,6 +28,7 @@ import tomli_w
 import torch
 
 import dospcot
+from dospcot.core.cotrainer import CURRENT_NUMERICS
 
 CONFIG_FILE = "config.toml"
 METRICS_FILE = "metrics.csv"
@@ -160,6 +161,7 @@ def write_run_info(run_dir: Path, command: str, wall_time_s: float, **extra: Any
     write_json(
         run_dir / "run_info.json",
         {"command": command, "wall_time_s": round(wall_time_s, 2), **extra, "dospcot": dospcot.__version__,
+         "numerics": CURRENT_NUMERICS,
          "commit": source_commit(), "cpu": cpu_description(),
          "torch": torch.__version__, "stable_baselines3": stable_baselines3.__version__,
          "python": platform.python_version(),
