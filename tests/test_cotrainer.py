@@ -279,3 +279,6 @@ def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path):
 
     write_run_info(tmp_path, "dospcot train tiny", 1.0)
     assert json.loads((tmp_path / "run_info.json").read_text())["numerics"] == CURRENT_NUMERICS == 2
+    # A driver that knows better (a run resumed from a checkpoint of numerics 1) names its own.
+    write_run_info(tmp_path, "dospcot train --resume", 1.0, numerics=1)
+    assert json.loads((tmp_path / "run_info.json").read_text())["numerics"] == 1
