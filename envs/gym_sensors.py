@@ -152,7 +152,7 @@ def resolve_state_key(spec: str) -> StateKeyFn:
 
 class ObservationSensors(gym.Wrapper):
     """Give an env with ``Discrete`` actions the sensor interface: each view a function of the last
-    observation, flattened to float32.
+    observation, flattened: to uint8 where the view gives uint8 or bool values, else to float32.
 
     Each view's shape is read from the observation of a reset (seed 0) at construction; a view that
     raises, returns a non-numeric value or changes shape later fails with one line naming it.
@@ -183,9 +183,12 @@ class ObservationSensors(gym.Wrapper):
                 f"the env's first observation (shape {shape}, {dtype}) does not fit its observation_space "
                 f"{env.observation_space}; an agent would learn from values its space does not allow"
             )
-        self._spaces = {
-            name: gym.spaces.Box(-np.inf, np.inf, self._read(name).shape, np.float32) for name in self._fns
-        }
+        self._spaces = {}
+        for name in self._fns:
+            value = self._read(name)
+            small = value.dtype == np.uint8
+            low, high = (0, 255) if small else (-np.inf, np.inf)
+            self._spaces[name] = gym.spaces.Box(low, high, value.shape, value.dtype)
         if state_key is not None:
             self.state_key()  # an unhashable key fails here, before anything trains
 
@@ -210,9 +213,15 @@ class ObservationSensors(gym.Wrapper):
         return repr(key)
 
     def _read(self, name: str) -> np.ndarray:
+        """The view ``name`` of the last observation, flat: uint8 where the view gives uint8 or bool
+        values (MiniGrid's image and indicator maps: a quarter of float32's memory in the store and
+        the replay buffers, and the same floats where read, as a network reads them through
+        ``float()``), float32 otherwise."""
         try:
             raw = self._fns[name](self._obs)
-            value = np.asarray(raw, dtype=np.float32)
+            value = np.asarray(raw)
+            dtype = np.uint8 if value.dtype in (np.uint8, np.bool_) else np.float32
+            value = np.asarray(raw, dtype=dtype)
         except Exception as err:  # a user's function may raise anything: named, its error the cause
             raise ValueError(f"view {name!r} failed on an observation: {type(err).__name__}: {err}") from err
         if raw is None:
@@ -226,12 +235,17 @@ class ObservationSensors(gym.Wrapper):
         return self._spaces[name]
 
     def observe(self, name: str) -> np.ndarray:
-        """The view ``name`` of the last observation, float32 of ``view_space(name).shape``."""
-        value = self._read(name)
-        if value.shape != self.view_space(name).shape:
+        """The view ``name`` of the last observation, of ``view_space(name)``'s shape and type."""
+        value, space = self._read(name), self.view_space(name)
+        if value.shape != space.shape:
             raise ValueError(
-                f"view {name!r} changed shape: {self.view_space(name).shape[0]} values at the first "
+                f"view {name!r} changed shape: {space.shape[0]} values at the first "
                 f"reset, {value.size} now; a view must return the same shape on every observation"
+            )
+        if value.dtype != space.dtype:
+            raise ValueError(
+                f"view {name!r} changed type: {space.dtype} at the first reset, {value.dtype} now; a view "
+                "must return values of one type (uint8 or bool, stored as uint8; any other, as float32)"
             )
         return value
 

@@ -73,8 +73,10 @@ def full_grid(env: gym.Env) -> np.ndarray:
 OBJECT_TYPES = 11
 """MiniGrid's object indices: unseen, empty, wall, floor, door, key, ball, box, goal, lava, agent."""
 
-_INDICATORS = np.eye(OBJECT_TYPES + 4, dtype=np.float32)
-"""(15, 15) float32 identity: row c marks object type c (c < 11), row 11 + s marks state s."""
+_INDICATORS = np.eye(OBJECT_TYPES + 4, dtype=np.uint8)
+"""(15, 15) uint8 identity: row c marks object type c (c < 11), row 11 + s marks state s. uint8, not
+float32: a sensor view of uint8 values is stored as uint8 (:class:`~dospcot.envs.gym_sensors.
+ObservationSensors`), a quarter of the memory, and a network reads the same 0.0 and 1.0."""
 
 
 def full_one_hot(env: gym.Env) -> np.ndarray:
@@ -97,7 +99,7 @@ def egocentric_map(env: gym.Env) -> np.ndarray:
     indicators = full_one_hot(env)
     width, height = indicators.shape[:2]
     side = max(width, height)
-    canvas = np.zeros((2 * side - 1, 2 * side - 1, indicators.shape[2]), np.float32)
+    canvas = np.zeros((2 * side - 1, 2 * side - 1, indicators.shape[2]), indicators.dtype)
     x, y = env.agent_pos
     canvas[side - 1 - x : side - 1 - x + width, side - 1 - y : side - 1 - y + height] = indicators
     # Directions: 0 +x, 1 +y, 2 -x, 3 -y (up); k quarter turns from axis 0 towards 1 bring each up.

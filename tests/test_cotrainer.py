@@ -5,7 +5,13 @@ import numpy as np
 import pytest
 
 from dospcot.config.learning_sections import CoTrainingConfig
-from dospcot.core.cotrainer import Pool, RoundResult, RunCoTrainer, RunPool, SelfPacedCoTrainer
+from dospcot.core.cotrainer import (
+    Pool,
+    RoundResult,
+    RunCoTrainer,
+    RunPool,
+    SelfPacedCoTrainer,
+)
 from dospcot.core.key_pool import key_features
 from dospcot.core.reward_classes import (
     QuantileRewardClasses,
@@ -220,3 +226,64 @@ def test_the_single_run_cotrainer_is_the_batched_one_on_a_batch_of_one():
             np.testing.assert_array_equal(getattr(one, name), getattr(many, name))
         assert one.pseudo_class.shape == (12,) and one.view_class.shape == (2, 12)
         assert (one.pace, one.changed, one.stopped) == (many.pace, many.changed, many.stopped)
+
+
+def test_a_fit_on_the_weighted_samples_alone_is_the_fit_on_the_whole_pool():
+    import torch
+
+    from dospcot.core.classifier import BatchedRewardClassifier, ClassifierConfig
+    from dospcot.core.cotrainer import Numerics, _fit
+
+    rng = np.random.default_rng(1)
+    x = torch.from_numpy(rng.normal(size=(1, 50, 4)))
+    y = torch.from_numpy(rng.integers(0, 2, size=(1, 50)))
+    weight = torch.from_numpy((rng.random((1, 50)) > 0.4).astype(np.float64))
+    mask = torch.ones(1, 50, 2, dtype=torch.bool)  # per sample, as episode-end classes give
+    fits = []
+    for weighted_only in (False, True):
+        clf = BatchedRewardClassifier(1, 4, 2, ClassifierConfig(epochs=60), [3])
+        loss = _fit(clf, Numerics(torch.float64, weighted_only), x, y, weight, mask)
+        fits.append((loss, list(clf.parameters())))
+    (loss_all, all_params), (loss_weighted, weighted_params) = fits
+    torch.testing.assert_close(loss_all, loss_weighted, rtol=1e-12, atol=1e-12)
+    for p, q in zip(all_params, weighted_params, strict=True):
+        torch.testing.assert_close(p, q, rtol=1e-9, atol=1e-12)
+
+
+def test_numerics_2_fits_in_float32_and_a_config_pickled_before_the_key_reads_as_1():
+    import dataclasses
+    import pickle
+
+    import torch
+
+    pool, _ = _separable_pool(2)
+    config = CoTrainingConfig(max_classes=2)
+    dims = [f.shape[2] for f in pool.features]
+    new = SelfPacedCoTrainer(dims, 1, dataclasses.replace(config, numerics=2), [0], 2)
+    assert all(p.dtype == torch.float32 for clf in new.classifiers for p in clf.parameters())
+    new.step(pool)
+    old = SelfPacedCoTrainer(dims, 1, config, [0], 2)
+    assert old.numerics == 1 and old.dtype == torch.float64
+    del old.config.__dict__["numerics"]  # as a checkpoint written before the key holds its config
+    loaded = pickle.loads(pickle.dumps(old))
+    assert loaded.numerics == 1 and loaded.dtype == torch.float64
+    loaded.step(pool)
+    assert RunCoTrainer([3], config, 0, 2).numerics == 1  # the default until the same-science check
+    with pytest.raises(ValueError, match="numerics must be one of 1, 2, got 7"):
+        CoTrainingConfig(numerics=7)
+
+
+def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path):
+    import json
+
+    from dospcot.run.cotraining import build_run
+    from dospcot.run.run_session import RunSession
+    from dospcot.tasks import load_config
+
+    cfg = load_config("tiny", ["training.rounds=1", "training.steps_per_round=200", "cotraining.numerics=2"])
+    assert build_run(cfg).trainer.numerics == 2
+    (tmp_path / "config.toml").write_text("")
+    session = RunSession(tmp_path, cfg, None, "dospcot train tiny")
+    session.run.run(on_round=lambda run, rows: session.after_round(rows))
+    session.finish()
+    assert json.loads((tmp_path / "run_info.json").read_text())["numerics"] == 2

@@ -793,3 +793,38 @@ def test_a_minigrid_query_names_its_state_by_a_short_digest_the_same_in_every_qu
         by_state.setdefault(key, set()).add(texts[n].rsplit(",", 1)[0])
     assert all(len(names) == 1 for names in by_state.values())
     assert len({next(iter(names)) for names in by_state.values()}) == len(by_state)  # states apart
+
+
+def test_minigrid_indicator_views_are_stored_as_uint8_and_read_as_the_same_floats():
+    pytest.importorskip("minigrid")
+    from dospcot.tasks.sensor_store import StepStore
+
+    views = {"ego": "minigrid.egocentric_map", "image": "image"}
+    env = make_masked_gym("minigrid:MiniGrid-DoorKey-5x5-v0", "ego", tuple(views), 1.0, view_specs=views)
+    assert env.observation_space.dtype == np.uint8 and env.observation_space.shape == (9 * 9 * 15,)
+    obs, info = env.reset(seed=0)
+    assert obs.dtype == np.uint8 and env.observation_space.contains(obs)
+    spaces = {v: env.get_wrapper_attr("view_space")(v) for v in views}
+    assert all(space.dtype == np.uint8 for space in spaces.values())
+    shapes = {v: space.shape for v, space in spaces.items()}
+    compact = StepStore(shapes, {v: space.dtype for v, space in spaces.items()})
+    wide = StepStore(shapes)  # float32 rows, as before
+    for store in (compact, wide):
+        assert store.rows["ego"].dtype == (np.uint8 if store is compact else np.float32)
+    rng = np.random.default_rng(0)
+    state = {v: np.array(info["views"][v]) for v in views}
+    for _ in range(40):
+        _, _, terminated, truncated, info = env.step(int(rng.integers(3)))
+        following = {v: np.array(info["views"][v]) for v in views}
+        for store in (compact, wide):
+            rows = store.add_row(state), store.add_row(following)
+            store.add(rows[0], 0, rows[1], True, 0.0, 0.0, ends=(terminated, truncated))
+        state = following
+        if terminated or truncated:
+            _, info = env.reset(seed=1)
+            state = {v: np.array(info["views"][v]) for v in views}
+    for view in views:
+        for termination in (False, True):
+            new, old = compact.features(view, 3, termination), wide.features(view, 3, termination)
+            assert new.dtype == old.dtype == np.float32
+            np.testing.assert_array_equal(new, old)

@@ -20,5 +20,7 @@ QUOTAS: tuple[str, ...] = get_args(Quota)
 LABEL_STRATEGIES: tuple[str, ...] = get_args(LabelStrategy)
 CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")
 """The strategies that read the views' reward classifiers to choose their queries."""
+NUMERICS_VERSIONS: tuple[int, ...] = (1, 2)
+"""The numerics versions of the reward classifiers' fits (:data:`dospcot.core.cotrainer.NUMERICS`)."""
 MODEL_KINDS: tuple[str, ...] = get_args(ModelKind)
 LOSS_KINDS: tuple[str, ...] = get_args(LossKind)

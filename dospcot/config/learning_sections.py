@@ -13,6 +13,7 @@ from dospcot.config.checks import check_at_least, check_label_fraction, check_po
 from dospcot.config.choices import (
     LOSS_KINDS,
     MODEL_KINDS,
+    NUMERICS_VERSIONS,
     QUOTAS,
     WEIGHTINGS,
     LabelStrategy,
@@ -305,6 +306,10 @@ class CoTrainingConfig:
     :param stop_when_fully_admitted: stop once every unlabelled sample is admitted.
     :param max_classes: the most distinct reward values a run may see.
     :param classifier: the reward classifiers' hyperparameters.
+    :param numerics: how the reward classifiers fit (:data:`dospcot.core.cotrainer.NUMERICS`): 1, in
+        float64 over the whole pool; 2, in float32 over the samples that carry weight, several times
+        cheaper on large pools (docs/guide/profile.md), not yet confirmed to train the same agents
+        over seeds. Every run names it in ``run_info.json``; a study never compares the two.
     """
 
     consensus_weight: float = 0.3
@@ -316,6 +321,7 @@ class CoTrainingConfig:
     stop_when_fully_admitted: bool = False
     max_classes: int = 16
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
+    numerics: int = 1
 
     renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
     """Keys of older configs and their names now."""
@@ -333,6 +339,10 @@ class CoTrainingConfig:
             raise ValueError(f"add_fraction_step must be >= 0, got {self.add_fraction_step}")
         check_within(self, 0, 1, "tol")
         check_at_least(self, 1, "max_classes")
+        if self.numerics not in NUMERICS_VERSIONS:
+            raise ValueError(
+                f"numerics must be one of {', '.join(map(str, NUMERICS_VERSIONS))}, got {self.numerics}"
+            )
 
 
 @dataclass(frozen=True)
@@ -372,3 +382,7 @@ class TabularConfig:
                 f"{self.episodes_per_round}, {self.replay_sweeps}"
             )
         check_within(self, 0, 1, "eps_start", "eps_end")
+        if self.cotraining.numerics != 1:
+            raise ValueError(
+                "cotraining.numerics: the paper protocol's batched co-trainer fits in numerics 1"
+            )

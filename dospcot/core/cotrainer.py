@@ -25,6 +25,52 @@ from dospcot.seeding import classifier_seed
 
 
 @dataclass(frozen=True)
+class Numerics:
+    """How a co-trainer's reward classifiers are fitted: a version of a run's numbers.
+
+    :param dtype: the classifiers' parameters and inputs.
+    :param weighted_only: a one-run fit reads only the samples whose weight is above 0 (the others
+        add nothing to its loss).
+    """
+
+    dtype: torch.dtype
+    weighted_only: bool
+
+    @property
+    def np_dtype(self) -> type:
+        """:attr:`dtype` as numpy's."""
+        return np.float64 if self.dtype == torch.float64 else np.float32
+
+
+NUMERICS: dict[int, Numerics] = {
+    1: Numerics(torch.float64, False),
+    2: Numerics(torch.float32, True),
+}
+"""The numerics versions (``cotraining.numerics``). 1: float64 fits over the whole pool (the paper
+protocol's co-trainer keeps it). 2 (issue 59): float32 fits that read only the samples that carry
+weight (the others add exactly 0 to the loss, so they move nothing but rounding). Both take
+``classifier.epochs`` full-batch Adam steps from the last fit's parameters; what version 2 saves is
+measured in docs/guide/profile.md."""
+
+
+def _fit(
+    clf: BatchedRewardClassifier,
+    numerics: Numerics,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    weight: torch.Tensor,
+    mask: torch.Tensor,
+) -> torch.Tensor:
+    """Fit ``clf`` under ``numerics``: on a batch of one run, only the weighted samples if it says so."""
+    if numerics.weighted_only and x.shape[0] == 1:
+        keep = weight[0] > 0
+        if mask.dim() == 3:
+            mask = mask[:, keep]
+        x, y, weight = x[:, keep], y[:, keep], weight[:, keep]
+    return clf.fit(x, y, weight, mask)
+
+
+@dataclass(frozen=True)
 class Pool:
     """The samples of one round, for B runs over N pool slots.
 
@@ -104,7 +150,12 @@ class SelfPacedCoTrainer:
     """
 
     def __init__(
-        self, view_dims: list[int], n_runs: int, config: CoTrainingConfig, seeds: list[int], n_classes: int
+        self,
+        view_dims: list[int],
+        n_runs: int,
+        config: CoTrainingConfig,
+        seeds: list[int],
+        n_classes: int,
     ) -> None:
         self.config, self.n_classes = config, n_classes
         self.n_views = len(view_dims)
@@ -113,12 +164,28 @@ class SelfPacedCoTrainer:
         self.classifiers = [
             BatchedRewardClassifier(
                 n_runs, dim, n_classes, config.classifier, [classifier_seed(s, j) for s in seeds]
-            )
+            ).to(self.dtype)
             for j, dim in enumerate(view_dims)
         ]
         self.round = 0
         self._previous: np.ndarray | None = None
         self._weights: np.ndarray | None = None
+
+    @property
+    def numerics(self) -> int:
+        """The numerics version of the classifiers' fits (``cotraining.numerics``; a config pickled
+        before the key existed reads the field's default, 1, the only version there was)."""
+        return self.config.numerics
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """The classifiers' parameters and inputs: float64 (numerics 1) or float32 (numerics 2)."""
+        return NUMERICS[self.numerics].dtype
+
+    @property
+    def dtype_np(self) -> type:
+        """:attr:`dtype` as numpy's."""
+        return NUMERICS[self.numerics].np_dtype
 
     @property
     def add_fraction(self) -> float:
@@ -129,15 +196,16 @@ class SelfPacedCoTrainer:
         """Run one round: for each view in turn select, fit and score; then Eq. 9; then age."""
         cfg, m = self.config, self.n_views
         mask = torch.from_numpy(pool.class_mask)
-        xs = [torch.from_numpy(np.asarray(f, dtype=np.float64)) for f in pool.features]
+        numerics = NUMERICS[self.numerics]
+        xs = [torch.from_numpy(np.asarray(f, dtype=numerics.np_dtype)) for f in pool.features]
         label_class = torch.from_numpy(pool.label_class)
-        labelled_w = torch.from_numpy(pool.labelled.astype(np.float64))
+        labelled_w = torch.from_numpy(pool.labelled.astype(numerics.np_dtype))
         share = _label_share(pool)
         add_num = np.ceil(self.add_fraction * pool.unlabelled.sum(axis=1) - 1e-9).astype(np.int64)
 
         if self.round == 0:  # the paper's initialisation: each classifier first learns the labels alone
             for clf, x in zip(self.classifiers, xs, strict=True):
-                clf.fit(x, label_class, labelled_w, mask)
+                _fit(clf, numerics, x, label_class, labelled_w, mask)
         scores = [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
         losses = np.stack([_class_losses(clf, x, mask) for clf, x in zip(self.classifiers, xs, strict=True)])
         n_runs, n_samples = pool.labelled.shape
@@ -172,8 +240,8 @@ class SelfPacedCoTrainer:
             # g_j learns its admitted samples under the current consensus (Eq. 9 with the new v_j).
             pseudo = consensus_labels(losses, weights)
             targets = torch.from_numpy(np.where(pool.labelled, pool.label_class, pseudo))
-            sample_w = torch.from_numpy(np.where(pool.labelled, 1.0, weights[j]))
-            fit_loss[j] = self.classifiers[j].fit(xs[j], targets, sample_w, mask).numpy()
+            sample_w = torch.from_numpy(np.where(pool.labelled, 1.0, weights[j]).astype(numerics.np_dtype))
+            fit_loss[j] = _fit(self.classifiers[j], numerics, xs[j], targets, sample_w, mask).numpy()
             scores[j] = self.classifiers[j].scores(xs[j], mask).numpy()
             losses[j] = _class_losses(self.classifiers[j], xs[j], mask)
 
@@ -215,8 +283,19 @@ class RunCoTrainer:
     :param n_classes: K, the most reward classes the run may hold.
     """
 
-    def __init__(self, view_dims: list[int], config: CoTrainingConfig, seed: int, n_classes: int) -> None:
+    def __init__(
+        self,
+        view_dims: list[int],
+        config: CoTrainingConfig,
+        seed: int,
+        n_classes: int,
+    ) -> None:
         self._batch = SelfPacedCoTrainer(view_dims, 1, config, [seed], n_classes)
+
+    @property
+    def numerics(self) -> int:
+        """The numerics version of the classifiers' fits (:data:`NUMERICS`)."""
+        return self._batch.numerics
 
     @property
     def classifiers(self) -> list[BatchedRewardClassifier]:
@@ -232,7 +311,7 @@ class RunCoTrainer:
         mask = torch.from_numpy(pool.class_mask[None])
         return np.stack(
             [
-                clf.scores(torch.from_numpy(np.asarray(f, dtype=np.float64)[None]), mask)[0].numpy()
+                clf.scores(torch.from_numpy(np.asarray(f, dtype=self._batch.dtype_np)[None]), mask)[0].numpy()
                 for clf, f in zip(self.classifiers, pool.features, strict=True)
             ]
         )
@@ -262,4 +341,13 @@ def _class_losses(clf: BatchedRewardClassifier, x: torch.Tensor, mask: torch.Ten
         return clf.class_losses(clf(x, mask), mask).numpy()
 
 
-__all__ = ["Pool", "RoundResult", "RunCoTrainer", "RunPool", "RunRound", "SelfPacedCoTrainer"]
+__all__ = [
+    "NUMERICS",
+    "Numerics",
+    "Pool",
+    "RoundResult",
+    "RunCoTrainer",
+    "RunPool",
+    "RunRound",
+    "SelfPacedCoTrainer",
+]

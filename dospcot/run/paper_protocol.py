@@ -120,7 +120,9 @@ def train_protocol_at(
         run_dir = run_dirs[seed]
         mine = [record for record in records if record["seed"] == seed]
         write_csv(run_dir / METRICS_FILE, mine)
-        write_run_info(run_dir, (commands or {}).get(seed, ""), wall / len(seeds), batch_seeds=seeds)
+        write_run_info(
+            run_dir, (commands or {}).get(seed, ""), wall / len(seeds), numerics=1, batch_seeds=seeds
+        )
         # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
         write_json(run_dir / SUMMARY_FILE, seed_summary(mine, cfg.tabular.rounds))
 

@@ -156,7 +156,16 @@ class RunSession:
         times = {} if np.isnan(cpu) else {"cpu_time_s": round(cpu, 2)}  # NaN: a session's CPU time unknown
         batched = {"batch_members": self.batch} if self.batch > 1 else {}
         elapsed = self.elapsed + time.perf_counter() - self.started
-        write_run_info(run_dir, self.command, elapsed, sessions=self.sessions, **times, **resumed, **batched)
+        write_run_info(
+            run_dir,
+            self.command,
+            elapsed,
+            numerics=cfg.cotraining.numerics,
+            sessions=self.sessions,
+            **times,
+            **resumed,
+            **batched,
+        )
         # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
         write_json(run_dir / SUMMARY_FILE, run_summary(self.records, run))
         # A finished run is never resumed, and its checkpoint holds every replay buffer (about a GB on

@@ -1,27 +1,6 @@
-"""``dospcot train`` and ``dospcot evaluate``: one run of a config, with its run folder.
-
-What a run is comes from its task (:mod:`dospcot.tasks`); this module writes the folder of a
-co-training run of SB3 agents, the default of every task but the paper protocol's.
-
-A run writes ``runs/<name>/<stamp>/`` (docs/design.md section 5):
-
-- ``config.toml``: the resolved config (rerun it with ``dospcot train runs/<name>/<stamp>/config.toml``);
-- ``tb/agent_<view>/``: TensorBoard events, SB3's ``rollout/`` and ``train/`` scalars plus ``dospcot/``
-  scalars per round (pace, eps, lambda, coverage, pseudo-reward accuracy and its worst class,
-  classifier loss, greedy return, agreement, ...), against the agent's env steps;
-- ``metrics.csv``: one row per round and view; ``summary.json``: the last round, per view and averaged;
-- ``agent_<view>.zip`` (loads with plain ``stable_baselines3.DQN.load``; a ``tabular`` agent's where
-  dospcot is importable), ``classifier_<view>.pt``
-  (:func:`dospcot.core.classifier.load_classifier`) and ``reward_classes.json`` (class index -> reward);
-- ``learning_curves.png``; ``run_info.json`` (command, versions, wall time);
-- ``summary.json`` is written last: a folder that has it holds a finished run;
-- ``checkpoint.pkl``: the state after the last finished round, for ``dospcot train --resume``;
-  removed when the run finishes (a finished run is not resumed).
-
-``metrics.csv``, the agents, the classifiers and the checkpoint are rewritten at the end of every
-round, the plot, ``run_info.json`` and ``summary.json`` when the run finishes; every file atomically,
-so a killed run resumes from its last finished round and ends with the same ``summary.json`` as an
-uninterrupted run. ``dospcot evaluate`` adds ``evaluation.json``.
+"""``dospcot train`` and ``dospcot evaluate``: one run of any config, with its run folder. How the
+config trains in it is its runner's, chosen by the config's type (:mod:`dospcot.run.runners`); what a
+co-training run's folder holds (every task's but the paper protocol's) is :mod:`dospcot.run.cotraining`'s.
 """
 
 from __future__ import annotations

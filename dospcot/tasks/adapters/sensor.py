@@ -92,8 +92,10 @@ class SensorAdapter(StoreQueries):
         # A keyed pool holds each pair once: its agents must agree on whether it is labelled.
         seeds = [cfg.seed if section.keyed else agent_seed(cfg.seed, k) for k in range(len(cfg.views))]
         envs = [make_env(v, cfg.views, fraction, seed) for v, seed in zip(cfg.views, seeds, strict=True)]
-        self.shapes = {v: envs[0].get_wrapper_attr("view_space")(v).shape for v in cfg.views}
-        self.store = (KeyedStepStore if section.keyed else StepStore)(self.shapes)
+        spaces = {v: envs[0].get_wrapper_attr("view_space")(v) for v in cfg.views}
+        self.shapes = {v: space.shape for v, space in spaces.items()}
+        dtypes = {v: space.dtype for v, space in spaces.items()}
+        self.store = (KeyedStepStore if section.keyed else StepStore)(self.shapes, dtypes)
         self._pairs: dict[int, tuple[str, int]] = {}
         """Sample id -> (its state key as shown to a person, its action), for :meth:`describe`."""
         self.demos = self._read_demonstrations(cfg.demonstrations, make_env)

@@ -22,6 +22,9 @@ class StepStore(InPlaceState):
     previous step's s') and of its s', so consecutive steps share rows.
 
     :param view_shapes: the shape of each view, by name.
+    :param view_dtypes: the type each view's rows are stored as, by name (a view the env gives as
+        uint8 is stored as uint8: a quarter of float32's memory, the same floats in :meth:`features`);
+        float32 for a view it does not name.
     """
 
     STEP_ARRAYS = (
@@ -30,9 +33,13 @@ class StepStore(InPlaceState):
     )  # fmt: skip
     """The arrays that hold one entry per step."""
 
-    def __init__(self, view_shapes: dict[str, tuple[int, ...]]) -> None:
+    def __init__(
+        self, view_shapes: dict[str, tuple[int, ...]], view_dtypes: Mapping[str, Any] | None = None
+    ) -> None:
+        dtypes = view_dtypes or {}
         self.rows = {
-            name: np.zeros((0, int(np.prod(shape))), np.float32) for name, shape in view_shapes.items()
+            name: np.zeros((0, int(np.prod(shape))), dtypes.get(name, np.float32))
+            for name, shape in view_shapes.items()
         }
         self._n_rows = 0
         self._n = 0
@@ -122,14 +129,15 @@ class StepStore(InPlaceState):
         return self.sample_of(key, action) is None
 
     def features(self, view: str, n_actions: int, termination: bool = False) -> np.ndarray:
-        """(len, 2 d + A) float32: view of s, one-hot action, view of s' of every step; with
-        ``termination``, (len, 2 d + A + 1): then whether the step ended its episode (0 or 1)."""
+        """(len, 2 d + A) float32 (whatever the rows' type): view of s, one-hot action, view of s' of
+        every step; with ``termination``, (len, 2 d + A + 1): then whether the step ended its episode
+        (0 or 1)."""
         rows, n = self.rows[view], self._n
         onehot = np.eye(n_actions, dtype=np.float32)[self.action[:n]]
         parts = [rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]]
         if termination:
             parts.append(self.terminal[:n, None].astype(np.float32))
-        return np.concatenate(parts, axis=1)
+        return np.concatenate(parts, axis=1, dtype=np.float32)
 
 
 class KeyedStepStore(StepStore):
@@ -141,10 +149,13 @@ class KeyedStepStore(StepStore):
     reward its latest (metrics only).
 
     :param view_shapes: the shape of each view, by name.
+    :param view_dtypes: the type of each view's rows, as for :class:`StepStore`.
     """
 
-    def __init__(self, view_shapes: dict[str, tuple[int, ...]]) -> None:
-        super().__init__(view_shapes)
+    def __init__(
+        self, view_shapes: dict[str, tuple[int, ...]], view_dtypes: Mapping[str, Any] | None = None
+    ) -> None:
+        super().__init__(view_shapes, view_dtypes)
         self.ids: dict[tuple[Hashable, int], int] = {}
         """The store id of each (state key, action) pair seen."""
 
