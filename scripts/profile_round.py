@@ -89,8 +89,8 @@ def instrument(timer: PhaseTimer) -> None:
     from dospcot.core.cotraining_run import CoTrainingRun
     from dospcot.policies import ExpectedSarsaDQN
     from dospcot.run.run_session import RunSession
-    from dospcot.tasks.grid import GridTask
-    from dospcot.tasks.sensor import SensorTask
+    from dospcot.tasks.adapters.grid import GridAdapter
+    from dospcot.tasks.adapters.sensor import SensorAdapter
 
     view_of: dict[int, str] = {}
 
@@ -100,7 +100,7 @@ def instrument(timer: PhaseTimer) -> None:
     patch(RunSession, "__init__", "set-up (task, agents)")
     patch(ExpectedSarsaDQN, "learn", "agents: collect & learn")
     patch(ExpectedSarsaDQN, "update", "agents: policy update")
-    for task in (GridTask, SensorTask):
+    for task in (GridAdapter, SensorAdapter):
         patch(task, "pool", "pool & features")
         patch(task, "true_class", "pseudo-rewards & round stats")
     patch(BatchedRewardClassifier, "fit", lambda clf, *_: view_of.get(id(clf), "fit, other"))

@@ -797,7 +797,7 @@ def test_a_minigrid_query_names_its_state_by_a_short_digest_the_same_in_every_qu
 
 def test_minigrid_indicator_views_are_stored_as_uint8_and_read_as_the_same_floats():
     pytest.importorskip("minigrid")
-    from dospcot.tasks.sensor_store import StepStore
+    from dospcot.tasks.adapters.sensor_store import StepStore
 
     views = {"ego": "minigrid.egocentric_map", "image": "image"}
     env = make_masked_gym("minigrid:MiniGrid-DoorKey-5x5-v0", "ego", tuple(views), 1.0, view_specs=views)
