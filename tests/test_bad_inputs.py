@@ -183,10 +183,11 @@ def _stopped_for_answers(tmp_path: Path, capsys) -> Path:
 
 def test_run_folders_refuse_a_second_process_an_edited_config_and_a_lost_checkpoint(tmp_path, capsys):
     run_dir = _stopped_for_answers(tmp_path, capsys)
-    # A live process holds the lock: a second resume stops in one line naming it.
-    (run_dir / LOCK_FILE).write_text(str(os.getppid()))
+    # A live Python process holds the lock: a second resume stops in one line naming it (a process that
+    # is no Python, its id reused, is named as such: tests/test_cli_newcomer.py).
+    (run_dir / LOCK_FILE).write_text(str(os.getpid()))
     assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
-    assert f"is being trained by process {os.getppid()}" in capsys.readouterr().err
+    assert f"is being trained by process {os.getpid()}" in capsys.readouterr().err
     (run_dir / LOCK_FILE).write_text("999999999")  # a process that is gone: its lock is taken over
     config = (run_dir / "config.toml").read_text()
     (run_dir / "config.toml").write_text(config.replace("rounds = 2", "rounds = 3"))

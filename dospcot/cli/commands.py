@@ -124,13 +124,9 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
 def _sweep_sizes(spec: SweepSpec, seeds: Sequence[int], workers: int, batch: int) -> list[str]:
     """:func:`~dospcot.run.sizes.check_sizes` of a sweep's cells (``spec``'s trials of its first seed)
     over ``seeds`` (a ``range`` for a count: a huge one is refused before it is built)."""
-    from dataclasses import replace
-
     from dospcot.run.sizes import check_sizes
-    from dospcot.tasks import load_config
 
-    cells = replace(spec, seeds=tuple(seeds[:1])).trials()  # a bad --set or grid fails here, before a folder
-    cfgs = [load_config(t.config, t.overrides()) for t in cells]
+    cfgs = spec.cell_configs()  # a bad --set or grid fails here, before a folder
     return check_sizes(cfgs, len(seeds), workers, min(batch, len(seeds)))
 
 
@@ -147,7 +143,9 @@ def _config(args: argparse.Namespace, command: str) -> int:
 
     cfg = load_config(args.config, args.overrides)
     table = get_task(cfg.task).config_table(cfg)
-    rows = config_rows(type(cfg), sb3_dqn_docs() if "dqn" in table else None)
+    rows = config_rows(type(cfg))
+    if any(row.section == "dqn" and not row.meaning for row in rows.values()):  # SB3's words (imports torch)
+        rows = config_rows(type(cfg), sb3_dqn_docs())
     heading = shlex.join(
         ["dospcot", "config", args.config, *(a for o in args.overrides for a in ("--set", o))]
     )

@@ -26,14 +26,14 @@ def preset_names() -> list[str]:
 
 def did_you_mean(name: str, names: Iterable[str], what: str, shown: int | None = 6) -> str:
     """``"; did you mean 'grid16'?"`` where some of ``names`` are close to ``name`` (:mod:`difflib`),
-    else ``"; <what> (<count>): a, b, ..."`` with the first ``shown`` names (None: all): a misspelling
+    else ``"; <what>: a, b, ..."`` with the first ``shown`` names (None: all): a misspelling
     is answered with the name meant, not with a list to search."""
     names = list(names)
     close = difflib.get_close_matches(name, names, n=3, cutoff=0.6)
     if close:
         return "; did you mean " + " or ".join(repr(c) for c in close) + "?"
     listed = names if shown is None else names[:shown]
-    return f"; {what} ({len(names)}): " + ", ".join(listed) + (", ..." if len(listed) < len(names) else "")
+    return f"; {what}: " + ", ".join(listed) + (", ..." if len(listed) < len(names) else "")
 
 
 def read_config_text(config: str) -> tuple[str, str]:
@@ -43,7 +43,7 @@ def read_config_text(config: str) -> tuple[str, str]:
         raise ConfigError(_folder_given(path))
     if not config.endswith(".toml") and "/" not in config:
         if config not in preset_names():
-            hint = did_you_mean(config, preset_names(), "presets, see dospcot train --list")
+            hint = did_you_mean(config, preset_names(), "presets (dospcot train --list)")
             raise ConfigError(f"no preset {config!r}{hint} (or give a path to a .toml)")
         return _presets().joinpath(f"{config}.toml").read_text(), f"preset {config}"
     if not path.is_file():
