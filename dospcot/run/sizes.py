@@ -11,7 +11,9 @@ Nothing here imports torch.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.run_configs import PaperConfig, RunConfig, TrainConfig
@@ -38,17 +40,36 @@ WARN_CPU_SECONDS = 7 * 86_400
 """Work beyond a CPU-week is warned of: it starts, but the line says how long it may take."""
 
 
+def _cotraining_seconds(cfg: TrainConfig) -> tuple[float, str]:
+    steps = cfg.training.total_steps * len(cfg.agent_kinds)
+    how = f"{steps:,} agent steps at about {DQN_STEPS_PER_CPU_SECOND:,}/CPU-s"
+    return steps / DQN_STEPS_PER_CPU_SECOND, how
+
+
+def _paper_seconds(cfg: PaperConfig) -> tuple[float, str]:
+    tab = cfg.tabular
+    steps = tab.rounds * tab.episodes_per_round * PAPER_RUNS_PER_SEED * 2 * PAPER_MIN_EPISODE_STEPS
+    return steps / TABULAR_STEPS_PER_SECOND, f"at least {TABULAR_STEPS_PER_SECOND:,} agent steps/s"
+
+
+@dataclass(frozen=True)
+class SizeRule:
+    """How one kind of config is weighed (the run layer's choice by the config's type, as its runner).
+
+    :param cpu_seconds: the estimated CPU-seconds of one seed, and how the estimate was made.
+    :param lower: the keys a refusal says to lower.
+    :param memory: refuses (``ConfigError``) what a batch of this many seeds cannot hold in memory
+        (None: nothing to weigh).
+    """
+
+    cpu_seconds: Callable[[Any], tuple[float, str]]
+    lower: str
+    memory: Callable[[Any, int], None] | None = None
+
+
 def cpu_seconds(cfg: RunConfig) -> tuple[float, str]:
     """The estimated CPU-seconds of one seed of ``cfg``, and how the estimate was made."""
-    if isinstance(cfg, PaperConfig):
-        tab = cfg.tabular
-        steps = tab.rounds * tab.episodes_per_round * PAPER_RUNS_PER_SEED * 2 * PAPER_MIN_EPISODE_STEPS
-        return steps / TABULAR_STEPS_PER_SECOND, f"at least {TABULAR_STEPS_PER_SECOND:,} agent steps/s"
-    steps = cfg.training.total_steps * len(cfg.agent_kinds)
-    return (
-        steps / DQN_STEPS_PER_CPU_SECOND,
-        f"{steps:,} agent steps at about {DQN_STEPS_PER_CPU_SECOND:,}/CPU-s",
-    )
+    return RULES[type(cfg)].cpu_seconds(cfg)
 
 
 def duration(seconds: float) -> str:
@@ -88,15 +109,13 @@ def check_sizes(
         each, how = cpu_seconds(cfg)
         total += each * seeds
         if each > REFUSE_RUN_CPU_SECONDS:
-            keys = (
-                "training.rounds or training.steps_per_round"
-                if isinstance(cfg, TrainConfig)
-                else "tabular.rounds or tabular.episodes_per_round"
-            )
             raise ConfigError(
-                f"{cfg.name}: one seed would take about {duration(each)} (an estimate: {how}); lower {keys}"
+                f"{cfg.name}: one seed would take about {duration(each)} (an estimate: {how}); "
+                f"lower {RULES[type(cfg)].lower}"
             )
-        _check_memory(cfg, batch)
+        memory = RULES[type(cfg)].memory
+        if memory is not None:
+            memory(cfg, batch)
     if total > REFUSE_CPU_SECONDS:
         raise ConfigError(f"{seeds:,} seeds would take about {duration(total)} (an estimate); give fewer")
     if total > WARN_CPU_SECONDS:
@@ -110,9 +129,7 @@ def check_sizes(
     return warnings
 
 
-def _check_memory(cfg: RunConfig, batch: int) -> None:
-    if not isinstance(cfg, TrainConfig):
-        return
+def _cotraining_memory(cfg: TrainConfig, batch: int) -> None:
     memory = memory_bytes()
     neural = sum(kind != "tabular" for kind in cfg.agent_kinds)
     tabular = len(cfg.agent_kinds) - neural
@@ -134,3 +151,12 @@ def _check_memory(cfg: RunConfig, batch: int) -> None:
             f"{batch_bytes / 2**30:,.0f} GiB (an estimate: its activations), and this machine has "
             f"{memory / 2**30:,.0f} GiB; lower dqn.batch_size"
         )
+
+
+RULES: dict[type, SizeRule] = {
+    TrainConfig: SizeRule(
+        _cotraining_seconds, "training.rounds or training.steps_per_round", _cotraining_memory
+    ),
+    PaperConfig: SizeRule(_paper_seconds, "tabular.rounds or tabular.episodes_per_round"),
+}
+"""How each kind of config is weighed, by its type."""
