@@ -287,3 +287,10 @@ def test_every_preset_and_every_studys_sweeps_pass_the_size_checks():
         for sweep in study.sweeps:
             cfgs = sweep_spec(sweep, study.seeds).cell_configs()
             check_sizes(cfgs, study.seeds, workers=1, batch=1)  # refuses nothing; a warning may say how long
+
+
+def test_a_study_with_too_many_seeds_is_refused_before_any_sweep(capsys, tmp_path):
+    err = _one_line(capsys, ["study", "grid16", "--seeds", "100000", "--runs-dir", str(tmp_path)])
+    assert err.startswith("dospcot study: error: 100,000 seeds would take about ")
+    assert err.endswith("CPU-days (an estimate) and make a run folder each; give at most 10,000")
+    assert list(tmp_path.iterdir()) == []

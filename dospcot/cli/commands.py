@@ -208,14 +208,17 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
 
 def _study(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.errors import ConfigError
-    from dospcot.lab.studies import get_study, header_command, run_study
+    from dospcot.lab.studies import get_study, header_command, run_study, sweep_spec
     from dospcot.run.sizes import check_sizes
 
     try:
-        get_study(args.study)
+        study = get_study(args.study)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    warn("study", check_sizes([], args.seeds or 1, args.workers))
+    if not args.render_only:  # its sweeps' cells over its seeds, weighed before any sweep starts
+        cells = [cfg for sweep in study.sweeps for cfg in sweep_spec(sweep, 1, args.overrides).cell_configs()]
+        seeds = args.seeds or study.seeds
+        warn("study", check_sizes(cells, seeds, args.workers, min(args.batch_seeds or 1, max(seeds, 1))))
     options = shlex.split(command)[3:]  # what follows "dospcot study STUDY"
     run_study(args, header_command(("dospcot", "study"), args.study, options), prog="dospcot study: error")
     return 0
