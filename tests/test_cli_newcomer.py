@@ -66,6 +66,15 @@ def test_config_prints_the_resolved_config_as_toml_with_each_keys_default_and_me
     assert load_config(str(tmp_path / "c.toml")) == load_config("tiny", ["training.rounds=3"])
 
 
+def test_config_imports_neither_torch_nor_stable_baselines3():
+    code = (
+        "import sys; from dospcot.cli import main; assert main(['config', 'grid16-dospcot']) == 0; "
+        "assert not {'torch', 'stable_baselines3'} & set(sys.modules), 'torch imported'"
+    )
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+
+
 def test_config_of_a_paper_preset_and_a_bad_config_is_one_line(capsys):
     assert main(["config", "paper-text"]) == 0
     assert tomllib.loads(capsys.readouterr().out)["tabular"]["episodes_per_round"] == 500

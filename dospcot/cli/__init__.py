@@ -38,6 +38,14 @@ def _main(argv: Sequence[str] | None) -> int:
 
         print("\n".join(preset_names()))
         return 0
+    if args.command == "config":  # torch-free too: a config reads without the training stack
+        from dospcot.config.errors import ConfigError
+
+        try:
+            return RUN_COMMANDS["config"](args, command)
+        except ConfigError as err:
+            print(f"dospcot config: error: {err}", file=sys.stderr)
+            return 2
     from dospcot.run.interrupts import Interrupted, stop_on_signals
 
     try:
