@@ -47,6 +47,7 @@ from typing import Any
 from tqdm.auto import tqdm
 
 from dospcot.lab.sweep_spec import (
+    SWEEP_FILE,
     TRIAL_FILE,
     Backend,
     SweepError,
@@ -243,15 +244,29 @@ def run_sweep(
             f"--batch-seeds takes a count >= 1, and more than 1 on the local backend only; got {batch_seeds} "
             f"on {backend}"
         )
+    new = spec is not None and not (sweep_dir / SWEEP_FILE).is_file()
+    existed = sweep_dir.exists()
     if spec is None:
         spec = open_sweep(sweep_dir, None)
         trials = spec.trials()
     else:
         trials = spec.trials()  # checked before the folder is made: a bad grid leaves nothing behind
         open_sweep(sweep_dir, spec)
-    # Two sweeps on one folder would fail each other's trials on their run locks, one by one.
-    with run_lock(sweep_dir, "run", SweepError):
-        return _run_trials(sweep_dir, trials, backend, workers, ray_address, show_progress, batch_seeds)
+    try:
+        # Two sweeps on one folder would fail each other's trials on their run locks, one by one.
+        with run_lock(sweep_dir, "run", SweepError):
+            return _run_trials(sweep_dir, trials, backend, workers, ray_address, show_progress, batch_seeds)
+    except RayStartError:
+        if new:  # no trial began: what this call wrote would only refuse the next sweep of the name
+            if existed:
+                (sweep_dir / SWEEP_FILE).unlink(missing_ok=True)
+            else:
+                shutil.rmtree(sweep_dir, ignore_errors=True)
+        raise
+
+
+class RayStartError(SweepError):
+    """Ray did not start (a bad ``--ray-address``, a cluster out of reach): no trial began."""
 
 
 def _run_trials(
@@ -438,7 +453,12 @@ def _run_ray(sweep_dir: Path, trials: list[Trial], workers: int, address: str | 
     started_here = not ray.is_initialized()
     if started_here:
         kwargs = {"address": address} if address else {"num_cpus": workers}
-        ray.init(**kwargs, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        try:
+            ray.init(**kwargs, include_dashboard=False, log_to_driver=False, configure_logging=False)
+        except Exception as err:  # a bad address, an unreachable cluster: Ray's own types vary
+            where = f"at --ray-address {address}" if address else "on this machine"
+            reason = (str(err).strip().splitlines() or [""])[0]
+            raise RayStartError(f"Ray did not start {where} ({type(err).__name__}: {reason})") from None
     try:
         trainable = tune.with_resources(
             tune.with_parameters(_ray_trial, sweep_dir=str(sweep_dir.resolve())), {"cpu": 1}

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from dospcot.config.errors import ConfigError
+from dospcot.config.run_configs import RunConfig
 from dospcot.run.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
 from dospcot.tasks import get_task, load_config, load_run_config
 
@@ -56,6 +57,21 @@ class SweepSpec:
             tuple(data["seeds"]),
             tuple(data["overrides"]),
         )
+
+    def cell_configs(self) -> list[RunConfig]:
+        """The config of each config x grid combination (its first seed's), read but not yet through its
+        task's check step: what the size checks (:func:`dospcot.run.sizes.check_sizes`) weigh."""
+        seed = self.seeds[0] if self.seeds else 0
+        return [
+            load_config(
+                config,
+                Trial(
+                    config, "", dict(zip(self.grid, values, strict=True)), seed, self.overrides
+                ).overrides(),
+            )
+            for config in self.configs
+            for values in product(*self.grid.values())
+        ]
 
     def trials(self) -> list[Trial]:
         """Every trial, each config's checked now so that a bad grid fails before anything runs: its

@@ -3,8 +3,10 @@ a sweep with the command that resumes it (docs/troubleshooting.md)."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
+import io
 import json
 import math
 import os
@@ -12,6 +14,7 @@ import signal
 import subprocess
 import sys
 import time
+import tomllib
 import typing
 from pathlib import Path
 
@@ -68,6 +71,61 @@ def test_any_value_of_any_key_is_a_config_or_one_line_naming_the_key(key, value)
     for name, item in dataclasses.asdict(cfg).items():
         if isinstance(item, float):
             assert math.isfinite(item), name
+
+
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(key=st.sampled_from(KEYS), value=VALUES)
+def test_dospcot_config_of_any_value_prints_a_config_that_loads_or_one_line(key, value):
+    """``dospcot config tiny --set KEY=VALUE``: the resolved config as TOML that reads back as the same
+    config, or one line and exit status 2."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        status = main(["config", "tiny", "--set", f"{key}={value}"])
+    if status == 0:
+        from dospcot.tasks.loading import config_from_table
+
+        assert config_from_table(tomllib.loads(out.getvalue())) == load_config("tiny", [f"{key}={value}"])
+    else:
+        assert status == 2 and err.getvalue().count("\n") == 1 and not out.getvalue()
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    seeds=st.integers(1, 10**9),
+    rounds=st.integers(1, 10**21),
+    steps=st.integers(1, 10**13),
+    workers=st.integers(1, 10**4),
+)
+def test_any_size_starts_or_is_refused_in_one_line_naming_the_estimate(seeds, rounds, steps, workers):
+    """Seeds, rounds, steps and workers of any size: refused in one line that names its estimate, or
+    accepted with at most one-line warnings, and never an estimate no machine can finish."""
+    from dospcot.run.sizes import REFUSE_CPU_SECONDS, REFUSE_RUN_CPU_SECONDS, check_sizes, cpu_seconds
+
+    cfg = load_config("tiny", [f"training.rounds={rounds}", f"training.steps_per_round={steps}"])
+    try:
+        warnings = check_sizes([cfg], seeds, workers, batch=seeds)
+    except ConfigError as err:
+        assert "\n" not in str(err) and "an estimate" in str(err)
+        return
+    assert all("\n" not in line for line in warnings)
+    each = cpu_seconds(cfg)[0]
+    assert each <= REFUSE_RUN_CPU_SECONDS and each * seeds <= REFUSE_CPU_SECONDS
+
+
+@settings(max_examples=15, deadline=None)
+@given(
+    command=st.sampled_from(["train", "sweep", "reproduce-paper"]),
+    seeds=st.integers(10_001, 10**15),
+)
+def test_too_many_seeds_on_any_command_is_one_line_and_leaves_nothing(command, seeds, tmp_path_factory):
+    where = tmp_path_factory.mktemp("seeds")
+    out_option = {"train": "--runs-dir", "sweep": "--runs-dir", "reproduce-paper": "--out"}[command]
+    argv = [command, *(["tiny"] if command != "reproduce-paper" else []), "--seeds", str(seeds)]
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main([*argv, out_option, str(where), "--no-progress"]) == 2
+    assert err.getvalue().count("\n") == 1 and f"{seeds:,} seeds would take about" in err.getvalue()
+    assert list(where.iterdir()) == []
 
 
 @pytest.mark.slow
@@ -183,10 +241,11 @@ def _stopped_for_answers(tmp_path: Path, capsys) -> Path:
 
 def test_run_folders_refuse_a_second_process_an_edited_config_and_a_lost_checkpoint(tmp_path, capsys):
     run_dir = _stopped_for_answers(tmp_path, capsys)
-    # A live process holds the lock: a second resume stops in one line naming it.
-    (run_dir / LOCK_FILE).write_text(str(os.getppid()))
+    # A live Python process holds the lock: a second resume stops in one line naming it (a process that
+    # is no Python, its id reused, is named as such: tests/test_cli_newcomer.py).
+    (run_dir / LOCK_FILE).write_text(str(os.getpid()))
     assert main(["train", "--resume", str(run_dir), "--no-progress"]) == 2
-    assert f"is being trained by process {os.getppid()}" in capsys.readouterr().err
+    assert f"is being trained by process {os.getpid()}" in capsys.readouterr().err
     (run_dir / LOCK_FILE).write_text("999999999")  # a process that is gone: its lock is taken over
     config = (run_dir / "config.toml").read_text()
     (run_dir / "config.toml").write_text(config.replace("rounds = 2", "rounds = 3"))

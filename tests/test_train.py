@@ -195,8 +195,11 @@ def test_tabular_agents_on_a_highway_stop_with_one_line(capsys):
 def test_unknown_preset_and_bad_resume_folder_fail_with_one_line(tmp_path, capsys):
     assert main(["train", "grid-99"]) == 2
     err = capsys.readouterr().err
-    assert "no preset 'grid-99'; presets: fasthighway, " in err and " grid16, " in err
+    assert "no preset 'grid-99'; did you mean 'grid32-m3' or 'grid16-m3' or 'grid32'?" in err
     assert err.count("\n") == 1
+    assert main(["train", "zzz"]) == 2  # nothing close: the first presets, and where the rest are
+    err = capsys.readouterr().err
+    assert "no preset 'zzz'; presets (dospcot train --list): fasthighway, " in err and ", ... (or" in err
     assert main(["train", "--resume", str(tmp_path)]) == 2
     assert "has no config.toml" in capsys.readouterr().err
 

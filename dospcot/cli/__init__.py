@@ -4,6 +4,7 @@ each has one handler (:mod:`dospcot.cli.commands`), whose bad inputs end in one 
 from __future__ import annotations
 
 import argparse
+import os
 import shlex
 import sys
 from collections.abc import Sequence
@@ -11,8 +12,24 @@ from collections.abc import Sequence
 from dospcot.cli.commands import RUN_COMMANDS, bench
 from dospcot.cli.parser import build_parser
 
+PIPE_CLOSED = 141
+"""The exit status where the reader of stdout went away (``dospcot train --list | head -5``): the
+shell's for a writer a closed pipe stopped (128 + SIGPIPE), without a word."""
+
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run ``dospcot`` with ``argv`` (default: the process's arguments); return the exit status."""
+    try:
+        status = _main(argv)
+        sys.stdout.flush()  # a closed pipe shows here at the latest, not as Python exits
+    except BrokenPipeError:
+        # The standard recipe: what is still buffered goes nowhere, and the process ends quietly.
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return PIPE_CLOSED
+    return status
+
+
+def _main(argv: Sequence[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
     args = build_parser().parse_args(argv)
     command = shlex.join(["dospcot", *argv])
@@ -21,6 +38,14 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         print("\n".join(preset_names()))
         return 0
+    if args.command == "config":  # torch-free too: a config reads without the training stack
+        from dospcot.config.errors import ConfigError
+
+        try:
+            return RUN_COMMANDS["config"](args, command)
+        except ConfigError as err:
+            print(f"dospcot config: error: {err}", file=sys.stderr)
+            return 2
     from dospcot.run.interrupts import Interrupted, stop_on_signals
 
     try:
@@ -54,6 +79,14 @@ def _run(args: argparse.Namespace, command: str) -> int:
             return 0
         except (ConfigError, RunFolderError, SweepError, RaterError) as err:
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+            return 2
+        except MemoryError as err:  # a buffer the size checks' lower bound let through (run/sizes.py)
+            reason = str(err).strip() or "no detail"
+            print(
+                f"dospcot {args.command}: error: out of memory ({reason}); lower dqn.buffer_size or "
+                "train fewer seeds at once",
+                file=sys.stderr,
+            )
             return 2
         except (NonFiniteError, EnvRaisedError) as err:  # the env's fault, not the command line's
             print(f"dospcot {args.command}: error: {err}", file=sys.stderr)

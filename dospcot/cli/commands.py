@@ -6,10 +6,15 @@ from __future__ import annotations
 import argparse
 import shlex
 import sys
+from collections.abc import Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from dospcot.cli.parser import QUICK_BENCH_OUT
 from dospcot.rating import rate_command
+
+if TYPE_CHECKING:
+    from dospcot.lab.sweep_spec import SweepSpec
 
 
 def _train(args: argparse.Namespace, command: str) -> int:
@@ -18,6 +23,7 @@ def _train(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.errors import ConfigError
     from dospcot.config.presets import preset_names
     from dospcot.run.run_folder import batch_members
+    from dospcot.run.sizes import check_sizes
     from dospcot.run.train import result_line, resume, train
     from dospcot.run.train_batch import resume_batch, train_seeds
     from dospcot.tasks import load_config
@@ -37,8 +43,12 @@ def _train(args: argparse.Namespace, command: str) -> int:
         if not args.config:
             raise ConfigError(f"give a CONFIG: a preset ({', '.join(preset_names())}) or a path to a .toml")
         cfg = load_config(args.config, args.overrides)
+        seeds = len(args.seeds) if args.seeds is not None else 1
+        warn("train", check_sizes([cfg], seeds, batch=seeds))
         if args.seeds is not None:
-            run_dirs = train_seeds(cfg, args.seeds, args.runs_dir, show_progress=progress, command=command)
+            run_dirs = train_seeds(
+                cfg, list(args.seeds), args.runs_dir, show_progress=progress, command=command
+            )
         else:
             run_dirs = [train(cfg, args.runs_dir, show_progress=progress, command=command)]
     for run_dir in run_dirs:
@@ -65,9 +75,12 @@ def _evaluate(args: argparse.Namespace, command: str) -> int:
 
 
 def _sweep(args: argparse.Namespace, command: str) -> int:
+    from dataclasses import replace
+
     from dospcot.config.errors import ConfigError
     from dospcot.lab.sweep import default_sweep_dir, run_sweep
     from dospcot.lab.sweep_spec import SweepSpec
+    from dospcot.run.sizes import check_sizes
 
     if args.ray_address and args.backend != "ray":
         raise ConfigError("--ray-address names a Ray cluster: it needs --backend ray")
@@ -77,17 +90,20 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
                 "--resume SWEEP_DIR takes no CONFIG, --grid, --set or --name: the folder holds them"
             )
         sweep_dir, spec = args.resume, None
+        warn("sweep", check_sizes([], len(args.seeds or ()), args.workers))
         if args.seeds is not None:
             from dospcot.lab.sweep_spec import add_seeds
 
-            spec = add_seeds(sweep_dir, args.seeds)
+            spec = add_seeds(sweep_dir, list(args.seeds))
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
         from dospcot.lab.sweep_spec import parse_grid
 
-        seeds = tuple(args.seeds or (0,))
-        spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), seeds, tuple(args.overrides))
+        seeds = args.seeds or (0,)
+        spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), (0,), tuple(args.overrides))
+        warn("sweep", _sweep_sizes(spec, seeds, args.workers, args.batch_seeds or 1))
+        spec = replace(spec, seeds=tuple(seeds))
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
     result = run_sweep(
         sweep_dir, spec, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
@@ -105,6 +121,39 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
     return 1 if result.failed else 0
 
 
+def _sweep_sizes(spec: SweepSpec, seeds: Sequence[int], workers: int, batch: int) -> list[str]:
+    """:func:`~dospcot.run.sizes.check_sizes` of a sweep's cells (``spec``'s trials of its first seed)
+    over ``seeds`` (a ``range`` for a count: a huge one is refused before it is built)."""
+    from dospcot.run.sizes import check_sizes
+
+    cfgs = spec.cell_configs()  # a bad --set or grid fails here, before a folder
+    return check_sizes(cfgs, len(seeds), workers, min(batch, len(seeds)))
+
+
+def warn(command: str, warnings: list[str]) -> None:
+    """Print each warning of a size check as one line on stderr."""
+    for line in warnings:
+        print(f"dospcot {command}: warning: {line}", file=sys.stderr)
+
+
+def _config(args: argparse.Namespace, command: str) -> int:
+    """``dospcot config``: the resolved config as TOML, each key with its default and meaning."""
+    from dospcot.config.reference import annotated_toml, config_rows, sb3_dqn_docs
+    from dospcot.tasks import get_task, load_config
+
+    cfg = load_config(args.config, args.overrides)
+    table = get_task(cfg.task).config_table(cfg)
+    rows = config_rows(type(cfg))
+    if any(row.section == "dqn" and not row.meaning for row in rows.values()):  # SB3's words (imports torch)
+        rows = config_rows(type(cfg), sb3_dqn_docs())
+    heading = shlex.join(
+        ["dospcot", "config", args.config, *(a for o in args.overrides for a in ("--set", o))]
+    )
+    heading += ": the resolved config; each comment gives the key's default and meaning"
+    print(annotated_toml(type(cfg), table, rows, heading), end="")
+    return 0
+
+
 def _report(args: argparse.Namespace, command: str) -> int:
     from dospcot.lab.report import write_report
 
@@ -116,6 +165,7 @@ def _report(args: argparse.Namespace, command: str) -> int:
 
 def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
     import time
+    from dataclasses import replace
 
     from dospcot.config.errors import ConfigError
     from dospcot.config.presets import PAPER_PRESETS
@@ -138,8 +188,9 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
         *([f"tabular.episodes_per_round={args.episodes}"] if args.episodes is not None else []),
         *args.overrides,
     ]
-    spec = SweepSpec((PAPER_PRESETS[args.preset],), {}, tuple(args.seeds), tuple(overrides))
-    spec.trials()  # a bad --set fails here, before the folder is made
+    spec = SweepSpec((PAPER_PRESETS.get(args.preset, args.preset),), {}, (0,), tuple(overrides))
+    warn("reproduce-paper", _sweep_sizes(spec, args.seeds, args.workers, 1))
+    spec = replace(spec, seeds=tuple(args.seeds))
     sweep_dir = new_run_dir(args.out, "")
     started = time.perf_counter()
     result = run_sweep(sweep_dir, spec, workers=args.workers, show_progress=not args.no_progress)
@@ -157,12 +208,17 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
 
 def _study(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.errors import ConfigError
-    from dospcot.lab.studies import get_study, header_command, run_study
+    from dospcot.lab.studies import get_study, header_command, run_study, sweep_spec
+    from dospcot.run.sizes import check_sizes
 
     try:
-        get_study(args.study)
+        study = get_study(args.study)
     except ValueError as err:
         raise ConfigError(str(err)) from None
+    if not args.render_only:  # its sweeps' cells over its seeds, weighed before any sweep starts
+        cells = [cfg for sweep in study.sweeps for cfg in sweep_spec(sweep, 1, args.overrides).cell_configs()]
+        seeds = args.seeds or study.seeds
+        warn("study", check_sizes(cells, seeds, args.workers, min(args.batch_seeds or 1, max(seeds, 1))))
     options = shlex.split(command)[3:]  # what follows "dospcot study STUDY"
     run_study(args, header_command(("dospcot", "study"), args.study, options), prog="dospcot study: error")
     return 0
@@ -175,6 +231,7 @@ RUN_COMMANDS = {
     "report": _report,
     "reproduce-paper": _reproduce_paper,
     "study": _study,
+    "config": _config,
     "rate": lambda args, command: rate_command(args, command, train=_train),  # --then-train: _train resumes
 }
 """Commands whose bad configs and folders end in one line on stderr and exit status 2."""

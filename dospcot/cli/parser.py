@@ -4,7 +4,7 @@ that ``--help`` and usage errors answer at once."""
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
@@ -14,13 +14,19 @@ QUICK_BENCH_OUT = Path("runs/bench-quick.md")
 """Where ``dospcot bench --quick`` writes its smoke-test figures."""
 
 
-def parse_seeds(text: str) -> list[int]:
-    """``"10"`` -> seeds 0..9; ``"3,5,7"`` -> those seeds."""
+def parse_seeds(text: str) -> Sequence[int]:
+    """``"10"`` -> seeds 0..9 (a ``range``: a huge count is refused by its size check, not built);
+    ``"3,5,7"`` -> those seeds."""
     try:
         if "," in text:
-            seeds = [int(s) for s in text.split(",") if s.strip()]
+            items = [s.strip() for s in text.split(",")]
+            if "" in items:
+                raise argparse.ArgumentTypeError(
+                    f"--seeds {text}: an empty item between commas; write the seeds as 0,3,7"
+                )
+            seeds: Sequence[int] = [int(s) for s in items]
         else:
-            seeds = list(range(int(text)))
+            seeds = range(int(text))
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"--seeds takes a count (10) or a list (0,3,7), got {text!r}"
@@ -29,7 +35,7 @@ def parse_seeds(text: str) -> list[int]:
         raise argparse.ArgumentTypeError(
             f"--seeds {text} gives no seed: give a count >= 1 (10) or a list of seeds (0,3,7)"
         )
-    if any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+    if isinstance(seeds, list) and (any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds)):
         raise argparse.ArgumentTypeError(f"--seeds takes distinct seeds >= 0, got {text!r}")
     return seeds
 
@@ -75,9 +81,11 @@ class OneLineParser(argparse.ArgumentParser):
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; building it imports neither torch nor stable-baselines3, so that
     ``--help`` and usage errors answer at once."""
+    from dospcot import __version__
     from dospcot.config.presets import PAPER_PRESETS
 
     parser = OneLineParser(prog="dospcot", description=__doc__)
+    parser.add_argument("--version", action="version", version=f"dospcot {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     train = commands.add_parser(
         "train",
@@ -175,10 +183,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     paper.add_argument(
         "--preset",
-        choices=sorted(PAPER_PRESETS),
+        choices=sorted({*PAPER_PRESETS, *PAPER_PRESETS.values()}),
         default="paper-text",
-        help="paper-text: the paper's stated hyperparameters; published-code: its code's "
-        "(the config presets paper-text and paper-published-code)",
+        help="paper-text: the paper's stated hyperparameters; published-code (or paper-published-code, "
+        "the config preset's own name): its code's",
     )
     paper.add_argument(
         "--label-fraction",
@@ -255,4 +263,15 @@ def build_parser() -> argparse.ArgumentParser:
     study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
     study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
     add_rate_parser(commands)
+    config = commands.add_parser(
+        "config",
+        help="print a config as TOML, resolved, each key with its default and meaning",
+        description="Read a preset or a .toml (its extends chain and --set overrides applied), check it as "
+        "dospcot train would, and print it as TOML: every key the run reads, with a comment giving the "
+        "key's default and one-line meaning (docs/guide/configuration.md holds the same table).",
+    )
+    config.add_argument(
+        "config", metavar="CONFIG", help="a preset name (see train --list) or a path to a .toml"
+    )
+    add_overrides(config, "override a key, as dospcot train's --set (repeatable)")
     return parser

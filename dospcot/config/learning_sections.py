@@ -309,7 +309,8 @@ class CoTrainingConfig:
     :param numerics: how the reward classifiers fit (:data:`dospcot.core.cotrainer.NUMERICS`): 1, in
         float64 over the whole pool; 2, in float32 over the samples that carry weight, several times
         cheaper on large pools (docs/guide/profile.md), not yet confirmed to train the same agents
-        over seeds. Every run names it in ``run_info.json``; a study never compares the two.
+        over seeds. Every run names it in ``run_info.json``; a study compares the two only where its grid
+        varies it (a config key, so the stale check keeps a sweep from mixing them).
     """
 
     consensus_weight: float = 0.3

@@ -19,6 +19,7 @@ tables are merged key by key over the base's.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import re
 import tomllib
@@ -32,6 +33,8 @@ from dospcot.config.presets import read_config_text
 
 BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.:/-]*")
 """A value ``--set`` takes as a string without TOML's quotes: a name, a dotted path or a file path."""
+LEADING_DOT = re.compile(r"[+-]?\.[0-9]+(?:[eE][+-]?[0-9]+)?")
+"""A number written without its leading zero (``.5``, ``-.25``), which TOML refuses: read as ``0.5``."""
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
@@ -42,6 +45,8 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
         raise ConfigError(f"--set takes key=value, got {text!r}")
+    if LEADING_DOT.fullmatch(raw.strip()):  # ".5": a number, as the shell and most languages read it
+        raw = raw.strip().replace(".", "0.", 1)
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
@@ -142,6 +147,13 @@ def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
         if key in set_elsewhere:
             raise ConfigError(f"{prefix}{key}: not a config key here; it is set by {set_elsewhere[key]}")
         if key not in fields:
+            close = difflib.get_close_matches(key, fields, n=3, cutoff=0.6)
+            if close:
+                raise ConfigError(
+                    f"unknown key '{prefix}{key}'; did you mean "
+                    + " or ".join(f"'{prefix}{name}'" for name in close)
+                    + "?"
+                )
             raise ConfigError(f"unknown key '{prefix}{key}'; allowed: {', '.join(fields)}")
     hints = typing.get_type_hints(cls)
     unbounded: frozenset[str] = getattr(cls, "infinite_keys", frozenset())

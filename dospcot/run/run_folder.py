@@ -222,14 +222,12 @@ def run_lock(
         except FileExistsError:
             holder = _lock_holder(lock)
             if holder is not None:
-                raise error(
-                    f"{run_dir} is being {doing} by process {holder} (its {LOCK_FILE}); wait for it or "
-                    "stop it, then resume"
-                ) from None
+                raise error(_held_line(run_dir, doing, holder)) from None
             lock.unlink(missing_ok=True)  # its process is gone
             continue
         with os.fdopen(descriptor, "w") as handle:
-            handle.write(str(os.getpid()))
+            started = process_start(os.getpid())
+            handle.write(f"{os.getpid()} {started}" if started is not None else str(os.getpid()))
         try:
             yield
         finally:
@@ -238,13 +236,55 @@ def run_lock(
     raise RunFolderError(f"cannot take the lock {lock}")  # pragma: no cover - a race lost twice
 
 
-def _lock_holder(lock: Path) -> int | None:
-    """The live process that holds ``lock``, or None (gone, or the lock unreadable)."""
+def _held_line(run_dir: Path, doing: str, pid: int) -> str:
+    """What the lock of ``run_dir`` held by the live process ``pid`` tells: a dospcot process is waited
+    for; another (its id reused since a dospcot run died) holds nothing, and its lock can go."""
+    command = process_command(pid)
+    lock = run_dir / LOCK_FILE
+    if command is None:  # no /proc to read: say both
+        return (
+            f"{run_dir} is being {doing} by process {pid} (its {LOCK_FILE}); wait for it or stop it, then "
+            f"resume; if process {pid} is no dospcot run, remove {lock}"
+        )
+    if "dospcot" in command or "python" in command:
+        return f"{run_dir} is being {doing} by process {pid} ({command}); wait for it or stop it, then resume"
+    return (
+        f"{lock} names process {pid}, which is no dospcot run ({command}): a run that died left it; "
+        f"remove {lock} and resume"
+    )
+
+
+def process_command(pid: int, width: int = 80) -> str | None:
+    """The command line of the process ``pid`` (shortened to ``width`` characters), or None where the
+    system does not say (no ``/proc``)."""
     try:
-        pid = int(lock.read_text())
+        raw = Path(f"/proc/{pid}/cmdline").read_bytes()
+    except OSError:
+        return None
+    command = " ".join(part.decode(errors="replace") for part in raw.split(b"\0") if part) or "?"
+    return command if len(command) <= width else command[: width - 3] + "..."
+
+
+def process_start(pid: int) -> int | None:
+    """When the process ``pid`` started (clock ticks since boot, ``/proc/<pid>/stat``), or None where
+    the system does not say: with its id, it names one process, as an id alone, once reused, does not."""
+    try:
+        return int(Path(f"/proc/{pid}/stat").read_text().rpartition(")")[2].split()[19])
+    except (OSError, ValueError, IndexError):
+        return None
+
+
+def _lock_holder(lock: Path) -> int | None:
+    """The live process that holds ``lock``, or None (gone, its id taken by a process started since,
+    or the lock unreadable). A lock holds the id and, where the system says, the start time."""
+    try:
+        pid_text, _, started = lock.read_text().partition(" ")
+        pid = int(pid_text)
         os.kill(pid, 0)
     except (OSError, ValueError):
         return None
+    if started.strip().isdigit() and process_start(pid) not in (None, int(started)):
+        return None  # the id was reused: the process that wrote the lock is gone
     return pid
 
 

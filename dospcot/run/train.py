@@ -93,6 +93,12 @@ def evaluate(run_dir: Path) -> dict[str, Any]:
 def run_config(run_dir: Path) -> RunConfig:
     """The config a run folder holds."""
     config_path = run_dir / CONFIG_FILE
+    if run_dir.is_file():  # --resume runs/x/<stamp>/config.toml: the folder was meant
+        raise RunFolderError(
+            f"{run_dir} is a file: give its run folder, {run_dir.parent}"
+            if run_dir.name == CONFIG_FILE
+            else f"{run_dir} is a file, not a run folder (runs/<name>/<stamp>)"
+        )
     if not config_path.is_file():
         raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
     return load_run_config(config_path)

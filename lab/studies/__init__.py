@@ -50,6 +50,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+from dospcot.config.presets import did_you_mean
 from dospcot.lab.report import TrialRun, load_runs, write_report
 from dospcot.lab.studies import (
     batched_seeds,
@@ -104,7 +105,7 @@ def get_study(name: str) -> Study:
     try:
         return STUDIES[name]
     except KeyError:
-        raise ValueError(f"no study {name!r}; the studies: {', '.join(STUDIES)}") from None
+        raise ValueError(f"no study {name!r}{did_you_mean(name, STUDIES, 'the studies', None)}") from None
 
 
 def header_command(program: Sequence[str], study: str, options: Sequence[str]) -> str:
