@@ -213,10 +213,12 @@ class GridWorld(gym.Env):
         self.next_state, self.reward, self.terminal = self._tables(step_cost, lava_penalty, goal_reward)
         # The toy-text interface, so TabularMDP.from_env and value iteration work unchanged.
         self.P = {
-            s: {a: [(1.0, int(self.next_state[s, a]), float(self.reward[s, a]), bool(self.terminal[s, a]))]
-                for a in range(4)}
+            s: {
+                a: [(1.0, int(self.next_state[s, a]), float(self.reward[s, a]), bool(self.terminal[s, a]))]
+                for a in range(4)
+            }
             for s in range(n * n)
-        }  # fmt: skip
+        }
         self.initial_state_distrib = np.zeros(n * n)
         self.initial_state_distrib[self.start_state] = 1.0
         self.s = self.start_state

@@ -417,9 +417,12 @@ def make_masked_gym(
         env_id, view_specs, views, env_kwargs, wrappers, state_key, train_wrappers, frames
     )
     mask = RewardMaskWrapper(
-        sensors, label_fraction, mode="key" if state_key else "transition", mask_seed=mask_seed,
+        sensors,
+        label_fraction,
+        mode="key" if state_key else "transition",
+        mask_seed=mask_seed,
         queried=queried,
-    )  # fmt: skip
+    )
     return SensorViewWrapper(mask, view, views)
 
 

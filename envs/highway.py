@@ -186,7 +186,11 @@ def make_masked_highway(
     """
     check_views(env_id, views)
     env = RewardMaskWrapper(
-        make_highway(env_id, config, frames), label_fraction, mode="transition", mask_seed=mask_seed,
-        reveal_first_steps=reveal_first_steps, queried=queried,
-    )  # fmt: skip
+        make_highway(env_id, config, frames),
+        label_fraction,
+        mode="transition",
+        mask_seed=mask_seed,
+        reveal_first_steps=reveal_first_steps,
+        queried=queried,
+    )
     return SensorViewWrapper(env, view, views)

@@ -144,10 +144,16 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
         queried: bool = False,
     ) -> None:
         gym.utils.RecordConstructorArgs.__init__(
-            self, label_fraction=label_fraction, mode=mode, mask_seed=mask_seed,
-            monitored_states=monitored_states, reveal_first_steps=reveal_first_steps,
-            revealed_keys=revealed_keys, segment_length=segment_length, queried=queried,
-        )  # fmt: skip
+            self,
+            label_fraction=label_fraction,
+            mode=mode,
+            mask_seed=mask_seed,
+            monitored_states=monitored_states,
+            reveal_first_steps=reveal_first_steps,
+            revealed_keys=revealed_keys,
+            segment_length=segment_length,
+            queried=queried,
+        )
         super().__init__(env)
         if mode not in MASK_MODES:
             raise ValueError(f"mode must be one of {MASK_MODES}, got {mode!r}")
@@ -176,9 +182,13 @@ class RewardMaskWrapper(gym.Wrapper, gym.utils.RecordConstructorArgs):
                         f"use mode='transition' for other spaces"
                     )
             self.mask = StateActionMask(
-                int(env.observation_space.n), int(env.action_space.n), self.label_fraction, mask_seed,
-                monitored_states, queried=queried,
-            )  # fmt: skip
+                int(env.observation_space.n),
+                int(env.action_space.n),
+                self.label_fraction,
+                mask_seed,
+                monitored_states,
+                queried=queried,
+            )
             if revealed_keys is not None:
                 if revealed_keys.shape != self.mask.labelled.shape:
                     raise ValueError(

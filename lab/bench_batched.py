@@ -68,8 +68,12 @@ def bench_batched_seeds(
     return Row.measured(
         "`dospcot train --seeds`, one batch vs runs of their own: CPU time per seed",
         f"`{preset}`, seeds 0-{seeds - 1}, {shortened}",
-        Clock(device).unit, ours, peer, higher_is_better=False, target=target,
-    )  # fmt: skip
+        Clock(device).unit,
+        ours,
+        peer,
+        higher_is_better=False,
+        target=target,
+    )
 
 
 STACKED_MEMBERS, STACKED_NET, STACKED_BATCH = 10, [128, 128], 64
@@ -81,9 +85,15 @@ def _filled_agents(device: str, fill: int) -> list[ExpectedSarsaDQN]:
     agents = []
     for seed in range(STACKED_MEMBERS):
         agent = ExpectedSarsaDQN(
-            "MlpPolicy", onehot_cliff(), learning_starts=fill, buffer_size=fill, batch_size=STACKED_BATCH,
-            policy_kwargs={"net_arch": STACKED_NET}, seed=seed, device=device,
-        )  # fmt: skip
+            "MlpPolicy",
+            onehot_cliff(),
+            learning_starts=fill,
+            buffer_size=fill,
+            batch_size=STACKED_BATCH,
+            policy_kwargs={"net_arch": STACKED_NET},
+            seed=seed,
+            device=device,
+        )
         agent.learn(fill)  # uniform actions until learning_starts: no gradient step yet
         agents.append(agent)
     return agents
@@ -121,8 +131,12 @@ def bench_stacked_update(quick: bool, repeats: int, device: str = "cpu") -> Row:
         "`ExpectedSarsaDQN.train()`: member updates per second",
         f"CliffWalking-v1 one-hot, MlpPolicy {STACKED_NET}, batch {STACKED_BATCH}, {STACKED_MEMBERS} "
         f"members, {steps} updates each, every batch sampled from the member's buffer",
-        f"updates/{Clock(device).unit}", ours, peer, higher_is_better=True, target=2.0,
-    )  # fmt: skip
+        f"updates/{Clock(device).unit}",
+        ours,
+        peer,
+        higher_is_better=True,
+        target=2.0,
+    )
 
 
 def _sweep_wall_seconds(spec: SweepSpec, batch_seeds: int) -> float:
@@ -150,8 +164,12 @@ def bench_batched_wall(quick: bool, repeats: int) -> Row:
         "`dospcot sweep --workers 2 --batch-seeds K`, two batches vs the runs alone: wall time of a cell",
         f"`{preset}` as in the CPU-time row, seeds 0-{seeds - 1}, K = {math.ceil(seeds / 2)}, "
         "process start-up included",
-        "s", ours, peer, higher_is_better=False, target=round(1 / 3, 3),
-    )  # fmt: skip
+        "s",
+        ours,
+        peer,
+        higher_is_better=False,
+        target=round(1 / 3, 3),
+    )
 
 
 def _status_kib(field: str) -> int:
@@ -194,5 +212,9 @@ def bench_batched_memory(quick: bool, repeats: int) -> Row:
         "`dospcot train --seeds`, a batch's member vs a run of its own: peak memory added to the process",
         f"`{preset}` as in the CPU-time row; ours: a batch of seeds 0-{seeds - 1}, per seed; "
         "the peer: seed 0",
-        "MiB", ours, peer, higher_is_better=False, target=1.2,
-    )  # fmt: skip
+        "MiB",
+        ours,
+        peer,
+        higher_is_better=False,
+        target=1.2,
+    )

@@ -59,8 +59,12 @@ def bench_fast_highway(quick: bool, repeats: int) -> Row:
         "FastHighwayVec vs highway-env's highway-fast-v0: env steps per second",
         f"random actions, resets included; ours {n_envs} envs x {vec_steps} steps, "
         f"highway-fast-v0 {peer_steps} steps (its Kinematics observation)",
-        "steps/s", ours, peer, higher_is_better=True, target=50.0,
-    )  # fmt: skip
+        "steps/s",
+        ours,
+        peer,
+        higher_is_better=True,
+        target=50.0,
+    )
 
 
 def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
@@ -79,9 +83,14 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
 
     def ours(rep: int) -> gym.Env:
         env = make_masked_gym(
-            env_id, cfg.views[0], tuple(views), cfg.training.label_fraction, rep, view_specs=views,
+            env_id,
+            cfg.views[0],
+            tuple(views),
+            cfg.training.label_fraction,
+            rep,
+            view_specs=views,
             state_key=cfg.gym.state_key,
-        )  # fmt: skip
+        )
         shapes = {v: env.get_wrapper_attr("view_space")(v).shape for v in views}
         return SensorStoreWrapper(env, KeyedStepStore(shapes))
 
@@ -96,8 +105,12 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
         f"pairs ({cfg.training.label_fraction:.0%}), the {cfg.views[0]} view observed, a fresh keyed "
         f"pool store recording every view ({', '.join(f'{n}: {v}' for n, v in views.items())}) of each "
         "new pair",
-        "steps/s", ours_rate, peer, higher_is_better=True, target=round(1 / 1.3, 3),
-    )  # fmt: skip
+        "steps/s",
+        ours_rate,
+        peer,
+        higher_is_better=True,
+        target=round(1 / 1.3, 3),
+    )
 
 
 def _filled_run(n: int, seed: int) -> CoTrainingRun:
@@ -139,8 +152,12 @@ def bench_store_memory(quick: bool, repeats: int) -> Row:
     return Row.measured(
         "Shared transition store vs the raw arrays: memory per million steps",
         f"16 x 16 grid, views {views}, {n:,} steps measured",
-        "MiB", ours, peer, higher_is_better=False, target=1.5,
-    )  # fmt: skip
+        "MiB",
+        ours,
+        peer,
+        higher_is_better=False,
+        target=1.5,
+    )
 
 
 SCALING_SIZES = (10_000, 30_000, 100_000, 300_000, 1_000_000)
@@ -164,5 +181,9 @@ def bench_cotraining_scaling(quick: bool, repeats: int) -> Row:
     return Row.measured(
         f"One co-training step, {large:,} vs {small:,} stored steps: growth against n log n",
         f"`grid16-dospcot`, median seconds per size: {curve}",
-        "x", growth, [bound] * repeats, higher_is_better=False, target=1.0,
-    )  # fmt: skip
+        "x",
+        growth,
+        [bound] * repeats,
+        higher_is_better=False,
+        target=1.0,
+    )

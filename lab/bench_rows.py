@@ -73,8 +73,12 @@ def bench_esarsa_dqn(
         + (f", greedy={greedy!r}" if target == "expected_sarsa" else "")
         + ") vs SB3 DQN: env steps per second",
         f"CliffWalking-v1 one-hot, {steps:,} steps, MlpPolicy {net}, train_freq 4, batch {batch}",
-        f"steps/{Clock(device).unit}", ours, peer, higher_is_better=True, target=0.95,
-    )  # fmt: skip
+        f"steps/{Clock(device).unit}",
+        ours,
+        peer,
+        higher_is_better=True,
+        target=0.95,
+    )
 
 
 class PerStepTabularCoTraining(TabularCoTraining):
@@ -167,8 +171,12 @@ def bench_tabular(quick: bool, repeats: int) -> Row:
         "`paper-text`); ours: "
         f"seeds {seeds[0]}-{seeds[-1]} in one batch ({len(paper.protocol_specs(seeds))} runs), the loop: "
         f"seed {seeds[0]} ({len(paper.protocol_specs(seeds[:1]))} runs)",
-        "steps/s", ours, peer, higher_is_better=True, target=20.0,
-    )  # fmt: skip
+        "steps/s",
+        ours,
+        peer,
+        higher_is_better=True,
+        target=20.0,
+    )
 
 
 def _cotraining_seconds(cfg: TrainConfig) -> float:
@@ -187,10 +195,15 @@ def _independent_seconds(cfg: TrainConfig) -> float:
     for k, view in enumerate(cfg.views):
         env = ViewObservationWrapper(gym.wrappers.TimeLimit(make_env(), limit), views[view])
         model = ExpectedSarsaDQN(
-            "MlpPolicy", env, seed=agent_seed(cfg.seed, k), exploration_horizon=total,
-            exploration_initial_eps=cfg.training.eps_start, exploration_final_eps=cfg.training.eps_end,
-            exploration_fraction=1.0, **{**cfg.dqn.sb3_kwargs(), "buffer_size": cfg.buffer_size},
-        )  # fmt: skip
+            "MlpPolicy",
+            env,
+            seed=agent_seed(cfg.seed, k),
+            exploration_horizon=total,
+            exploration_initial_eps=cfg.training.eps_start,
+            exploration_final_eps=cfg.training.eps_end,
+            exploration_fraction=1.0,
+            **{**cfg.dqn.sb3_kwargs(), "buffer_size": cfg.buffer_size},
+        )
         model.learning_starts = max(model.learning_starts, cfg.training.collect_only_steps)
         start = time.perf_counter()
         model.learn(total)
@@ -207,8 +220,12 @@ def bench_cotraining_overhead(quick: bool, repeats: int) -> Row:
     return Row.measured(
         "DOSPCoT run vs its two ExpectedSarsaDQN agents alone: wall time",
         f"`grid16-dospcot` (patch + rays), {cfg.training.rounds} rounds, {steps:,} steps per agent",
-        "s", ours, peer, higher_is_better=False, target=1.3,
-    )  # fmt: skip
+        "s",
+        ours,
+        peer,
+        higher_is_better=False,
+        target=1.3,
+    )
 
 
 def _trials_per_minute(spec: SweepSpec, workers: int) -> float:
@@ -237,5 +254,9 @@ def bench_sweep_throughput(quick: bool, repeats: int) -> Row:
     return Row.measured(
         "`dospcot sweep` local backend, 2 workers vs 1: throughput",
         f"{trials} trials of `tiny` (2 rounds x {steps:,} steps), process start-up included",
-        "trials/min", ours, peer, higher_is_better=True, target=1.7,
-    )  # fmt: skip
+        "trials/min",
+        ours,
+        peer,
+        higher_is_better=True,
+        target=1.7,
+    )

@@ -50,9 +50,17 @@ def build_tables(records: Sequence[Mapping[str, Any]], paper: dict, last_round: 
     def add(table: str, agents: str, method: str, gamma: float | None, rnd: int, metric: str, key, ref=None):
         cell = cell_summary(values[metric].get(key, []))
         rows.append(
-            {"table": table, "agents": agents, "method": method, "gamma": gamma, "round": rnd,
-             "metric": metric, **asdict(cell), "paper": ref}
-        )  # fmt: skip
+            {
+                "table": table,
+                "agents": agents,
+                "method": method,
+                "gamma": gamma,
+                "round": rnd,
+                "metric": metric,
+                **asdict(cell),
+                "paper": ref,
+            }
+        )
 
     def add_pair(table: str, a: str, b: str, gamma: float, rnd: int, metric: str, ref=None):
         name = f"{KIND_NAMES[a]}-{KIND_NAMES[b]}"

@@ -121,10 +121,17 @@ def _row(
 ) -> dict[str, Any]:
     stat = SeedSummary.of(values)
     return {
-        "config": name, **dict(params), **labels, "metric": metric, "n": stat.n, "mean": stat.mean,
-        "ci_low": stat.low, "ci_high": stat.high, "iqm": stat.iqm,
+        "config": name,
+        **dict(params),
+        **labels,
+        "metric": metric,
+        "n": stat.n,
+        "mean": stat.mean,
+        "ci_low": stat.low,
+        "ci_high": stat.high,
+        "iqm": stat.iqm,
         "seeds": " ".join(str(run.trial.seed) for run in members),
-    }  # fmt: skip
+    }
 
 
 def _summary(row: dict[str, Any]) -> SeedSummary:

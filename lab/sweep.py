@@ -332,13 +332,18 @@ def _run_local(
     manager.start(_worker_start, (os.getpid(),))
     worker_ids = manager.list()  # each worker adds its process id, so a stop can end them
     pool = ProcessPoolExecutor(
-        min(workers, len(jobs)), mp_context=context, initializer=_worker_start,
+        min(workers, len(jobs)),
+        mp_context=context,
+        initializer=_worker_start,
         initargs=(os.getpid(), worker_ids),
-    )  # fmt: skip
+    )
     bar = tqdm(
-        total=total, unit="trial", disable=not show_progress, dynamic_ncols=True,
+        total=total,
+        unit="trial",
+        disable=not show_progress,
+        dynamic_ncols=True,
         bar_format="{l_bar}{bar}| {n:.1f}/{total} trials [{elapsed}<{remaining}{postfix}]",
-    )  # fmt: skip
+    )
     try:
         reports = manager.Queue()  # (job index, share of a trial done) from the workers
         futures = {

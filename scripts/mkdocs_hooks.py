@@ -34,8 +34,13 @@ CONFIGURATION_PAGE = ROOT / "docs" / "guide" / "configuration.md"
 PACKAGES = ("dospcot", "dospcot.envs", "dospcot.policies", "dospcot.lab")
 """The package and the sub-packages that live in folders of their own (``envs/``, ``policies/``,
 ``lab/``)."""
-NOT_API = {"dospcot.__main__", "dospcot.cli", "dospcot.cli.__main__", "dospcot.cli.commands",
-           "dospcot.cli.parser"}  # fmt: skip
+NOT_API = {
+    "dospcot.__main__",
+    "dospcot.cli",
+    "dospcot.cli.__main__",
+    "dospcot.cli.commands",
+    "dospcot.cli.parser",
+}
 """Modules that are a command, not an API: ``dospcot --help`` and the guide document them."""
 KNOWN_GAPS = {
     "dospcot.envs.gridworld.GridLayout.goal",

@@ -27,18 +27,24 @@ DIGESTS = Path(__file__).with_name("output_digests.json")
 FILES = ("metrics.csv", "summary.json")
 CASES: dict[str, tuple[str, ...]] = {
     "grid16-dospcot": (
-        "training.rounds=2", "training.steps_per_round=400", "dqn.learning_starts=100",
+        "training.rounds=2",
+        "training.steps_per_round=400",
+        "dqn.learning_starts=100",
     ),
     "fasthighway-dospcot": (
-        "training.rounds=2", "training.steps_per_round=200", "dqn.learning_starts=50",
+        "training.rounds=2",
+        "training.steps_per_round=200",
+        "dqn.learning_starts=50",
         "highway.eval_episodes=2",
     ),
     "minigrid-doorkey-dospcot": (
-        "training.rounds=2", "training.steps_per_round=300", "dqn.learning_starts=50",
+        "training.rounds=2",
+        "training.steps_per_round=300",
+        "dqn.learning_starts=50",
         "gym.eval_episodes=2",
     ),
     "paper-text": ("tabular.rounds=2", "tabular.episodes_per_round=20"),
-}  # fmt: skip
+}
 """Each preset and the ``--set`` overrides that shorten it (seed 0, the presets' own)."""
 
 

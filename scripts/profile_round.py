@@ -228,9 +228,13 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline", type=Path, help="raw figures of an earlier profile: before → after")
     parser.add_argument("--results", type=Path, help="render figures --json wrote, not train")
     parser.add_argument(
-        "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+        "--set",
+        dest="overrides",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
         help="override a key in every run, e.g. --set cotraining.numerics=2 (repeatable)",
-    )  # fmt: skip
+    )
     parser.add_argument("--child", help=argparse.SUPPRESS)
     args = parser.parse_args(argv)
     if args.child:

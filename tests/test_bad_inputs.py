@@ -51,9 +51,27 @@ def _keys(cls: type, prefix: str = "") -> list[tuple[str, typing.Any]]:
 
 KEYS = [key for key, _ in _keys(TrainConfig)]
 VALUES = st.sampled_from(
-    ["nan", "inf", "-inf", "-1", "0", "1", "3", "0.5", "2.5", "-0.5", "1e9", "true", '"x"', '""', "[1]",
-     "[]", "{a=1}", "1e-12"]
-)  # fmt: skip
+    [
+        "nan",
+        "inf",
+        "-inf",
+        "-1",
+        "0",
+        "1",
+        "3",
+        "0.5",
+        "2.5",
+        "-0.5",
+        "1e9",
+        "true",
+        '"x"',
+        '""',
+        "[1]",
+        "[]",
+        "{a=1}",
+        "1e-12",
+    ]
+)
 
 
 @settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -155,11 +173,20 @@ def _train_or_refuse(runs: Path, override: str) -> None:
 
 @pytest.mark.parametrize(
     "override",
-    ["env.lava_density=2", "env.lava_density=0.8", "env.step_cost=nan", "cotraining.classifier.epochs=0",
-     "cotraining.classifier.lr=nan", "dqn.buffer_size=8", 'name="tiny2', "training.rounds=0",
-     # A device that is no device, and a GPU where torch sees none (a machine with one trains).
-     "dqn.device=gpu", "dqn.device=cuda:7"],
-)  # fmt: skip
+    [
+        "env.lava_density=2",
+        "env.lava_density=0.8",
+        "env.step_cost=nan",
+        "cotraining.classifier.epochs=0",
+        "cotraining.classifier.lr=nan",
+        "dqn.buffer_size=8",
+        'name="tiny2',
+        "training.rounds=0",
+        # A device that is no device, and a GPU where torch sees none (a machine with one trains).
+        "dqn.device=gpu",
+        "dqn.device=cuda:7",
+    ],
+)
 def test_the_reported_bad_inputs_exit_2_in_one_line_before_a_folder(tmp_path, override):
     _train_or_refuse(tmp_path / "runs", override)
     assert not (tmp_path / "runs").exists() or not list((tmp_path / "runs").glob("tiny/*"))
@@ -265,14 +292,33 @@ def test_run_folders_refuse_a_second_process_an_edited_config_and_a_lost_checkpo
 
 def _sweep(runs: Path, *more: str) -> subprocess.Popen:
     command = [
-        sys.executable, "-m", "dospcot.cli", "sweep", "tiny", "--seeds", "3", "--workers", "2", "--set",
-        "training.steps_per_round=500", "--runs-dir", str(runs), "--name", "s", "--no-progress", *more,
-    ]  # fmt: skip
+        sys.executable,
+        "-m",
+        "dospcot.cli",
+        "sweep",
+        "tiny",
+        "--seeds",
+        "3",
+        "--workers",
+        "2",
+        "--set",
+        "training.steps_per_round=500",
+        "--runs-dir",
+        str(runs),
+        "--name",
+        "s",
+        "--no-progress",
+        *more,
+    ]
     # Its own process group, as a terminal gives a command; and Ctrl-C's default, whatever launched the tests.
     return subprocess.Popen(
-        command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+        command,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        start_new_session=True,
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )  # fmt: skip
+    )
 
 
 @pytest.mark.slow

@@ -46,10 +46,16 @@ def test_while_every_label_is_0_a_goal_reward_is_a_value_no_label_has_shown():
     classes.fit(np.zeros(12))
     np.testing.assert_array_equal(classes.encode(np.array([0.0, 0.93, -0.5])), [0, -1, -1])
     result = RoundResult(
-        pseudo_class=np.array([[0, 0, 0]]), pseudo_weight=np.ones((1, 3)), view_weight=np.ones((1, 1, 3)),
-        view_class=np.zeros((1, 1, 3), int), threshold=np.ones((1, 1, 2)), classifier_loss=np.zeros((1, 1)),
-        pace=np.ones(1), changed=np.ones(1, bool), stopped=np.zeros(1, bool),
-    )  # fmt: skip
+        pseudo_class=np.array([[0, 0, 0]]),
+        pseudo_weight=np.ones((1, 3)),
+        view_weight=np.ones((1, 1, 3)),
+        view_class=np.zeros((1, 1, 3), int),
+        threshold=np.ones((1, 1, 2)),
+        classifier_loss=np.zeros((1, 1)),
+        pace=np.ones(1),
+        changed=np.ones(1, bool),
+        stopped=np.zeros(1, bool),
+    )
     stats = round_stats(result.of_run(0), np.ones(3, bool), classes.encode(np.array([0.0, 0.0, 0.93])))
     assert stats["pseudo_accuracy"] == pytest.approx(2 / 3) and stats["worst_class_recall"] == 0.0
     classes.fit(np.array([0.0] * 11 + [0.9]))  # a goal label: its class takes every goal reward
@@ -77,9 +83,12 @@ def test_round_stats_read_the_run_they_are_given_in_a_batch():
         pseudo_weight=np.array([[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.5, 0.5]]),
         view_weight=np.array([[[1.0, 1.0, 0.0, 0.0], [0.0, 1.0, 0.5, 0.5]]]),
         view_class=np.array([[[0, 1, 0, 0], [0, 1, 0, 0]]]),
-        threshold=np.array([[[0.2, 0.4], [0.6, np.nan]]]), classifier_loss=np.array([[0.3, 0.7]]),
-        pace=np.array([0.5, 0.75]), changed=np.ones(2, bool), stopped=np.array([False, True]),
-    )  # fmt: skip
+        threshold=np.array([[[0.2, 0.4], [0.6, np.nan]]]),
+        classifier_loss=np.array([[0.3, 0.7]]),
+        pace=np.array([0.5, 0.75]),
+        changed=np.ones(2, bool),
+        stopped=np.array([False, True]),
+    )
     truth = np.array([0, 1, 0, 1])
     unlabelled = np.array([False, True, True, True])
     stats = round_stats(result.of_run(1), unlabelled, truth)
@@ -99,9 +108,17 @@ def test_round_stats_read_the_run_they_are_given_in_a_batch():
 def test_record_head_names_the_run_and_the_agent():
     head = ("cotrain", ("esarsa", "q"), ("coords", "patch"), 0.3, 4)
     assert record_head(*head, 2, np.int64(1)) == {
-        "method": "cotrain", "agents": "esarsa-q", "views": "coords-patch", "m": 2, "gamma": 0.3,
-        "seed": 4, "round": 2, "agent": 1, "kind": "q", "view": "patch",
-    }  # fmt: skip
+        "method": "cotrain",
+        "agents": "esarsa-q",
+        "views": "coords-patch",
+        "m": 2,
+        "gamma": 0.3,
+        "seed": 4,
+        "round": 2,
+        "agent": 1,
+        "kind": "q",
+        "view": "patch",
+    }
     assert type(record_head(*head, 2, np.int64(1))["agent"]) is int
 
 
@@ -117,8 +134,9 @@ def test_a_class_labelled_only_on_episode_ends_is_open_only_to_episode_ends():
     expected_off = [True, False, True, False]  # a step that goes on may not take the goal class
     np.testing.assert_array_equal(mask, [expected_on if t else expected_off for t in terminal])
     # Every class the run has is shown only on ends: a step that goes on keeps them all.
-    only_ends = episode_end_class_mask(np.array([1, 0]), np.array([True, False]), np.array([True, False]),
-                                       np.array([False, True]))  # fmt: skip
+    only_ends = episode_end_class_mask(
+        np.array([1, 0]), np.array([True, False]), np.array([True, False]), np.array([False, True])
+    )
     np.testing.assert_array_equal(only_ends, [[False, True], [False, True]])
 
 
@@ -196,9 +214,12 @@ def test_candidate_quotas_admit_a_rare_class_whose_labels_understate_it():
     labelled = np.zeros(40, dtype=bool)
     labelled[[0, 1, 2, 3, 30]] = True
     pool = Pool(
-        [np.eye(2)[truth][None]], labelled[None], np.where(labelled, truth, -1)[None], ~labelled[None],
+        [np.eye(2)[truth][None]],
+        labelled[None],
+        np.where(labelled, truth, -1)[None],
+        ~labelled[None],
         np.array([[True, True]]),
-    )  # fmt: skip
+    )
     for quota, rare_admitted in (("label-share", 7), ("candidates", 9)):
         config = CoTrainingConfig(max_classes=2, add_fraction_start=1.0, quota=quota)
         result = SelfPacedCoTrainer([2], 1, config, [0], config.max_classes).step(pool)

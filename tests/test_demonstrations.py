@@ -48,9 +48,13 @@ def _demos(rewards: bool = True) -> Demonstrations:
     obs = {"a": rng.normal(size=(5, 3)).astype(np.float32), "b": rng.normal(size=(5, 2)).astype(np.float32)}
     nxt = {name: value + 1 for name, value in obs.items()}
     return Demonstrations(
-        obs, nxt, np.array([0, 1, 2, 1, 0]), np.array([0, 0, 0, 1, 1]),
-        np.array([0.0, 0.0, 1.0, 0.0, 1.0]) if rewards else None, np.array([4, 5, 6, 4, 5]),
-    )  # fmt: skip
+        obs,
+        nxt,
+        np.array([0, 1, 2, 1, 0]),
+        np.array([0, 0, 0, 1, 1]),
+        np.array([0.0, 0.0, 1.0, 0.0, 1.0]) if rewards else None,
+        np.array([4, 5, 6, 4, 5]),
+    )
 
 
 @pytest.mark.parametrize("rewards", [True, False])

@@ -57,8 +57,11 @@ def test_a_study_without_runs_publishes_no_figure(rendered):
     """The unpublished studies' pages and rows name no number of theirs, only what would produce them."""
     unpublished = [name for name, result in rendered.items() if result.table is None]
     assert set(unpublished) == {
-        "demo-labels", "equal-effort", "equal-effort-highway", "highway",
-    }  # fmt: skip
+        "demo-labels",
+        "equal-effort",
+        "equal-effort-highway",
+        "highway",
+    }
     for name in unpublished:
         page = rendered[name].page
         assert "Unpublished" in page and f"dospcot study {name} --docs" in page
@@ -196,7 +199,17 @@ def test_runs_readme_lists_the_files_gitignore_keeps_of_the_record():
         for line in (ROOT / ".gitignore").read_text().splitlines()
         if line.startswith("!runs/sweeps/") and not line.endswith("/")
     }
-    assert listed == kept == {
-        "sweep.json", "trial.json", "config.toml", "run_info.json", "metrics.csv", "summary.json",
-        "reward_classes.json", "queries.csv",
-    }  # fmt: skip
+    assert (
+        listed
+        == kept
+        == {
+            "sweep.json",
+            "trial.json",
+            "config.toml",
+            "run_info.json",
+            "metrics.csv",
+            "summary.json",
+            "reward_classes.json",
+            "queries.csv",
+        }
+    )

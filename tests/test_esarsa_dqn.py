@@ -294,9 +294,14 @@ def test_speed_path_target_by_hand(greedy, expected):
 
 def _window_buffer(table=None, n_steps=3, gamma=0.5, size=10):
     return RelabellingReplayBuffer(
-        size, gym.spaces.Box(-100, 100, (2,)), gym.spaces.Discrete(3), device="cpu",
-        reward_table=table, n_steps=n_steps, gamma=gamma,
-    )  # fmt: skip
+        size,
+        gym.spaces.Box(-100, 100, (2,)),
+        gym.spaces.Discrete(3),
+        device="cpu",
+        reward_table=table,
+        n_steps=n_steps,
+        gamma=gamma,
+    )
 
 
 def _add_step(buffer, k, reward, observed=True, done=False, truncated=False, explored=False):
@@ -304,9 +309,13 @@ def _add_step(buffer, k, reward, observed=True, done=False, truncated=False, exp
     info = {"reward_observed": observed, "store_id": k, "TimeLimit.truncated": truncated}
     info["explored"] = explored
     buffer.add(
-        np.array([[k, 0.0]]), np.array([[k + 1, 0.0]]), np.array([1]), np.array([reward]),
-        np.array([done]), [info],
-    )  # fmt: skip
+        np.array([[k, 0.0]]),
+        np.array([[k + 1, 0.0]]),
+        np.array([1]),
+        np.array([reward]),
+        np.array([done]),
+        [info],
+    )
 
 
 def _windows(buffer, indices):
@@ -360,15 +369,26 @@ def test_n_step_windows_end_before_an_exploratory_action():
     assert got["next"] == [1.0, 4.0]
 
 
-@pytest.mark.parametrize(("target", "cut", "n_steps", "records"), [
-    ("q", True, 3, True), ("q", False, 3, False), ("q", True, 1, False), ("expected_sarsa", True, 3, False),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    ("target", "cut", "n_steps", "records"),
+    [
+        ("q", True, 3, True),
+        ("q", False, 3, False),
+        ("q", True, 1, False),
+        ("expected_sarsa", True, 3, False),
+    ],
+)
 def test_the_agent_flags_its_exploratory_actions_where_windows_are_cut(target, cut, n_steps, records):
     # learning_starts beyond the run: every action is a warm-up draw and the network never changes.
     model = ExpectedSarsaDQN(
-        "MlpPolicy", onehot_cliff(), target=target, cut_windows=cut, n_steps=n_steps, learning_starts=1000,
+        "MlpPolicy",
+        onehot_cliff(),
+        target=target,
+        cut_windows=cut,
+        n_steps=n_steps,
+        learning_starts=1000,
         seed=0,
-    )  # fmt: skip
+    )
     model.learn(200)
     buffer = model.replay_buffer
     flags = buffer.explored[:200, 0]
@@ -385,9 +405,17 @@ def test_flagging_agents_act_as_dqn_predict_does():
     # exploration (and reuses that forward pass to act) must draw the very actions DQN.predict draws.
     def actions(cut: bool) -> np.ndarray:
         model = ExpectedSarsaDQN(
-            "MlpPolicy", onehot_cliff(), target="q", cut_windows=cut, n_steps=3, learning_starts=10,
-            gradient_steps=0, exploration_initial_eps=0.5, exploration_final_eps=0.5, seed=3,
-        )  # fmt: skip
+            "MlpPolicy",
+            onehot_cliff(),
+            target="q",
+            cut_windows=cut,
+            n_steps=3,
+            learning_starts=10,
+            gradient_steps=0,
+            exploration_initial_eps=0.5,
+            exploration_final_eps=0.5,
+            seed=3,
+        )
         model.learn(300)
         flags = model.replay_buffer.explored[:300, 0]
         greedy = model.q_net(th.as_tensor(model.replay_buffer.observations[:300, 0])).argmax(dim=1).numpy()
@@ -400,9 +428,15 @@ def test_flagging_agents_act_as_dqn_predict_does():
     assert np.array_equal(taken, actions(cut=False))
     # Both act from their own forward pass, not through policy.predict: stock DQN draws the same.
     stock = DQN(
-        "MlpPolicy", onehot_cliff(), n_steps=3, learning_starts=10, gradient_steps=0,
-        exploration_initial_eps=0.5, exploration_final_eps=0.5, seed=3,
-    )  # fmt: skip
+        "MlpPolicy",
+        onehot_cliff(),
+        n_steps=3,
+        learning_starts=10,
+        gradient_steps=0,
+        exploration_initial_eps=0.5,
+        exploration_final_eps=0.5,
+        seed=3,
+    )
     stock.learn(300)
     assert np.array_equal(taken, stock.replay_buffer.actions[:300, 0, 0])
     assert 0.2 < (taken[10:] != taken[9:-1]).mean()  # not one action repeated: both explore

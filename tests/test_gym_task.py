@@ -629,9 +629,10 @@ def test_exploring_starts_move_training_episodes_only_and_follow_the_envs_seed()
     # A run's training envs start anywhere, its evaluation envs at the task's start (1, 1).
     views = {"image": "image", "pose": "minigrid.position"}
     cfg = gym_config(
-        env_id, views,
+        env_id,
+        views,
         settings={"gym.wrappers": ["dospcot.envs.minigrid_views:MoveActions"], "gym.train_wrappers": [start]},
-    )  # fmt: skip
+    )
     task = build_run(cfg).task
     train_starts = set()
     for seed in range(10):

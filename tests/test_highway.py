@@ -29,14 +29,24 @@ from dospcot.tasks.adapters.sensor import SensorAdapter
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
 
 TINY = [
-    "training.rounds=2", "training.steps_per_round=120", "dqn.learning_starts=40", "dqn.net_arch=[32]",
+    "training.rounds=2",
+    "training.steps_per_round=120",
+    "dqn.learning_starts=40",
+    "dqn.net_arch=[32]",
     "highway.eval_episodes=2",
-]  # fmt: skip
+]
 RUN_FILES = [
-    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json",
-    "agent_kinematics.zip", "agent_occupancy.zip", "classifier_kinematics.pt", "classifier_occupancy.pt",
+    "config.toml",
+    "metrics.csv",
+    "summary.json",
+    "learning_curves.png",
+    "run_info.json",
+    "agent_kinematics.zip",
+    "agent_occupancy.zip",
+    "classifier_kinematics.pt",
+    "classifier_occupancy.pt",
     "reward_classes.json",
-]  # fmt: skip
+]
 
 
 @pytest.mark.parametrize("env_id", ["highway-fast-v0", "dospcot/FastHighway-v0"])
@@ -46,8 +56,10 @@ def test_masked_sensor_envs_pass_gymnasium_and_sb3_env_checkers(env_id, view):
     sb3_check_env(make_masked_highway(env_id, view))
 
 
-@pytest.mark.parametrize(("view", "obs_type"), [("kinematics", "Kinematics"), ("occupancy", "OccupancyGrid"),
-                                                ("ttc", "TimeToCollision")])  # fmt: skip
+@pytest.mark.parametrize(
+    ("view", "obs_type"),
+    [("kinematics", "Kinematics"), ("occupancy", "OccupancyGrid"), ("ttc", "TimeToCollision")],
+)
 def test_each_view_is_the_observation_highway_env_returns_for_the_same_state(view, obs_type):
     ours = make_masked_highway("highway-fast-v0", view, (view, "kinematics"), label_fraction=1.0)
     theirs = gym.make("highway-fast-v0", config={"observation": {"type": obs_type}})
@@ -218,9 +230,11 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_id
     plain = build_run(cfg)
     plain.run()
     make = partial(
-        make_masked_highway, cfg.highway.env_id, config=cfg.highway.config,
+        make_masked_highway,
+        cfg.highway.env_id,
+        config=cfg.highway.config,
         reveal_first_steps=cfg.highway.reveal_first_steps,
-    )  # fmt: skip
+    )
     scrambled = CoTrainingRun(
         SensorAdapter(cfg, cfg.highway, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
     )
@@ -279,9 +293,12 @@ def test_fast_env_config_keys_and_views_are_checked():
 
 def test_a_file_raters_queries_on_highway_env_show_the_frames_of_each_step(tmp_path):
     overrides = [
-        *TINY, 'highway.env_id="highway-fast-v0"', 'training.label_strategy="outcomes"',
-        'training.rater="file"', "training.label_fraction=0.05",
-    ]  # fmt: skip
+        *TINY,
+        'highway.env_id="highway-fast-v0"',
+        'training.label_strategy="outcomes"',
+        'training.rater="file"',
+        "training.label_fraction=0.05",
+    ]
     with pytest.raises(QueriesPending) as pending:
         train(load_config("fasthighway-dospcot", overrides), tmp_path, show_progress=False)
     rows = list(csv.DictReader(pending.value.path.open()))

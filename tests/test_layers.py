@@ -13,8 +13,12 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).parents[1]
-FOLDERS = {"dospcot": ROOT / "dospcot", "dospcot.envs": ROOT / "envs", "dospcot.policies": ROOT / "policies",
-           "dospcot.lab": ROOT / "lab"}  # fmt: skip
+FOLDERS = {
+    "dospcot": ROOT / "dospcot",
+    "dospcot.envs": ROOT / "envs",
+    "dospcot.policies": ROOT / "policies",
+    "dospcot.lab": ROOT / "lab",
+}
 """Where each installed package's files lie (pyproject.toml's package-dir)."""
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("dospcot.config", "dospcot"),
@@ -74,8 +78,12 @@ def imports_of(name: str) -> set[str]:
 
 
 def layer_of(name: str) -> int:
-    matches = [(len(prefix), rank) for rank, layer in enumerate(LAYERS) for prefix in layer
-               if name == prefix or name.startswith(prefix + ".")]  # fmt: skip
+    matches = [
+        (len(prefix), rank)
+        for rank, layer in enumerate(LAYERS)
+        for prefix in layer
+        if name == prefix or name.startswith(prefix + ".")
+    ]
     assert matches, f"{name} belongs to no layer: add it to LAYERS and docs/design.md"
     return max(matches)[1]
 
@@ -139,8 +147,9 @@ def test_every_import_runs_down_the_layers():
     assert upward == []
 
 
-@pytest.mark.parametrize("preset", ["grid16-dospcot", "minigrid-lavagap-dospcot", "fasthighway-dospcot",
-                                    "paper-text", "tiny"])  # fmt: skip
+@pytest.mark.parametrize(
+    "preset", ["grid16-dospcot", "minigrid-lavagap-dospcot", "fasthighway-dospcot", "paper-text", "tiny"]
+)
 def test_reading_a_config_imports_no_training_stack(preset):
     script = (
         "import json, sys\n"

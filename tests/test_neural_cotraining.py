@@ -268,9 +268,16 @@ def test_round_stats_name_the_worst_class_the_mean_accuracy_hides():
     given = np.array([0, 0, 1, 1, 0, 0, -1])
     weight = (given >= 0).astype(float)
     result = RunRound(
-        pseudo_class=given, pseudo_weight=weight, view_weight=weight[None], view_class=given[None],
-        threshold=np.zeros((1, 2)), classifier_loss=np.zeros(1), pace=6 / 7, changed=0.0, stopped=False,
-    )  # fmt: skip
+        pseudo_class=given,
+        pseudo_weight=weight,
+        view_weight=weight[None],
+        view_class=given[None],
+        threshold=np.zeros((1, 2)),
+        classifier_loss=np.zeros(1),
+        pace=6 / 7,
+        changed=0.0,
+        stopped=False,
+    )
     unlabelled = np.ones(7, dtype=bool)
     stats = round_stats(result, unlabelled, true_class)
     assert stats["pseudo_accuracy"] == pytest.approx(4 / 6)

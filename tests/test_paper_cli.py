@@ -100,18 +100,20 @@ def test_report_of_a_paper_sweep_gives_the_hand_computed_figures(tmp_path):
     for seed in (0, 1, 2):
         with (tmp_path / "sweep" / "trials" / "paper-text" / f"seed={seed}" / "metrics.csv").open() as f:
             rows = [
-                r for r in csv.DictReader(f)
+                r
+                for r in csv.DictReader(f)
                 if (r["method"], r["agents"], r["gamma"], r["round"])
                 == ("cotrain", "esarsa-esarsa", "0.3", "5")
-            ]  # fmt: skip
+            ]
         assert len(rows) == 2
         per_seed.append(np.mean([float(r["agreement"]) for r in rows]))
     with (tmp_path / "sweep" / "report.csv").open() as f:
         cell = next(
-            r for r in csv.DictReader(f)
+            r
+            for r in csv.DictReader(f)
             if (r["table"], r["agents"], r["method"], r["gamma"], r["metric"])
             == ("3", "ESARSA-ESARSA", "DOSPCoT", "0.3", "agreement")
-        )  # fmt: skip
+        )
     assert float(cell["mean"]) == pytest.approx(np.mean(per_seed)) and cell["n"] == "3"
     assert cell["paper"] == "" and cell["config"] == "paper-text"
     text = paths[0].read_text()

@@ -53,9 +53,13 @@ def test_margins_are_the_views_mean_gap_between_their_two_likeliest_classes():
 
 def test_uncertainty_queries_the_smallest_margins_first():
     ids, drawn = choose_queries(
-        "uncertainty", np.ones(4, bool), 2, np.random.default_rng(0), random_share=0.0,
+        "uncertainty",
+        np.ones(4, bool),
+        2,
+        np.random.default_rng(0),
+        random_share=0.0,
         probabilities=PROBABILITIES,
-    )  # fmt: skip
+    )
     assert ids.tolist() == [3, 1] and not drawn.any()
 
 
@@ -65,9 +69,13 @@ def test_disagreement_queries_the_most_confident_disagreements_then_the_uncertai
     assert disagreement_order(PROBABILITIES).tolist() == [2, 1, 3, 0]
     candidates = np.array([True, True, False, True])  # sample 2 is labelled already
     ids, _ = choose_queries(
-        "disagreement", candidates, 2, np.random.default_rng(0), random_share=0.0,
+        "disagreement",
+        candidates,
+        2,
+        np.random.default_rng(0),
+        random_share=0.0,
         probabilities=PROBABILITIES,
-    )  # fmt: skip
+    )
     assert ids.tolist() == [1, 3]
 
 
@@ -89,9 +97,13 @@ def test_outcomes_cover_every_kind_of_step_before_the_rest():
 def test_a_random_share_of_every_active_strategys_queries_is_drawn_at_random():
     candidates = np.ones(4, bool)
     ids, drawn = choose_queries(
-        "uncertainty", candidates, 4, np.random.default_rng(0), random_share=0.25,
+        "uncertainty",
+        candidates,
+        4,
+        np.random.default_rng(0),
+        random_share=0.25,
         probabilities=PROBABILITIES,
-    )  # fmt: skip
+    )
     assert ids[:3].tolist() == [3, 1, 0] and ids[3] == 2 and drawn.tolist() == [False, False, False, True]
     # Before any classifier was fit, a classifier strategy chooses at random, as "random" always does.
     for strategy, probabilities in (("disagreement", None), ("random", PROBABILITIES)):
@@ -201,9 +213,14 @@ def _tiny_grid() -> GridWorld:
 
 @pytest.mark.parametrize(
     ("strategy", "agents"),
-    [("random", "dqn"), ("outcomes", "dqn"), ("uncertainty", "esarsa_dqn"), ("disagreement", "dqn"),
-     ("disagreement", "tabular")],
-)  # fmt: skip
+    [
+        ("random", "dqn"),
+        ("outcomes", "dqn"),
+        ("uncertainty", "esarsa_dqn"),
+        ("disagreement", "dqn"),
+        ("disagreement", "tabular"),
+    ],
+)
 def test_leakage_permuting_the_hidden_rewards_of_keys_never_queried_changes_nothing(strategy, agents):
     plain = _grid_run(strategy, f'agent="{agents}"')
     plain.run()

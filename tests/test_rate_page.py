@@ -30,9 +30,15 @@ from dospcot.rating.server import RoundAnswers, make_app  # noqa: E402
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
-    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
-    "--disable-background-networking", "--disable-component-update", "--disable-sync",
-]  # fmt: skip
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-quic",
+    "--no-first-run",
+    "--disable-background-networking",
+    "--disable-component-update",
+    "--disable-sync",
+]
 TOKEN = "t0ken-for-tests"
 ROUND_2 = [
     {"sample": 5, "key": "state 1, action 0 (up)", "reward": "", "frame": "round_2/5_frame.png"},
@@ -130,10 +136,14 @@ def test_only_files_under_the_queries_folder_are_served(tmp_path):
     with _serve(run_dir / "queries" / "round_2.csv") as url:
         assert _request(url + "/files/round_2/5_frame.png") == (200, PNG)
         for path in (
-            "/files/../config.toml", "/files/%2e%2e/config.toml", "/files/round_2/..%2f..%2fconfig.toml",
-            "/files//etc/passwd", "/files/%2fetc%2fpasswd", "/files/round_2/link.png",
+            "/files/../config.toml",
+            "/files/%2e%2e/config.toml",
+            "/files/round_2/..%2f..%2fconfig.toml",
+            "/files//etc/passwd",
+            "/files/%2fetc%2fpasswd",
+            "/files/round_2/link.png",
             "/files/round_2/none.png",
-        ):  # fmt: skip
+        ):
             status, body = _request(url + path)
             assert status == 404, path
             assert (
@@ -401,12 +411,17 @@ def _answered_in_chromium(
 
 
 TINY_SETS = [
-    "training.steps_per_round=150", "training.label_fraction=0.2", 'training.label_strategy="disagreement"',
-]  # fmt: skip
-MINIGRID_SETS = [
-    "training.rounds=2", "training.steps_per_round=200", "dqn.learning_starts=50", "gym.eval_episodes=1",
+    "training.steps_per_round=150",
+    "training.label_fraction=0.2",
     'training.label_strategy="disagreement"',
-]  # fmt: skip
+]
+MINIGRID_SETS = [
+    "training.rounds=2",
+    "training.steps_per_round=200",
+    "dqn.learning_starts=50",
+    "gym.eval_episodes=1",
+    'training.label_strategy="disagreement"',
+]
 
 
 def test_a_tiny_run_answered_in_chromium_equals_the_simulated_run(tmp_path):

@@ -161,16 +161,28 @@ def test_the_file_names_views_explains_actions_and_lists_the_rewards_seen(tmp_pa
     (rater.folder / "round_1.csv").write_text("sample,reward\n1,0\n2,0.955\n")
     (tmp_path / "run" / "reward_classes.json").write_text(json.dumps({"rewards": [0.0, 0.955]}))
     described = {
-        "key": "state #ab12, action 2", "frame": b"\x89PNG", "view0_class": 1, "view0_confidence": 0.93,
-        "view1_class": 0, "view1_confidence": 0.61,
-    }  # fmt: skip
+        "key": "state #ab12, action 2",
+        "frame": b"\x89PNG",
+        "view0_class": 1,
+        "view0_confidence": 0.93,
+        "view1_class": 0,
+        "view1_confidence": 0.61,
+    }
     with pytest.raises(QueriesPending):
         rater.answer(2, np.array([7]), [described])
     fields, rows, _ = read_rows(rater.path(2))
     assert fields == [
-        "sample", "key", "reward", "confirm_new", "rewards_seen", "frame", "image_predicts",
-        "image_confidence", "ego_predicts", "ego_confidence",
-    ]  # fmt: skip
+        "sample",
+        "key",
+        "reward",
+        "confirm_new",
+        "rewards_seen",
+        "frame",
+        "image_predicts",
+        "image_confidence",
+        "ego_predicts",
+        "ego_confidence",
+    ]
     ((_, row),) = rows
     assert row["key"] == "state #ab12, action 2 (forward)" and row["rewards_seen"] == "0, 0.955"
     assert (row["image_predicts"], row["ego_predicts"], row["ego_confidence"]) == ("0.955", "0", "0.61")

@@ -80,9 +80,14 @@ def test_the_quickstart_loads_an_agent_with_plain_stable_baselines3(quickstart):
 def test_the_quickstart_opens_tensorboard_on_the_runs(quickstart):
     _, code = _block(TENSORBOARD)
     server = subprocess.Popen(
-        ["bash", "-c", code], cwd=quickstart, env=ENV, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-        text=True, start_new_session=True,
-    )  # fmt: skip
+        ["bash", "-c", code],
+        cwd=quickstart,
+        env=ENV,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
     lines = []
     try:
         deadline = time.monotonic() + 120

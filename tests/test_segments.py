@@ -290,9 +290,16 @@ def _segment_decoding(monkeypatch, *argv: str) -> None:
 def test_the_decoding_diagnostic_counts_every_step_the_agents_read_and_refuses_per_step_labels(
     monkeypatch, capsys
 ):
-    small = ["env.size=6", "env.max_episode_steps=24", "training.rounds=1", "training.steps_per_round=400",
-             "training.learn_from_round=1", "dqn.learning_starts=100", "training.segment_length=4",
-             "training.label_fraction=0.2"]  # fmt: skip
+    small = [
+        "env.size=6",
+        "env.max_episode_steps=24",
+        "training.rounds=1",
+        "training.steps_per_round=400",
+        "training.learn_from_round=1",
+        "dqn.learning_starts=100",
+        "training.segment_length=4",
+        "training.label_fraction=0.2",
+    ]
     _segment_decoding(monkeypatch, "grid16-dospcot", *(f"--set={s}" for s in small))
     out = capsys.readouterr().out
     read = int(re.search(r"(\d+) steps read by the agents", out)[1])

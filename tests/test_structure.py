@@ -90,11 +90,14 @@ def test_a_new_task_is_one_module_that_registers_itself():
 
     assert type(get_task("chain")) is toy_chain_task.ChainTask
     data = {
-        "task": "chain", "method": "oracle", "views": ["cell", "progress"], "agent": "tabular",
+        "task": "chain",
+        "method": "oracle",
+        "views": ["cell", "progress"],
+        "agent": "tabular",
         "env": {"size": 6, "max_episode_steps": 20},
         "training": {"rounds": 2, "steps_per_round": 400, "eps_end": 0.0},
         "tabular_agent": {"learning_rate": 0.5},
-    }  # fmt: skip
+    }
     cfg = config_from_table(data)
     with pytest.raises(ConfigError, match="views: the chain has no view 'coords'; allowed: cell, progress"):
         config_from_table({**data, "views": ["coords"]})

@@ -89,9 +89,14 @@ def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(tmp_pa
     ignored = _git("check-ignore", "--no-index", *map(str, files)).stdout.split()
     kept = [f for f in files if str(f) not in ignored]
     assert {f.name for f in kept} == {
-        "sweep.json", "trial.json", "config.toml", "run_info.json", "metrics.csv", "summary.json",
+        "sweep.json",
+        "trial.json",
+        "config.toml",
+        "run_info.json",
+        "metrics.csv",
+        "summary.json",
         "reward_classes.json",
-    }  # fmt: skip
+    }
     assert any(f.suffix == ".zip" for f in files) and any("tb" in f.parts for f in files)
     elsewhere = tmp_path / "elsewhere"
     for f in kept:
@@ -245,8 +250,12 @@ def test_report_on_synthetic_summaries_gives_hand_checked_figures(tmp_path):
             assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     _, runs = load_runs(sweep_dir)
     assert [(r.trial.params["training.label_fraction"], r.trial.seed) for r in runs][:5] == [
-        ("0.1", 0), ("0.1", 1), ("0.1", 2), ("0.1", 3), ("0.5", 0),
-    ]  # fmt: skip
+        ("0.1", 0),
+        ("0.1", 1),
+        ("0.1", 2),
+        ("0.1", 3),
+        ("0.5", 0),
+    ]
 
 
 def test_the_per_view_table_shows_which_views_agent_failed_where_the_mean_hides_it(tmp_path):

@@ -36,12 +36,20 @@ from dospcot.tasks import get_task, load_config
 from dospcot.tasks.adapters.grid import grid_world
 
 ISSUE_PRESETS = [
-    "grid16-dospcot", "grid16-oracle", "grid16-masked-zero", "grid16-labels-only", "grid16-self-training",
+    "grid16-dospcot",
+    "grid16-oracle",
+    "grid16-masked-zero",
+    "grid16-labels-only",
+    "grid16-self-training",
     "grid32-dospcot",
-]  # fmt: skip
+]
 RUN_FILES = [
-    "config.toml", "metrics.csv", "summary.json", "learning_curves.png", "run_info.json",
-]  # fmt: skip
+    "config.toml",
+    "metrics.csv",
+    "summary.json",
+    "learning_curves.png",
+    "run_info.json",
+]
 
 
 def _train(tmp_path: Path, *overrides: str) -> Path:
@@ -67,8 +75,11 @@ def test_grid32_presets_are_the_grid16_ones_on_a_32_map(method):
     assert large.training.steps_per_round == 2 * small.training.steps_per_round
     assert (small.env.ray_encoding, large.env.ray_encoding) == ("inverse", "inverse")
     assert (large.method, large.views, large.dqn, large.cotraining) == (
-        small.method, small.views, small.dqn, small.cotraining,
-    )  # fmt: skip
+        small.method,
+        small.views,
+        small.dqn,
+        small.cotraining,
+    )
 
 
 def test_set_overrides_are_typed_and_extends_merges(tmp_path):

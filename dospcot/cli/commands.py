@@ -106,9 +106,14 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
         spec = replace(spec, seeds=tuple(seeds))
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
     result = run_sweep(
-        sweep_dir, spec, backend=args.backend, workers=args.workers, ray_address=args.ray_address,
-        show_progress=not args.no_progress, batch_seeds=args.batch_seeds,
-    )  # fmt: skip
+        sweep_dir,
+        spec,
+        backend=args.backend,
+        workers=args.workers,
+        ray_address=args.ray_address,
+        show_progress=not args.no_progress,
+        batch_seeds=args.batch_seeds,
+    )
     print(
         f"{sweep_dir}: {len(result.trials)} trials; {len(result.skipped)} already finished, "
         f"{len(result.ran) - len(result.failed)} run now, {len(result.failed)} failed "

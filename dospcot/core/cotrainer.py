@@ -118,10 +118,16 @@ class RoundResult:
     def of_run(self, b: int) -> RunRound:
         """Run ``b``'s part of the round."""
         return RunRound(
-            self.pseudo_class[b], self.pseudo_weight[b], self.view_weight[:, b], self.view_class[:, b],
-            self.threshold[:, b], self.classifier_loss[:, b], float(self.pace[b]), float(self.changed[b]),
+            self.pseudo_class[b],
+            self.pseudo_weight[b],
+            self.view_weight[:, b],
+            self.view_class[:, b],
+            self.threshold[:, b],
+            self.classifier_loss[:, b],
+            float(self.pace[b]),
+            float(self.changed[b]),
             bool(self.stopped[b]),
-        )  # fmt: skip
+        )
 
 
 @dataclass(frozen=True)

@@ -142,9 +142,12 @@ def make_agent(
     env = FiniteCheckWrapper(env, f"{type(env.unwrapped).__name__} (agent {k}, view {view})")
     training = cfg.training
     common = dict(
-        target=AGENT_TARGETS[kind], seed=agent_seed(cfg.seed, k), exploration_initial_eps=training.eps_start,
-        exploration_final_eps=training.eps_end, replay_buffer_kwargs=buffer_kwargs,
-    )  # fmt: skip
+        target=AGENT_TARGETS[kind],
+        seed=agent_seed(cfg.seed, k),
+        exploration_initial_eps=training.eps_start,
+        exploration_final_eps=training.eps_end,
+        replay_buffer_kwargs=buffer_kwargs,
+    )
     if kind == "tabular":
         if observations is None:
             raise ValueError(
@@ -159,9 +162,13 @@ def make_agent(
         kwargs = {**cfg.dqn.sb3_kwargs(), "buffer_size": cfg.buffer_size}
         demos = cfg.demonstrations
         agent = ExpectedSarsaDQN(
-            "MlpPolicy", env, **common, **kwargs,
-            demo_margin=demos.margin, demo_loss_weight=demos.margin_loss_weight,
-        )  # fmt: skip
+            "MlpPolicy",
+            env,
+            **common,
+            **kwargs,
+            demo_margin=demos.margin,
+            demo_loss_weight=demos.margin_loss_weight,
+        )
     agent.learning_starts = max(agent.learning_starts, training.collect_only_steps)
     agent.set_pace(0.0)
     return agent
@@ -185,9 +192,12 @@ class CoTrainingRun:
         if training.queries:
             rater = rater or SimulatedRater(task.hidden_reward)
             self.queries = RewardQueries(
-                training.label_strategy, training.label_fraction, training.query_random_share,
-                training.query_recent_rounds, rater,
-            )  # fmt: skip
+                training.label_strategy,
+                training.label_fraction,
+                training.query_random_share,
+                training.query_recent_rounds,
+                rater,
+            )
         self.collected = False
         """Whether this round's collection is done, its queries not yet answered (a run stopped for a
         person's answers resumes there)."""

@@ -229,9 +229,15 @@ class RewardQueries:
         terminated, truncated = task.episode_ends()
         probs = probabilities() if self.strategy in CLASSIFIER_STRATEGIES else None
         ids, drawn = choose_queries(
-            self.strategy, candidates, n, rng, random_share=self.random_share, probabilities=probs,
-            terminated=terminated, truncated=truncated,
-        )  # fmt: skip
+            self.strategy,
+            candidates,
+            n,
+            rng,
+            random_share=self.random_share,
+            probabilities=probs,
+            terminated=terminated,
+            truncated=truncated,
+        )
         described = [task.describe(int(i)) for i in ids]
         if probs is not None:
             for row, i in zip(described, ids, strict=True):

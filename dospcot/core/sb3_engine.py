@@ -19,11 +19,17 @@ from stable_baselines3.common.type_aliases import ReplayBufferSamples
 
 PRIVATE_ATTRIBUTES: dict[str, tuple[str, ...]] = {
     "DQN": (
-        "_setup_learn", "_last_obs", "_update_info_buffer", "_store_transition", "_n_calls",
-        "_episode_num", "_current_progress_remaining", "_n_updates",
+        "_setup_learn",
+        "_last_obs",
+        "_update_info_buffer",
+        "_store_transition",
+        "_n_calls",
+        "_episode_num",
+        "_current_progress_remaining",
+        "_n_updates",
     ),
     "ReplayBuffer": ("_get_samples",),
-}  # fmt: skip
+}
 """What this module reads or writes of SB3's, by class."""
 
 LOG_INTERVAL = 4

@@ -120,9 +120,13 @@ def _train_in(
     run, rounds = session.run, cfg.training.rounds
     per_round = cfg.training.steps_per_round * len(run.agents)
     bar = tqdm(
-        total=rounds * per_round, initial=run.round * per_round, unit="step",
-        desc=f"{cfg.name} round {run.round + 1}/{rounds}", disable=not show_progress, dynamic_ncols=True,
-    )  # fmt: skip
+        total=rounds * per_round,
+        initial=run.round * per_round,
+        unit="step",
+        desc=f"{cfg.name} round {run.round + 1}/{rounds}",
+        disable=not show_progress,
+        dynamic_ncols=True,
+    )
 
     def after_round(run: CoTrainingRun, rows: list[dict]) -> None:
         session.after_round(rows)
@@ -155,9 +159,12 @@ def evaluate_cotraining_run(run_dir: Path, cfg: TrainConfig) -> dict[str, Any]:
     per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
     finished = (run_dir / SUMMARY_FILE).is_file()
     result = {
-        "round": _rounds_done(run_dir), "rounds": cfg.training.rounds, "finished": finished,
-        "per_view": per_view, "mean": {key: float(np.mean(value)) for key, value in policy.items()},
-    }  # fmt: skip
+        "round": _rounds_done(run_dir),
+        "rounds": cfg.training.rounds,
+        "finished": finished,
+        "per_view": per_view,
+        "mean": {key: float(np.mean(value)) for key, value in policy.items()},
+    }
     if finished:
         write_json(run_dir / EVALUATION_FILE, result)
     return result

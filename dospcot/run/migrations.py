@@ -27,8 +27,11 @@ def upgrade_run_state(state: dict[str, Any]) -> dict[str, Any]:
     """A run's checkpoint state (:meth:`dospcot.run.run_session.RunSession.checkpoint_state`) with every
     field of :data:`CHECKPOINT_FIELDS_ADDED` present."""
     upgraded = {
-        "cpu_s": math.nan, "commits": [None] * state["sessions"], "config_sha256": None, "extra": {},
+        "cpu_s": math.nan,
+        "commits": [None] * state["sessions"],
+        "config_sha256": None,
+        "extra": {},
         **state,
-    }  # fmt: skip
+    }
     upgraded["run"] = {"segment_classes": None, "collected": False, **state["run"]}
     return upgraded

@@ -167,9 +167,13 @@ class PaperProtocolRunner:
     def train_at(run_dir: Path, cfg: PaperConfig, *, show_progress: bool, command: str) -> Path:
         """Train one seed's 26 runs in ``run_dir`` (a progress bar in episodes)."""
         with tqdm(
-            total=episodes_per_seed(cfg), unit="ep", desc=f"{cfg.name} seed {cfg.seed}",
-            disable=not show_progress, mininterval=1.0, dynamic_ncols=True,
-        ) as bar:  # fmt: skip
+            total=episodes_per_seed(cfg),
+            unit="ep",
+            desc=f"{cfg.name} seed {cfg.seed}",
+            disable=not show_progress,
+            mininterval=1.0,
+            dynamic_ncols=True,
+        ) as bar:
             try:
                 train_protocol_at(cfg, {cfg.seed: run_dir}, commands={cfg.seed: command}, progress=bar.update)
             except KeyboardInterrupt:  # a seed keeps no checkpoint: it trains again from the start
@@ -200,9 +204,11 @@ class PaperProtocolRunner:
         """Train every seed of ``run_dirs`` in one batch; ``progress`` gets the share of one seed done."""
         episodes = episodes_per_seed(cfg)
         train_protocol_at(
-            cfg, run_dirs, commands=commands,
+            cfg,
+            run_dirs,
+            commands=commands,
             progress=None if progress is None else lambda done: progress(done / episodes),
-        )  # fmt: skip
+        )
 
     @staticmethod
     def result_line(run_dir: Path, summary: dict[str, Any]) -> str:

@@ -71,9 +71,15 @@ def gym_config(
         for view, spec in views.items()
     }
     data: dict[str, Any] = {
-        "name": name, "seed": seed, "method": method, "agent": agent, "task": "gym", "views": list(specs),
-        "gym": {"env_id": env_id, "views": specs}, "training": {"label_fraction": label_fraction},
-    }  # fmt: skip
+        "name": name,
+        "seed": seed,
+        "method": method,
+        "agent": agent,
+        "task": "gym",
+        "views": list(specs),
+        "gym": {"env_id": env_id, "views": specs},
+        "training": {"label_fraction": label_fraction},
+    }
     if state_key is not None:
         data["gym"]["state_key"] = (
             state_key if isinstance(state_key, str) else dotted_path(state_key, "state_key")

@@ -159,13 +159,19 @@ def write_run_info(run_dir: Path, command: str, wall_time_s: float, **extra: Any
     out of ``summary.json`` so that a resumed run's summary equals the uninterrupted run's."""
     write_json(
         run_dir / "run_info.json",
-        {"command": command, "wall_time_s": round(wall_time_s, 2), **extra,
-         "dospcot": dospcot.__version__,
-         "commit": source_commit(), "cpu": cpu_description(),
-         "torch": torch.__version__, "stable_baselines3": stable_baselines3.__version__,
-         "python": platform.python_version(),
-         "machine": f"{platform.machine()} {platform.system()}, {torch.get_num_threads()} torch threads"},
-    )  # fmt: skip
+        {
+            "command": command,
+            "wall_time_s": round(wall_time_s, 2),
+            **extra,
+            "dospcot": dospcot.__version__,
+            "commit": source_commit(),
+            "cpu": cpu_description(),
+            "torch": torch.__version__,
+            "stable_baselines3": stable_baselines3.__version__,
+            "python": platform.python_version(),
+            "machine": f"{platform.machine()} {platform.system()}, {torch.get_num_threads()} torch threads",
+        },
+    )
 
 
 def new_run_dir(root: Path, name: str, config: dict[str, Any] | None = None) -> Path:

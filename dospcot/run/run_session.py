@@ -38,19 +38,39 @@ from dospcot.run.run_folder import (
 from dospcot.tasks import get_task
 
 ROUND_SCALARS = (
-    "pace", "eps", "lambda", "coverage", "view_coverage", "pseudo_accuracy", "view_pseudo_accuracy",
-    "worst_class_recall", "worst_class_precision", "classifier_loss", "greedy_return", "success",
-    "normalised_score", "agreement", "labelled_steps",
-)  # fmt: skip
+    "pace",
+    "eps",
+    "lambda",
+    "coverage",
+    "view_coverage",
+    "pseudo_accuracy",
+    "view_pseudo_accuracy",
+    "worst_class_recall",
+    "worst_class_precision",
+    "classifier_loss",
+    "greedy_return",
+    "success",
+    "normalised_score",
+    "agreement",
+    "labelled_steps",
+)
 """The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
 QUERIES_FOLDER = "queries"
 """Where a file rater writes each round's queries, ``round_<r>.csv``, for a person to answer."""
 SEGMENT_SCALARS = ("step_reward_error",)
 """The further per-round scalars of a run on segment labels."""
 SUMMARY_METRICS = (
-    "normalised_score", "agreement", "greedy_return", "success", "pseudo_accuracy",
-    "worst_class_recall", "worst_class_precision", "coverage", "labelled_steps", "step_reward_error",
-)  # fmt: skip
+    "normalised_score",
+    "agreement",
+    "greedy_return",
+    "success",
+    "pseudo_accuracy",
+    "worst_class_recall",
+    "worst_class_precision",
+    "coverage",
+    "labelled_steps",
+    "step_reward_error",
+)
 
 
 def new_run(cfg: TrainConfig, rater: Rater | None = None) -> CoTrainingRun:

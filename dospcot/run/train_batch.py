@@ -169,9 +169,13 @@ def _train_batch(
     per_round = cfg.training.steps_per_round * len(cfg.views) * len(cfgs)
     rounds = cfg.training.rounds
     bar = tqdm(
-        total=rounds * per_round, initial=first.round * per_round, unit="member-step",
-        desc=f"{cfg.name} x {len(cfgs)} seeds", disable=not show_progress, dynamic_ncols=True,
-    )  # fmt: skip
+        total=rounds * per_round,
+        initial=first.round * per_round,
+        unit="member-step",
+        desc=f"{cfg.name} x {len(cfgs)} seeds",
+        disable=not show_progress,
+        dynamic_ncols=True,
+    )
 
     def after_round(rows: list[list[dict]]) -> None:
         for member, (session, member_rows) in enumerate(zip(sessions, rows, strict=True)):

@@ -62,9 +62,13 @@ class GymTask(SensorTask):
 
         gym = cfg.gym
         make_eval_env = partial(
-            make_masked_gym, gym.env_id, view_specs=gym.views, env_kwargs=gym.env_kwargs,
-            wrappers=gym.wrappers, state_key=gym.state_key,
-        )  # fmt: skip
+            make_masked_gym,
+            gym.env_id,
+            view_specs=gym.views,
+            env_kwargs=gym.env_kwargs,
+            wrappers=gym.wrappers,
+            state_key=gym.state_key,
+        )
         queried, frames = cfg.training.queries, cfg.training.rater == "file"
         make_env = partial(make_eval_env, train_wrappers=gym.train_wrappers, queried=queried, frames=frames)
         return SensorAdapter(cfg, gym, make_env, make_eval_env)

@@ -57,9 +57,12 @@ class HighwayTask(SensorTask):
 
         highway = cfg.highway
         make_eval_env = partial(
-            make_masked_highway, highway.env_id, config=highway.config,
-            reveal_first_steps=highway.reveal_first_steps, queried=cfg.training.queries,
-        )  # fmt: skip
+            make_masked_highway,
+            highway.env_id,
+            config=highway.config,
+            reveal_first_steps=highway.reveal_first_steps,
+            queried=cfg.training.queries,
+        )
         # A file rater's queries show frames: the training envs draw them, the evaluation envs need not.
         make_env = partial(make_eval_env, frames=cfg.training.rater == "file")
         return SensorAdapter(cfg, highway, make_env, make_eval_env)

@@ -217,9 +217,12 @@ def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") ->
                 spec = sweep_spec(sweep, args.seeds, args.overrides)
                 sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
                 failed = run_sweep(
-                    sweep_dir, spec, backend=args.backend, workers=args.workers,
+                    sweep_dir,
+                    spec,
+                    backend=args.backend,
+                    workers=args.workers,
                     batch_seeds=sweep.batch_seeds or args.batch_seeds,
-                ).failed  # fmt: skip
+                ).failed
                 if failed:
                     sys.exit(f"{len(failed)} trials failed: {', '.join(failed)}")
     except SweepError as err:

@@ -21,9 +21,11 @@ from dospcot.run.run_folder import REWARD_CLASSES_FILE
 from dospcot.tasks import load_run_config
 
 MINIGRID_COLUMNS = dict(
-    success="success", greedy_return="greedy return", pseudo_accuracy="pseudo-reward accuracy",
+    success="success",
+    greedy_return="greedy return",
+    pseudo_accuracy="pseudo-reward accuracy",
     worst_class_precision="worst-class precision",
-)  # fmt: skip
+)
 
 
 def minigrid_tables(runs: list[TrialRun]) -> list[str]:

@@ -28,9 +28,13 @@ SECOND_VIEW_SETTINGS: dict[str, dict[str, str]] = {
 SMALLEST_EFFECT = {"pseudo_accuracy": 0.01, "success": 0.1}
 """The smallest paired difference that counts (H1), by metric."""
 SECOND_VIEW_COLUMNS = (
-    "success", "pseudo_accuracy", "agreement",
-    "worst_class_precision", "worst_class_recall", "normalised_score",
-)  # fmt: skip
+    "success",
+    "pseudo_accuracy",
+    "agreement",
+    "worst_class_precision",
+    "worst_class_recall",
+    "normalised_score",
+)
 """The primary metrics, then the secondary ones the pre-registration names (its amendment of 2026-11-26
 says why the worst class's precision and recall stand for the lava class's)."""
 HIGHWAY_SECOND_VIEW_COLUMNS = ("greedy_return", "success", "pseudo_accuracy", "normalised_score")
@@ -109,10 +113,12 @@ def second_view_tables(runs: list[TrialRun], columns: tuple[str, ...] = SECOND_V
     lines = []
     for setting, agent, methods, hypothesis in _cells(runs, columns):
         lines += [
-            "", f"**{setting}, {AGENT_WORDS[agent]} agents**", "",
+            "",
+            f"**{setting}, {AGENT_WORDS[agent]} agents**",
+            "",
             "| method | " + " | ".join(titles[c] for c in columns) + " |",
             "|---|" + "---|" * len(columns),
-        ]  # fmt: skip
+        ]
         for method in sorted(methods, key=lambda m: (SECOND_VIEW_ORDER.index(m.split(" (")[0]), m)):
             cells = [over_seeds(list(methods[method].values()), c) for c in columns]
             lines.append(f"| {SECOND_VIEW_WORDS.get(method, method)} | " + " | ".join(cells) + " |")

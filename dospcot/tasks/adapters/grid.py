@@ -266,9 +266,13 @@ def grid_world(cfg: TrainConfig) -> tuple[Callable[[], GridWorld], dict[str, Vie
     env = cfg.env
     layout = GridLayout.random(env.size, env.layout_seed, env.lava_density, env.wall_density)
     make_env = partial(
-        GridWorld, layout, step_cost=env.step_cost, lava_penalty=env.lava_penalty,
-        goal_reward=env.goal_reward, exploring_starts=env.exploring_starts,
-    )  # fmt: skip
+        GridWorld,
+        layout,
+        step_cost=env.step_cost,
+        lava_penalty=env.lava_penalty,
+        goal_reward=env.goal_reward,
+        exploring_starts=env.exploring_starts,
+    )
     blind = (
         view_blind_spots(layout, env.blind_spot_rate, cfg.seed, identical=env.blind_spots == "identical")
         if env.blind_spot_rate > 0

@@ -28,9 +28,15 @@ class StepStore(InPlaceState):
     """
 
     STEP_ARRAYS = (
-        "state_row", "next_row", "action", "labelled", "terminal", "truncated", "label_value",
+        "state_row",
+        "next_row",
+        "action",
+        "labelled",
+        "terminal",
+        "truncated",
+        "label_value",
         "hidden_reward",
-    )  # fmt: skip
+    )
     """The arrays that hold one entry per step."""
 
     def __init__(
@@ -205,9 +211,15 @@ class SensorStoreWrapper(gym.Wrapper):
         next_row = self._add_row(views) if new else -1
         info = dict(info)
         info["store_id"] = self.store.add(
-            self._row if new else -1, action, next_row, info["reward_observed"], float(reward),
-            info["hidden_reward"], key=info.get("state_key"), ends=(terminated, truncated),
-        )  # fmt: skip
+            self._row if new else -1,
+            action,
+            next_row,
+            info["reward_observed"],
+            float(reward),
+            info["hidden_reward"],
+            key=info.get("state_key"),
+            ends=(terminated, truncated),
+        )
         self._views, self._row = views, next_row
         return obs, reward, terminated, truncated, info
 
