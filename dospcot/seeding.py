@@ -23,7 +23,17 @@ EVAL_SEED = 1_000_003
 
 # The stream tags: the first word of each derivation's spawn key. Never renumber them: a run's
 # seeds, and so its results, depend on them.
-_AGENT, _ROUND_RESET, _CLASSIFIER, _LAYER, _DEMONSTRATIONS, _QUERIES, _BATCHED_DRAWS = range(7)
+(
+    _AGENT,
+    _ROUND_RESET,
+    _CLASSIFIER,
+    _LAYER,
+    _DEMONSTRATIONS,
+    _QUERIES,
+    _BATCHED_DRAWS,
+    _ENSEMBLE,
+    _BOOTSTRAP,
+) = range(9)
 
 
 def _derive(seed: int, stream: int, *index: int) -> int:
@@ -73,3 +83,15 @@ def batched_draws_seed(seed: int, k: int) -> int:
     minibatches from when the run is a member of a batch (:mod:`dospcot.core.batched_runs`); a run of
     its own draws them from numpy's global generator, which SB3 seeds."""
     return _derive(seed, _BATCHED_DRAWS, k)
+
+
+def ensemble_seed(seed: int, view: int, member: int) -> int:
+    """The initial parameters of member ``member`` of view ``view``'s ensemble of reward classifiers in
+    run ``seed`` (the reward-model peer, :mod:`dospcot.core.reward_model`)."""
+    return _derive(seed, _ENSEMBLE, view, member)
+
+
+def bootstrap_seed(seed: int, round_: int) -> int:
+    """The seed of the reward-model peer's bootstrap draws of the labels in round ``round_`` (1-based)
+    of run ``seed``."""
+    return _derive(seed, _BOOTSTRAP, round_)

@@ -9,17 +9,29 @@ Weighting = Literal["hard", "soft"]
 """Self-paced weights: 1 when admitted (SPaMCo's default), or a ramp over the threshold."""
 Quota = Literal["label-share", "candidates"]
 """How add_num splits over the reward classes (:mod:`dospcot.core.selection`)."""
-LabelStrategy = Literal["uniform", "random", "outcomes", "uncertainty", "disagreement"]
+LabelStrategy = Literal[
+    "uniform",
+    "random",
+    "outcomes",
+    "uncertainty",
+    "disagreement",
+    "outcomes+disagreement",
+    "outcomes+uncertainty",
+]
 """How labels are chosen: ``"uniform"`` is the paper's fixed random mask, the others query a rater
-(:mod:`dospcot.core.queries`)."""
+(:mod:`dospcot.core.queries`); ``"a+b"`` splits a round's chosen queries equally between a and b."""
+QuerySchedule = Literal["asap", "even", "decay"]
+"""How a label budget (``training.label_budget``) spreads over the rounds (:mod:`dospcot.core.queries`)."""
 ModelKind = Literal["mlp", "linear"]
 LossKind = Literal["cross_entropy", "hinge"]
 
 WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
 QUOTAS: tuple[str, ...] = get_args(Quota)
 LABEL_STRATEGIES: tuple[str, ...] = get_args(LabelStrategy)
+QUERY_SCHEDULES: tuple[str, ...] = get_args(QuerySchedule)
 CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")
-"""The strategies that read the views' reward classifiers to choose their queries."""
+"""The strategies that read the views' reward classifiers to choose their queries (a combination
+reads them when one of its parts does)."""
 NUMERICS_VERSIONS: tuple[int, ...] = (1, 2)
 """The numerics versions of the reward classifiers' fits (:data:`dospcot.core.cotrainer.NUMERICS`)."""
 MODEL_KINDS: tuple[str, ...] = get_args(ModelKind)

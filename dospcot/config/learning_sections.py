@@ -14,11 +14,13 @@ from dospcot.config.choices import (
     LOSS_KINDS,
     MODEL_KINDS,
     NUMERICS_VERSIONS,
+    QUERY_SCHEDULES,
     QUOTAS,
     WEIGHTINGS,
     LabelStrategy,
     LossKind,
     ModelKind,
+    QuerySchedule,
     Quota,
     Weighting,
 )
@@ -56,10 +58,28 @@ class TrainingConfig:
         rater effort in labelled steps (:mod:`dospcot.core.segments`).
     :param label_strategy: how labels are chosen (:mod:`dospcot.core.queries`): ``"uniform"``, a fixed
         random mask of share ``label_fraction`` (the paper's setting); or a rater with a budget who,
-        after each round's collection, labels at most ``ceil(label_fraction x samples met)`` in all,
-        chosen ``"random"``-ly, by ``"outcomes"`` (the kinds of episode end first), by
-        ``"uncertainty"`` (the views' classifiers' smallest margins) or by ``"disagreement"``
-        (co-testing: where the views' classifiers disagree; two or more views). Co-training only.
+        after each round's collection, labels the samples chosen ``"random"``-ly, by ``"outcomes"``
+        (the kinds of episode end first), by ``"uncertainty"`` (the views' classifiers' smallest
+        margins) or by ``"disagreement"`` (co-testing: where the views' classifiers disagree; two or
+        more views, or a reward model's ensemble); ``"outcomes+disagreement"`` and
+        ``"outcomes+uncertainty"`` split the chosen queries equally between their two parts.
+        Co-training and the reward-model peer only.
+    :param label_budget: the answers a run may buy over its whole length, whatever its number of
+        agents or views (an active ``label_strategy``); 0: at most ``ceil(label_fraction x samples
+        met)`` in all, as the uniform mask would reveal among them.
+    :param query_schedule: how ``label_budget`` spreads over the rounds: ``"asap"`` (all of it as soon
+        as there are candidates), ``"even"`` (an equal share a round) or ``"decay"`` (round r's share
+        in proportion to 1 / r). What a round could not spend carries forward.
+    :param first_round_share: the most of ``label_budget`` round 1 may spend, in (0, 1] (1: no cap);
+        what it holds back goes to the next rounds' schedule.
+    :param query_pool_factor: the guided queries of a round choose among at most this many times their
+        number of candidates, drawn at random (the recent samples first, ``query_recent_rounds``);
+        0: among every candidate.
+    :param query_class_floor: the share of a round's chosen queries split equally over the reward
+        classes the views' classifiers predict, each class's best candidates first, so a rare class
+        is asked about (0: none; needs fitted classifiers, so from round 2).
+    :param query_skip_confidence: a candidate every view predicts the same class for, each with at
+        least this probability, is not queried (1: none is skipped; from round 2).
     :param query_random_share: the share of each round's queries an active strategy draws at random.
     :param query_recent_rounds: prefer the samples first met in the latest this many rounds (0: all).
     :param rater: who answers the queries: ``"simulated"`` (the hidden reward) or ``"file"`` (a person:
@@ -77,6 +97,12 @@ class TrainingConfig:
     learn_from_round: int = 1
     segment_length: int = 1
     label_strategy: LabelStrategy = "uniform"
+    label_budget: int = 0
+    query_schedule: QuerySchedule = "asap"
+    first_round_share: float = 1.0
+    query_pool_factor: int = 0
+    query_class_floor: float = 0.0
+    query_skip_confidence: float = 1.0
     query_random_share: float = 0.2
     query_recent_rounds: int = 0
     rater: Literal["simulated", "file"] = "simulated"
@@ -95,10 +121,27 @@ class TrainingConfig:
                 f"learn_from_round must lie in [1, rounds = {self.rounds}], got {self.learn_from_round}"
             )
         check_label_fraction(self.label_fraction)
-        check_within(self, 0, 1, "eps_start", "eps_end", "query_random_share")
-        check_at_least(self, 0, "query_recent_rounds")
+        check_within(self, 0, 1, "eps_start", "eps_end", "query_random_share", "query_class_floor")
+        check_at_least(self, 0, "query_recent_rounds", "label_budget", "query_pool_factor")
         if self.rater == "file" and not self.queries:
             raise ValueError('rater = "file" answers queries: set label_strategy to an active strategy')
+        self._check_budget()
+
+    def _check_budget(self) -> None:
+        if self.query_schedule not in QUERY_SCHEDULES:
+            raise ValueError(f"query_schedule must be one of {QUERY_SCHEDULES}, got {self.query_schedule!r}")
+        for name in ("first_round_share", "query_skip_confidence"):
+            if not 0 < getattr(self, name) <= 1:
+                raise ValueError(f"{name} must lie in (0, 1], got {getattr(self, name)}")
+        if self.label_budget and not self.queries:
+            raise ValueError(
+                "label_budget counts a rater's answers: set label_strategy to an active strategy "
+                "(the uniform mask reveals the share label_fraction)"
+            )
+        if not self.label_budget and (self.query_schedule != "asap" or self.first_round_share < 1):
+            raise ValueError(
+                "query_schedule and first_round_share spread a budget counted in labels: set label_budget"
+            )
 
     @property
     def queries(self) -> bool:
@@ -311,6 +354,8 @@ class CoTrainingConfig:
         cheaper on large pools (docs/guide/profile.md), not yet confirmed to train the same agents
         over seeds. Every run names it in ``run_info.json``; a study compares the two only where its grid
         varies it (a config key, so the stale check keeps a sweep from mixing them).
+    :param ensemble_size: the reward-model peer's (``method = "reward-model"``) classifiers per view,
+        each from its own initial parameters and its own bootstrap of the labels.
     """
 
     consensus_weight: float = 0.3
@@ -323,6 +368,7 @@ class CoTrainingConfig:
     max_classes: int = 16
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
     numerics: int = 1
+    ensemble_size: int = 3
 
     renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
     """Keys of older configs and their names now."""
@@ -339,7 +385,7 @@ class CoTrainingConfig:
         if self.add_fraction_step < 0:
             raise ValueError(f"add_fraction_step must be >= 0, got {self.add_fraction_step}")
         check_within(self, 0, 1, "tol")
-        check_at_least(self, 1, "max_classes")
+        check_at_least(self, 1, "max_classes", "ensemble_size")
         if self.numerics not in NUMERICS_VERSIONS:
             raise ValueError(
                 f"numerics must be one of {', '.join(map(str, NUMERICS_VERSIONS))}, got {self.numerics}"

@@ -31,8 +31,9 @@ class TrainConfig:
 
     :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
     :param seed: seeds the mask, the agents and the classifiers.
-    :param method: ``oracle``, ``masked-zero``, ``labels-only`` or ``cotrain`` (DOSPCoT; one view is
-        self-training).
+    :param method: ``oracle``, ``masked-zero``, ``labels-only``, ``cotrain`` (DOSPCoT; one view is
+        self-training) or ``reward-model`` (the peer without co-training: an ensemble of reward
+        classifiers per view fitted on the labels alone rewards every unlabelled sample).
     :param views: one view per agent, from the task's views (the grid's ``coords``, ``patch``, ``rays``).
     :param agents: the agent kind of each view (``esarsa_dqn``, ``dqn`` or, on a grid, ``tabular``);
         empty: ``agent`` for every view.
@@ -45,7 +46,7 @@ class TrainConfig:
 
     name: str = "run"
     seed: int = 0
-    method: Literal["oracle", "masked-zero", "labels-only", "cotrain"] = "cotrain"
+    method: Literal["oracle", "masked-zero", "labels-only", "cotrain", "reward-model"] = "cotrain"
     views: tuple[str, ...] = ("coords", "patch")
     agents: tuple[str, ...] = ()
     agent: str = "esarsa_dqn"
@@ -87,7 +88,7 @@ class TrainConfig:
     def _check_segments(self) -> None:
         if self.training.segment_length == 1:
             return
-        if self.method != "cotrain":
+        if self.method != "cotrain":  # the reward-model peer too: its ensembles learn single rewards
             raise ConfigError(
                 f'training.segment_length: segment labels need co-training (method = "cotrain"; one '
                 f'view is self-training), got method = "{self.method}"'
@@ -102,12 +103,13 @@ class TrainConfig:
         strategy = self.training.label_strategy
         if not self.training.queries:
             return
-        if self.method != "cotrain":
+        if not self.learns_rewards:
             raise ConfigError(
                 f'training.label_strategy: "{strategy}" queries the rewards co-training needs (method = '
-                f'"cotrain"; one view is self-training), got method = "{self.method}"; use "uniform"'
+                f'"cotrain"; one view is self-training; or "reward-model"), got method = "{self.method}"; '
+                'use "uniform"'
             )
-        if strategy == "disagreement" and len(self.views) < 2:
+        if "disagreement" in strategy.split("+") and len(self.views) < 2 and self.method == "cotrain":
             raise ConfigError(
                 'training.label_strategy: "disagreement" asks where two views\' classifiers disagree, and '
                 f'the run has one view ({self.views[0]}); use "uncertainty" for one view'
@@ -117,6 +119,12 @@ class TrainConfig:
                 "training.label_strategy: queries reveal single rewards, segment labels none; "
                 f'set label_strategy = "uniform" with segment_length = {self.training.segment_length}'
             )
+
+    @property
+    def learns_rewards(self) -> bool:
+        """Whether the run fits reward classifiers that reward the unlabelled samples: co-training
+        (``cotrain``) or the reward-model peer (``reward-model``)."""
+        return self.method in ("cotrain", "reward-model")
 
     @property
     def agent_kinds(self) -> tuple[str, ...]:

@@ -40,7 +40,9 @@ target (``dqn``), or a Q-table over the view's observations (``tabular``,
 :class:`~dospcot.policies.TabularExpectedSarsa`); any mix works, since all three are SB3 ``DQN`` models.
 
 Baselines: ``oracle`` (every reward revealed), ``masked-zero`` (masked rewards read as 0 with weight
-1) and ``labels-only`` (masked steps weigh 0). The hidden reward reaches only the metrics.
+1) and ``labels-only`` (masked steps weigh 0); the peer ``reward-model`` takes the co-trainer's place
+in step 2 with ensembles fitted on the labels alone (:mod:`dospcot.core.reward_model`). The hidden
+reward reaches only the metrics.
 """
 
 from __future__ import annotations
@@ -60,7 +62,8 @@ from dospcot.core.cotrainer import RunCoTrainer, RunPool
 from dospcot.core.queries import QueriedTask, Rater, RewardQueries
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
-from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
+from dospcot.core.reward_model import RewardModelTrainer
+from dospcot.core.round_records import VIEW_STATS, class_rows, record_head, round_stats
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
@@ -117,10 +120,10 @@ class TaskAdapter(QueriedTask, Protocol):
 
 
 def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
-    """The relabelling replay buffer's arguments for a method: co-training reads the reward table,
-    masked-zero counts masked rewards as 0, the rest weigh masked steps 0."""
+    """The relabelling replay buffer's arguments for a method: co-training and the reward-model peer
+    read the reward table, masked-zero counts masked rewards as 0, the rest weigh masked steps 0."""
     return {
-        "reward_table": table if method == "cotrain" else None,
+        "reward_table": table if method in ("cotrain", "reward-model") else None,
         "masked_reward": "zero" if method == "masked-zero" else "ignore",
     }
 
@@ -191,13 +194,7 @@ class CoTrainingRun:
         """The reward queries of an active label strategy, or None (the uniform mask)."""
         if training.queries:
             rater = rater or SimulatedRater(task.hidden_reward)
-            self.queries = RewardQueries(
-                training.label_strategy,
-                training.label_fraction,
-                training.query_random_share,
-                training.query_recent_rounds,
-                rater,
-            )
+            self.queries = RewardQueries(training, rater)
         self.collected = False
         """Whether this round's collection is done, its queries not yet answered (a run stopped for a
         person's answers resumes there)."""
@@ -215,10 +212,15 @@ class CoTrainingRun:
         ]
         for k in range(len(self.agents)):
             self._give_demonstrations(k)
-        self.trainer: RunCoTrainer | None = None
+        self.trainer: RunCoTrainer | RewardModelTrainer | None = None
         if cfg.method == "cotrain":
             # A segment's input is the sum of its steps' (dospcot.core.segments.segment_pool).
             self.trainer = RunCoTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
+        elif cfg.method == "reward-model":
+            self.trainer = RewardModelTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
+        self.class_records: list[dict] = []
+        """Every round's pseudo-rewards per hidden reward class (metrics only; :func:`class_rows`), for a
+        run that learns rewards, on single-step labels."""
         self.round = 0
         self.stopped = False
         """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
@@ -331,7 +333,11 @@ class CoTrainingRun:
             bought = np.flatnonzero(self.queries.revealed)
             self.table.set(bought, self.store.label_value[bought], 1.0)
         self.stopped = result.stopped
-        stats = round_stats(result, pool.unlabelled, self.task.true_class())  # metrics only
+        true_class = self.task.true_class()  # metrics only
+        stats = round_stats(result, pool.unlabelled, true_class)
+        rewards = self.classes.decode(np.arange(self.task.n_classes))
+        labelled, unlabelled = pool.labelled, pool.unlabelled
+        self.class_records += class_rows(self.round, result, labelled, unlabelled, true_class, rewards)
         return {**stats, "labelled_steps": int(pool.labelled.sum())}
 
     def _cotrain_segments(self, steps: RunPool) -> dict:
@@ -401,6 +407,7 @@ class CoTrainingRun:
             "classes": self.classes,
             "trainer": self.trainer,
             "collected": self.collected,
+            "class_records": self.class_records,
             "queries": None
             if self.queries is None
             else (self.queries.revealed, self.queries.met_round, self.queries.log),
@@ -418,7 +425,7 @@ class CoTrainingRun:
             self.segment_classes = state["segment_classes"]
         self.table.load_state_dict(state["table"])
         self.task.classes, self.trainer = state["classes"], state["trainer"]
-        self.collected = state["collected"]
+        self.collected, self.class_records = state["collected"], state["class_records"]
         if self.queries is not None:
             self.queries.revealed, self.queries.met_round, self.queries.log = state["queries"]
         for k, agent in enumerate(self.agents):

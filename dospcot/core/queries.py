@@ -1,16 +1,21 @@
-"""Active reward queries: which samples a rater labels, round by round, under the uniform mask's budget
-(docs/queries.md).
+"""Active reward queries: which samples a rater labels, round by round, and how many (docs/queries.md).
 
 Under ``training.label_strategy = "uniform"`` (the default, the paper's setting) a fixed random mask
 reveals a share of the rewards whatever the agents do. Every other strategy reveals nothing up front:
-after each round's collection it buys labels for chosen samples, at most
-``ceil(label_fraction x samples met so far)`` revealed in all (keys on a keyed pool, steps otherwise),
-which is what the uniform mask reveals among the samples met, in expectation. A revealed sample stays
-revealed, for all its visits, past and future.
+after each round's collection it buys labels for chosen samples (keys on a keyed pool, steps
+otherwise). A revealed sample stays revealed, for all its visits, past and future.
 
-The choice reads what an agent may read (the samples met, their episode ends, the reward classifiers'
-outputs), never a hidden reward; the rater alone reads the hidden reward of the samples it is asked
-about (:mod:`dospcot.core.raters`).
+**How many.** With ``training.label_budget`` B > 0 the run may buy B answers over its whole length,
+whatever its number of agents or views, spread by ``training.query_schedule``
+(:func:`scheduled_labels`): ``"asap"`` spends it as soon as there are candidates, ``"even"`` B / R a
+round over R rounds, ``"decay"`` round r's share in proportion to 1 / r; ``training.first_round_share``
+caps round 1, and what a round could not spend carries forward. With B = 0 (the default) the budget
+is a share of the samples met: at most ``ceil(label_fraction x samples met so far)`` in all
+(:func:`query_budget`), what the uniform mask reveals among them, in expectation.
+
+**Which.** The choice reads what an agent may read (the samples met, their episode ends, the reward
+classifiers' outputs), never a hidden reward; the rater alone reads the hidden reward of the samples
+it is asked about (:mod:`dospcot.core.raters`).
 
 - ``"random"``: the budget spent at random over the samples met (the active strategies' direct control);
 - ``"outcomes"``: the queries first cover the kinds of step an agent sees without a reward: steps that
@@ -20,12 +25,19 @@ about (:mod:`dospcot.core.raters`).
   classifiers (uncertainty sampling; one view: self-training's partner);
 - ``"disagreement"`` (co-testing, Muslea et al.): samples whose views' classifiers predict different
   classes, the most confident disagreements first (the views' mean confidence in their own class),
-  then the rest by uncertainty; needs two or more views.
+  then the rest by uncertainty; needs two or more views, or the reward-model peer's ensemble, whose
+  members play the views;
+- ``"a+b"`` (``"outcomes+disagreement"``, ``"outcomes+uncertainty"``): a's choice, then b's, each
+  half of the chosen queries.
 
 Every strategy but ``"random"`` keeps a random share of each round's queries
-(``training.query_random_share``), and each may prefer the samples first met in the latest
-``training.query_recent_rounds`` rounds. Before any classifier was fit (the first round) the
-classifier-driven strategies choose at random.
+(``training.query_random_share``). Each may prefer the samples first met in the latest
+``training.query_recent_rounds`` rounds, choose among a random pool of ``training.query_pool_factor``
+times its queries, give a floor of its queries to every reward class the classifiers predict
+(``training.query_class_floor``) and pass over the samples its views agree on with a confidence of
+``training.query_skip_confidence`` or more. Before any classifier was fit (the first round) what needs
+one is skipped: a classifier-driven strategy chooses at random, a combination leaves it to its other
+part.
 """
 
 from __future__ import annotations
@@ -37,6 +49,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from dospcot.config.choices import CLASSIFIER_STRATEGIES
+from dospcot.config.learning_sections import TrainingConfig
 
 LOG_COLUMNS: tuple[str, ...] = ("round", "sample", "strategy", "answer")
 """The columns of a run's ``queries.csv``."""
@@ -93,6 +106,42 @@ def query_budget(label_fraction: float, met: int, revealed: int) -> int:
     return max(0, math.ceil(label_fraction * met - 1e-9) - revealed)
 
 
+def scheduled_labels(budget: int, rounds: int, round_: int, schedule: str, first_round_share: float) -> int:
+    """The answers rounds 1 to ``round_`` may have bought in all under a label budget.
+
+    :param budget: ``training.label_budget``, the answers of the whole run.
+    :param rounds: R, the run's rounds.
+    :param round_: r, 1-based; the last round may spend whatever is left.
+    :param schedule: ``"asap"`` (all of it), ``"even"`` (r / R of it) or ``"decay"`` (H_r / H_R of it,
+        H_r the r-th harmonic number: round r's own share in proportion to 1 / r).
+    :param first_round_share: the cap on round 1's share, in (0, 1].
+    :return: floor(budget x share), so a round buys this minus what the rounds before it bought.
+    """
+    if round_ >= rounds:
+        return budget
+    if schedule == "asap":
+        share = 1.0
+    elif schedule == "even":
+        share = round_ / rounds
+    else:
+        harmonic = np.cumsum(1.0 / np.arange(1, rounds + 1))
+        share = float(harmonic[round_ - 1] / harmonic[-1])
+    if round_ == 1:
+        share = min(share, first_round_share)
+    return math.floor(budget * share + 1e-9)
+
+
+def strategy_parts(strategy: str) -> tuple[str, ...]:
+    """The strategies a label strategy combines: ``("outcomes", "disagreement")`` for
+    ``"outcomes+disagreement"``, the strategy alone otherwise."""
+    return tuple(strategy.split("+"))
+
+
+def reads_classifiers(strategy: str) -> bool:
+    """Whether a label strategy (or a part of a combination) reads the reward classifiers."""
+    return any(part in CLASSIFIER_STRATEGIES for part in strategy_parts(strategy))
+
+
 def margins(probabilities: np.ndarray) -> np.ndarray:
     """(N,) the mean over views of the gap between each sample's two most likely classes.
 
@@ -137,6 +186,50 @@ def outcome_order(
     return np.asarray(chosen, dtype=np.int64)
 
 
+def class_floors(candidates: np.ndarray, n: int, probabilities: np.ndarray) -> np.ndarray:
+    """``n`` candidate indices spread over the reward classes the views predict (the class of their
+    mean probability): each class an equal floor ``ceil(n / classes)``, the rarest class among the
+    candidates first, its least certain candidates first (:func:`margins`); a class with fewer
+    candidates leaves its remainder unspent.
+
+    :param candidates: (N,) bool.
+    :param probabilities: (m, N, K) each view's class probabilities.
+    """
+    predicted = probabilities.mean(axis=0).argmax(axis=-1)
+    order = np.lexsort((np.arange(candidates.size), margins(probabilities)))
+    order = order[candidates[order]]
+    classes, counts = np.unique(predicted[order], return_counts=True)
+    if n <= 0 or classes.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    floor = math.ceil(n / classes.size)
+    chosen: list[np.ndarray] = []
+    for c in classes[np.argsort(counts, kind="stable")]:
+        room = n - sum(map(len, chosen))
+        chosen.append(order[predicted[order] == c][: min(floor, room)])
+    return np.concatenate(chosen).astype(np.int64)
+
+
+def _part_choice(
+    part: str,
+    candidates: np.ndarray,
+    n: int,
+    rng: np.random.Generator,
+    probabilities: np.ndarray | None,
+    terminated: np.ndarray | None,
+    truncated: np.ndarray | None,
+) -> np.ndarray:
+    """``n`` of the candidates as one strategy (not ``"random"``, nor a combination) chooses them."""
+    if n <= 0:
+        return np.zeros(0, dtype=np.int64)
+    if part == "outcomes":
+        return outcome_order(candidates, n, terminated, truncated, rng)
+    if part == "uncertainty":
+        order = np.lexsort((np.arange(candidates.size), margins(probabilities)))
+    else:
+        order = disagreement_order(probabilities)
+    return order[candidates[order]][:n]
+
+
 def choose_queries(
     strategy: str,
     candidates: np.ndarray,
@@ -147,6 +240,8 @@ def choose_queries(
     probabilities: np.ndarray | None = None,
     terminated: np.ndarray | None = None,
     truncated: np.ndarray | None = None,
+    class_floor: float = 0.0,
+    pool_factor: int = 0,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The samples to query now and, for each, whether it was drawn at random.
 
@@ -156,25 +251,35 @@ def choose_queries(
     :param rng: the round's query stream (:func:`dospcot.seeding.query_seed`).
     :param random_share: the share of ``n`` drawn at random by a strategy other than ``"random"``.
     :param probabilities: (m, N, K) the views' class probabilities; None before any classifier was fit
-        (the classifier strategies then choose at random).
+        (what needs them is then skipped).
     :param terminated: (N,) bool, samples that ended their episode (``"outcomes"``).
     :param truncated: (N,) bool, samples cut by the time limit (``"outcomes"``).
+    :param class_floor: the share of the chosen queries spread over the predicted classes first
+        (:func:`class_floors`; needs ``probabilities``).
+    :param pool_factor: choose among at most this many times the chosen queries' number of
+        candidates, drawn at random (0: among all).
     :return: (n,) int sample indices in the order chosen, and (n,) bool, True where drawn at random.
     """
     n = min(n, int(candidates.sum()))
-    guided = 0 if strategy == "random" else n - round(random_share * n)
-    if strategy in CLASSIFIER_STRATEGIES and probabilities is None:
-        guided = 0
-    if guided == 0:
-        chosen = np.zeros(0, dtype=np.int64)
-    elif strategy == "outcomes":
-        chosen = outcome_order(candidates, guided, terminated, truncated, rng)
-    else:
-        if strategy == "uncertainty":
-            order = np.lexsort((np.arange(candidates.size), margins(probabilities)))
-        else:
-            order = disagreement_order(probabilities)
-        chosen = order[candidates[order]][:guided]
+    parts = [
+        part
+        for part in strategy_parts(strategy)
+        if part != "random" and (probabilities is not None or part not in CLASSIFIER_STRATEGIES)
+    ]
+    guided = n - round(random_share * n) if parts else 0
+    pool = candidates
+    if pool_factor and guided:
+        pool = np.zeros_like(candidates)
+        pool[rng.permutation(np.flatnonzero(candidates))[: pool_factor * guided]] = True
+    chosen = np.zeros(0, dtype=np.int64)
+    if class_floor and probabilities is not None and guided:
+        chosen = class_floors(pool, round(class_floor * guided), probabilities)
+    for i, part in enumerate(parts):
+        left = pool.copy()
+        left[chosen] = False
+        want = min((guided - chosen.size) // (len(parts) - i), int(left.sum()))
+        picked = _part_choice(part, left, want, rng, probabilities, terminated, truncated)
+        chosen = np.concatenate([chosen, picked]).astype(np.int64)
     rest = candidates.copy()
     rest[chosen] = False
     drawn = rng.permutation(np.flatnonzero(rest))[: n - chosen.size]
@@ -186,18 +291,13 @@ class RewardQueries:
     """A run's reward queries: which samples are revealed, the round each sample was first met, and
     every answer, bought after each round's collection (:meth:`buy`).
 
-    :param strategy: the run's ``training.label_strategy`` (not ``"uniform"``).
-    :param label_fraction: the budget's share of the samples met.
-    :param random_share: ``training.query_random_share``.
-    :param recent_rounds: ``training.query_recent_rounds`` (0: every round's samples alike).
+    :param training: the run's ``[training]`` section: its ``label_strategy`` (not ``"uniform"``), the
+        budget (``label_budget`` with its schedule, or ``label_fraction``) and the ``query_*`` keys.
     :param rater: answers the queries (:mod:`dospcot.core.raters`).
     """
 
-    def __init__(
-        self, strategy: str, label_fraction: float, random_share: float, recent_rounds: int, rater: Rater
-    ) -> None:
-        self.strategy, self.label_fraction = strategy, label_fraction
-        self.random_share, self.recent_rounds, self.rater = random_share, recent_rounds, rater
+    def __init__(self, training: TrainingConfig, rater: Rater) -> None:
+        self.training, self.strategy, self.rater = training, training.label_strategy, rater
         self.revealed = np.zeros(0, dtype=bool)
         """(N,) the samples the rater labelled."""
         self.met_round = np.zeros(0, dtype=np.int64)
@@ -205,38 +305,71 @@ class RewardQueries:
         self.log: list[dict[str, Any]] = []
         """One row per answer: round, sample, how it was chosen (the strategy or ``"random"``), answer."""
 
+    @property
+    def reads_probabilities(self) -> bool:
+        """Whether choosing reads the classifiers' probabilities: a classifier strategy, class floors
+        or skipping the confident samples."""
+        training = self.training
+        return (
+            reads_classifiers(self.strategy)
+            or training.query_class_floor > 0
+            or training.query_skip_confidence < 1
+        )
+
+    def allowance(self, round_: int, met: int) -> int:
+        """How many answers round ``round_`` may buy, before the candidates are counted: what the
+        schedule allows by now (:func:`scheduled_labels`) or the share of the ``met`` samples
+        (:func:`query_budget`), less what was bought before."""
+        training, bought = self.training, int(self.revealed.sum())
+        if not training.label_budget:
+            return query_budget(training.label_fraction, met, bought)
+        allowed = scheduled_labels(
+            training.label_budget,
+            training.rounds,
+            round_,
+            training.query_schedule,
+            training.first_round_share,
+        )
+        return max(0, allowed - bought)
+
     def buy(
         self, round_: int, task: QueriedTask, probabilities: ProbabilitiesOf, rng: np.random.Generator
     ) -> None:
         """Choose this round's queries, ask the rater and reveal the answers in the task's store.
 
         :param probabilities: the views' class probabilities of the task's pool, or None before any
-            classifier was fit; called only by the classifier strategies.
+            classifier was fit; called only when choosing reads them (:attr:`reads_probabilities`).
         :raises QueriesPending: the rater waits for a person; nothing was revealed.
         """
+        training = self.training
         met = task.met()
         grow = met.size - self.revealed.size
         self.revealed = np.concatenate([self.revealed, np.zeros(grow, dtype=bool)])
         self.met_round = np.concatenate([self.met_round, np.zeros(grow, dtype=np.int64)])
         self.met_round[met & (self.met_round == 0)] = round_
         candidates = met & ~task.labelled()
-        n = min(
-            query_budget(self.label_fraction, int(met.sum()), int(self.revealed.sum())), int(candidates.sum())
-        )
-        if self.recent_rounds:  # the latest rounds' samples first, the older ones when they run short
-            recent = candidates & (self.met_round > round_ - self.recent_rounds)
+        probs = probabilities() if self.reads_probabilities else None
+        if probs is not None and training.query_skip_confidence < 1:  # what the views agree on is known
+            predicted = probs.argmax(axis=-1)
+            agreed = (predicted == predicted[0]).all(axis=0)
+            sure = probs.max(axis=-1).min(axis=0) >= training.query_skip_confidence
+            candidates = candidates & ~(agreed & sure)
+        n = min(self.allowance(round_, int(met.sum())), int(candidates.sum()))
+        if training.query_recent_rounds:  # the latest rounds' samples first, the older ones when short
+            recent = candidates & (self.met_round > round_ - training.query_recent_rounds)
             candidates = recent if recent.sum() >= n else candidates
         terminated, truncated = task.episode_ends()
-        probs = probabilities() if self.strategy in CLASSIFIER_STRATEGIES else None
         ids, drawn = choose_queries(
             self.strategy,
             candidates,
             n,
             rng,
-            random_share=self.random_share,
+            random_share=training.query_random_share,
             probabilities=probs,
             terminated=terminated,
             truncated=truncated,
+            class_floor=training.query_class_floor,
+            pool_factor=training.query_pool_factor,
         )
         described = [task.describe(int(i)) for i in ids]
         if probs is not None:

@@ -17,6 +17,8 @@ from dospcot.core.cotrainer import RunRound
 
 VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
 """The per-view figures of :func:`round_stats`, under the names a record gives them."""
+CLASS_COLUMNS = ("round", "class", "reward", "samples", "labelled", "admitted", "recall", "precision")
+"""The columns of a run's ``pseudo_rewards.csv`` (:func:`class_rows`)."""
 
 
 def record_head(
@@ -85,3 +87,43 @@ def round_stats(result: RunRound, unlabelled: np.ndarray, true_class: np.ndarray
         "stopped": result.stopped,
         "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(right)],
     }
+
+
+def class_rows(
+    round_index: int,
+    result: RunRound,
+    labelled: np.ndarray,
+    unlabelled: np.ndarray,
+    true_class: np.ndarray,
+    rewards: np.ndarray,
+) -> list[dict[str, Any]]:
+    """A round's pseudo-rewards per hidden reward class, so that a shortfall reads as wrong rewards
+    (low precision), missing ones (low recall, high precision) or a class no label showed (class -1).
+
+    One row per class the pool's samples truly hold: its ``samples`` met (labelled or in U), how many are
+    ``labelled``, how many of the others were ``admitted`` with a pseudo-reward, ``recall`` (the share
+    of its unlabelled samples given their own class) and ``precision`` (the share of the samples given
+    the class that truly hold it; NaN where none was given it).
+
+    :param labelled: (N,) bool; ``unlabelled`` (N,) bool, U.
+    :param true_class: (N,) each sample's hidden class, -1 for a value no label showed (metrics only).
+    :param rewards: (K,) each class's reward value.
+    """
+    admitted, met = result.pseudo_weight > 0, labelled | unlabelled
+    rows = []
+    for c in np.unique(true_class[met]):
+        truly, given = (true_class == c) & met, admitted & (result.pseudo_class == c)
+        in_u = truly & unlabelled
+        rows.append(
+            {
+                "round": round_index,
+                "class": int(c),
+                "reward": float(rewards[c]) if c >= 0 else float("nan"),
+                "samples": int(truly.sum()),
+                "labelled": int((truly & labelled).sum()),
+                "admitted": int((in_u & admitted).sum()),
+                "recall": float((given & in_u).sum() / in_u.sum()) if in_u.any() else float("nan"),
+                "precision": float((given & truly).sum() / given.sum()) if given.any() else float("nan"),
+            }
+        )
+    return rows

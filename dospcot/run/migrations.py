@@ -19,6 +19,7 @@ CHECKPOINT_FIELDS_ADDED: tuple[tuple[str, str], ...] = (
     ("extra", "what a batch keeps beside a member's run: nothing"),
     ("run.segment_classes", "a run on segment labels' reward classes: the run's fresh ones"),
     ("run.collected", "whether a round was collected and awaits a person's answers: no, at a round's end"),
+    ("run.class_records", "the pseudo-rewards per reward class of the rounds before: not recorded"),
 )
 """The fields of a run's checkpoint state added since format 1, and what their absence means."""
 
@@ -33,5 +34,5 @@ def upgrade_run_state(state: dict[str, Any]) -> dict[str, Any]:
         "extra": {},
         **state,
     }
-    upgraded["run"] = {"segment_classes": None, "collected": False, **state["run"]}
+    upgraded["run"] = {"segment_classes": None, "collected": False, "class_records": [], **state["run"]}
     return upgraded

@@ -35,6 +35,8 @@ SUMMARY_FILE = "summary.json"
 REWARD_CLASSES_FILE = "reward_classes.json"
 QUERIES_FILE = "queries.csv"
 """Every label a rater gave: round, sample, how it was chosen, answer (active label strategies)."""
+PSEUDO_REWARDS_FILE = "pseudo_rewards.csv"
+"""Each round's pseudo-rewards per hidden reward class (runs that learn rewards, single-step labels)."""
 CHECKPOINT_FILE = "checkpoint.pkl"
 CHECKPOINT_FORMAT = 1
 LOCK_FILE = ".lock"

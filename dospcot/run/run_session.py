@@ -19,11 +19,13 @@ from dospcot.core.classifier import save_classifier
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import LOG_COLUMNS, Rater
 from dospcot.core.raters import FileRater, action_names
+from dospcot.core.round_records import CLASS_COLUMNS
 from dospcot.run.interrupts import Interrupted
 from dospcot.run.plots import plot_learning_curves
 from dospcot.run.run_folder import (
     CHECKPOINT_FILE,
     METRICS_FILE,
+    PSEUDO_REWARDS_FILE,
     QUERIES_FILE,
     REWARD_CLASSES_FILE,
     SUMMARY_FILE,
@@ -212,6 +214,8 @@ class RunSession:
             write_csv(run_dir / QUERIES_FILE, run.queries.log, LOG_COLUMNS)
         for agent, view in zip(run.agents, cfg.views, strict=True):
             atomic_write(run_dir / f"agent_{view}.zip", agent.save)
+        if run.class_records:
+            write_csv(run_dir / PSEUDO_REWARDS_FILE, run.class_records, CLASS_COLUMNS)
         if run.trainer is not None:
             for clf, view in zip(run.trainer.classifiers, cfg.views, strict=True):
                 atomic_write(run_dir / f"classifier_{view}.pt", partial(save_classifier, clf))

@@ -16,6 +16,7 @@
     dospcot study equal-effort-highway --docs  # the same on the fast highway, 5 seeds
     dospcot study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
     dospcot study second-view-highway --docs   # its highway monitor setting x seeds 0-4
+    dospcot study budget-explore --docs   # label budgets, schedules and peers on MiniGrid, seeds 0-2
 
 (``python scripts/study.py`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
@@ -54,6 +55,7 @@ from dospcot.config.presets import did_you_mean
 from dospcot.lab.report import TrialRun, load_runs, write_report
 from dospcot.lab.studies import (
     batched_seeds,
+    budget,
     grid,
     highway,
     label_sources,
@@ -96,6 +98,7 @@ STUDIES: dict[str, Study] = {
     **paper.STUDIES,
     **queries.STUDIES,
     **batched_seeds.STUDIES,
+    **budget.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 
@@ -245,6 +248,8 @@ def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") ->
         plot = next((p for p in written if study.plot and p.name == study.plot[0]), None)
         if plot is not None:
             shutil.copyfile(plot, RESULTS / study.plot[1])
+        if study.figure is not None and rendered.table is not None:
+            study.figure(study_runs(study, args.runs_dir, suffix)[0], RESULTS / f"{args.study}.png")
         write_glance(args.study, rendered.glance, list(STUDIES))
         if rendered.readme is not None:
             replace_block(README, block, rendered.readme)

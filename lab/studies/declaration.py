@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from pathlib import Path
 
 from dospcot.lab.report import TrialRun
 
@@ -48,6 +49,9 @@ class Study:
     plot: tuple[str, str] | None = None
     """A plot of the report that goes into ``docs/results/``: (its name in the sweep folder, its name
     there)."""
+    figure: Callable[[list[TrialRun], Path], None] | None = None
+    """Draws a figure from the study's runs into the path given (``--docs``: ``docs/results/<study>.png``,
+    which its tables link to); None: the study has none of its own."""
     cells_explained: bool = False
     """Whether its tables say what a cell is themselves (the paper's): the header then says only where
     the figures come from."""

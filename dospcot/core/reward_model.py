@@ -1,0 +1,123 @@
+"""The reward-model peer (``method = "reward-model"``): the learnt reward a user would reach for instead
+of co-training.
+
+Each view has an ensemble of E reward classifiers (the co-trainer's own model,
+``cotraining.classifier``; E = ``cotraining.ensemble_size``), each member from its own initial
+parameters and fitted, every round, on its own bootstrap of the labels alone: no pseudo-label, no
+self-paced selection, no consensus between views. The mean of every member's class probabilities
+rewards every unlabelled sample, with weight 1, as the learnt reward of PEBBLE (Lee et al., 2021) and
+B-Pref rewards every transition. Queries by ``"disagreement"`` go where the members disagree
+(:meth:`RewardModelTrainer.probabilities` hands every member to the queries as a view of its own).
+
+It answers :class:`~dospcot.core.cotraining_run.CoTrainingRun` as the co-trainer does: ``step`` on a
+:class:`~dospcot.core.cotrainer.RunPool` returns a :class:`~dospcot.core.cotrainer.RunRound`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from dospcot.config.learning_sections import CoTrainingConfig
+from dospcot.core.classifier import BatchedRewardClassifier
+from dospcot.core.cotrainer import NUMERICS, RunPool, RunRound
+from dospcot.seeding import bootstrap_seed, ensemble_seed
+
+
+class RewardModelTrainer:
+    """The ensembles of one run's reward model, one per view.
+
+    :param view_dims: input width of each view's classifiers (m entries).
+    :param config: the classifiers' hyperparameters (``classifier``), their ``numerics`` and
+        ``ensemble_size``; the self-paced schedule's keys are not read.
+    :param seed: the run's seed; member e of view j initialises from ``(seed, j, e)``.
+    :param n_classes: K, the most reward classes the run may hold.
+    """
+
+    def __init__(self, view_dims: list[int], config: CoTrainingConfig, seed: int, n_classes: int) -> None:
+        self.config, self.seed = config, seed
+        members = config.ensemble_size
+        self.classifiers = [
+            BatchedRewardClassifier(
+                members,
+                dim,
+                n_classes,
+                config.classifier,
+                [ensemble_seed(seed, j, e) for e in range(members)],
+            ).to(self.dtype)
+            for j, dim in enumerate(view_dims)
+        ]
+        self.round = 0
+        self._previous: np.ndarray | None = None
+
+    @property
+    def numerics(self) -> int:
+        """The numerics version of the classifiers' fits (:data:`~dospcot.core.cotrainer.NUMERICS`)."""
+        return self.config.numerics
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """The classifiers' parameters and inputs."""
+        return NUMERICS[self.numerics].dtype
+
+    def _inputs(self, pool: RunPool, rows: np.ndarray | slice) -> tuple[list[torch.Tensor], torch.Tensor]:
+        """Each view's inputs of the samples ``rows``, (E, n, d_j), and their class mask, one copy per
+        member."""
+        members = self.config.ensemble_size
+        np_dtype = NUMERICS[self.numerics].np_dtype
+        xs = [
+            torch.from_numpy(np.asarray(f[rows], dtype=np_dtype))[None].expand(members, -1, -1)
+            for f in pool.features
+        ]
+        mask = pool.class_mask if pool.class_mask.ndim == 1 else pool.class_mask[rows]
+        return xs, torch.from_numpy(np.ascontiguousarray(mask))[None].expand(members, *mask.shape)
+
+    def step(self, pool: RunPool) -> RunRound:
+        """One round: every member refits on its bootstrap of the labels; the ensembles' mean class
+        rewards every sample of U with weight 1."""
+        self.round += 1
+        members, m = self.config.ensemble_size, len(self.classifiers)
+        rows = np.flatnonzero(pool.labelled)
+        # Poisson(1) counts: the bootstrap of online bagging, so a member's labels differ from its
+        # neighbours' without a fixed sample size.
+        counts = np.random.default_rng(bootstrap_seed(self.seed, self.round)).poisson(
+            1.0, (m, members, rows.size)
+        )
+        counts[counts.sum(axis=-1) == 0] = 1  # a member whose draw kept no label learns them all
+        xs, mask = self._inputs(pool, rows)
+        y = torch.from_numpy(pool.label_class[rows])[None].expand(members, -1)
+        losses = np.zeros(m)
+        for j, clf in enumerate(self.classifiers):
+            weight = torch.from_numpy(counts[j].astype(NUMERICS[self.numerics].np_dtype))
+            losses[j] = float(clf.fit(xs[j], y, weight, mask).mean()) if rows.size else float("nan")
+        probabilities = self.probabilities(pool).reshape(m, members, *pool.labelled.shape, -1)
+        view_class = probabilities.mean(axis=1).argmax(axis=-1)
+        pseudo_class = np.where(pool.unlabelled, probabilities.mean(axis=(0, 1)).argmax(axis=-1), -1)
+        admitted = pool.unlabelled.astype(np.float64)
+        changed = 1.0
+        if self._previous is not None:
+            n = min(self._previous.size, pseudo_class.size)
+            differs = (self._previous[:n] != pseudo_class[:n]) & pool.unlabelled[:n]
+            changed = float(differs.sum() / max(pool.unlabelled.sum(), 1))
+        self._previous = pseudo_class.copy()
+        return RunRound(
+            pseudo_class=pseudo_class,
+            pseudo_weight=admitted,
+            view_weight=np.repeat(admitted[None], m, axis=0),
+            view_class=view_class,
+            threshold=np.full((m, probabilities.shape[-1]), np.nan),
+            classifier_loss=losses,
+            pace=1.0,
+            changed=changed,
+            stopped=False,
+        )
+
+    def probabilities(self, pool: RunPool) -> np.ndarray | None:
+        """(m x E, N, K) every member's class probabilities of the pool's samples, view by view, or None
+        before the first round fit them."""
+        if self.round == 0:
+            return None
+        xs, mask = self._inputs(pool, slice(None))
+        return np.concatenate(
+            [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
+        )

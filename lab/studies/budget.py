@@ -1,0 +1,332 @@
+"""Labels that pay (issue 58): a label budget counted in answers, spread over the rounds, against the
+reward-model peer, with label-efficiency curves. ``budget-explore`` is the exploration (seeds 0-2,
+recorded as exploratory); it chooses the settings a confirmatory study registers before its runs.
+
+Its tables split a shortfall against the oracle into its parts: the labels each arm bought, its
+success round by round beside the oracle's (fewer rounds with a reward), the pseudo-rewards per hidden
+reward class in the last round (wrong or missing rewards, from each run's ``pseudo_rewards.csv``), and
+success against labels bought with the labels each arm needs to reach 90% of the oracle's success.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from dospcot.lab.report import TrialRun
+from dospcot.lab.studies.declaration import Glance, Study, Sweep
+from dospcot.lab.studies.tables import FRACTION
+from dospcot.metrics import SeedSummary
+from dospcot.run.plots import Band, plot_bands
+from dospcot.run.run_folder import METRICS_FILE, PSEUDO_REWARDS_FILE
+
+STRATEGY = "training.label_strategy"
+BUDGET = "training.label_budget"
+SCHEDULE = "training.query_schedule"
+FIRST_SHARE = "training.first_round_share"
+EXPLORATION = "training.exploration"
+ORACLE_SHARE = 0.9
+"""Label efficiency: the labels an arm needs to reach this share of the oracle's success."""
+
+
+def method_of(run: TrialRun) -> str:
+    """A run's method from its preset's name: oracle, self-training, dospcot or reward-model."""
+    config = run.trial.config
+    for method in ("self-training", "reward-model", "oracle"):
+        if config.endswith(f"-{method}"):
+            return method
+    return "dospcot"
+
+
+def arm_of(run: TrialRun) -> str:
+    """A run's arm: its method and the settings its sweep varies or sets, but for the label budget (the
+    curves' x-axis) and the label fraction of a uniform mask (its budget)."""
+    params = run.trial.params
+    method = method_of(run)
+    if method == "oracle":
+        return "oracle"
+    parts = [method, params.get(STRATEGY, "uniform")]
+    if SCHEDULE in params:
+        parts.append(params[SCHEDULE])
+    if FIRST_SHARE in params:
+        parts.append(f"round 1 <= {params[FIRST_SHARE]}")
+    if params.get(FRACTION) == "1.0":
+        parts.append("every reward labelled")
+    if EXPLORATION in params:
+        parts.append(f"exploration by {params[EXPLORATION]}")
+    return " ".join(parts)
+
+
+def labels_used(run: TrialRun) -> float:
+    """The labels a run held at its end (bought answers, or its mask's share), mean over its agents
+    (every agent of a run reads the same labels)."""
+    return float(run.summary["mean"]["labelled_steps"])
+
+
+def _by_arm(runs: list[TrialRun]) -> dict[str, list[TrialRun]]:
+    arms: dict[str, list[TrialRun]] = {}
+    for run in runs:
+        arms.setdefault(arm_of(run), []).append(run)
+    return arms
+
+
+def _success(runs: list[TrialRun]) -> SeedSummary:
+    return SeedSummary.of([r.summary["mean"]["success"] for r in runs])
+
+
+def _arm_table(arms: dict[str, list[TrialRun]]) -> list[str]:
+    """One row per arm and budget: success, pseudo-reward accuracy and the labels each run bought."""
+    lines = [
+        "| arm | label budget | labels used per run | success | pseudo-reward accuracy | seeds |",
+        "|---|---|---|---|---|---|",
+    ]
+    for arm, members in arms.items():
+        for budget, cell in _by_budget(members).items():
+            used = SeedSummary.of([labels_used(r) for r in cell])
+            accuracy = SeedSummary.of([r.summary["mean"]["pseudo_accuracy"] for r in cell])
+            lines.append(
+                f"| {arm} | {budget} | {used.mean:.0f} | {_success(cell)} | {accuracy} | {len(cell)} |"
+            )
+    return lines
+
+
+def _by_budget(members: list[TrialRun]) -> dict[str, list[TrialRun]]:
+    """An arm's runs by label budget (or, for a uniform mask, its label fraction), smallest first."""
+    cells: dict[str, list[TrialRun]] = {}
+    for run in members:
+        params = run.trial.params
+        key = params.get(BUDGET) or (f"share {params[FRACTION]}" if FRACTION in params else "preset")
+        cells.setdefault(key, []).append(run)
+    return dict(sorted(cells.items(), key=lambda item: (item[0].startswith("share"), _number(item[0]))))
+
+
+def _number(text: str) -> float:
+    try:
+        return float(text.split()[-1])
+    except ValueError:
+        return float("inf")
+
+
+def _round_success(run: TrialRun) -> dict[int, float]:
+    """A run's success after each round, mean over its agents."""
+    by_round: dict[int, list[float]] = {}
+    with (run.run_dir / METRICS_FILE).open(newline="") as handle:
+        for row in csv.DictReader(handle):
+            by_round.setdefault(int(row["round"]), []).append(float(row["success"]))
+    return {r: float(np.mean(values)) for r, values in by_round.items()}
+
+
+def _rounds_table(arms: dict[str, list[TrialRun]]) -> list[str]:
+    """Mean success after each round, per arm, beside the oracle's: where co-trained agents trail it
+    from the first rounds, they had fewer rounds with a reward to learn from."""
+    curves = {arm: [_round_success(r) for r in members] for arm, members in arms.items()}
+    rounds = sorted({r for runs in curves.values() for curve in runs for r in curve})
+    lines = [
+        "| arm | " + " | ".join(f"round {r}" for r in rounds) + " |",
+        "|---|" + "---|" * len(rounds),
+    ]
+    for arm, runs in curves.items():
+        cells = [
+            f"{np.mean([c[r] for c in runs if r in c]):.2f}" if any(r in c for c in runs) else ""
+            for r in rounds
+        ]
+        lines.append(f"| {arm} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
+    """The last round's pseudo-rewards per hidden reward class, mean over each arm's runs: recall (the
+    share of a class's unlabelled samples given it) and precision (the share of those given it that
+    hold it). Low recall with high precision: rewards missing, not wrong."""
+    lines = [
+        "| arm | reward | samples | labelled | recall | precision | runs |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for arm, members in arms.items():
+        rows: dict[str, list[dict[str, str]]] = {}
+        for run in members:
+            path = run.run_dir / PSEUDO_REWARDS_FILE
+            if not path.is_file():
+                continue
+            with path.open(newline="") as handle:
+                table = list(csv.DictReader(handle))
+            last = max(int(row["round"]) for row in table)
+            for row in table:
+                if int(row["round"]) == last:
+                    rows.setdefault(row["reward"], []).append(row)
+        for reward, members_rows in sorted(rows.items(), key=lambda item: float(item[0])):
+            mean = {
+                key: np.nanmean([float(row[key]) for row in members_rows])
+                for key in ("samples", "labelled", "recall", "precision")
+            }
+            lines.append(
+                f"| {arm} | {float(reward):g} | {mean['samples']:.0f} | {mean['labelled']:.0f} | "
+                f"{mean['recall']:.3f} | {mean['precision']:.3f} | {len(members_rows)} |"
+            )
+    return lines if len(lines) > 2 else []
+
+
+def labels_to_reach(points: list[tuple[float, float]], target: float) -> float | None:
+    """The labels at which success first reaches ``target``, linearly interpolated between the
+    (labels, success) points sorted by labels; None where no point reaches it."""
+    points = sorted(points)
+    for i, (labels, success) in enumerate(points):
+        if success >= target:
+            if i == 0:
+                return labels
+            (x0, y0), (x1, y1) = points[i - 1], (labels, success)
+            return x0 + (target - y0) * (x1 - x0) / (y1 - y0)
+    return None
+
+
+def _efficiency(arms: dict[str, list[TrialRun]]) -> list[str]:
+    """Labels to reach 90% of the oracle's success, per arm with a budget, from its mean success
+    against its mean labels used at each budget."""
+    oracle = arms.get("oracle")
+    if not oracle:
+        return []
+    target = ORACLE_SHARE * _success(oracle).mean
+    lines = [
+        f"Labels to reach {ORACLE_SHARE:.0%} of the oracle's success ({target:.3f}), interpolated between "
+        "each arm's budgets:",
+        "",
+        "| arm | budgets | labels to reach it |",
+        "|---|---|---|",
+    ]
+    for arm, members in arms.items():
+        if arm == "oracle":
+            continue
+        cells = _by_budget(members)
+        points = [(np.mean([labels_used(r) for r in c]), _success(c).mean) for c in cells.values()]
+        reached = labels_to_reach(points, target)
+        where = "not reached" if reached is None else f"{reached:.0f}"
+        lines.append(f"| {arm} | {', '.join(cells)} | {where} |")
+    return lines
+
+
+def figure(runs: list[TrialRun], path: Path) -> None:
+    """Success against labels used per arm (mean over seeds with its 95% interval), and the oracle's
+    success as a flat line across the plot."""
+    arms = _by_arm(runs)
+    bands = []
+    for arm, members in arms.items():
+        if arm == "oracle":
+            continue
+        cells = list(_by_budget(members).values())
+        x = np.array([np.mean([labels_used(r) for r in c]) for c in cells])
+        stats = [_success(c) for c in cells]
+        order = np.argsort(x)
+        bands.append(_band(arm, x[order], [stats[i] for i in order]))
+    if "oracle" in arms and bands:
+        stat = _success(arms["oracle"])
+        x = np.array([min(b.x.min() for b in bands), max(b.x.max() for b in bands)])
+        bands.append(_band("oracle (every reward)", x, [stat, stat]))
+    if bands:
+        plot_bands(
+            {"success against labels used": bands}, "labels used per run", "success", path, markers=True
+        )
+
+
+def _band(label: str, x: np.ndarray, stats: list[SeedSummary]) -> Band:
+    return Band(
+        label,
+        np.asarray(x, dtype=float),
+        np.array([s.mean for s in stats]),
+        np.array([s.low for s in stats]),
+        np.array([s.high for s in stats]),
+    )
+
+
+def _tables(tasks: dict[str, Callable[[TrialRun], bool]]) -> Callable[[list[TrialRun]], list[str]]:
+    def tables(runs: list[TrialRun]) -> list[str]:
+        lines = [
+            "Exploratory: seeds 0-2, settings chosen here are confirmed on other seeds, maps and tasks by a "
+            "study registered before its runs. An arm names its method, label strategy, schedule and what "
+            "else its sweep sets; labels used counts the labels each run held at its end (bought answers, "
+            "or a uniform mask's share of the samples met), so equal budgets read as equal counts.",
+        ]
+        lines += ["", "![success against labels used, per arm, and the oracle's](budget-explore.png)"]
+        for task, belongs in tasks.items():
+            arms = _by_arm([r for r in runs if belongs(r)])
+            if not arms:
+                continue
+            lines += ["", f"### {task}", "", *_arm_table(arms), "", "Success after each round:", ""]
+            lines += _rounds_table(arms)
+            classes = _class_table(arms)
+            if classes:
+                lines += ["", "Pseudo-rewards per hidden reward class, last round:", "", *classes]
+            efficiency = _efficiency(arms)
+            if efficiency:
+                lines += ["", *efficiency]
+        return lines
+
+    return tables
+
+
+def _glance(runs: list[TrialRun]) -> Glance:
+    """The exploration's control: co-training with every reward labelled against the oracle, success."""
+    arms = _by_arm(runs)
+    oracle = arms.get("oracle")
+    controls = [arm for arm in arms if "every reward labelled" in arm]
+    if not oracle or not controls:
+        return Glance("not rendered yet", "exploratory")
+    best = max(controls, key=lambda arm: _success(arms[arm]).mean)
+    return Glance(
+        f"success, {best}: {_success(arms[best])} against the oracle's {_success(oracle)}", "exploratory"
+    )
+
+
+def _of(prefix: str) -> Callable[[TrialRun], bool]:
+    return lambda run: run.trial.config.startswith(prefix)
+
+
+ROUNDS = {EXPLORATION: ("rounds",)}
+"""Exploration by the share of rounds done, as the oracle explores (the control's finding)."""
+
+EXPLORE_SWEEPS = (
+    # The control first: with every reward labelled, co-training has nothing to learn, so whatever
+    # it loses against the oracle is the machinery's.
+    Sweep(
+        "budget-explore-lavagap-control",
+        ("minigrid-lavagap-dospcot",),
+        {FRACTION: ("1.0",), EXPLORATION: ("rounds", "pace")},
+    ),
+    Sweep("queries-lavagap-oracle", ("minigrid-lavagap-oracle",), {}),
+    Sweep("queries-doorkey-oracle", ("minigrid-doorkey-oracle",), {}),
+    Sweep("budget-explore-doorkey-uniform", ("minigrid-doorkey-dospcot",), {FRACTION: ("0.1",), **ROUNDS}),
+    Sweep(
+        "budget-explore-doorkey-dospcot",
+        ("minigrid-doorkey-dospcot",),
+        {BUDGET: ("300",), STRATEGY: ("disagreement",), SCHEDULE: ("asap", "even"), **ROUNDS},
+    ),
+    Sweep(
+        "budget-explore-doorkey-self-training",
+        ("minigrid-doorkey-self-training",),
+        {BUDGET: ("300",), STRATEGY: ("uncertainty",), SCHEDULE: ("even",), **ROUNDS},
+    ),
+    Sweep(
+        "budget-explore-doorkey-reward-model",
+        ("minigrid-doorkey-reward-model",),
+        {BUDGET: ("300",), STRATEGY: ("disagreement",), SCHEDULE: ("even",), **ROUNDS},
+    ),
+)
+
+STUDIES: dict[str, Study] = {
+    "budget-explore": Study(
+        EXPLORE_SWEEPS,
+        _tables(
+            {
+                "MiniGrid-LavaGapS7-v0": _of("minigrid-lavagap-"),
+                "MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-"),
+            }
+        ),
+        "Labels that pay: exploring label budgets, schedules and the reward-model peer",
+        "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
+        _glance,
+        seeds=3,
+        figure=figure,
+    ),
+}

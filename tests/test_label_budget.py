@@ -1,0 +1,214 @@
+"""A label budget counted in answers, spread over the rounds (dospcot/core/queries.py), the strategies'
+class floors and combinations, and the reward-model peer (dospcot/core/reward_model.py): schedules
+worked by hand, small pools, equal counts across arms, and the leakage test for every new piece."""
+
+from __future__ import annotations
+
+from functools import partial
+
+import numpy as np
+import pytest
+from test_neural_cotraining import assert_same_learners
+from test_queries import PROBABILITIES, _grid_run, _tiny_grid, _unqueried_permuted_grid
+
+from dospcot.config.errors import ConfigError
+from dospcot.core.queries import RewardQueries, choose_queries, class_floors, scheduled_labels
+from dospcot.core.raters import SimulatedRater
+from dospcot.tasks import load_config
+
+BUDGET = ["training.label_budget=30", "training.rounds=3"]
+
+
+def test_the_schedules_spread_a_budget_of_100_over_5_rounds_as_worked_by_hand():
+    def cumulative(schedule: str, cap: float = 1.0) -> list[int]:
+        return [scheduled_labels(100, 5, r, schedule, cap) for r in range(1, 6)]
+
+    assert cumulative("asap") == [100] * 5
+    assert cumulative("even") == [20, 40, 60, 80, 100]
+    # Harmonic numbers H_1..H_5 = 1, 1.5, 1.833, 2.083, 2.283: 100 x H_r / H_5, rounded down.
+    assert cumulative("decay") == [43, 65, 80, 91, 100]
+    # The round-1 cap holds round 1 back; the schedule after it is unchanged, so round 2 catches up.
+    assert cumulative("asap", 0.25) == [25, 100, 100, 100, 100]
+    assert cumulative("decay", 0.25) == [25, 65, 80, 91, 100]
+    assert cumulative("even", 0.5) == [20, 40, 60, 80, 100]  # a cap above the round's share binds nothing
+
+
+class _Pool:
+    """A queried task over a fixed pool whose met samples grow by hand."""
+
+    def __init__(self, n: int) -> None:
+        self.n_met = 0
+        self.n = n
+        self.labels = np.zeros(n, dtype=bool)
+        self.hidden = np.arange(n, dtype=np.float64) % 3
+
+    def met(self) -> np.ndarray:
+        return np.arange(self.n) < self.n_met
+
+    def labelled(self) -> np.ndarray:
+        return self.labels.copy()
+
+    def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros(self.n, dtype=bool), np.zeros(self.n, dtype=bool)
+
+    def describe(self, sample: int) -> dict:
+        return {"sample": sample}
+
+    def reveal(self, ids: np.ndarray, rewards: np.ndarray) -> None:
+        self.labels[ids] = True
+
+    def hidden_reward(self, ids: np.ndarray) -> np.ndarray:
+        return self.hidden[ids]
+
+
+def _training(strategy: str = "random", **keys):
+    overrides = [f"training.{key}={value!r}".replace("'", '"') for key, value in keys.items()]
+    return load_config("tiny", [f'training.label_strategy="{strategy}"', *overrides]).training
+
+
+def test_unspent_labels_carry_forward_and_the_first_round_cap_holds():
+    training = _training(label_budget=12, rounds=3, query_schedule="even", first_round_share=0.25)
+    pool = _Pool(100)
+    queries = RewardQueries(training, SimulatedRater(pool.hidden_reward))
+    bought = []
+    for round_, met in ((1, 50), (2, 5 + 50), (3, 100)):
+        pool.n_met = met
+        queries.buy(round_, pool, lambda: None, np.random.default_rng(round_))
+        bought.append(int(queries.revealed.sum()))
+    # Even: 4, 8, 12 by round; round 1 capped at floor(0.25 x 12) = 3.
+    assert bought == [3, 8, 12]
+    # A round with too few candidates carries its shortfall to the next.
+    pool = _Pool(100)
+    queries = RewardQueries(training, SimulatedRater(pool.hidden_reward))
+    counts = []
+    for round_, met in ((1, 2), (2, 4), (3, 100)):
+        pool.n_met = met
+        queries.buy(round_, pool, lambda: None, np.random.default_rng(round_))
+        counts.append(int(queries.revealed.sum()))
+    assert counts == [2, 4, 12]
+
+
+def test_class_floors_ask_about_every_predicted_class_rarest_first():
+    # One view, five samples: predicted classes 0, 0, 0, 1, 0; margins 0.8, 0.6, 0.2, 0.4, 0.1.
+    probabilities = np.array([[[0.9, 0.1], [0.8, 0.2], [0.6, 0.4], [0.3, 0.7], [0.55, 0.45]]])
+    candidates = np.ones(5, bool)
+    # The rare class 1 first (sample 3), then class 0's least certain (sample 4).
+    assert class_floors(candidates, 2, probabilities).tolist() == [3, 4]
+    # A floor of 2 a class: class 1 has one sample, so one query of the 4 is left to the strategy.
+    assert class_floors(candidates, 4, probabilities).tolist() == [3, 4, 2]
+    choose = partial(choose_queries, "uncertainty", candidates, 3, np.random.default_rng(0), random_share=0.0)
+    ids, drawn = choose(probabilities=probabilities, class_floor=2 / 3)
+    # Two by the floors, then uncertainty's smallest margin among the rest (sample 2).
+    assert ids.tolist() == [3, 4, 2] and not drawn.any()
+    # Without floors the rare class waits behind the uncertain samples of the common one.
+    assert choose(probabilities=probabilities)[0].tolist() == [4, 2, 3]
+
+
+def test_a_combination_splits_its_chosen_queries_between_its_parts():
+    terminated = np.array([True, False, False, False])
+    ids, drawn = choose_queries(
+        "outcomes+uncertainty",
+        np.ones(4, bool),
+        2,
+        np.random.default_rng(0),
+        random_share=0.0,
+        probabilities=PROBABILITIES,
+        terminated=terminated,
+        truncated=np.zeros(4, bool),
+    )
+    # outcomes takes the episode end (0), uncertainty the smallest margin of the rest (3).
+    assert ids.tolist() == [0, 3] and not drawn.any()
+    # Before any classifier: outcomes chooses all of the guided share.
+    ids, _ = choose_queries(
+        "outcomes+disagreement",
+        np.ones(4, bool),
+        1,
+        np.random.default_rng(0),
+        random_share=0.0,
+        terminated=terminated,
+        truncated=np.zeros(4, bool),
+    )
+    assert ids.tolist() == [0]
+
+
+def test_confidently_agreed_samples_are_never_queried():
+    training = _training("uncertainty", label_budget=4, rounds=1, query_skip_confidence=0.6)
+    pool = _Pool(4)
+    pool.n_met = 4
+    queries = RewardQueries(training, SimulatedRater(pool.hidden_reward))
+    queries.buy(1, pool, lambda: PROBABILITIES, np.random.default_rng(0))
+    # Both views give sample 0 class 0, at 0.6 and 0.7; sample 3 class 0 too, but at 0.5 and 0.45;
+    # samples 1 and 2 split. A budget of 4 buys the three others and stops.
+    assert sorted(np.flatnonzero(queries.revealed).tolist()) == [1, 2, 3]
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        ['views=["coords", "patch"]'],  # DOSPCoT
+        ['views=["coords"]'],  # self-training
+        ['method="reward-model"', 'views=["coords"]'],
+    ],
+)
+def test_every_arm_buys_the_same_count_of_labels_whatever_its_agents(overrides):
+    strategy = "uncertainty" if "reward-model" not in overrides[0] else "disagreement"
+    run = _grid_run(strategy, *BUDGET, 'training.query_schedule="even"', *overrides)
+    per_round = []
+    run.run(on_round=lambda r, rows: per_round.append(int(r.queries.revealed.sum())))
+    assert per_round == [10, 20, 30]
+    assert len(run.queries.log) == 30 and run.store.labelled.sum() == 30
+
+
+def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_labels_alone():
+    run = _grid_run("disagreement", *BUDGET, 'method="reward-model"', 'views=["coords"]')
+    run.run()
+    pool = run.task.pool()
+    probabilities = run.trainer.probabilities(pool)
+    assert probabilities.shape[0] == 3  # one view, three members: the queries' "views"
+    admitted = run.table.weight[: pool.unlabelled.size] > 0
+    assert admitted[pool.unlabelled].all()  # no self-paced selection: all of U is rewarded
+    # The members differ (their own seeds and bootstraps), so disagreement has something to read.
+    assert not np.allclose(probabilities[0], probabilities[1])
+
+
+@pytest.mark.parametrize(
+    ("strategy", "overrides"),
+    [
+        ("outcomes+disagreement", ['training.query_schedule="decay"', "training.first_round_share=0.3"]),
+        ("uncertainty", ['training.query_schedule="even"', "training.query_class_floor=0.5"]),
+        ("disagreement", ["training.query_pool_factor=3", "training.query_skip_confidence=0.9"]),
+        ("disagreement", ['method="reward-model"', 'views=["coords"]', 'training.query_schedule="even"']),
+    ],
+)
+def test_leakage_permuting_unqueried_rewards_changes_nothing_under_budgets_and_the_peer(strategy, overrides):
+    plain = _grid_run(strategy, *BUDGET, *overrides)
+    plain.run()
+    queried = np.flatnonzero(plain.queries.revealed)
+    assert not np.array_equal(_unqueried_permuted_grid(queried, 0).reward, _tiny_grid().reward)
+    other = _grid_run(strategy, *BUDGET, *overrides, make_env=partial(_unqueried_permuted_grid, queried, 0))
+    other.run()
+    assert other.queries.log == plain.queries.log
+    assert_same_learners(plain, other)
+
+
+def test_budget_keys_refuse_what_they_cannot_mean():
+    with pytest.raises(ConfigError, match="label_budget counts a rater's answers"):
+        load_config("tiny", ["training.label_budget=10"])
+    with pytest.raises(ConfigError, match="spread a budget counted in labels: set label_budget"):
+        load_config("tiny", ['training.label_strategy="random"', 'training.query_schedule="even"'])
+    with pytest.raises(ConfigError, match="first_round_share must lie in"):
+        load_config(
+            "tiny",
+            ['training.label_strategy="random"', "training.label_budget=5", "training.first_round_share=0"],
+        )
+    with pytest.raises(ConfigError, match="query_schedule"):
+        load_config(
+            "tiny",
+            ['training.label_strategy="random"', "training.label_budget=5", 'training.query_schedule="soon"'],
+        )
+    with pytest.raises(ConfigError, match="segment labels need co-training"):
+        load_config("tiny", ['method="reward-model"', "training.segment_length=4"])
+    # One view with disagreement is the peer's own: its ensemble's members disagree.
+    assert load_config(
+        "tiny", ['method="reward-model"', 'views=["coords"]', 'training.label_strategy="disagreement"']
+    )
