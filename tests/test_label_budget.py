@@ -12,8 +12,11 @@ from test_neural_cotraining import assert_same_learners
 from test_queries import PROBABILITIES, _grid_run, _tiny_grid, _unqueried_permuted_grid
 
 from dospcot.config.errors import ConfigError
+from dospcot.core.cotrainer import RunRound
 from dospcot.core.queries import RewardQueries, choose_queries, class_floors, scheduled_labels
 from dospcot.core.raters import SimulatedRater
+from dospcot.core.round_records import class_rows
+from dospcot.lab.studies.budget import labels_to_reach
 from dospcot.tasks import load_config
 
 BUDGET = ["training.label_budget=30", "training.rounds=3"]
@@ -212,3 +215,36 @@ def test_budget_keys_refuse_what_they_cannot_mean():
     assert load_config(
         "tiny", ['method="reward-model"', 'views=["coords"]', 'training.label_strategy="disagreement"']
     )
+
+
+def test_pseudo_rewards_per_class_split_missing_from_wrong_as_worked_by_hand():
+    # Six samples met (one more never met); true classes 0, 0, 0, 1, 1, -1 (a value no label showed).
+    true_class = np.array([0, 0, 0, 1, 1, -1, 1])
+    labelled = np.array([True, False, False, True, False, False, False])
+    unlabelled = np.array([False, True, True, False, True, True, False])
+    # Sample 1 rightly 0, sample 2 not admitted, sample 4 wrongly 0, sample 5 given 1.
+    pseudo_class = np.array([-1, 0, 0, -1, 0, 1, -1])
+    weight = np.array([0.0, 1.0, 0.0, 0.0, 0.7, 1.0, 0.0])
+    empty = np.zeros((1, 7))
+    result = RunRound(
+        pseudo_class, weight, empty, empty.astype(int), np.zeros((1, 2)), np.zeros(1), 0.5, 0, False
+    )
+    rows = {
+        row["class"]: row
+        for row in class_rows(3, result, labelled, unlabelled, true_class, np.array([-1.0, 5.0]))
+    }
+    assert sorted(rows) == [-1, 0, 1]  # the never-met sample 6 is in no row
+    zero, one, unseen = rows[0], rows[1], rows[-1]
+    assert (zero["samples"], zero["labelled"], zero["admitted"]) == (3, 1, 1)
+    assert zero["recall"] == 0.5  # of U's two class-0 samples, one was given 0 (the other is missing)
+    assert zero["precision"] == 0.5  # of the two given 0, one holds it
+    assert (one["reward"], one["samples"], one["labelled"], one["admitted"]) == (5.0, 2, 1, 1)
+    assert one["recall"] == 0.0 and one["precision"] == 0.0  # sample 4 got 0; sample 5, given 1, is -1
+    assert np.isnan(unseen["reward"]) and unseen["recall"] == 0.0 and np.isnan(unseen["precision"])
+
+
+def test_labels_to_reach_interpolates_between_budgets_or_says_not_reached():
+    points = [(300.0, 0.9), (100.0, 0.5)]
+    assert labels_to_reach(points, 0.8) == 250.0  # 100 + (0.8 - 0.5) / (0.9 - 0.5) x 200
+    assert labels_to_reach(points, 0.4) == 100.0  # the smallest budget already reaches it
+    assert labels_to_reach(points, 0.95) is None

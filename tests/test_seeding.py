@@ -8,8 +8,10 @@ import pytest
 from dospcot.seeding import (
     EVAL_SEED,
     agent_seed,
+    bootstrap_seed,
     classifier_seed,
     demonstration_seed,
+    ensemble_seed,
     layer_seed,
     round_reset_seed,
 )
@@ -41,6 +43,8 @@ def test_no_seed_repeats_across_the_studies_runs_or_meets_an_evaluation_episode(
         [round_reset_seed(s, k, r) for s in runs for k in agents for r in rounds],
         [classifier_seed(s, j) for s in runs for j in agents],
         [demonstration_seed(s) for s in runs],
+        [ensemble_seed(s, j, e) for s in runs for j in agents for e in range(5)],
+        [bootstrap_seed(s, r) for s in runs for r in rounds],
     ]
     for stream in streams:
         assert len(set(stream)) == len(stream)
