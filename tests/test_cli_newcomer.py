@@ -20,6 +20,7 @@ from dospcot.config.loading import parse_override
 from dospcot.config.presets import preset_names
 from dospcot.config.reference import REFERENCE_END, REFERENCE_START
 from dospcot.run import sizes
+from dospcot.run.cores import usable_cores
 from dospcot.run.run_folder import LOCK_FILE, process_start, run_lock, write_toml
 from dospcot.run.sizes import MAX_SEEDS, check_sizes
 from dospcot.tasks import get_task, load_config
@@ -257,10 +258,9 @@ def test_rounds_and_steps_no_machine_can_finish_are_refused_before_a_folder(caps
 def test_workers_above_the_cores_are_a_warning(capsys, tmp_path):
     assert main(["sweep", "--resume", str(tmp_path / "none"), "--workers", "1000"]) == 2
     warning, error = capsys.readouterr().err.splitlines()
-    cores = os.cpu_count()
     assert warning == (
-        f"dospcot sweep: warning: --workers 1000 is above this machine's {cores} cores: the workers "
-        "share them"
+        f"dospcot sweep: warning: --workers 1000 is above the {usable_cores()} cores this process may use: "
+        "the workers share them"
     )
     assert error.startswith("dospcot sweep: error: ") and "is not a sweep folder" in error
 

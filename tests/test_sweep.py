@@ -14,11 +14,13 @@ import pytest
 import torch
 
 from dospcot.cli import main
+from dospcot.cli.parser import build_parser
 from dospcot.config.errors import ConfigError
 from dospcot.lab.report import load_runs, write_report
 from dospcot.lab.sweep import run_sweep
-from dospcot.lab.sweep_spec import SweepError, SweepSpec, Trial, open_sweep, parse_grid
+from dospcot.lab.sweep_spec import SweepError, SweepSpec, Trial, open_sweep, parse_grid, trial_dir
 from dospcot.run import run_folder
+from dospcot.run.cores import usable_cores
 from dospcot.tasks import load_config
 
 GRID = {"training.label_fraction": ("0.1", "0.5"), "cotraining.consensus_weight": ("0", "0.3")}
@@ -51,7 +53,7 @@ def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
         SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}).trials()
 
 
-def test_local_sweep_runs_every_trial_once_and_reruns_nothing(tmp_path):
+def test_local_sweep_runs_every_trial_once_whatever_its_workers_and_reruns_nothing(tmp_path):
     spec = SweepSpec(("tiny",), GRID, (0, 1))
     result = run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False)
     assert len(result.trials) == 8 and len(result.ran) == 8 and not result.skipped and not result.failed
@@ -69,6 +71,38 @@ def test_local_sweep_runs_every_trial_once_and_reruns_nothing(tmp_path):
     assert _summaries(tmp_path / "sweep") == summaries
     with pytest.raises(SweepError, match="holds another sweep"):
         open_sweep(tmp_path / "sweep", SweepSpec(("tiny",), GRID, (0, 1, 2)))
+    # --workers defaults to the cores, so no trial's numbers may depend on it: the last trial, which ran
+    # after others in one of the pool's two processes, alone in a sweep of one worker gives the same files.
+    last = result.trials[-1]
+    alone = SweepSpec((last.config,), {key: (value,) for key, value in last.params.items()}, (last.seed,))
+    run_sweep(tmp_path / "alone", alone, workers=1, show_progress=False)
+    for name in ("metrics.csv", "summary.json"):
+        alone_file, pool_file = (trial_dir(tmp_path / s, last) / name for s in ("alone", "sweep"))
+        assert alone_file.read_bytes() == pool_file.read_bytes(), name
+
+
+@pytest.mark.parametrize(
+    ("command", "what"),
+    [("sweep", "trials at once"), ("study", "trials at once"), ("reproduce-paper", "processes")],
+)
+def test_workers_default_to_the_cores_this_process_may_use(command, what, capsys):
+    cores = usable_cores()
+    parser = build_parser()
+    assert parser.parse_args([command, *(["grid16"] if command == "study" else [])]).workers == cores
+    with pytest.raises(SystemExit):
+        parser.parse_args([command, "--help"])
+    help_text = " ".join(capsys.readouterr().out.split())
+    assert f"--workers WORKERS {what} (default: the cores this process may use, {cores} here)" in help_text
+
+
+def test_the_cores_are_the_process_affinity_where_the_platform_has_one(monkeypatch):
+    monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 3}, raising=False)
+    assert usable_cores() == 2
+    monkeypatch.delattr(os, "sched_getaffinity", raising=False)
+    monkeypatch.setattr(os, "cpu_count", lambda: 6)
+    assert usable_cores() == 6
+    monkeypatch.setattr(os, "cpu_count", lambda: None)  # undeterminable
+    assert usable_cores() == 1
 
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any, NoReturn
 
 from dospcot.rating import add_rate_parser  # torch-free: rate imports its server when it runs
+from dospcot.run.cores import usable_cores
 
 QUICK_BENCH_OUT = Path("runs/bench-quick.md")
 """Where ``dospcot bench --quick`` writes its smoke-test figures."""
@@ -67,6 +68,18 @@ def add_overrides(parser: argparse.ArgumentParser, help: str) -> None:
     """The ``--set KEY=VALUE`` option (repeatable) of a command that reads configs."""
     parser.add_argument(
         "--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE", help=help
+    )
+
+
+def add_workers(parser: argparse.ArgumentParser, help: str) -> None:
+    """The ``--workers N`` option of a command that runs trials in processes: by default every core this
+    process may use (:func:`~dospcot.run.cores.usable_cores`), since no run's numbers depend on N."""
+    cores = usable_cores()
+    parser.add_argument(
+        "--workers",
+        type=positive_int,
+        default=cores,
+        help=f"{help} (default: the cores this process may use, {cores} here)",
     )
 
 
@@ -145,7 +158,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_overrides(sweep, "override a key in every trial (repeatable)")
     sweep.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
-    sweep.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    add_workers(sweep, "trials at once")
     sweep.add_argument(
         "--batch-seeds",
         type=positive_int,
@@ -205,7 +218,7 @@ def build_parser() -> argparse.ArgumentParser:
         help="episodes per agent per round (default: the preset's, 500, the paper's; fewer for a quick look)",
     )
     add_overrides(paper, "override a key of the preset, e.g. --set tabular.replay_sweeps=0 (repeatable)")
-    paper.add_argument("--workers", type=positive_int, default=2, help="processes (default 2)")
+    add_workers(paper, "processes")
     paper.add_argument(
         "--out",
         type=Path,
@@ -251,7 +264,7 @@ def build_parser() -> argparse.ArgumentParser:
     # No choices: the studies' names live with their declarations, which import torch.
     study.add_argument("study", metavar="STUDY", help="the study, e.g. grid16 (a wrong name lists them)")
     study.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's)")
-    study.add_argument("--workers", type=positive_int, default=2, help="trials at once (default 2)")
+    add_workers(study, "trials at once")
     study.add_argument(
         "--batch-seeds",
         type=positive_int,

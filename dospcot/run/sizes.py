@@ -17,6 +17,7 @@ from typing import Any
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.run_configs import PaperConfig, RunConfig, TrainConfig
+from dospcot.run.cores import usable_cores
 
 DQN_STEPS_PER_CPU_SECOND = 2_500
 """Env steps one ``ExpectedSarsaDQN`` agent takes per CPU-second (BENCHMARKS.md: about 2,465 on
@@ -93,7 +94,7 @@ def check_sizes(
     """Refuse what the machine cannot finish or hold; return the warnings (one line each).
 
     :param cfgs: the configs that train (a sweep's cells), each over ``seeds`` seeds.
-    :param workers: processes at once (``--workers``), warned of above the machine's cores.
+    :param workers: processes at once (``--workers``), warned of above the cores this process may use.
     :param batch: seeds trained together in one process (``--seeds`` of train, ``--batch-seeds``).
     :raises ConfigError: more than :data:`MAX_SEEDS` seeds, a run beyond :data:`REFUSE_RUN_CPU_SECONDS`,
         work beyond :data:`REFUSE_CPU_SECONDS`,
@@ -123,9 +124,11 @@ def check_sizes(
             f"this would take about {duration(total)} of CPU time (an estimate from BENCHMARKS.md's rates); "
             "it starts anyway"
         )
-    cores = os.cpu_count() or 1
+    cores = usable_cores()
     if workers is not None and workers > cores:
-        warnings.append(f"--workers {workers} is above this machine's {cores} cores: the workers share them")
+        warnings.append(
+            f"--workers {workers} is above the {cores} cores this process may use: the workers share them"
+        )
     return warnings
 
 

@@ -69,6 +69,7 @@ from dospcot.lab.studies.pages import GLANCE, glance_cells, page, page_prose, wr
 from dospcot.lab.studies.provenance import header
 from dospcot.lab.studies.readme import README, RESULTS, read_block, replace_block
 from dospcot.lab.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
+from dospcot.run.cores import usable_cores
 from dospcot.run.interrupts import Interrupted, stop_on_signals
 
 __all__ = [
@@ -266,7 +267,13 @@ def main(argv: Sequence[str] | None = None) -> None:
     parser.add_argument(
         "--seeds", type=int, help="seeds 0..N-1 (default: the study's, 5; highway 3, paper 10)"
     )
-    parser.add_argument("--workers", type=int, default=2, help="trials at once (default 2)")
+    cores = usable_cores()
+    parser.add_argument(
+        "--workers",
+        type=int,
+        default=cores,
+        help=f"trials at once (default: the cores this process may use, {cores} here)",
+    )
     parser.add_argument("--batch-seeds", type=int, default=1, help="seeds per batch (default 1)")
     parser.add_argument("--backend", choices=["local", "ray"], default="local")
     parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
