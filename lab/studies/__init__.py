@@ -153,9 +153,12 @@ def study_table(
     )
 
 
-def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = ()) -> SweepSpec:
-    """The spec of one of a study's sweeps over seeds 0..seeds-1, with ``overrides`` (``--set``)."""
-    return SweepSpec(sweep.configs, sweep.grid, tuple(range(seeds)), tuple(overrides))
+def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = (), first_seed: int = 0) -> SweepSpec:
+    """The spec of one of a study's sweeps over ``seeds`` seeds from ``first_seed``, with ``overrides``
+    (``--set``)."""
+    return SweepSpec(
+        sweep.configs, sweep.grid, tuple(range(first_seed, first_seed + seeds)), tuple(overrides)
+    )
 
 
 def check_record(
@@ -166,7 +169,7 @@ def check_record(
     for sweep in study.sweeps:
         sweep_dir = runs_dir / f"{sweep.name}{suffix}"
         if sweep_dir.is_dir():  # a sweep never started has nothing stale
-            check_not_stale(sweep_dir, sweep_spec(sweep, seeds, overrides).trials())
+            check_not_stale(sweep_dir, sweep_spec(sweep, seeds, overrides, study.first_seed).trials())
 
 
 @dataclass(frozen=True)
@@ -218,7 +221,7 @@ def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") ->
             check_record(study, args.runs_dir, args.seeds, args.overrides, suffix)
         else:
             for sweep in study.sweeps:
-                spec = sweep_spec(sweep, args.seeds, args.overrides)
+                spec = sweep_spec(sweep, args.seeds, args.overrides, study.first_seed)
                 sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
                 failed = run_sweep(
                     sweep_dir,

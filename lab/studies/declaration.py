@@ -34,9 +34,10 @@ class Glance:
 @dataclass(frozen=True)
 class Study:
     """A study: its sweeps, the tables built from their finished runs, its page's title, the task it
-    runs on (in words, for the results at a glance) and its seeds (0..seeds-1 unless --seeds says
-    otherwise). Its page's prose, the text above and below the table (what the study runs, the reading
-    of its table, its history), is ``pages/<study>.md`` beside this module."""
+    runs on (in words, for the results at a glance) and its seeds (``seeds`` of them from
+    ``first_seed``, unless --seeds says how many). Its page's prose, the text above and below the
+    table (what the study runs, the reading of its table, its history), is ``pages/<study>.md``
+    beside this module."""
 
     sweeps: tuple[Sweep, ...]
     tables: Callable[[list[TrialRun]], list[str]]
@@ -44,6 +45,8 @@ class Study:
     task: str
     glance: Callable[[list[TrialRun]], Glance]
     seeds: int = 5
+    first_seed: int = 0
+    """A confirmatory study's seeds start past those its settings were explored on."""
     readme: Callable[[str], str] | None = None
     """The README block from the study's table text; ``None``: the study has no README block."""
     plot: tuple[str, str] | None = None

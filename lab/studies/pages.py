@@ -43,11 +43,12 @@ def page(name: str, study: Study, table: str | None) -> str:
 def unpublished(name: str, study: Study) -> str:
     """The notice in place of a table that the record cannot rebuild."""
     sweeps = ", ".join(f"`{sweep.name}`" for sweep in study.sweeps)
+    seeds = f"{study.first_seed}-{study.first_seed + study.seeds - 1}"
     return (
         "**Unpublished: the record holds no runs of this study**, so this page shows no table and no "
         "figure of it (a table is published only where `--render-only` rebuilds it from the runs in "
         f"`runs/sweeps/`). `dospcot study {name} --docs` trains it into `runs/sweeps/` "
-        f"({len(study.sweeps)} sweep(s), seeds 0-{study.seeds - 1}: {sweeps}; several CPU-hours on 2 "
+        f"({len(study.sweeps)} sweep(s), seeds {seeds}: {sweeps}; several CPU-hours on 2 "
         "cores) and writes this page with its tables."
     )
 
