@@ -54,7 +54,8 @@ def gym_config(
 
     :param env: a registered gymnasium id, or a module-level function that returns the env.
     :param views: each agent's view by name; every view gets one agent.
-    :param method: ``cotrain`` (DOSPCoT), ``oracle``, ``masked-zero`` or ``labels-only``.
+    :param method: ``cotrain`` (DOSPCoT), ``oracle``, ``masked-zero``, ``labels-only`` or
+        ``reward-model`` (the peer: ensembles fitted on the labels alone).
     :param agent: every agent's kind: ``dqn`` or ``esarsa_dqn``.
     :param seed: the run's seed.
     :param label_fraction: the share of steps (with ``state_key``: of (state, action) pairs) whose
