@@ -1,13 +1,15 @@
 """``dospcot bench``: performance claims measured against a peer in the same run, written to
 BENCHMARKS.md by this module (never by hand).
 
-Every row reports our figure and the peer's, each the median of ``repeats`` repetitions with its
-min and max, their ratio and the target. Repetitions of ours and the peer alternate, so drift in the
-machine's speed hits both alike.
+Every row reports our figure and the peer's, each the median of its repetitions with its min and
+max, their ratio, the target, and how the row was made: the benchmark that measured it, its
+repetitions, when, the commit and the CPU (:class:`~dospcot.lab.bench_measure.Provenance`).
+Repetitions of ours and the peer alternate, so drift in the machine's speed hits both alike.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import platform
 from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
@@ -28,7 +30,7 @@ from dospcot.lab.bench_env_rows import (
     bench_minigrid_wrappers,
     bench_store_memory,
 )
-from dospcot.lab.bench_measure import Row
+from dospcot.lab.bench_measure import Provenance, Row, short_commit
 from dospcot.lab.bench_rows import (
     bench_cotraining_overhead,
     bench_esarsa_dqn,
@@ -36,6 +38,7 @@ from dospcot.lab.bench_rows import (
     bench_tabular,
 )
 from dospcot.run.interrupts import Interrupted
+from dospcot.run.run_folder import cpu_description
 
 
 def _esarsa_dqn(net: list[int], batch: int, **options: str) -> Callable[[bool, int], Row]:
@@ -142,9 +145,31 @@ NOTES = [
 ]
 
 
-TABLE_HEADER = "| benchmark | setting | ours | peer | ratio | target | met | GPU: ratio, met (ours vs peer) |"
+TABLE_HEADER = (
+    "| benchmark | setting | ours | peer | ratio | target | met | made by | GPU: ratio, met (ours vs peer) |"
+)
+SEPARATOR = "|---|---|---|---|---|---|---|---|---|"
+WITHOUT_PROVENANCE = (
+    "| benchmark | setting | ours | peer | ratio | target | met | GPU: ratio, met (ours vs peer) |"
+)
+"""The header of a table written before rows carried their provenance: a rerun gives it the *made by*
+column, each old row's cell not recorded."""
 WITHOUT_GPU = "| benchmark | setting | ours | peer | ratio | target | met |"
 """The header of a table written before the GPU column, which a rerun gives the column."""
+FIGURES = (
+    "Each figure: the median of its row's repetitions [min, max]; ours and the peer alternate in the same "
+    "run. A row's *made by* cell says how it was made: the benchmark (`dospcot bench --only NAME` "
+    "measures it again), its repetitions, when (UTC), the commit of the source that measured it (`+dirty`: "
+    "with uncommitted changes) and the CPU with torch's kernels."
+)
+"""The line above the table that says what a figure is; it replaces a file's older line (which claimed
+one repetition count for every row) whenever the file is written."""
+RECOVERED = "that wrote the row"
+"""How the *made by* cell of a row written before rows carried their provenance names the commit it was
+recovered from: the one that wrote the row into BENCHMARKS.md (``git log -- BENCHMARKS.md``)."""
+RECOVERED_NOTE = "Provenance recovered:"
+"""The paragraph above the table that says how such rows' provenance was recovered; a rerun drops it
+once no row of the table is one of them."""
 RERUN_NOTE = "Rerun alone by"
 GPU_NOTE = "GPU column by"
 NO_FIGURE = "–"
@@ -163,9 +188,10 @@ def _target(row: Row) -> str:
 
 
 def _table_line(row: Row, gpu: str = NO_FIGURE) -> str:
+    made = row.made or Provenance.unknown()
     return (
         f"| {row.name} | {row.setting} | {row.ours} | {row.peer} | {row.ratio:.3f} | "
-        f"{_target(row)} | {'yes' if row.met else 'no'} | {gpu} |"
+        f"{_target(row)} | {'yes' if row.met else 'no'} | {made} | {gpu} |"
     )
 
 
@@ -180,26 +206,25 @@ def _after_table(lines: list[str]) -> int:
     return max(i for i, line in enumerate(lines) if line.startswith("| ")) + 1
 
 
-def render(rows: list[Row], command: str, repeats: int, kept: str = "") -> str:
-    """The text of BENCHMARKS.md.
+def render(rows: list[Row], command: str, kept: str = "") -> str:
+    """The text of BENCHMARKS.md: its header, the table of ``rows`` (each with its *made by* cell) and
+    the notes.
 
     :param kept: the file a full run replaces: its GPU figures and notes stay, where a row's benchmark
         and setting are unchanged (they were measured on another machine, which this run does not use).
     """
-    cpu = platform.processor() or platform.machine()
     lines = [
         "# Benchmarks",
         "",
         f"Written by `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC.  ",
-        f"Machine: {cpu}, torch threads: {torch.get_num_threads()}, Python {platform.python_version()}, "
-        f"torch {torch.__version__}; no GPU.  ",
-        f"Each figure: median of {repeats} repetitions [min, max]; "
-        "ours and the peer alternate in the same run.",
+        f"Machine: {cpu_description()} ({platform.machine()}), torch threads: {torch.get_num_threads()}, "
+        f"Python {platform.python_version()}, torch {torch.__version__}; no GPU.  ",
+        FIGURES,
     ]
-    old = kept.splitlines() if TABLE_HEADER in kept else []
+    old = _table_lines(kept) if any(h in kept for h in (TABLE_HEADER, WITHOUT_PROVENANCE)) else []
     gpu = {tuple(_cells(line)[:2]): _cells(line)[-1] for line in old if line.startswith("| ")}
     lines += [part for line in old if line.startswith(GPU_NOTE) for part in ("", line)]
-    lines += ["", TABLE_HEADER, "|---|---|---|---|---|---|---|---|"]
+    lines += ["", TABLE_HEADER, SEPARATOR]
     lines += [_table_line(row, gpu.get((row.name, row.setting), NO_FIGURE)) for row in rows]
     lines += ["", *NOTES]
     return "\n".join(lines) + "\n"
@@ -231,7 +256,7 @@ def run_benchmarks(
     # Each row goes into the file as it lands, so that a stop or a failing row an hour in keeps the
     # rows before it: merged into the table already there, or, where there is none, a table of its own.
     text = out.read_text() if out.is_file() else ""
-    table = text if TABLE_HEADER in text or WITHOUT_GPU in text else None
+    table = text if any(h in text for h in (TABLE_HEADER, WITHOUT_PROVENANCE, WITHOUT_GPU)) else None
     if (only or device != "cpu") and table is None:
         raise ValueError(
             f"--only and --device update the table of a file a full `dospcot bench` wrote; {out} holds none"
@@ -247,34 +272,44 @@ def run_benchmarks(
         for name, bench in bar:
             bar.set_postfix_str(name)
             try:
-                rows.append(bench(quick, repeats))
+                row = bench(quick, repeats)
             except KeyboardInterrupt:
                 done = ", ".join(row.name for row in rows)
                 raise Interrupted(
                     f"the rows measured before the stop, in {out}: {done}" if rows else "nothing"
                 ) from None
+            rows.append(dataclasses.replace(row, made=Provenance.now(name, row)))
             if device != "cpu":
                 out.write_text(_with_gpu_rows(table, rows, list(chosen)[: len(rows)], command, repeats))
             elif table is None:
-                out.write_text(render(rows, command, repeats))
+                out.write_text(render(rows, command))
             else:
                 out.write_text(_with_rows(table, rows, list(chosen)[: len(rows)], command))
     if not only and device == "cpu":  # a full run's rows are the whole table
-        out.write_text(render(rows, command, repeats, text))
+        out.write_text(render(rows, command, text))
     return rows
 
 
 def _table_lines(text: str) -> list[str]:
-    """``text``'s lines, a table written before the GPU column given it (no figure in it yet)."""
+    """``text``'s lines in today's form: a table written before the GPU column given it (no figure in
+    it yet), one written before rows carried their provenance given the *made by* column (each old
+    row's cell not recorded), and the line that says what a figure is, today's (:data:`FIGURES`)."""
     lines = text.splitlines()
     if WITHOUT_GPU in lines:
         at = lines.index(WITHOUT_GPU)
-        lines[at : at + 2] = [TABLE_HEADER, "|---|---|---|---|---|---|---|---|"]
+        lines[at : at + 2] = [WITHOUT_PROVENANCE, "|---|---|---|---|---|---|---|---|"]
         lines = [
             f"{line} {NO_FIGURE} |" if line.startswith("| ") and i > at + 1 else line
             for i, line in enumerate(lines)
         ]
-    return lines
+    if WITHOUT_PROVENANCE in lines:
+        at = lines.index(WITHOUT_PROVENANCE)
+        lines[at : at + 2] = [TABLE_HEADER, SEPARATOR]
+        for i in range(at + 2, len(lines)):
+            if lines[i].startswith("| "):
+                cells = _cells(lines[i])
+                lines[i] = "| " + " | ".join([*cells[:-1], str(Provenance.unknown()), cells[-1]]) + " |"
+    return [FIGURES if line.startswith("Each figure:") else line for line in lines]
 
 
 def _drop_superseded(lines: list[str], prefix: str, rerun: set[str]) -> None:
@@ -312,6 +347,10 @@ def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> st
         else:
             lines[at] = _table_line(row, _cells(lines[at])[-1] if same else NO_FIGURE)
     _drop_superseded(lines, RERUN_NOTE, set(names))
+    if not any(line.startswith("| ") and RECOVERED in line for line in lines):
+        for i in reversed(range(len(lines))):
+            if lines[i].startswith(RECOVERED_NOTE):
+                del lines[i - 1 : i + 1]  # the paragraph and the blank line above it
     _add_note(
         lines, f"{RERUN_NOTE} `{command}` on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {'; '.join(names)}."
     )
@@ -327,14 +366,14 @@ def _with_gpu_rows(text: str, rows: list[Row], names: list[str], command: str, r
         at = _row_at(lines, row)
         if at is None:
             at = _after_table(lines)
-            cpu = [NO_FIGURE] * 3 + [_target(row), NO_FIGURE]
+            cpu = [NO_FIGURE] * 3 + [_target(row), NO_FIGURE, NO_FIGURE]
             lines.insert(at, "| " + " | ".join([row.name, row.setting, *cpu, NO_FIGURE]) + " |")
         lines[at] = "| " + " | ".join([*_cells(lines[at])[:-1], _gpu_cell(row)]) + " |"
     _drop_superseded(lines, GPU_NOTE, set(names))
     gpu = f"{torch.cuda.get_device_name()}, torch {torch.__version__}, Python {platform.python_version()}"
     _add_note(
         lines,
-        f"{GPU_NOTE} `{command}` ({gpu}; wall time, median of {repeats} repetitions) "
-        f"on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {'; '.join(names)}.",
+        f"{GPU_NOTE} `{command}` ({gpu}; CPU {cpu_description()}; commit {short_commit()}; wall time, "
+        f"median of {repeats} repetitions) on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {'; '.join(names)}.",
     )
     return "\n".join(lines) + "\n"

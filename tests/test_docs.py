@@ -211,5 +211,6 @@ def test_runs_readme_lists_the_files_gitignore_keeps_of_the_record():
             "summary.json",
             "reward_classes.json",
             "queries.csv",
+            "pseudo_rewards.csv",
         }
     )

@@ -3,6 +3,7 @@
 import csv
 import dataclasses
 import json
+import re
 import shutil
 import subprocess
 import sys
@@ -214,7 +215,7 @@ def _row(name: str, ours: float) -> bench_measure.Row:
 
 def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, monkeypatch):
     out = tmp_path / "BENCHMARKS.md"
-    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench", 3))
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench"))
     rerun = {"A": lambda quick, repeats: _row("A", 20.0), "C": lambda quick, repeats: _row("C", 2.0)}
     monkeypatch.setattr(bench, "BENCHMARKS", rerun)
     assert main(["bench", "--only", "A", "--only", "C", "--out", str(out)]) == 0
@@ -252,7 +253,7 @@ def test_bench_only_replaces_its_row_and_appends_a_new_one(tmp_path, capsys, mon
 
 def test_bench_keeps_the_rows_measured_before_a_failing_row_or_a_stop(tmp_path, capsys, monkeypatch):
     out = tmp_path / "BENCHMARKS.md"
-    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench", 3))
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench"))
 
     def fails(error: type[BaseException]):
         def row(quick: bool, repeats: int) -> bench_measure.Row:
@@ -283,7 +284,7 @@ def test_bench_keeps_the_rows_measured_before_a_failing_row_or_a_stop(tmp_path, 
 
 def test_bench_gpu_column_holds_the_gpu_figures_beside_the_cpu_ones(tmp_path, capsys, monkeypatch):
     out = tmp_path / "BENCHMARKS.md"
-    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench", 3))
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot bench"))
     assert main(["bench", "--device", "cuda", "--out", str(out)]) == 2  # this machine has no GPU
     err = capsys.readouterr().err
     assert "sees no CUDA device" in err and err.count("\n") == 1
@@ -297,19 +298,23 @@ def test_bench_gpu_column_holds_the_gpu_figures_beside_the_cpu_ones(tmp_path, ca
     lines = out.read_text().splitlines()
     table = {line.split(" | ")[0]: line for line in lines if line.startswith("| ")}
     # A's CPU figures stay (ratio 0.5); its GPU cell: ratio 8/10, target 0.5 met, the two medians.
-    assert table["| A"].endswith("| 0.500 | >= 0.5 | yes | 0.800, yes (8.00 steps/s vs 10.00 steps/s) |")
-    assert table["| B"].endswith("| >= 0.5 | yes | – |")  # no GPU form: a dash
+    unknown = str(bench_measure.Provenance.unknown())  # rows that render() wrote without run_benchmarks
+    gpu_a = "0.800, yes (8.00 steps/s vs 10.00 steps/s)"
+    assert table["| A"].endswith(f"| 0.500 | >= 0.5 | yes | {unknown} | {gpu_a} |")
+    assert table["| B"].endswith(f"| >= 0.5 | yes | {unknown} | – |")  # no GPU form: a dash
     assert (
-        table["| D"]
-        == "| D | setting | – | – | – | >= 0.5 | – | 4.000, yes (40.00 steps/s vs 10.00 steps/s) |"
+        table["| D"]  # no CPU figure, so nothing made it on the CPU
+        == "| D | setting | – | – | – | >= 0.5 | – | – | 4.000, yes (40.00 steps/s vs 10.00 steps/s) |"
     )
     gpu_notes = [line for line in lines if line.startswith("GPU column by")]
     assert len(gpu_notes) == 1 and "(Test GPU, torch " in gpu_notes[0] and gpu_notes[0].endswith(": A; D.")
+    assert "; CPU " in gpu_notes[0] and "; commit " in gpu_notes[0]  # the GPU note says what made it
     # A CPU rerun of A keeps its GPU figure; a full CPU run keeps every GPU figure and the GPU note.
     monkeypatch.setattr(bench, "BENCHMARKS", {"A": lambda quick, repeats: _row("A", 20.0)})
     assert main(["bench", "--only", "A", "--out", str(out)]) == 0
     table = {line.split(" | ")[0]: line for line in out.read_text().splitlines() if line.startswith("| ")}
-    assert "| 2.000 | >= 0.5 | yes | 0.800, yes (8.00 steps/s vs 10.00 steps/s) |" in table["| A"]
+    assert table["| A"].endswith(f" | >= 0.5 | yes | {bench._cells(table['| A'])[-2]} | {gpu_a} |")
+    assert "| 2.000 |" in table["| A"] and _made("A", table["| A"])
     monkeypatch.setattr(
         bench,
         "BENCHMARKS",
@@ -318,7 +323,8 @@ def test_bench_gpu_column_holds_the_gpu_figures_beside_the_cpu_ones(tmp_path, ca
     assert main(["bench", "--out", str(out)]) == 0
     lines = out.read_text().splitlines()
     table = {line.split(" | ")[0]: line for line in lines if line.startswith("| ")}
-    assert table["| A"].endswith("| 0.200 | >= 0.5 | no | 0.800, yes (8.00 steps/s vs 10.00 steps/s) |")
+    assert table["| A"].endswith(f"| 0.200 | >= 0.5 | no | {bench._cells(table['| A'])[-2]} | {gpu_a} |")
+    assert _made("A", table["| A"])
     assert (
         set(table) == {"| benchmark", "| A", "| B"}
         and [line for line in lines if line.startswith("GPU")] == gpu_notes
@@ -330,23 +336,106 @@ def test_bench_gpu_column_holds_the_gpu_figures_beside_the_cpu_ones(tmp_path, ca
     assert len(notes) == 2 and notes[0] == gpu_notes[0] and notes[1].endswith(": A.")
 
 
-def test_bench_gives_a_table_written_before_the_gpu_column_the_column(tmp_path, monkeypatch):
+def _made(bench_name: str, line: str) -> bool:
+    """Whether ``line``'s *made by* cell is the one run_benchmarks writes for a row of :func:`_row` that
+    benchmark ``bench_name`` measured on this machine (3 repetitions; the date, a minute's, aside)."""
+    made = bench_measure.Provenance.parse(bench._cells(line)[-2])
+    now = bench_measure.Provenance.now(bench_name, _row(bench_name, 1.0))
+    return dataclasses.replace(made, date=now.date) == now
+
+
+OLD_HEADER = (
+    "# Benchmarks\n\nEach figure: median of 3 repetitions [min, max]; ours and the peer alternate.\n\n"
+)
+
+
+@pytest.mark.parametrize("gpu_column", [False, True], ids=["before-the-gpu-column", "before-provenance"])
+def test_bench_gives_an_older_table_its_columns_and_drops_its_one_repetition_count(
+    tmp_path, monkeypatch, gpu_column
+):
+    """A table written before the GPU column, or before rows carried their provenance, gets the columns
+    it lacks on a rerun: the old rows' *made by* cell not recorded, and the header's claim of one
+    repetition count for every row replaced by the line that points at each row's own."""
     out = tmp_path / "BENCHMARKS.md"
-    text = bench.render([_row("A", 5.0)], "dospcot bench", 3).replace(bench.TABLE_HEADER, bench.WITHOUT_GPU)
-    out.write_text(
-        text.replace("|---|---|---|---|---|---|---|---|", "|---|---|---|---|---|---|---|").replace(
-            " – |\n", "\n"
-        )
+    header, row = (
+        bench.WITHOUT_GPU,
+        "| A | setting | 5.00 steps/s [5.00, 5.00] | 10.00 steps/s | 0.500 | >= 0.5 | yes |",
     )
-    assert bench.TABLE_HEADER not in out.read_text()
+    if gpu_column:
+        header, row = bench.WITHOUT_PROVENANCE, row + " 0.900, yes (9 vs 10) |"
+    separator = "|---" * header.count(" | ") + "|---|"
+    out.write_text(f"{OLD_HEADER}{header}\n{separator}\n{row}\n\nNotes:\n- old.\n")
     monkeypatch.setattr(bench, "BENCHMARKS", {"B": lambda quick, repeats: _row("B", 6.0)})
-    assert main(["bench", "--only", "B", "--out", str(out)]) == 0
+    assert main(["bench", "--only", "B", "--repeats", "1", "--out", str(out)]) == 0
     lines = out.read_text().splitlines()
     at = lines.index(bench.TABLE_HEADER)
-    assert lines[at + 1] == "|---|---|---|---|---|---|---|---|"
-    assert lines[at + 2].endswith("| 0.500 | >= 0.5 | yes | – |") and lines[at + 3].endswith(
-        "| 0.600 | >= 0.5 | yes | – |"
+    assert lines[at + 1] == bench.SEPARATOR
+    unknown = str(bench_measure.Provenance.unknown())
+    assert lines[at + 2].endswith(
+        f"| 0.500 | >= 0.5 | yes | {unknown} | {'0.900, yes (9 vs 10)' if gpu_column else '–'} |"
     )
+    # B's repetitions are those its measurements hold (3, from _row), whatever --repeats asked.
+    assert lines[at + 3].startswith("| B | ") and "| 0.600 | >= 0.5 | yes | " in lines[at + 3]
+    assert lines[at + 3].endswith(" | – |") and _made("B", lines[at + 3])
+    assert bench.FIGURES in lines and not any(line.startswith("Each figure: median of") for line in lines)
+
+
+def test_bench_drops_the_recovered_provenance_paragraph_with_the_last_row_it_describes(tmp_path, monkeypatch):
+    out = tmp_path / "BENCHMARKS.md"
+    recovered = bench_measure.Provenance(
+        "A", "3", "2026-11-24 03:49 UTC", f"a503a3c ({bench.RECOVERED})", "x"
+    )
+    rows = [dataclasses.replace(_row(name, 5.0), made=recovered) for name in ("A", "B")]
+    lines = bench.render(rows, "dospcot bench").splitlines()
+    at = lines.index(bench.TABLE_HEADER)
+    lines[at - 1 : at - 1] = ["", f"{bench.RECOVERED_NOTE} how rows A and B were made, from git."]
+    out.write_text("\n".join(lines) + "\n")
+    monkeypatch.setattr(bench, "BENCHMARKS", {"A": lambda quick, repeats: _row("A", 6.0)})
+    assert main(["bench", "--only", "A", "--out", str(out)]) == 0
+    assert bench.RECOVERED_NOTE in out.read_text()  # B is still a recovered row
+    monkeypatch.setattr(bench, "BENCHMARKS", {"B": lambda quick, repeats: _row("B", 6.0)})
+    assert main(["bench", "--only", "B", "--out", str(out)]) == 0
+    assert bench.RECOVERED_NOTE not in out.read_text() and bench.RECOVERED not in out.read_text()
+
+
+def test_bench_stamps_every_row_with_how_it_was_made(tmp_path, monkeypatch):
+    """Each row a run measures carries its benchmark's name, its repetitions (counted from its
+    measurements), the date, the commit and the CPU model; none is asserted by its timing."""
+    out = tmp_path / "BENCHMARKS.md"
+    one = bench_measure.Row(
+        "One",
+        "setting",
+        bench_measure.Measurement.of([2.0], "s"),
+        bench_measure.Measurement.of([4.0], "s"),
+        False,
+        1.0,
+    )
+    monkeypatch.setattr(
+        bench,
+        "BENCHMARKS",
+        {"one_rep": lambda quick, repeats: one, "A": lambda quick, repeats: _row("A", 5.0)},
+    )
+    monkeypatch.setattr(bench_measure, "cpu_description", lambda: "Test CPU Model 9000, torch kernels AVX2")
+    monkeypatch.setattr(bench_measure, "short_commit", lambda: "abc1234+dirty")
+    assert main(["bench", "--out", str(out)]) == 0
+    text = out.read_text()
+    rows = {line.split(" | ")[0]: line for line in text.splitlines() if line.startswith("| ")}
+    made = {
+        name: bench_measure.Provenance.parse(bench._cells(rows[f"| {name}"])[-2]) for name in ("One", "A")
+    }
+    assert (made["One"].bench, made["One"].repetitions) == ("one_rep", "1")
+    assert (made["A"].bench, made["A"].repetitions) == ("A", "3")
+    for prov in made.values():
+        assert (prov.commit, prov.cpu) == ("abc1234+dirty", "Test CPU Model 9000, torch kernels AVX2")
+        assert re.fullmatch(r"\d{4}-\d\d-\d\d \d\d:\d\d UTC", prov.date)
+        assert bench_measure.Provenance.parse(str(prov)) == prov  # the cell reads back as written
+    assert "median of 3 repetitions" not in text and bench.FIGURES in text
+    assert "`one_rep`; 1 repetition; " in rows["| One"]
+    # A provenance cell that a row written before them holds reads back as not recorded.
+    unknown = bench_measure.Provenance.parse(str(bench_measure.Provenance.unknown()))
+    assert set(dataclasses.astuple(unknown)) == {bench_measure.NOT_RECORDED}
+    with pytest.raises(ValueError, match="not a made-by cell"):
+        bench_measure.Provenance.parse("3 repetitions; yesterday")
 
 
 def test_bench_note_of_a_row_stays_when_another_row_of_its_name_is_rerun(tmp_path, monkeypatch):
@@ -354,7 +443,7 @@ def test_bench_note_of_a_row_stays_when_another_row_of_its_name_is_rerun(tmp_pat
     line that says where the other's GPU figure came from."""
     out = tmp_path / "BENCHMARKS.md"
     wide = dataclasses.replace(_row("A", 5.0), setting="wide")
-    out.write_text(bench.render([_row("A", 5.0), wide], "dospcot bench", 3))
+    out.write_text(bench.render([_row("A", 5.0), wide], "dospcot bench"))
     monkeypatch.setattr(bench.torch.cuda, "is_available", lambda: True)
     monkeypatch.setattr(bench.torch.cuda, "get_device_name", lambda: "Test GPU")
     gpu = {"narrow": lambda quick, repeats: _row("A", 7.0), "wide": lambda quick, repeats: wide}

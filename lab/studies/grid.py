@@ -18,6 +18,7 @@ from dospcot.lab.studies.tables import (
     per_view_rows,
     verdict,
     versus,
+    with_headline,
 )
 
 WORST_CLASS = (
@@ -94,6 +95,16 @@ def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
     return lines
 
 
+def grid16_glance(runs: list[TrialRun]) -> Glance:
+    """Success, DOSPCoT minus self-training, paired by seed."""
+    return glance_versus(runs, "grid16", "success")
+
+
+def grid32_glance(runs: list[TrialRun]) -> Glance:
+    """Success on the 32 x 32 map, DOSPCoT minus self-training, paired by seed."""
+    return glance_versus(runs, "grid32", "success")
+
+
 def layouts_glance(runs: list[TrialRun]) -> Glance:
     """Success, DOSPCoT minus self-training, paired by layout and seed over the three layouts."""
     return glance_versus(
@@ -129,10 +140,10 @@ LABEL_FRACTION = Sweep(
 STUDIES: dict[str, Study] = {
     "grid16": Study(
         (Sweep("grid16", GRID16_PRESETS, {}),),
-        grid16_tables,
+        with_headline(grid16_tables, grid16_glance),
         "The 16 x 16 grid study",
         "16 x 16 grid, layout 0, 5% labels",
-        lambda runs: glance_versus(runs, "grid16", "success"),
+        grid16_glance,
         seeds=10,
     ),
     # The presets on maps nobody tuned them on.
@@ -144,7 +155,7 @@ STUDIES: dict[str, Study] = {
                 {LAYOUT: UNSEEN_LAYOUTS},
             ),
         ),
-        layout_tables,
+        with_headline(layout_tables, layouts_glance),
         "The 16 x 16 grid presets on three unseen layouts",
         "16 x 16 grid, layouts 101, 202, 303 (never tuned on)",
         layouts_glance,
@@ -157,10 +168,10 @@ STUDIES: dict[str, Study] = {
                 {},
             ),
         ),
-        grid16_tables,
+        with_headline(grid16_tables, grid32_glance),
         "The 32 x 32 grid study",
         "32 x 32 grid, layout 0, 5% labels",
-        lambda runs: glance_versus(runs, "grid32", "success"),
+        grid32_glance,
     ),
     # The same six presets with a Q-table over each agent's view in place of every ExpectedSarsaDQN.
     "grid16-tabular": Study(

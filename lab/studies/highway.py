@@ -13,6 +13,7 @@ from dospcot.lab.studies.tables import (
     mean_over_oracles,
     over_seeds,
     per_view_rows,
+    with_headline,
 )
 from dospcot.metrics import SeedSummary
 from dospcot.tasks import load_run_config
@@ -61,7 +62,7 @@ STUDIES: dict[str, Study] = {
                 {},
             ),
         ),
-        highway_tables,
+        with_headline(highway_tables, partial(glance_versus, prefix=base, metric="greedy_return")),
         f"The highway study on {env}",
         f"{task}, 10% of steps labelled",
         partial(glance_versus, prefix=base, metric="greedy_return"),

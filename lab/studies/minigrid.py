@@ -15,6 +15,7 @@ from dospcot.lab.studies.tables import (
     per_view_rows,
     verdict,
     versus,
+    with_headline,
 )
 from dospcot.metrics import SeedSummary
 from dospcot.run.run_folder import REWARD_CLASSES_FILE
@@ -112,7 +113,7 @@ STUDIES: dict[str, Study] = {
             )
             for task in MINIGRID_TASKS
         ),
-        minigrid_tables,
+        with_headline(minigrid_tables, minigrid_glance),
         "MiniGrid: LavaGapS7 and DoorKey-5x5",
         "MiniGrid LavaGapS7 and DoorKey-5x5, 10% of pairs labelled",
         minigrid_glance,

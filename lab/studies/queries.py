@@ -239,10 +239,21 @@ def _glance(runs: list[TrialRun]) -> Glance:
     )
 
 
+def _labels(runs: list[TrialRun], arm: str) -> str:
+    """The labels a run of ``arm`` bought, its runs' mean (``labelled_steps``): at one label fraction, a
+    method with two agents meets twice the steps of one with one, and buys twice the labels."""
+    bought = SeedSummary.of([r.summary["mean"]["labelled_steps"] for r in runs if _arm(r) == arm])
+    return f"{bought.mean:,.0f}"
+
+
 def _highway_glance(runs: list[TrialRun]) -> Glance:
-    diff = _difference(runs, "dospcot disagreement @ 0.02", "self-training uncertainty @ 0.02", "success")
+    """DOSPCoT disagreement minus self-training uncertainty, success, paired, with the labels each bought."""
+    a, b = "dospcot disagreement @ 0.02", "self-training uncertainty @ 0.02"
+    diff = _difference(runs, a, b, "success")
     return Glance(
-        f"success, DOSPCoT disagreement minus self-training uncertainty, paired: {diff}", "no hypothesis"
+        f"success, DOSPCoT disagreement ({_labels(runs, a)} labels a run) minus self-training uncertainty "
+        f"({_labels(runs, b)}), paired: {diff}",
+        "no hypothesis",
     )
 
 

@@ -152,3 +152,21 @@ def glance_versus(
     diff = versus(runs, f"{prefix}-dospcot", f"{prefix}-self-training", metric, **kwargs)
     name = COLUMNS.get(metric, metric.replace("_", " "))
     return Glance(f"{name}, DOSPCoT minus self-training, paired by {paired_by}: {diff}", verdict(diff))
+
+
+def with_headline(
+    tables: Callable[[list[TrialRun]], list[str]], glance: Callable[[list[TrialRun]], Glance]
+) -> Callable[[list[TrialRun]], list[str]]:
+    """``tables`` followed by a line that states the study's headline comparison and its verdict as
+    ``glance`` gives them to the results at a glance: the page that row links to then states them."""
+
+    def tables_and_headline(runs: list[TrialRun]) -> list[str]:
+        headline = glance(runs)
+        return [
+            *tables(runs),
+            "",
+            "Headline, as the [results at a glance](docs/results/index.md) give it: "
+            f"{headline.headline}; {headline.verdict}.",
+        ]
+
+    return tables_and_headline
