@@ -56,7 +56,9 @@ def arm_of(run: TrialRun) -> str:
     if params.get(FRACTION) == "1.0":
         parts.append("every reward labelled")
     if EXPLORATION in params:
-        parts.append(f"exploration by {params[EXPLORATION]}")
+        parts.append(
+            ROUNDS_ARM if params[EXPLORATION] == "rounds" else f"exploration by {params[EXPLORATION]}"
+        )
     return " ".join(parts)
 
 
@@ -157,12 +159,15 @@ def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
                     rows.setdefault(row["reward"], []).append(row)
         for reward, members_rows in sorted(rows.items(), key=lambda item: float(item[0])):
             mean = {
-                key: np.nanmean([float(row[key]) for row in members_rows])
+                key: SeedSummary.of([float(row[key]) for row in members_rows]).mean
                 for key in ("samples", "labelled", "recall", "precision")
+            }
+            share = {
+                key: "n/a" if np.isnan(mean[key]) else f"{mean[key]:.3f}" for key in ("recall", "precision")
             }
             lines.append(
                 f"| {arm} | {float(reward):g} | {mean['samples']:.0f} | {mean['labelled']:.0f} | "
-                f"{mean['recall']:.3f} | {mean['precision']:.3f} | {len(members_rows)} |"
+                f"{share['recall']} | {share['precision']} | {len(members_rows)} |"
             )
     return lines if len(lines) > 2 else []
 
@@ -258,6 +263,9 @@ def _tables(tasks: dict[str, Callable[[TrialRun], bool]]) -> Callable[[list[Tria
             classes = _class_table(arms)
             if classes:
                 lines += ["", "Pseudo-rewards per hidden reward class, last round:", "", *classes]
+            descriptive = _descriptive(arms)
+            if descriptive:
+                lines += ["", "Descriptive, exploratory comparisons:", "", *descriptive]
             efficiency = _efficiency(arms)
             if efficiency:
                 lines += ["", *efficiency]
@@ -283,6 +291,39 @@ def _controls(arms: dict[str, list[TrialRun]]) -> list[str]:
             diff = paired_difference(members, oracle)
             verdict = "holds 0" if diff.low <= 0 <= diff.high else "excludes 0"
             lines.append(f"- Control: {arm} minus the oracle, success, paired by seed: {diff} ({verdict}).")
+    return lines
+
+
+ROUNDS_ARM = "exploration by rounds"
+DESCRIPTIVE = (
+    ("dospcot uniform " + ROUNDS_ARM, "dospcot uniform", "exploration by rounds against the pace, 10% mask"),
+    (
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        f"dospcot disagreement asap {ROUNDS_ARM}",
+        "the budget spread evenly against spent at once",
+    ),
+    (
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        f"self-training uncertainty even {ROUNDS_ARM}",
+        "the second view's disagreement against one view's uncertainty",
+    ),
+    (
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        f"reward-model disagreement even {ROUNDS_ARM}",
+        "co-training against the reward-model peer",
+    ),
+)
+"""Comparisons the exploration reads (arm a, arm b, what a minus b asks), success paired by seed over
+the seeds both ran, with no threshold and no verdict."""
+
+
+def _descriptive(arms: dict[str, list[TrialRun]]) -> list[str]:
+    lines = []
+    for a, b, question in DESCRIPTIVE:
+        if a in arms and b in arms:
+            diff = paired_difference(arms[a], arms[b])
+            if diff.n:
+                lines.append(f"- {question}: success of {a} minus {b}, paired: {diff} over {diff.n} seeds.")
     return lines
 
 
@@ -316,21 +357,27 @@ EXPLORE_SWEEPS = (
     ),
     Sweep("queries-lavagap-oracle", ("minigrid-lavagap-oracle",), {}),
     Sweep("queries-doorkey-oracle", ("minigrid-doorkey-oracle",), {}),
+    # The active-queries study's DOSPCoT arms at a 10% mask, exploring by the pace (seeds 0-9).
+    Sweep(
+        "queries-doorkey-dospcot",
+        ("minigrid-doorkey-dospcot",),
+        {FRACTION: ("0.1",), STRATEGY: ("uniform", "random", "uncertainty")},
+    ),
     Sweep("budget-explore-doorkey-uniform", ("minigrid-doorkey-dospcot",), {FRACTION: ("0.1",), **ROUNDS}),
     Sweep(
         "budget-explore-doorkey-dospcot",
         ("minigrid-doorkey-dospcot",),
-        {BUDGET: ("300",), STRATEGY: ("disagreement",), SCHEDULE: ("asap", "even"), **ROUNDS},
+        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("asap", "even"), **ROUNDS},
     ),
     Sweep(
         "budget-explore-doorkey-self-training",
         ("minigrid-doorkey-self-training",),
-        {BUDGET: ("300",), STRATEGY: ("uncertainty",), SCHEDULE: ("even",), **ROUNDS},
+        {BUDGET: ("100",), STRATEGY: ("uncertainty",), SCHEDULE: ("even",), **ROUNDS},
     ),
     Sweep(
         "budget-explore-doorkey-reward-model",
         ("minigrid-doorkey-reward-model",),
-        {BUDGET: ("300",), STRATEGY: ("disagreement",), SCHEDULE: ("even",), **ROUNDS},
+        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("even",), **ROUNDS},
     ),
 )
 
