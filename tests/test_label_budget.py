@@ -16,7 +16,10 @@ from dospcot.core.cotrainer import RunRound
 from dospcot.core.queries import RewardQueries, choose_queries, class_floors, scheduled_labels
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.round_records import class_rows
+from dospcot.lab.report import TrialRun
+from dospcot.lab.studies.budget import STUDIES as BUDGET_STUDIES
 from dospcot.lab.studies.budget import labels_to_reach
+from dospcot.lab.sweep import Trial
 from dospcot.tasks import load_config
 
 BUDGET = ["training.label_budget=30", "training.rounds=3"]
@@ -252,3 +255,40 @@ def test_labels_to_reach_interpolates_between_budgets_or_says_not_reached():
     assert labels_to_reach(points, 0.8) == 250.0  # 100 + (0.8 - 0.5) / (0.9 - 0.5) x 200
     assert labels_to_reach(points, 0.4) == 100.0  # the smallest budget already reaches it
     assert labels_to_reach(points, 0.95) is None
+
+
+def _budget_run(tmp_path, config: str, params: dict, seed: int, success: list[float], labels: float):
+    """A finished run of the budget study: its summary and a metrics.csv with one row per round."""
+    run_dir = tmp_path / f"{config}-{'-'.join(params.values())}-{seed}"
+    run_dir.mkdir()
+    rows = ["round,agent,success"] + [f"{r},0,{s}" for r, s in enumerate(success, 1)]
+    (run_dir / "metrics.csv").write_text("\n".join(rows) + "\n")
+    mean = {"success": success[-1], "labelled_steps": labels, "pseudo_accuracy": 1.0}
+    return TrialRun(Trial(config, config, params, seed), {"mean": mean}, [], run_dir)
+
+
+def test_the_budget_tables_pair_arms_by_seed_and_count_their_labels(tmp_path):
+    even = {
+        "training.label_budget": "100",
+        "training.label_strategy": "disagreement",
+        "training.query_schedule": "even",
+        "training.exploration": "rounds",
+    }
+    asap = {**even, "training.query_schedule": "asap"}
+    runs = []
+    for seed in range(3):
+        runs.append(_budget_run(tmp_path, "minigrid-doorkey-oracle", {}, seed, [0.5, 1.0], 900))
+        runs.append(
+            _budget_run(tmp_path, "minigrid-doorkey-dospcot", even, seed, [0.0, 0.8 + 0.05 * seed], 100)
+        )
+        runs.append(_budget_run(tmp_path, "minigrid-doorkey-dospcot", asap, seed, [0.0, 0.6], 100))
+    text = "\n".join(BUDGET_STUDIES["budget-explore"].tables(runs))
+    arm = "dospcot disagreement even exploration by rounds"
+    assert f"| {arm} | 100 | 100 | 0.850 [0.800, 0.900] |" in text
+    assert "| oracle | preset | every reward | 1.000 [1.000, 1.000] |" in text
+    assert f"| {arm} | 0.00 | 0.85 |" in text  # success after each round
+    # Even minus asap, paired by seed: 0.2, 0.25, 0.3.
+    assert "the budget spread evenly against spent at once: success of " in text
+    assert "paired: 0.250 [0.200, 0.300] over 3 seeds." in text
+    # 90% of the oracle's 1.0 is 0.9: the even arm's one budget (0.85) does not reach it.
+    assert f"| {arm} | 100 | not reached |" in text
