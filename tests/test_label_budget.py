@@ -20,6 +20,7 @@ from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.budget import STUDIES as BUDGET_STUDIES
 from dospcot.lab.studies.budget import labels_to_reach
 from dospcot.lab.sweep import Trial
+from dospcot.run.cotraining import build_run
 from dospcot.tasks import load_config
 
 BUDGET = ["training.label_budget=30", "training.rounds=3"]
@@ -292,3 +293,20 @@ def test_the_budget_tables_pair_arms_by_seed_and_count_their_labels(tmp_path):
     assert "paired: 0.250 [0.200, 0.300] over 3 seeds." in text
     # 90% of the oracle's 1.0 is 0.9: the even arm's one budget (0.85) does not reach it.
     assert f"| {arm} | 100 | not reached |" in text
+
+
+def test_the_control_one_view_co_trained_with_every_reward_labelled_is_the_oracle_bit_for_bit():
+    """The co-training machinery (reward table, keyed labels, a co-trainer whose U is empty) costs
+    nothing when no reward is hidden: exploring by rounds, as the oracle does, the one agent learns
+    exactly the oracle's parameters and scores the same every round."""
+    common = ['views=["coords"]', "seed=3"]
+    oracle = build_run(load_config("tiny", ['method="oracle"', *common]))
+    oracle_rows = oracle.run()
+    control = build_run(
+        load_config("tiny", [*common, "training.label_fraction=1.0", 'training.exploration="rounds"'])
+    )
+    control_rows = control.run()
+    for key in ("greedy_return", "success", "agreement", "eps"):
+        assert [r[key] for r in control_rows] == [r[key] for r in oracle_rows], key
+    for p, q in zip(oracle.agents[0].policy.parameters(), control.agents[0].policy.parameters(), strict=True):
+        assert np.array_equal(p.detach().numpy(), q.detach().numpy())
