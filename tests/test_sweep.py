@@ -52,6 +52,7 @@ def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
         SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}).trials()
 
 
+@pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`; the fast tests below resume and skip trials
 def test_local_sweep_runs_every_trial_once_and_reruns_nothing(tmp_path):
     spec = SweepSpec(("tiny",), GRID, (0, 1))
     result = run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False)
