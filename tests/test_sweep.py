@@ -127,6 +127,18 @@ def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(one_tr
     assert info["cpu"].endswith(f", torch kernels {torch.backends.cpu.get_cpu_capability()}")
 
 
+def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(one_trial_sweep, tmp_path):
+    """A sweep folder may outlive its presets (the studies keep theirs): a trial whose stored config
+    differs from what its preset gives now is neither counted nor resumed, and the sweep names it."""
+    spec = ONE_TRIAL
+    shutil.copytree(one_trial_sweep, tmp_path / "s")  # the sweep as run_sweep left it
+    (stored,) = (tmp_path / "s").glob("trials/tiny/*/config.toml")
+    stored.write_text(stored.read_text().replace("steps_per_round = 300", "steps_per_round = 200"))
+    message = r"1 trial\(s\) .* tiny/seed=0: training.steps_per_round was 200, is 300"
+    with pytest.raises(SweepError, match=message):
+        run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)
+
+
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`
 def test_ray_backend_runs_the_same_trials_to_the_same_summaries(tmp_path):
     ray = pytest.importorskip("ray", reason="the `ray` extra is not installed (pip install 'dospcot[ray]')")
@@ -390,15 +402,3 @@ def test_changed_run_records_do_not_mark_the_source_dirty(tmp_path):
         assert run_folder.source_commit(tmp_path) == head + "+dirty"
     finally:
         run_folder.source_commit.cache_clear()
-
-
-def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(one_trial_sweep, tmp_path):
-    """A sweep folder may outlive its presets (the studies keep theirs): a trial whose stored config
-    differs from what its preset gives now is neither counted nor resumed, and the sweep names it."""
-    spec = ONE_TRIAL
-    shutil.copytree(one_trial_sweep, tmp_path / "s")  # the sweep as run_sweep left it
-    (stored,) = (tmp_path / "s").glob("trials/tiny/*/config.toml")
-    stored.write_text(stored.read_text().replace("steps_per_round = 300", "steps_per_round = 200"))
-    message = r"1 trial\(s\) .* tiny/seed=0: training.steps_per_round was 200, is 300"
-    with pytest.raises(SweepError, match=message):
-        run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)

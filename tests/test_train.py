@@ -364,17 +364,6 @@ def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tr
     assert {p.relative_to(killed): p.read_bytes() for p in killed.rglob("*") if p.is_file()} == before
 
 
-def test_exploring_starts_draw_free_cells_from_the_seed_and_lava_returns_to_the_map_start():
-    env = GridWorld(size=8, layout_seed=1, exploring_starts=True)
-    starts = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
-    again = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
-    assert starts == again and len(set(starts)) > 10
-    free = env.layout.terrain.reshape(-1) == 0
-    assert free[starts].all()
-    lava_moves = np.argwhere(env.reward == -100.0)
-    assert (env.next_state[tuple(lava_moves.T)] == env.start_state).all()
-
-
 def _assert_every_run_file_whole(run_dir: Path) -> None:
     """Every file a kill left in a run folder parses in full: none is half-written."""
     for path in run_dir.iterdir():
@@ -432,6 +421,17 @@ def test_a_run_killed_at_random_moments_resumes_to_the_uninterrupted_result(trai
     assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
     assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
     assert not list(killed.glob(".*.tmp"))
+
+
+def test_exploring_starts_draw_free_cells_from_the_seed_and_lava_returns_to_the_map_start():
+    env = GridWorld(size=8, layout_seed=1, exploring_starts=True)
+    starts = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
+    again = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
+    assert starts == again and len(set(starts)) > 10
+    free = env.layout.terrain.reshape(-1) == 0
+    assert free[starts].all()
+    lava_moves = np.argwhere(env.reward == -100.0)
+    assert (env.next_state[tuple(lava_moves.T)] == env.start_state).all()
 
 
 def test_metrics_csv_holds_every_rows_columns_when_a_resumed_run_adds_one(tmp_path):
