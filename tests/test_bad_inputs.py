@@ -16,6 +16,7 @@ import sys
 import time
 import tomllib
 import typing
+import warnings
 from pathlib import Path
 
 import gymnasium as gym
@@ -154,20 +155,36 @@ def test_any_value_on_the_command_line_trains_or_exits_2_in_one_line_leaving_no_
     _train_or_refuse(runs, f"{key}={value}")
 
 
-def _train_or_refuse(runs: Path, override: str) -> None:
+def _train_or_refuse(runs: Path, override: str, capfd: pytest.CaptureFixture | None = None) -> None:
+    """``dospcot train tiny`` (short) with ``override``: trained, or exit status 2 and one line on stderr
+    leaving no run folder. In a process of its own, or in this one where ``capfd`` is given: main is what
+    the process runs, capfd reads its stderr down to the file descriptor, and a warning (which the
+    process would print on stderr) fails the test."""
     import shutil
 
     shutil.rmtree(runs, ignore_errors=True)
     args = ["train", "tiny", "--no-progress", "--runs-dir", str(runs)]
     sets = [a for o in [*SHORT, override] for a in ("--set", o)]
-    process = subprocess.run(
-        [sys.executable, "-m", "dospcot.cli", *args, *sets], capture_output=True, text=True, timeout=300
-    )
-    if process.returncode == 0:
+    if capfd is None:
+        process = subprocess.run(
+            [sys.executable, "-m", "dospcot.cli", *args, *sets], capture_output=True, text=True, timeout=300
+        )
+        status, err = process.returncode, process.stderr
+    else:
+        capfd.readouterr()
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                status = main([*args, *sets])
+            except SystemExit as exit_:  # argparse's own errors
+                status = exit_.code
+        err = capfd.readouterr().err
+        assert not caught, [f"{w.category.__name__}: {w.message}" for w in caught]
+    if status == 0:
         assert list(runs.glob("tiny/*/summary.json"))
     else:
-        assert process.returncode == 2, process.stderr
-        assert process.stderr.count("\n") == 1 and "Traceback" not in process.stderr
+        assert status == 2, err
+        assert err.count("\n") == 1 and "Traceback" not in err
         assert not list(runs.glob("tiny/*")), "a refused config left a run folder"
 
 
@@ -187,8 +204,9 @@ def _train_or_refuse(runs: Path, override: str) -> None:
         "dqn.device=cuda:7",
     ],
 )
-def test_the_reported_bad_inputs_exit_2_in_one_line_before_a_folder(tmp_path, override):
-    _train_or_refuse(tmp_path / "runs", override)
+def test_the_reported_bad_inputs_exit_2_in_one_line_before_a_folder(tmp_path, capfd, override):
+    # In this process: test_a_summary_json_round_trips_finite runs the command in a process of its own.
+    _train_or_refuse(tmp_path / "runs", override, capfd)
     assert not (tmp_path / "runs").exists() or not list((tmp_path / "runs").glob("tiny/*"))
 
 

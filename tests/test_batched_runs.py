@@ -134,6 +134,7 @@ def test_a_batch_killed_after_a_round_resumes_to_the_files_of_one_never_stopped(
         assert not (resumed / BATCH_FILE).exists()
 
 
+@pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`; the grouping alone, untrained, is checked below
 def test_a_sweep_batches_its_seeds_and_a_batchs_grouping_changes_no_members_files(tmp_path):
     from dospcot.lab.sweep import run_sweep
     from dospcot.lab.sweep_spec import SweepSpec, trial_dir
@@ -184,10 +185,8 @@ def test_a_batch_reports_its_progress_to_a_sweep_in_trials(tmp_path):
     assert sum(shares) == pytest.approx(2.0, abs=0.02)  # two trials, but what is left under the last report
 
 
-@pytest.mark.parametrize(
-    ("started", "other"),
-    [(3, 1), pytest.param(1, 3, marks=pytest.mark.slow)],  # each near 30 s on 2 cores
-)
+@pytest.mark.slow  # each over 30 s on 2 cores: `make test-slow`; the refusal alone is checked below
+@pytest.mark.parametrize(("started", "other"), [(3, 1), (1, 3)])
 def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_never_stopped(
     tmp_path, capsys, started, other
 ):
@@ -225,6 +224,37 @@ def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_nev
     assert [info.get("batch_members", 1) for info in infos] == [started] * 3
     # The killed trials went on from their checkpoint (a second session), none from scratch.
     assert [info["sessions"] for info in infos] == ([2, 2, 2] if started > 1 else [2, 1, 1])
+
+
+def test_a_sweep_groups_its_seeds_by_batch_seeds_and_refuses_another_once_its_trials_began(tmp_path, capsys):
+    """The two slow tests above without their training: --batch-seeds K puts a cell's seeds in jobs of
+    at most K, and a sweep whose trials began under K refuses another K in one line."""
+    from dospcot.lab.sweep import plan_jobs
+    from dospcot.lab.sweep_spec import SweepSpec, open_sweep, store_batch_seeds, trial_dir
+    from dospcot.run.run_folder import write_toml
+    from dospcot.tasks import get_task
+
+    spec = SweepSpec(("tiny",), {"training.label_fraction": ("0.2",)}, (0, 1, 2), tuple(TINY))
+    trials = spec.trials()
+
+    def seeds(jobs):
+        return [[trial.seed for trial in job] for job in jobs]
+
+    assert seeds(plan_jobs(trials, workers=1, batch_seeds=2)) == [[0, 1], [2]]
+    assert seeds(plan_jobs(trials, workers=1, batch_seeds=3)) == [[0, 1, 2]]
+    assert seeds(plan_jobs(trials, workers=1)) == [[0], [1], [2]]
+    sweep_dir = tmp_path / "s"
+    open_sweep(sweep_dir, spec)
+    store_batch_seeds(sweep_dir, 3)
+    for trial in trials:  # each trial's run folder begun: its config.toml, which a run writes first
+        cfg = load_config(trial.config, trial.overrides())
+        write_toml(trial_dir(sweep_dir, trial) / "config.toml", get_task(cfg.task).config_table(cfg))
+    args = ["sweep", "--resume", str(sweep_dir), "--workers", "1", "--no-progress"]
+    assert main([*args, "--batch-seeds", "1"]) == 2
+    error = capsys.readouterr().err
+    assert error.count("\n") == 1 and "Traceback" not in error
+    assert "trains its trials with --batch-seeds 3 and 3 of its 3 have started" in error
+    assert not list(sweep_dir.glob("trials/*/*/summary.json"))  # nothing trained
 
 
 @pytest.mark.parametrize("seeds", [[], ["--seeds", "2"]])

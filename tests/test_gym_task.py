@@ -265,9 +265,21 @@ def minigrid_direction(obs: dict[str, np.ndarray]) -> np.ndarray:
     return np.concatenate([np.eye(4)[obs["direction"]], obs["image"][..., 0].ravel() / 10])
 
 
+@pytest.fixture(scope="module")
+def keyed_run() -> CoTrainingRun:
+    """The corridor on (cell, action) labels, 30% of them, 2 rounds of 600 steps: built and run once for
+    the module; the tests only read it."""
+    settings = {**SETTINGS, "training.rounds": 2, "training.steps_per_round": 600}
+    run = build_run(
+        gym_config(make_corridor, VIEWS, label_fraction=0.3, state_key=corridor_cell, settings=settings)
+    )
+    run.run()
+    return run
+
+
 # Single-step labels on MiniGrid, (state key, action) labels on the corridor.
 @pytest.mark.parametrize("task", ["corridor-keyed", "minigrid"])
-def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(task):
+def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(request, task):
     settings = {**SETTINGS, "training.rounds": 2, "training.steps_per_round": 600}
     env, views, fraction = make_corridor, VIEWS, 0.1
     if task == "corridor-keyed":
@@ -278,8 +290,12 @@ def test_leakage_scrambling_hidden_rewards_leaves_the_learners_bit_identical(tas
         env, views = "minigrid:MiniGrid-LavaGapS7-v0", {"image": "image", "direction": minigrid_direction}
         fraction = 0.5  # the goal, rarely reached at random, must be labelled at times
     cfg = gym_config(env, views, label_fraction=fraction, settings=settings)
-    plain = build_run(cfg)
-    plain.run()
+    if task == "corridor-keyed":  # the module's run of this config
+        plain = request.getfixturevalue("keyed_run")
+        assert plain.cfg == cfg
+    else:
+        plain = build_run(cfg)
+        plain.run()
     make = partial(make_masked_gym, cfg.gym.env_id, view_specs=cfg.gym.views, state_key=cfg.gym.state_key)
     scrambled = CoTrainingRun(
         SensorAdapter(cfg, cfg.gym, lambda *args: _ScrambledHiddenReward(make(*args))), cfg
@@ -552,11 +568,11 @@ def test_the_egocentric_map_puts_the_agent_at_its_centre_facing_up(doorkey):
         assert view.sum() == indicators.sum() and (view.sum(axis=-1) > 0).sum() == 25
 
 
-def test_a_keyed_run_resumed_from_its_checkpoint_ends_as_the_uninterrupted_run():
+def test_a_keyed_run_resumed_from_its_checkpoint_ends_as_the_uninterrupted_run(keyed_run):
     settings = {**SETTINGS, "training.rounds": 2, "training.steps_per_round": 600}
     cfg = gym_config(make_corridor, VIEWS, label_fraction=0.3, state_key=corridor_cell, settings=settings)
-    whole = build_run(cfg)
-    whole.run()
+    whole = keyed_run
+    assert whole.cfg == cfg
     first = build_run(cfg)
     first.run_round()
     saved = pickle.dumps(first.state_dict())

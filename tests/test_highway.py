@@ -196,10 +196,18 @@ def test_an_agent_trained_on_the_fast_env_drives_on_highway_env_through_the_same
     assert steps >= 1 and 0.0 <= total <= steps
 
 
-def test_a_resumed_highway_run_continues_exactly():
+@pytest.fixture(scope="module")
+def fast_run():
+    """``fasthighway-dospcot`` on ``TINY``, built and run once for the module; the tests only read it (its
+    agents are evaluated again, which changes nothing: an evaluation starts its episodes from the seeds)."""
+    run = build_run(load_config("fasthighway-dospcot", TINY))
+    run.run()
+    return run
+
+
+def test_a_resumed_highway_run_continues_exactly(fast_run):
     cfg = load_config("fasthighway-dospcot", TINY)
-    straight = build_run(cfg)
-    straight.run()
+    straight = fast_run
     first = build_run(cfg)
     first.run_round()
     state = pickle.loads(pickle.dumps(first.state_dict()))
@@ -224,11 +232,14 @@ class _ScrambledHiddenReward(gym.Wrapper):
 
 
 @pytest.mark.parametrize("monitor", [[], ["highway.reveal_first_steps=5"]])
-def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_identical(monitor):
+def test_leakage_scrambling_hidden_rewards_leaves_the_transition_learners_bit_identical(request, monitor):
     cfg = load_config("fasthighway-dospcot", TINY + monitor)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
-    plain = build_run(cfg)
-    plain.run()
+    if monitor:
+        plain = build_run(cfg)
+        plain.run()
+    else:  # the module's run of the same config
+        plain = request.getfixturevalue("fast_run")
     make = partial(
         make_masked_highway,
         cfg.highway.env_id,

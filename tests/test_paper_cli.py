@@ -175,11 +175,25 @@ def test_cli_reproduce_paper_is_a_sweep_and_its_report(tmp_path, capsys):
         (["evaluate"], "the following arguments are required: run_dir"),
     ],
 )
-def test_cli_bad_arguments_exit_nonzero_with_a_message(args, message):
-    out = subprocess.run([sys.executable, "-m", "dospcot", *args], capture_output=True, text=True)
-    assert out.returncode != 0
-    assert message in out.stderr
-    assert out.stderr.count("\n") == 1  # one line, no usage block and no traceback
+def test_cli_bad_arguments_exit_nonzero_with_a_message(capfd, args, message):
+    # main is what `python -m dospcot` runs: in this process, the same status and stderr (capfd reads
+    # the file descriptor as well), without the process's imports of torch.
+    try:
+        code = main(args)
+    except SystemExit as exit_:  # argparse's own errors
+        code = exit_.code
+    assert code != 0
+    err = capfd.readouterr().err
+    assert message in err
+    assert err.count("\n") == 1  # one line, no usage block and no traceback
+
+
+def test_a_bad_argument_ends_a_process_of_its_own_with_one_line():
+    out = subprocess.run(
+        [sys.executable, "-m", "dospcot", "reproduce-paper", "--workers", "0"], capture_output=True, text=True
+    )
+    assert out.returncode == 2 and out.stdout == ""
+    assert "expected a positive integer" in out.stderr and out.stderr.count("\n") == 1
 
 
 def test_bench_quick_never_writes_benchmarks_md(tmp_path, capsys, monkeypatch):

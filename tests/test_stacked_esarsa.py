@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 import torch as th
@@ -21,6 +23,20 @@ def _trained_agent(n_steps: int, seed: int = 0) -> ExpectedSarsaDQN:
     return run.agents[0]
 
 
+@pytest.fixture(scope="module")
+def trained_agent():
+    """``trained_agent(n_steps, seed=0)``: a deep copy of :func:`_trained_agent`'s agent, which is trained
+    once per module for each (n_steps, seed); the test may train and change its copy."""
+    agents: dict[tuple[int, int], ExpectedSarsaDQN] = {}
+
+    def get(n_steps: int, seed: int = 0) -> ExpectedSarsaDQN:
+        if (n_steps, seed) not in agents:
+            agents[n_steps, seed] = _trained_agent(n_steps, seed)
+        return copy.deepcopy(agents[n_steps, seed])
+
+    return get
+
+
 def _batches(agent: ExpectedSarsaDQN, count: int, seed: int) -> list[WeightedReplayBufferSamples]:
     np.random.seed(seed)  # noqa: NPY002  (the buffer samples from numpy's global stream, as SB3's)
     return [agent.replay_buffer.sample(agent.batch_size) for _ in range(count)]
@@ -34,8 +50,10 @@ def _member_parameters(learner: StackedExpectedSarsa, member: int) -> dict[str, 
 @pytest.mark.parametrize(
     ("target", "greedy"), [("expected_sarsa", "target"), ("expected_sarsa", "online"), ("q", "target")]
 )
-def test_one_member_makes_the_first_100_updates_of_expected_sarsa_dqn_train(n_steps, target, greedy):
-    agent = _trained_agent(n_steps)
+def test_one_member_makes_the_first_100_updates_of_expected_sarsa_dqn_train(
+    trained_agent, n_steps, target, greedy
+):
+    agent = trained_agent(n_steps)
     agent.target, agent.greedy = target, greedy
     batches = _batches(agent, UPDATES, seed=1)
     assert n_steps == 1 or any(float((b.discounts < agent.gamma * 0.999).any()) for b in batches)
@@ -56,8 +74,8 @@ def test_one_member_makes_the_first_100_updates_of_expected_sarsa_dqn_train(n_st
     assert updated > UPDATES // 2
 
 
-def test_one_member_makes_expected_sarsa_dqns_updates_with_the_large_margin_loss():
-    agent = _trained_agent(3)
+def test_one_member_makes_expected_sarsa_dqns_updates_with_the_large_margin_loss(trained_agent):
+    agent = trained_agent(3)
     rng = np.random.default_rng(0)
     states = rng.random((40, *agent.observation_space.shape)).astype(np.float32)
     actions = rng.integers(agent.action_space.n, size=40)
@@ -79,9 +97,9 @@ def test_one_member_makes_expected_sarsa_dqns_updates_with_the_large_margin_loss
         np.testing.assert_allclose(value, agent.q_net.state_dict()[name], atol=1e-5, rtol=0)
 
 
-def test_members_are_independent_another_members_data_leaves_one_bit_identical():
-    agents = [_trained_agent(3, seed) for seed in (0, 1, 2)]
-    other = _trained_agent(3, seed=7)
+def test_members_are_independent_another_members_data_leaves_one_bit_identical(trained_agent):
+    agents = [trained_agent(3, seed) for seed in (0, 1, 2)]
+    other = trained_agent(3, seed=7)
     data = [_batches(agent, 30, seed=i) for i, agent in enumerate(agents)]
 
     def trajectory(members, batches):

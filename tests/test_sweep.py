@@ -4,6 +4,7 @@ import csv
 import json
 import math
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -53,6 +54,7 @@ def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
         SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}).trials()
 
 
+@pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`; the fast tests below resume and skip trials
 def test_local_sweep_runs_every_trial_once_whatever_its_workers_and_reruns_nothing(tmp_path):
     spec = SweepSpec(("tiny",), GRID, (0, 1))
     result = run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False)
@@ -106,6 +108,17 @@ def test_the_cores_are_the_process_affinity_where_the_platform_has_one(monkeypat
 
 
 ROOT = Path(__file__).resolve().parent.parent
+ONE_TRIAL = SweepSpec(("tiny",), {}, (0,))
+
+
+@pytest.fixture(scope="module")
+def one_trial_sweep(tmp_path_factory) -> Path:
+    """A finished sweep of ``ONE_TRIAL`` (tiny, seed 0), run once for the module: tests copy it where they
+    change it."""
+    sweep_dir = tmp_path_factory.mktemp("one-trial") / "s"
+    result = run_sweep(sweep_dir, ONE_TRIAL, workers=1, show_progress=False)
+    assert len(result.ran) == 1 and not result.failed
+    return sweep_dir
 
 
 def _git(*args: str) -> subprocess.CompletedProcess:
@@ -113,12 +126,12 @@ def _git(*args: str) -> subprocess.CompletedProcess:
 
 
 @pytest.mark.skipif(_git("rev-parse", "HEAD").returncode != 0, reason="needs the git checkout")
-def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(tmp_path):
+def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(one_trial_sweep, tmp_path):
     """runs/README.md: the repository keeps each trial's small files under runs/sweeps, enough to
     rebuild the tables and to skip finished trials on another machine; agents and events stay out."""
     sweep = tmp_path / "runs" / "sweeps" / "s"
-    spec = SweepSpec(("tiny",), {"training.label_fraction": ("0.1",)}, (0,))
-    run_sweep(sweep, spec, workers=1, show_progress=False)
+    spec = ONE_TRIAL
+    shutil.copytree(one_trial_sweep, sweep)  # the sweep as run_sweep left it
     files = [path.relative_to(tmp_path) for path in sweep.rglob("*") if path.is_file()]
     ignored = _git("check-ignore", "--no-index", *map(str, files)).stdout.split()
     kept = [f for f in files if str(f) not in ignored]
@@ -146,6 +159,18 @@ def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(tmp_pa
     assert info["commit"].split("+")[0] == _git("rev-parse", "HEAD").stdout.strip()
     # ... and the CPU kernels, as another instruction set may end the same seed elsewhere.
     assert info["cpu"].endswith(f", torch kernels {torch.backends.cpu.get_cpu_capability()}")
+
+
+def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(one_trial_sweep, tmp_path):
+    """A sweep folder may outlive its presets (the studies keep theirs): a trial whose stored config
+    differs from what its preset gives now is neither counted nor resumed, and the sweep names it."""
+    spec = ONE_TRIAL
+    shutil.copytree(one_trial_sweep, tmp_path / "s")  # the sweep as run_sweep left it
+    (stored,) = (tmp_path / "s").glob("trials/tiny/*/config.toml")
+    stored.write_text(stored.read_text().replace("steps_per_round = 300", "steps_per_round = 200"))
+    message = r"1 trial\(s\) .* tiny/seed=0: training.steps_per_round was 200, is 300"
+    with pytest.raises(SweepError, match=message):
+        run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)
 
 
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`
@@ -411,15 +436,3 @@ def test_changed_run_records_do_not_mark_the_source_dirty(tmp_path):
         assert run_folder.source_commit(tmp_path) == head + "+dirty"
     finally:
         run_folder.source_commit.cache_clear()
-
-
-def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(tmp_path):
-    """A sweep folder may outlive its presets (the studies keep theirs): a trial whose stored config
-    differs from what its preset gives now is neither counted nor resumed, and the sweep names it."""
-    spec = SweepSpec(("tiny",), {}, (0,))
-    run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)
-    (stored,) = (tmp_path / "s").glob("trials/tiny/*/config.toml")
-    stored.write_text(stored.read_text().replace("steps_per_round = 300", "steps_per_round = 200"))
-    message = r"1 trial\(s\) .* tiny/seed=0: training.steps_per_round was 200, is 300"
-    with pytest.raises(SweepError, match=message):
-        run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)

@@ -81,7 +81,15 @@ ALL_METHODS = [
 ]
 
 
-def test_leakage_permuting_hidden_rewards_leaves_q_tables_bit_identical(mdp):
+@pytest.fixture(scope="module")
+def all_methods(mdp):
+    """``ALL_METHODS`` trained once for the module, on ``SMALL``: the runner (its step count) and its
+    result. The tests only read it; each compares it with a run of its own."""
+    runner = TabularCoTraining(mdp, ALL_METHODS, SMALL)
+    return runner, runner.run()
+
+
+def test_leakage_permuting_hidden_rewards_leaves_q_tables_bit_identical(mdp, all_methods):
     from dataclasses import replace
 
     masked = ~StateActionMask(mdp.n_states, mdp.n_actions, SMALL.label_fraction, seed=5).labelled
@@ -90,15 +98,15 @@ def test_leakage_permuting_hidden_rewards_leaves_q_tables_bit_identical(mdp):
     reward[masked] = np.random.default_rng(0).permutation(values)
     assert not np.array_equal(reward, mdp.reward)  # the permutation moved some -100s
     permuted = replace(mdp, reward=reward)
-    a = TabularCoTraining(mdp, ALL_METHODS, SMALL).run()
+    _, a = all_methods
     b = TabularCoTraining(permuted, ALL_METHODS, SMALL).run()
     assert np.array_equal(a.q, b.q)
     # The metrics do read the truth, so they may differ; the learners may not.
     assert [r["pace"] for r in a.records] == [r["pace"] for r in b.records]
 
 
-def test_same_seed_gives_bit_identical_tables_twice(mdp):
-    a = TabularCoTraining(mdp, ALL_METHODS, SMALL).run()
+def test_same_seed_gives_bit_identical_tables_twice(mdp, all_methods):
+    _, a = all_methods
     b = TabularCoTraining(mdp, ALL_METHODS, SMALL).run()
     assert np.array_equal(a.q, b.q)
     assert json.dumps(a.records) == json.dumps(b.records)  # NaN-safe comparison
@@ -111,14 +119,14 @@ def test_a_run_is_the_same_alone_or_in_a_batch(mdp):
     assert np.array_equal(together.q[:2], alone.q)
 
 
-def test_the_benchmarks_per_step_python_loop_is_the_same_learner(mdp):
+def test_the_benchmarks_per_step_python_loop_is_the_same_learner(mdp, all_methods):
     """The tabular benchmark's reference does the vectorised agents' work one step at a time: every
     kind, every method, the same Q-tables and records bit for bit, and the same step count."""
     from dospcot.lab.bench_rows import PerStepTabularCoTraining
 
-    ours = TabularCoTraining(mdp, ALL_METHODS, SMALL)
+    ours, a = all_methods
     loop = PerStepTabularCoTraining(mdp, ALL_METHODS, SMALL)
-    a, b = ours.run(), loop.run()
+    b = loop.run()
     assert np.array_equal(a.q, b.q)
     assert json.dumps(a.records) == json.dumps(b.records)
     assert ours.env_steps == loop.env_steps > 2 * 60 * 8  # 8 agents, 2 rounds of 60 episodes

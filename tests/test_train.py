@@ -7,6 +7,7 @@ import json
 import os
 import pickle
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -57,6 +58,27 @@ def _train(tmp_path: Path, *overrides: str) -> Path:
     assert main([*args, *(a for o in overrides for a in ("--set", o))]) == 0
     (run_dir,) = (tmp_path / "tiny").iterdir()
     return run_dir
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    """``trained(*overrides)``: the folder :func:`_train` gives for ``overrides``, trained once per config
+    in the module (overrides that resolve to the same config share it: a config trains the same run).
+    Tests only read it; a test that changes a run's files works on a copy (:func:`_copy`)."""
+    runs: dict[str, Path] = {}
+
+    def get(*overrides: str) -> Path:
+        key = repr(load_config("tiny", list(overrides)))
+        if key not in runs:
+            runs[key] = _train(tmp_path_factory.mktemp("tiny"), *overrides)
+        return runs[key]
+
+    return get
+
+
+def _copy(run_dir: Path, tmp_path: Path) -> Path:
+    """A copy of the run folder ``run_dir`` under ``tmp_path``, for a test to change."""
+    return Path(shutil.copytree(run_dir, tmp_path / "tiny" / run_dir.name))
 
 
 def test_every_issue_preset_ships_and_validates():
@@ -216,8 +238,8 @@ def test_unknown_preset_and_bad_resume_folder_fail_with_one_line(tmp_path, capsy
 
 
 @pytest.mark.parametrize("views", [["coords"], ["coords", "patch"], ["coords", "patch", "rays"]])
-def test_tiny_run_writes_every_file_for_one_two_and_three_views(tmp_path, views):
-    run_dir = _train(tmp_path, f"views={json.dumps(views)}")
+def test_tiny_run_writes_every_file_for_one_two_and_three_views(trained, views):
+    run_dir = trained(f"views={json.dumps(views)}")
     for name in RUN_FILES:
         assert (run_dir / name).is_file(), name
     assert not (run_dir / "checkpoint.pkl").exists()  # a finished run keeps no checkpoint
@@ -249,8 +271,8 @@ def test_a_run_on_segment_labels_logs_and_summarises_its_decoding_error(tmp_path
 
 
 @pytest.mark.parametrize("agent", ["esarsa_dqn", "tabular"])
-def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(tmp_path, capsys, agent):
-    run_dir = _train(tmp_path, f"agent={agent}")
+def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(trained, tmp_path, capsys, agent):
+    run_dir = _copy(trained(f"agent={agent}"), tmp_path)
     capsys.readouterr()
     assert main(["evaluate", str(run_dir)]) == 0
     assert "wrote" in capsys.readouterr().out
@@ -262,8 +284,8 @@ def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(tmp_path, capsys,
     assert evaluation == evaluate(run_dir)
 
 
-def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
-    run_dir = _train(tmp_path)
+def test_corrupt_checkpoint_and_agent_give_clear_errors(trained, tmp_path, capsys):
+    run_dir = _copy(trained(), tmp_path)
     (run_dir / "summary.json").unlink()  # a killed run's folder: a finished one is not resumed
     whole = pickle.dumps({"records": [], "elapsed_s": 1.0, "sessions": 1})
     (run_dir / "checkpoint.pkl").write_bytes(whole[: len(whole) // 2])  # as a kill mid-write would leave it
@@ -286,9 +308,9 @@ def test_corrupt_checkpoint_and_agent_give_clear_errors(tmp_path, capsys):
             load_classifier(clf_path)
 
 
-def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tmp_path, capsys):
+def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(trained, tmp_path, capsys):
     overrides = ["--set", "training.rounds=3", "--set", "training.steps_per_round=800", "--no-progress"]
-    full = _train(tmp_path / "full", "training.rounds=3", "training.steps_per_round=800")
+    full = trained("training.rounds=3", "training.steps_per_round=800")
     cmd = [
         sys.executable,
         "-m",
@@ -342,17 +364,6 @@ def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(tm
     assert {p.relative_to(killed): p.read_bytes() for p in killed.rglob("*") if p.is_file()} == before
 
 
-def test_exploring_starts_draw_free_cells_from_the_seed_and_lava_returns_to_the_map_start():
-    env = GridWorld(size=8, layout_seed=1, exploring_starts=True)
-    starts = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
-    again = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
-    assert starts == again and len(set(starts)) > 10
-    free = env.layout.terrain.reshape(-1) == 0
-    assert free[starts].all()
-    lava_moves = np.argwhere(env.reward == -100.0)
-    assert (env.next_state[tuple(lava_moves.T)] == env.start_state).all()
-
-
 def _assert_every_run_file_whole(run_dir: Path) -> None:
     """Every file a kill left in a run folder parses in full: none is half-written."""
     for path in run_dir.iterdir():
@@ -378,9 +389,9 @@ def _assert_every_run_file_whole(run_dir: Path) -> None:
             assert data.startswith(b"\x89PNG") and data.endswith(b"IEND\xaeB`\x82")
 
 
-def test_a_run_killed_at_random_moments_resumes_to_the_uninterrupted_result(tmp_path):
+def test_a_run_killed_at_random_moments_resumes_to_the_uninterrupted_result(trained, tmp_path):
     overrides = ["training.rounds=3", "training.steps_per_round=800"]
-    full = _train(tmp_path / "full", *overrides)
+    full = trained(*overrides)
     rng = random.Random(11)
     base = [sys.executable, "-m", "dospcot", "train", "--no-progress"]
     kills = []
@@ -410,6 +421,17 @@ def test_a_run_killed_at_random_moments_resumes_to_the_uninterrupted_result(tmp_
     assert (killed / "summary.json").read_text() == (full / "summary.json").read_text()
     assert (killed / "metrics.csv").read_text() == (full / "metrics.csv").read_text()
     assert not list(killed.glob(".*.tmp"))
+
+
+def test_exploring_starts_draw_free_cells_from_the_seed_and_lava_returns_to_the_map_start():
+    env = GridWorld(size=8, layout_seed=1, exploring_starts=True)
+    starts = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
+    again = [env.reset(seed=5)[0]] + [env.reset()[0] for _ in range(200)]
+    assert starts == again and len(set(starts)) > 10
+    free = env.layout.terrain.reshape(-1) == 0
+    assert free[starts].all()
+    lava_moves = np.argwhere(env.reward == -100.0)
+    assert (env.next_state[tuple(lava_moves.T)] == env.start_state).all()
 
 
 def test_metrics_csv_holds_every_rows_columns_when_a_resumed_run_adds_one(tmp_path):
