@@ -376,8 +376,14 @@ EXPLORE_SWEEPS = (
         {FRACTION: ("1.0",), EXPLORATION: ("rounds",)},
     ),
     Sweep("queries-lavagap-oracle", ("minigrid-lavagap-oracle",), {}),
+    Sweep(
+        "queries-lavagap-dospcot",
+        ("minigrid-lavagap-dospcot",),
+        {FRACTION: ("0.1",), STRATEGY: ("uniform", "random", "uncertainty")},
+    ),
+    Sweep("budget-explore-lavagap-uniform", ("minigrid-lavagap-dospcot",), {FRACTION: ("0.1",), **ROUNDS}),
     Sweep("queries-doorkey-oracle", ("minigrid-doorkey-oracle",), {}),
-    # The active-queries study's DOSPCoT arms at a 10% mask, exploring by the pace (seeds 0-9).
+    # The active-queries study's DOSPCoT arms at a 10% mask explore by the pace (seeds 0-9).
     Sweep(
         "queries-doorkey-dospcot",
         ("minigrid-doorkey-dospcot",),
