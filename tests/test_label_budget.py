@@ -169,7 +169,7 @@ def test_every_arm_buys_the_same_count_of_labels_whatever_its_agents(overrides):
 
 
 def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_labels_alone():
-    run = _grid_run("disagreement", *BUDGET, 'method="reward-model"', 'views=["coords"]')
+    run = _grid_run("disagreement", *SHORT_BUDGET, 'method="reward-model"', 'views=["coords"]')
     run.run()
     pool = run.task.pool()
     probabilities = run.trainer.probabilities(pool)
@@ -183,9 +183,16 @@ def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_lab
 @pytest.mark.parametrize(
     ("strategy", "overrides"),
     [
-        ("outcomes+disagreement", ['training.query_schedule="decay"', "training.first_round_share=0.3"]),
+        (
+            "outcomes+disagreement",
+            [
+                'training.query_schedule="decay"',
+                "training.first_round_share=0.3",
+                "training.query_pool_factor=3",
+                "training.query_skip_confidence=0.9",
+            ],
+        ),
         ("uncertainty", ['training.query_schedule="even"', "training.query_class_floor=0.5"]),
-        ("disagreement", ["training.query_pool_factor=3", "training.query_skip_confidence=0.9"]),
         ("disagreement", ['method="reward-model"', 'views=["coords"]', 'training.query_schedule="even"']),
     ],
 )
