@@ -316,6 +316,11 @@ DESCRIPTIVE = (
         "the budget spread evenly against spent at once",
     ),
     (
+        f"dospcot outcomes+disagreement even {ROUNDS_ARM}",
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        "half the queries on episode ends under the even schedule",
+    ),
+    (
         f"dospcot disagreement even {ROUNDS_ARM}",
         f"self-training uncertainty even {ROUNDS_ARM}",
         "the second view's disagreement against one view's uncertainty",
@@ -394,6 +399,11 @@ EXPLORE_SWEEPS = (
         "budget-explore-doorkey-dospcot",
         ("minigrid-doorkey-dospcot",),
         {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("asap", "even"), **ROUNDS},
+    ),
+    Sweep(
+        "budget-explore-doorkey-outcomes",
+        ("minigrid-doorkey-dospcot",),
+        {BUDGET: ("100",), STRATEGY: ("outcomes+disagreement",), SCHEDULE: ("even",), **ROUNDS},
     ),
     Sweep(
         "budget-explore-doorkey-self-training",
