@@ -48,7 +48,7 @@ def arm_of(run: TrialRun) -> str:
     method = method_of(run)
     if method == "oracle":
         return "oracle"
-    parts = [method, params.get(STRATEGY, "uniform")]
+    parts = [method, params.get(STRATEGY, "uniform").strip('"')]  # a TOML string keeps its quotes
     if SCHEDULE in params:
         parts.append(params[SCHEDULE])
     if FIRST_SHARE in params:
@@ -403,7 +403,7 @@ EXPLORE_SWEEPS = (
     Sweep(
         "budget-explore-doorkey-outcomes",
         ("minigrid-doorkey-dospcot",),
-        {BUDGET: ("100",), STRATEGY: ("outcomes+disagreement",), SCHEDULE: ("even",), **ROUNDS},
+        {BUDGET: ("100",), STRATEGY: ('"outcomes+disagreement"',), SCHEDULE: ("even",), **ROUNDS},
     ),
     Sweep(
         "budget-explore-doorkey-self-training",
