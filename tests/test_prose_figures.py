@@ -542,8 +542,8 @@ FIGURES = [
     Figure(
         "runs with reward classes",
         "runs/README.md",
-        r"\d+ of the record's \d+ co-trained runs have it \(.*?\)",
-        r"(\d+) of the record's (\d+) co-trained runs have it \(the (.*?) runs predate it\)",
+        r"[\d,]+ of the record's [\d,]+ co-trained runs have it \(.*?\)",
+        r"([\d,]+) of the record's ([\d,]+) co-trained runs have it \(the (.*?) runs predate it\)",
         reward_classes,
         "record (co-trained runs: method cotrain; those with reward_classes.json)",
     ),
