@@ -46,6 +46,7 @@ RUN_FILES = [
     "classifier_kinematics.pt",
     "classifier_occupancy.pt",
     "reward_classes.json",
+    "pseudo_rewards.csv",
 ]
 
 

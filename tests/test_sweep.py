@@ -143,6 +143,7 @@ def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(one_tr
         "metrics.csv",
         "summary.json",
         "reward_classes.json",
+        "pseudo_rewards.csv",
     }
     assert any(f.suffix == ".zip" for f in files) and any("tb" in f.parts for f in files)
     elsewhere = tmp_path / "elsewhere"
