@@ -152,6 +152,14 @@ def margins(probabilities: np.ndarray) -> np.ndarray:
     return (top[..., -1] - second).mean(axis=0)
 
 
+def uncertainty_order(probabilities: np.ndarray) -> np.ndarray:
+    """Sample indices by the views' mean margin (:func:`margins`), smallest first; ties by id.
+
+    :param probabilities: (m, N, K) each view's class probabilities.
+    """
+    return np.lexsort((np.arange(probabilities.shape[1]), margins(probabilities)))
+
+
 def disagreement_order(probabilities: np.ndarray) -> np.ndarray:
     """Sample indices, most confident disagreements first, then the agreeing samples by uncertainty.
 
@@ -196,7 +204,7 @@ def class_floors(candidates: np.ndarray, n: int, probabilities: np.ndarray) -> n
     :param probabilities: (m, N, K) each view's class probabilities.
     """
     predicted = probabilities.mean(axis=0).argmax(axis=-1)
-    order = np.lexsort((np.arange(candidates.size), margins(probabilities)))
+    order = uncertainty_order(probabilities)
     order = order[candidates[order]]
     classes, counts = np.unique(predicted[order], return_counts=True)
     if n <= 0 or classes.size == 0:
@@ -224,7 +232,7 @@ def _part_choice(
     if part == "outcomes":
         return outcome_order(candidates, n, terminated, truncated, rng)
     if part == "uncertainty":
-        order = np.lexsort((np.arange(candidates.size), margins(probabilities)))
+        order = uncertainty_order(probabilities)
     else:
         order = disagreement_order(probabilities)
     return order[candidates[order]][:n]
