@@ -17,6 +17,7 @@
     dospcot study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
     dospcot study second-view-highway --docs   # its highway monitor setting x seeds 0-4
     dospcot study budget-explore --docs   # label budgets, schedules and peers on MiniGrid, seeds 0-2
+    dospcot study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
 
 (``python scripts/study.py`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
@@ -60,6 +61,7 @@ from dospcot.lab.studies import (
     highway,
     label_sources,
     minigrid,
+    numerics,
     paper,
     queries,
     second_view,
@@ -100,6 +102,7 @@ STUDIES: dict[str, Study] = {
     **queries.STUDIES,
     **batched_seeds.STUDIES,
     **budget.STUDIES,
+    **numerics.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 

@@ -3,11 +3,9 @@ at a time and as batches (docs/batched_seeds.md), to show that the batch gives t
 
 from __future__ import annotations
 
-import json
-
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import over_seeds, paired
+from dospcot.lab.studies.tables import cpu_per_run, over_seeds, paired
 from dospcot.metrics import SeedSummary
 
 PRESETS = ("grid16-dospcot", "grid16-oracle")
@@ -20,13 +18,6 @@ ALONE, BATCHED = "batched-seeds-alone", "batched-seeds-batched"
 def _path(run: TrialRun) -> str:
     """How a run was trained: ``"alone"`` or ``"batched"`` (its sweep folder's name says)."""
     return "batched" if run.run_dir.parents[2].name.startswith(BATCHED) else "alone"
-
-
-def _cpu(runs: list[TrialRun]) -> str:
-    """The CPU time per run over ``runs`` (each run's ``cpu_time_s``; a batch member's share)."""
-    seconds = [json.loads((r.run_dir / "run_info.json").read_text()).get("cpu_time_s") for r in runs]
-    known = [s for s in seconds if s is not None]
-    return f"{sum(known) / len(known):.0f} CPU-s" if known else "unknown"
 
 
 def _differences(runs: list[TrialRun], preset: str) -> dict[str, SeedSummary]:
@@ -53,7 +44,7 @@ def tables(runs: list[TrialRun]) -> list[str]:
             members = [r for r in runs if r.trial.config == preset and _path(r) == path]
             if members:
                 cells = " | ".join(over_seeds(members, metric) for metric in METRICS)
-                lines.append(f"| `{preset}` | {path} | {cells} | {_cpu(members)} | {len(members)} |")
+                lines.append(f"| `{preset}` | {path} | {cells} | {cpu_per_run(members)} | {len(members)} |")
     lines += ["", "Batched minus alone, paired by seed:", ""]
     for preset in PRESETS:
         for metric, diff in _differences(runs, preset).items():

@@ -3,6 +3,7 @@ seeds (a method's runs, a view's agents, two arms paired by seed)."""
 
 from __future__ import annotations
 
+import json
 import math
 from collections.abc import Callable
 from typing import Any
@@ -112,11 +113,37 @@ def run_value(run: TrialRun, metric: str) -> float:
     return run.summary["mean"].get(metric, math.nan)
 
 
-def paired(a: dict[int, TrialRun], b: dict[int, TrialRun], metric: str) -> SeedSummary:
-    """``metric`` of a minus b, paired by seed: mean and 95% bootstrap interval over the seeds both ran."""
-    return SeedSummary.of(
-        [run_value(a[s], metric) - run_value(b[s], metric) for s in sorted(set(a) & set(b))]
-    )
+def numerics_of(run: TrialRun) -> int:
+    """The numerics version of the run's classifier fits, as its ``run_info.json`` names it (1 for runs
+    written before versions were named: they all fit in numerics 1)."""
+    info = run.run_dir / "run_info.json"
+    return int(json.loads(info.read_text()).get("numerics", 1)) if info.is_file() else 1
+
+
+def cpu_per_run(runs: list[TrialRun]) -> str:
+    """The CPU time per run over ``runs`` (each run's ``cpu_time_s``; a batch member's share)."""
+    seconds = [json.loads((r.run_dir / "run_info.json").read_text()).get("cpu_time_s") for r in runs]
+    known = [s for s in seconds if s is not None]
+    return f"{sum(known) / len(known):.0f} CPU-s" if known else "unknown"
+
+
+def paired(
+    a: dict[int, TrialRun], b: dict[int, TrialRun], metric: str, across_numerics: bool = False
+) -> SeedSummary:
+    """``metric`` of a minus b, paired by seed: mean and 95% bootstrap interval over the seeds both ran.
+
+    :param across_numerics: compare runs of different numerics versions (only the study that compares
+        the versions does); otherwise such a comparison is refused.
+    :raises ValueError: the runs compared were trained under more than one numerics version.
+    """
+    seeds = sorted(set(a) & set(b))
+    versions = {numerics_of(r) for s in seeds for r in (a[s], b[s])}
+    if len(versions) > 1 and not across_numerics:
+        raise ValueError(
+            f"a comparison of {metric} mixes runs of numerics versions {sorted(versions)}: train every arm "
+            "under one version (cotraining.numerics) before comparing them"
+        )
+    return SeedSummary.of([run_value(a[s], metric) - run_value(b[s], metric) for s in seeds])
 
 
 def verdict(diff: SeedSummary, ours: str = "DOSPCoT", theirs: str = "self-training") -> str:
