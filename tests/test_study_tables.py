@@ -11,6 +11,7 @@ import pytest
 
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies import STUDIES
+from dospcot.lab.studies.grid import grid16_tables, label_fraction_tables
 from dospcot.lab.studies.label_sources import (
     DEMO_ARMS,
     EFFORT_ARMS,
@@ -129,9 +130,10 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
         run("minigrid-doorkey-dospcot", 1, 0.5),
     ]
     rows = {line.split(" | ")[2]: line for line in minigrid_tables(runs) if line.startswith("| MiniGrid")}
-    assert rows["`minigrid-lavagap-oracle`"].endswith("| 100% |")
-    assert rows["`minigrid-lavagap-dospcot`"].endswith("| 50% |")  # 0.45 of the oracle's 0.9
-    assert rows["`minigrid-doorkey-dospcot`"].endswith("| n/a (oracle 0) |")
+    # The share of the oracle's success, then the labels used (these runs did not count theirs).
+    assert rows["`minigrid-lavagap-oracle`"].endswith("| 100% | every reward |")
+    assert rows["`minigrid-lavagap-dospcot`"].endswith("| 50% | unknown |")  # 0.45 of the oracle's 0.9
+    assert rows["`minigrid-doorkey-dospcot`"].endswith("| n/a (oracle 0) | unknown |")
     lines = minigrid_tables(runs)
     assert "20 greedy episodes per agent" in lines[0]
     text = "\n".join(lines)
@@ -140,6 +142,53 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
         "- MiniGrid-LavaGapS7-v0: seeds whose DOSPCoT run met a labelled goal pair: 0, 1 (of 0, 1)." in text
     )
     assert "- MiniGrid-DoorKey-5x5-v0: seeds whose DOSPCoT run met a labelled goal pair: 1 (of 0, 1)." in text
+
+
+def _labelled_run(preset: str, seed: int, labels: int | None, fraction: str | None = None) -> TrialRun:
+    """A grid run of one view that held ``labels`` labels at its end (None: written before the count)."""
+    mean = {"success": 1.0} | ({} if labels is None else {"labelled_steps": float(labels)})
+    summary = {"mean": mean, "views": ["patch"], "per_view": {"patch": mean}, "rounds": 5}
+    params = {} if fraction is None else {"training.label_fraction": fraction}
+    return TrialRun(Trial(preset, preset, params, seed), summary, [], Path())
+
+
+def test_the_grid_tables_give_the_labels_each_method_used_per_run():
+    """Each method's runs' mean of the labels they held at their end; "every reward" for the oracle,
+    whose count is the samples it met; the runs that counted them where some did not; "unknown" where
+    none did."""
+    runs = [
+        *(_labelled_run("grid16-oracle", seed, 816) for seed in range(3)),
+        *(_labelled_run("grid16-dospcot", seed, n) for seed, n in enumerate((40, 43, 47))),
+        _labelled_run("grid16-self-training", 0, 41),
+        _labelled_run("grid16-self-training", 1, None),
+        *(_labelled_run("grid16-masked-zero", seed, None) for seed in range(2)),
+    ]
+    lines = grid16_tables(runs)
+    assert "| pseudo-reward accuracy | worst-class precision | coverage | labels used per run |" in lines[3]
+    rows = {line.split(" | ")[1]: line for line in lines if line.startswith("| ") and "`" in line}
+    assert rows["`grid16-oracle`"].endswith("| every reward |")
+    assert rows["`grid16-dospcot`"].endswith("| 43 |")  # (40 + 43 + 47) / 3 = 43.3
+    assert rows["`grid16-self-training`"].endswith("| 41 |")  # seed 1 predates the count
+    assert rows["`grid16-masked-zero`"].endswith("| unknown |")
+    assert "| DOSPCoT (m = 2, patch + rays) | patch | 1.000 [1.000, 1.000] | n/a | n/a | 43 |" in lines
+
+
+def test_the_label_fraction_tables_give_each_cells_labels_in_the_same_shape():
+    runs = [
+        *(_labelled_run("grid16-dospcot", seed, n, "0.01") for seed, n in enumerate((8, 12))),
+        *(_labelled_run("grid16-dospcot", seed, n, "0.05") for seed, n in enumerate((40, 45, 47))),
+        _labelled_run("grid16-masked-zero", 0, 9, "0.01"),  # not run at 0.05
+    ]
+    lines = label_fraction_tables(runs)
+    at = lines.index(
+        "Labels used per run by label fraction (the labels each run held at its end, mean over seeds):"
+    )
+    assert lines[at + 2 : at + 6] == [
+        "| method | 0.01 | 0.05 |",
+        "|---|---|---|",
+        "| DOSPCoT (m = 2, patch + rays) | 10 | 44 |",  # 20 / 2; 132 / 3
+        "| masked-zero | 9 | n/a |",
+    ]
 
 
 def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
@@ -153,6 +202,7 @@ def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
         for seed, value in enumerate(values):
             runs.append(_run("grid16-dospcot", DEMO_ARMS[arm], seed, value, 0.9))
     text = "\n".join(demonstration_tables(runs))
+    assert "| worst-class precision | labels used per run |" in text
     for arm, values in success.items():
         assert f"| {arm} | 4 | {SeedSummary.of(values)} |" in text
     assert "as labels only" not in text  # an arm not run has no row

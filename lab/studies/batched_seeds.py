@@ -5,7 +5,14 @@ from __future__ import annotations
 
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import cpu_per_run, over_seeds, paired
+from dospcot.lab.studies.tables import (
+    LABELS_COLUMN,
+    LABELS_EXPLAINED,
+    cpu_per_run,
+    labels_cell,
+    over_seeds,
+    paired,
+)
 from dospcot.metrics import SeedSummary
 
 PRESETS = ("grid16-dospcot", "grid16-oracle")
@@ -33,18 +40,22 @@ def _held(diff: SeedSummary) -> bool:
 
 
 def tables(runs: list[TrialRun]) -> list[str]:
-    """Per preset and path: success, agreement and CPU time per run; then each difference."""
+    """Per preset and path: success, agreement, CPU time and labels per run; then each difference."""
     lines = [
+        LABELS_EXPLAINED,
         "",  # the table a block of its own, after the page's provenance lines
-        "| preset | trained | success | agreement | CPU time per run | seeds |",
-        "|---|---|---|---|---|---|",
+        f"| preset | trained | success | agreement | CPU time per run | seeds | {LABELS_COLUMN} |",
+        "|---|---|---|---|---|---|---|",
     ]
     for preset in PRESETS:
         for path in ("alone", "batched"):
             members = [r for r in runs if r.trial.config == preset and _path(r) == path]
             if members:
                 cells = " | ".join(over_seeds(members, metric) for metric in METRICS)
-                lines.append(f"| `{preset}` | {path} | {cells} | {cpu_per_run(members)} | {len(members)} |")
+                lines.append(
+                    f"| `{preset}` | {path} | {cells} | {cpu_per_run(members)} | {len(members)} | "
+                    f"{labels_cell(members)} |"
+                )
     lines += ["", "Batched minus alone, paired by seed:", ""]
     for preset in PRESETS:
         for metric, diff in _differences(runs, preset).items():

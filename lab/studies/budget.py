@@ -18,7 +18,7 @@ import numpy as np
 
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import FRACTION
+from dospcot.lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
 from dospcot.metrics import SeedSummary
 from dospcot.run.plots import Band, plot_bands
 from dospcot.run.run_folder import METRICS_FILE, PSEUDO_REWARDS_FILE
@@ -62,12 +62,6 @@ def arm_of(run: TrialRun) -> str:
     return " ".join(parts)
 
 
-def labels_used(run: TrialRun) -> float:
-    """The labels a run held at its end (bought answers, or its mask's share), mean over its agents
-    (every agent of a run reads the same labels)."""
-    return float(run.summary["mean"]["labelled_steps"])
-
-
 def _by_arm(runs: list[TrialRun]) -> dict[str, list[TrialRun]]:
     arms: dict[str, list[TrialRun]] = {}
     for run in runs:
@@ -82,14 +76,15 @@ def _success(runs: list[TrialRun]) -> SeedSummary:
 def _arm_table(arms: dict[str, list[TrialRun]]) -> list[str]:
     """One row per arm and budget: success, pseudo-reward accuracy and the labels each run bought."""
     lines = [
-        "| arm | label budget | labels used per run | success | pseudo-reward accuracy | seeds |",
+        f"| arm | label budget | {LABELS_COLUMN} | success | pseudo-reward accuracy | seeds |",
         "|---|---|---|---|---|---|",
     ]
     for arm, members in arms.items():
         for budget, cell in _by_budget(members).items():
-            used = "every reward" if arm == "oracle" else f"{np.mean([labels_used(r) for r in cell]):.0f}"
             accuracy = SeedSummary.of([r.summary["mean"]["pseudo_accuracy"] for r in cell])
-            lines.append(f"| {arm} | {budget} | {used} | {_success(cell)} | {accuracy} | {len(cell)} |")
+            lines.append(
+                f"| {arm} | {budget} | {labels_cell(cell)} | {_success(cell)} | {accuracy} | {len(cell)} |"
+            )
     return lines
 
 

@@ -3,6 +3,9 @@ map, and score against label fraction."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from functools import partial
+
 from dospcot.lab.report import TrialRun, cells
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
 from dospcot.lab.studies.provenance import score_floor
@@ -10,10 +13,13 @@ from dospcot.lab.studies.tables import (
     COLUMNS,
     FRACTION,
     GRID16_PRESETS,
+    LABELS_COLUMN,
+    LABELS_EXPLAINED,
     METHODS,
     by_method,
     cell_labels,
     glance_versus,
+    labels_cell,
     over_seeds,
     per_view_rows,
     verdict,
@@ -37,21 +43,22 @@ def grid16_tables(runs: list[TrialRun]) -> list[str]:
     grouped = by_method(runs)
     lines = [
         WORST_CLASS,
+        LABELS_EXPLAINED,
         "",
-        "| method | preset | " + " | ".join(COLUMNS.values()) + " |",
-        "|---|---|" + "---|" * len(COLUMNS),
+        "| method | preset | " + " | ".join([*COLUMNS.values(), LABELS_COLUMN]) + " |",
+        "|---|---|" + "---|" * (len(COLUMNS) + 1),
     ]
     labels = cell_labels(grouped)
     for (name, params), members in grouped.items():
-        stats = [over_seeds(members, key) for key in COLUMNS]
+        stats = [*(over_seeds(members, key) for key in COLUMNS), labels_cell(members)]
         lines.append(f"| {labels[name, params]} | `{name}` | " + " | ".join(stats) + " |")
     per_view = list(COLUMNS)[:3]
     lines += [
         "",
         "Per view (the same runs; each cell over seeds):",
         "",
-        "| method | view | " + " | ".join(COLUMNS[key] for key in per_view) + " |",
-        "|---|---|" + "---|" * len(per_view),
+        "| method | view | " + " | ".join([*(COLUMNS[key] for key in per_view), LABELS_COLUMN]) + " |",
+        "|---|---|" + "---|" * (len(per_view) + 1),
     ]
     return lines + per_view_rows(grouped, per_view)
 
@@ -65,32 +72,39 @@ def layout_tables(runs: list[TrialRun]) -> list[str]:
     lines = [f"Layout {layout}: the map's {floor}." for layout, floor in floors.items()]
     lines += [
         WORST_CLASS,
+        LABELS_EXPLAINED,
         "",
-        "| layout seed | method | preset | " + " | ".join(COLUMNS[key] for key in LAYOUT_COLUMNS) + " |",
-        "|---|---|---|" + "---|" * len(LAYOUT_COLUMNS),
+        "| layout seed | method | preset | "
+        + " | ".join([*(COLUMNS[key] for key in LAYOUT_COLUMNS), LABELS_COLUMN])
+        + " |",
+        "|---|---|---|" + "---|" * (len(LAYOUT_COLUMNS) + 1),
     ]
     for (name, params), members in by_layout:
-        stats = [over_seeds(members, key) for key in LAYOUT_COLUMNS]
+        stats = [*(over_seeds(members, key) for key in LAYOUT_COLUMNS), labels_cell(members)]
         lines.append(f"| {dict(params)[LAYOUT]} | {METHODS[name]} | `{name}` | " + " | ".join(stats) + " |")
     return lines
 
 
 def label_fraction_tables(runs: list[TrialRun]) -> list[str]:
-    """Per metric, a method x label-fraction table."""
+    """Per metric, a method x label-fraction table; then the labels each cell's runs used, in the same
+    shape, so that every cell above has its labels in the same place below."""
     grouped = cells(runs)
     names = list(dict.fromkeys(name for name, _ in grouped))
     fractions = list(dict.fromkeys(dict(params)[FRACTION] for _, params in grouped))
+    tables: dict[str, Callable[[list[TrialRun]], str]] = {
+        f"{COLUMNS[key].capitalize()} by label fraction:": partial(over_seeds, key=key)
+        for key in ("normalised_score", "success", "agreement")
+    }
+    tables[
+        f"{LABELS_COLUMN.capitalize()} by label fraction (the labels each run held at its end, mean over "
+        "seeds):"
+    ] = labels_cell
+    header = ["| method | " + " | ".join(fractions) + " |", "|---|" + "---|" * len(fractions)]
     lines = ["", "![normalised score and success against label fraction](docs/results/label-fraction.png)"]
-    for key in ("normalised_score", "success", "agreement"):
-        lines += [
-            "",
-            f"{COLUMNS[key].capitalize()} by label fraction:",
-            "",
-            "| method | " + " | ".join(fractions) + " |",
-            "|---|" + "---|" * len(fractions),
-        ]
+    for title, cell in tables.items():
+        lines += ["", title, "", *header]
         for name in names:
-            stats = [over_seeds(grouped.get((name, ((FRACTION, f),)), []), key) for f in fractions]
+            stats = [cell(grouped.get((name, ((FRACTION, f),)), [])) for f in fractions]
             lines.append(f"| {METHODS.get(name, name)} | " + " | ".join(stats) + " |")
     return lines
 

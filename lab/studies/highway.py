@@ -7,9 +7,12 @@ from functools import partial
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Study, Sweep
 from dospcot.lab.studies.tables import (
+    LABELS_COLUMN,
+    LABELS_EXPLAINED,
     METHODS,
     by_method,
     glance_versus,
+    labels_cell,
     mean_over_oracles,
     over_seeds,
     per_view_rows,
@@ -40,16 +43,28 @@ def highway_tables(runs: list[TrialRun]) -> list[str]:
         f"(reward per step in [0, 1]); a uniformly random policy returns "
         f"{sum(random.values()) / len(random):.1f} on average over the seeds "
         f"({min(random.values()):.1f} to {max(random.values()):.1f}).",
+        LABELS_EXPLAINED,
         "",
-        "| method | preset | " + " | ".join(HIGHWAY_COLUMNS.values()) + " | share of oracle return |",
-        "|---|---|" + "---|" * (len(HIGHWAY_COLUMNS) + 1),
+        "| method | preset | "
+        + " | ".join([*HIGHWAY_COLUMNS.values(), "share of oracle return", LABELS_COLUMN])
+        + " |",
+        "|---|---|" + "---|" * (len(HIGHWAY_COLUMNS) + 2),
     ]
     for (name, _), members in grouped.items():
         stats = [over_seeds(members, key) for key in HIGHWAY_COLUMNS]
         share = SeedSummary.of([r.summary["mean"]["greedy_return"] for r in members]).mean / oracle_mean
-        lines.append(f"| {METHODS.get(name, name)} | `{name}` | " + " | ".join(stats) + f" | {share:.1%} |")
-    lines += ["", "Per view (greedy return, no-crash episodes):", "", "| method | view | return | no crash |"]
-    lines.append("|---|---|---|---|")
+        lines.append(
+            f"| {METHODS.get(name, name)} | `{name}` | "
+            + " | ".join([*stats, f"{share:.1%}", labels_cell(members)])
+            + " |"
+        )
+    lines += [
+        "",
+        "Per view (greedy return, no-crash episodes):",
+        "",
+        f"| method | view | return | no crash | {LABELS_COLUMN} |",
+        "|---|---|---|---|---|",
+    ]
     return lines + per_view_rows(grouped, ["greedy_return", "success"])
 
 

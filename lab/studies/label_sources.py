@@ -10,7 +10,16 @@ from functools import partial
 
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import COLUMNS, FRACTION, over_seeds, paired, verdict
+from dospcot.lab.studies.tables import (
+    COLUMNS,
+    FRACTION,
+    LABELS_COLUMN,
+    LABELS_EXPLAINED,
+    labels_cell,
+    over_seeds,
+    paired,
+    verdict,
+)
 
 # A first comparison of label sources: expert demonstrations with 1% per-step labels against 5% per-step
 # labels, on grid16-dospcot, seeds 0-9. Each arm is a set of overrides of the preset, one sweep each.
@@ -57,16 +66,20 @@ def _arm_sweeps(
 
 
 def _arm_rows(
-    by_arm: dict[str, dict[int, TrialRun]], arms: Sequence[str], columns: Sequence[str], names: dict[str, str]
+    by_arm: dict[str, dict[int, TrialRun]],
+    arms: Sequence[str],
+    columns: Sequence[str],
+    names: dict[str, str],
+    labels: bool = False,
 ) -> list[str]:
-    """A table's header and one row per arm that ran: its seeds, then ``columns`` over seeds."""
-    lines = [
-        "| arm | seeds | " + " | ".join(names[c] for c in columns) + " |",
-        "|---|---|" + "---|" * len(columns),
-    ]
+    """A table's header and one row per arm that ran: its seeds, then ``columns`` over seeds, then
+    (``labels``) the labels each run used."""
+    titles = [names[c] for c in columns] + ([LABELS_COLUMN] if labels else [])
+    lines = ["| arm | seeds | " + " | ".join(titles) + " |", "|---|---|" + "---|" * len(titles)]
     for arm in arms:
         if arm in by_arm:
-            cells_ = [over_seeds(list(by_arm[arm].values()), c) for c in columns]
+            members = list(by_arm[arm].values())
+            cells_ = [over_seeds(members, c) for c in columns] + ([labels_cell(members)] if labels else [])
             lines.append(f"| {arm} | {len(by_arm[arm])} | " + " | ".join(cells_) + " |")
     return lines
 
@@ -77,8 +90,9 @@ def demonstration_tables(runs: list[TrialRun]) -> list[str]:
     lines = [
         "Every arm is `grid16-dospcot` with the overrides named; demonstrations are value iteration's "
         "optimal episodes, the first from the map's start (docs/demonstrations.md).",
+        LABELS_EXPLAINED,
         "",
-        *_arm_rows(by_arm, DEMO_ARMS, DEMO_COLUMNS, COLUMNS),
+        *_arm_rows(by_arm, DEMO_ARMS, DEMO_COLUMNS, COLUMNS, labels=True),
     ]
     ours, theirs = DEMO_TARGET
     if ours in by_arm and theirs in by_arm:

@@ -7,9 +7,12 @@ import json
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
 from dospcot.lab.studies.tables import (
+    LABELS_COLUMN,
+    LABELS_EXPLAINED,
     METHODS,
     MINIGRID_TASKS,
     by_method,
+    labels_cell,
     mean_over_oracles,
     over_seeds,
     per_view_rows,
@@ -38,11 +41,12 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
         f"Evaluation: {episodes} greedy episodes per agent from the task's own start, each on a new map; "
         "success is the share that reach the goal, and the return is MiniGrid's (1 - 0.9 t / T at the "
         "goal). The label fraction is the share of (state, action) pairs whose reward is revealed.",
+        LABELS_EXPLAINED,
         "",
         "| task | method | preset | "
-        + " | ".join(MINIGRID_COLUMNS.values())
-        + " | share of oracle success |",
-        "|---|---|---|" + "---|" * (len(MINIGRID_COLUMNS) + 1),
+        + " | ".join([*MINIGRID_COLUMNS.values(), "share of oracle success", LABELS_COLUMN])
+        + " |",
+        "|---|---|---|" + "---|" * (len(MINIGRID_COLUMNS) + 2),
     ]
     for task, env_id in MINIGRID_TASKS.items():
         cells_of_task = {key: m for key, m in grouped.items() if key[0].startswith(f"minigrid-{task}-")}
@@ -51,14 +55,18 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
             stats = [over_seeds(members, key) for key in MINIGRID_COLUMNS]
             mean = SeedSummary.of([r.summary["mean"]["success"] for r in members]).mean
             share = f"{mean / oracle_mean:.0%}" if oracle_mean > 0 else "n/a (oracle 0)"
-            lines.append(f"| {env_id} | {METHODS[name]} | `{name}` | " + " | ".join(stats) + f" | {share} |")
+            lines.append(
+                f"| {env_id} | {METHODS[name]} | `{name}` | "
+                + " | ".join([*stats, share, labels_cell(members)])
+                + " |"
+            )
     lines += ["", *_goal_label_lines(grouped)]
     lines += [
         "",
         "Per view (the same runs; each cell over seeds):",
         "",
-        "| task | method | view | success | greedy return |",
-        "|---|---|---|---|---|",
+        f"| task | method | view | success | greedy return | {LABELS_COLUMN} |",
+        "|---|---|---|---|---|---|",
     ]
     return lines + per_view_rows(
         grouped, ["success", "greedy_return"], lambda name: MINIGRID_TASKS[name.split("-")[1]]

@@ -10,7 +10,7 @@ from collections.abc import Callable
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
 from dospcot.lab.studies.grid import LAYOUT, UNSEEN_LAYOUTS
-from dospcot.lab.studies.tables import FRACTION, MINIGRID_TASKS, over_seeds
+from dospcot.lab.studies.tables import FRACTION, MINIGRID_TASKS, labels_cell, over_seeds
 from dospcot.metrics import SeedSummary
 from dospcot.run.run_folder import METRICS_FILE, QUERIES_FILE, REWARD_CLASSES_FILE
 
@@ -240,10 +240,9 @@ def _glance(runs: list[TrialRun]) -> Glance:
 
 
 def _labels(runs: list[TrialRun], arm: str) -> str:
-    """The labels a run of ``arm`` bought, its runs' mean (``labelled_steps``): at one label fraction, a
-    method with two agents meets twice the steps of one with one, and buys twice the labels."""
-    bought = SeedSummary.of([r.summary["mean"]["labelled_steps"] for r in runs if _arm(r) == arm])
-    return f"{bought.mean:,.0f}"
+    """The labels a run of ``arm`` bought, its runs' mean: at one label fraction, a method with two
+    agents meets twice the steps of one with one, and buys twice the labels."""
+    return labels_cell([r for r in runs if _arm(r) == arm])
 
 
 def _highway_glance(runs: list[TrialRun]) -> Glance:

@@ -14,7 +14,17 @@ import numpy as np
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
 from dospcot.lab.studies.highway import HIGHWAY_COLUMNS
-from dospcot.lab.studies.tables import COLUMNS, FRACTION, GRID16_PRESETS, over_seeds, paired, run_value
+from dospcot.lab.studies.tables import (
+    COLUMNS,
+    FRACTION,
+    GRID16_PRESETS,
+    LABELS_COLUMN,
+    LABELS_EXPLAINED,
+    labels_cell,
+    over_seeds,
+    paired,
+    run_value,
+)
 from dospcot.metrics import SeedSummary
 
 # The second-view study (docs/preregistration.md, committed before any of its runs): its settings,
@@ -110,17 +120,18 @@ def second_view_tables(runs: list[TrialRun], columns: tuple[str, ...] = SECOND_V
     """Per setting and agent kind: every method's metrics over seeds, then the pre-registered paired
     differences and each hypothesis marked confirmed or not (docs/preregistration.md)."""
     titles = _titles(columns)
-    lines = []
+    lines = [LABELS_EXPLAINED]
     for setting, agent, methods, hypothesis in _cells(runs, columns):
         lines += [
             "",
             f"**{setting}, {AGENT_WORDS[agent]} agents**",
             "",
-            "| method | " + " | ".join(titles[c] for c in columns) + " |",
-            "|---|" + "---|" * len(columns),
+            "| method | " + " | ".join([*(titles[c] for c in columns), LABELS_COLUMN]) + " |",
+            "|---|" + "---|" * (len(columns) + 1),
         ]
         for method in sorted(methods, key=lambda m: (SECOND_VIEW_ORDER.index(m.split(" (")[0]), m)):
-            cells = [over_seeds(list(methods[method].values()), c) for c in columns]
+            members = list(methods[method].values())
+            cells = [*(over_seeds(members, c) for c in columns), labels_cell(members)]
             lines.append(f"| {SECOND_VIEW_WORDS.get(method, method)} | " + " | ".join(cells) + " |")
         lines += ["", *hypothesis.lines]
     return lines

@@ -1,5 +1,5 @@
 """What the studies' tables share: the presets' names in words, the metric columns, and the cells over
-seeds (a method's runs, a view's agents, two arms paired by seed)."""
+seeds (a method's runs, a view's agents, two arms paired by seed, the labels an arm used)."""
 
 from __future__ import annotations
 
@@ -55,6 +55,13 @@ COLUMNS = {
     "coverage": "coverage",
 }
 FRACTION = "training.label_fraction"
+LABELS_COLUMN = "labels used per run"
+LABELS_EXPLAINED = (
+    "Labels used per run: the labelled samples a run held at its end (those its agents met whose reward "
+    "its mask, a monitor or a demonstration revealed, or the answers it bought), mean over its seeds; "
+    "the oracle reads every reward."
+)
+"""What :func:`labels_cell` counts, for the tables that show it beside their cells over seeds."""
 GRID16_PRESETS = tuple(name for name in METHODS if name.startswith("grid16-"))
 
 
@@ -89,13 +96,14 @@ def per_view_rows(
     keys: list[str],
     first: Callable[[str], str] | None = None,
 ) -> list[str]:
-    """One table row per method and view: ``keys`` over seeds; ``first`` gives a leading cell from
-    the preset's name (a task column)."""
+    """One table row per method and view: ``keys`` over seeds, then the labels each run used (every
+    agent of a run reads the same); ``first`` gives a leading cell from the preset's name (a task
+    column)."""
     labels = cell_labels(grouped)
     return [
         ("" if first is None else f"| {first(key[0])} ")
         + f"| {labels[key]} | {view} | "
-        + " | ".join(over_seeds(members, k, view) for k in keys)
+        + " | ".join([*(over_seeds(members, k, view) for k in keys), labels_cell(members)])
         + " |"
         for key, members in grouped.items()
         for view in members[0].summary["views"]
@@ -111,6 +119,24 @@ def mean_over_oracles(grouped: dict[tuple[str, tuple], list[TrialRun]], metric: 
 def run_value(run: TrialRun, metric: str) -> float:
     """A run's mean over its agents of ``metric``; NaN where the run did not record it."""
     return run.summary["mean"].get(metric, math.nan)
+
+
+def labels_used(run: TrialRun) -> float:
+    """The labels a run held at its end (bought answers, or its mask's share), mean over its agents
+    (every agent of a run reads the same labels); NaN where the run did not count them."""
+    return float(run.summary["mean"].get("labelled_steps", math.nan))
+
+
+def labels_cell(members: list[TrialRun]) -> str:
+    """The labels each run of ``members`` used (:func:`labels_used`), mean over the runs that counted
+    them: "every reward" for an oracle's runs, "unknown" where no run counted them, "n/a" for none."""
+    if not members:
+        return "n/a"
+    # Presets name their method last; an oracle's pool counts the samples met, all of them labelled.
+    if all(run.trial.config.endswith("-oracle") for run in members):
+        return "every reward"
+    known = [used for run in members if not math.isnan(used := labels_used(run))]
+    return f"{sum(known) / len(known):.0f}" if known else "unknown"
 
 
 def numerics_of(run: TrialRun) -> int:
