@@ -61,6 +61,7 @@ def test_a_study_without_runs_publishes_no_figure(rendered):
         "equal-effort",
         "equal-effort-highway",
         "highway",
+        "third-view-doorkey",
     }
     for name in unpublished:
         page = rendered[name].page

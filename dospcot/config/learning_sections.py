@@ -352,8 +352,9 @@ class CoTrainingConfig:
     :param numerics: how the reward classifiers fit (:data:`dospcot.core.cotrainer.NUMERICS`): 1, in
         float64 over the whole pool; 2, in float32 over the samples that carry weight, several times
         cheaper on large pools (docs/guide/profile.md), not yet confirmed to train the same agents
-        over seeds. Every run names it in ``run_info.json``; a study compares the two only where its grid
-        varies it (a config key, so the stale check keeps a sweep from mixing them).
+        over seeds. Every run names it in ``run_info.json``; a run folder or checkpoint written before
+        the key existed reads as 1 (``added_keys``), and a study compares the two only where its grid
+        varies it.
     :param ensemble_size: the reward-model peer's (``method = "reward-model"``) classifiers per view,
         each from its own initial parameters and its own bootstrap of the labels.
     """
@@ -372,6 +373,13 @@ class CoTrainingConfig:
 
     renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
     """Keys of older configs and their names now."""
+    added_keys: ClassVar[dict[str, Any]] = {"numerics": 1}
+    """Keys added since run folders were first written, each with the value a folder (or a pickled
+    checkpoint) written before it ran under, which differs from today's default."""
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # A checkpoint pickled before a key was added would otherwise read today's default.
+        self.__dict__.update({**self.added_keys, **state})
 
     def __post_init__(self) -> None:
         if self.consensus_weight < 0:
@@ -411,7 +419,7 @@ class TabularConfig:
     episodes_per_round: int = 500
     replay_sweeps: int = 1
     label_fraction: float = 0.1
-    cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
+    cotraining: CoTrainingConfig = field(default_factory=lambda: CoTrainingConfig(numerics=1))
     learning_rate: float = 0.8
     discount: float = 0.95
     eps_start: float = 0.1
@@ -431,5 +439,6 @@ class TabularConfig:
         check_within(self, 0, 1, "eps_start", "eps_end")
         if self.cotraining.numerics != 1:
             raise ValueError(
-                "cotraining.numerics: the paper protocol's batched co-trainer fits in numerics 1"
+                "cotraining.numerics: the paper protocol's batched co-trainer fits in numerics 1; set "
+                "numerics = 1 in [tabular.cotraining]"
             )

@@ -107,11 +107,12 @@ def config_table(config: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
 
 def renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
     """``data`` with the renamed keys of ``cls`` and of its sections (``renamed_keys``) under their new
-    names: a run folder outlives its code (the record's do), so its ``config.toml`` is read this way,
+    names, and the keys added since (``added_keys``) at the value a folder written before them ran
+    under: a run folder outlives its code (the record's do), so its ``config.toml`` is read this way,
     while a config a person writes with an old key is refused (:func:`from_mapping`)."""
     renamed: dict[str, str] = getattr(cls, "renamed_keys", {})
     hints = typing.get_type_hints(cls)
-    out = {}
+    out: dict[str, Any] = dict(getattr(cls, "added_keys", {}))
     for key, value in data.items():
         key = renamed.get(key, key)
         hint = hints.get(key)

@@ -160,7 +160,10 @@ def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = (), first_se
     """The spec of one of a study's sweeps over ``seeds`` seeds from ``first_seed``, with ``overrides``
     (``--set``)."""
     return SweepSpec(
-        sweep.configs, sweep.grid, tuple(range(first_seed, first_seed + seeds)), tuple(overrides)
+        sweep.configs,
+        sweep.grid,
+        tuple(range(first_seed, first_seed + seeds)),
+        (*sweep.overrides(), *overrides),
     )
 
 

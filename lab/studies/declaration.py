@@ -12,14 +12,22 @@ from dospcot.lab.report import TrialRun
 
 @dataclass(frozen=True)
 class Sweep:
-    """One sweep of a study: its folder's name under --runs-dir, its configs and its grid; and how many
+    """One sweep of a study: its folder's name under --runs-dir, its configs and its grid; how many
     seeds train per batch (docs/batched_seeds.md), where the study fixes it (None: the command's
-    ``--batch-seeds``)."""
+    ``--batch-seeds``); and the numerics version its runs train under (``cotraining.numerics``, set
+    for every trial, so the sweep keeps it when the default moves; None: the sweep's grid varies it,
+    or its configs have no co-training key, as the paper protocol's). The studies recorded before
+    numerics 2 became the default keep 1, the version their runs were trained under."""
 
     name: str
     configs: tuple[str, ...]
     grid: dict[str, tuple[str, ...]]
     batch_seeds: int | None = None
+    numerics: int | None = 1
+
+    def overrides(self) -> tuple[str, ...]:
+        """The settings every trial of the sweep gets before the grid's: its numerics version."""
+        return () if self.numerics is None else (f"cotraining.numerics={self.numerics}",)
 
 
 @dataclass(frozen=True)

@@ -57,7 +57,7 @@ def paper_glance(runs: list[TrialRun]) -> Glance:
 # The seed paper's protocol: a sweep of one paper preset over seeds; `dospcot report` tables it.
 STUDIES: dict[str, Study] = {
     preset: Study(
-        (Sweep(preset, (preset,), {}),),
+        (Sweep(preset, (preset,), {}, numerics=None),),
         partial(_with_agreement_plot, f"docs/results/{preset}-agreement.png"),
         f"Seed paper reproduction: masked CliffWalking-v1 (`{preset}`)",
         f"masked CliffWalking, the seed paper's protocol ({preset} settings)",

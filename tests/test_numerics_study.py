@@ -1,0 +1,72 @@
+"""The numerics versions in the lab: a study's sweeps pin the version they train under, a comparison
+that mixes versions is refused, and the numerics study's verdicts on hand-made runs."""
+
+import json
+from pathlib import Path
+
+import pytest
+
+from dospcot.lab.report import TrialRun
+from dospcot.lab.studies import STUDIES, Sweep, sweep_spec
+from dospcot.lab.studies.numerics import glance, tables
+from dospcot.lab.studies.tables import numerics_of, paired
+from dospcot.lab.sweep import Trial
+
+
+def _run(
+    tmp_path: Path, preset: str, seed: int, numerics: int | None, success: float, accuracy: float
+) -> TrialRun:
+    run_dir = tmp_path / f"{preset}-{numerics}-{seed}"
+    run_dir.mkdir()
+    info = {"cpu_time_s": 100.0 * (numerics or 1)}
+    if numerics is not None:  # runs written before the key name no version
+        info["numerics"] = numerics
+    (run_dir / "run_info.json").write_text(json.dumps(info))
+    summary = {"mean": {"success": success, "pseudo_accuracy": accuracy}}
+    return TrialRun(Trial(preset, preset, {}, seed), summary, [], run_dir)
+
+
+def test_a_studys_sweep_pins_its_numerics_before_the_commands_overrides():
+    assert sweep_spec(Sweep("s", ("tiny",), {}), 2).overrides == ("cotraining.numerics=1",)
+    pinned = sweep_spec(Sweep("s", ("tiny",), {}, numerics=2), 2, ["training.rounds=1"])
+    assert pinned.overrides == ("cotraining.numerics=2", "training.rounds=1")
+    assert pinned.trials()[0].overrides()[0] == "cotraining.numerics=2"
+    assert sweep_spec(Sweep("s", ("paper-text",), {}, numerics=None), 2).overrides == ()
+    # the numerics study varies the version in its grid, so those sweeps pin nothing
+    assert [s.numerics for s in STUDIES["numerics"].sweeps] == [None, None, 1]
+
+
+def test_a_comparison_that_mixes_numerics_versions_is_refused(tmp_path):
+    old = {s: _run(tmp_path, "grid16-dospcot", s, None, 0.5, 0.9) for s in range(3)}
+    new = {s: _run(tmp_path, "grid16-dospcot", s, 2, 1.0, 0.9) for s in range(3)}
+    assert numerics_of(old[0]) == 1 and numerics_of(new[0]) == 2
+    with pytest.raises(ValueError, match=r"mixes runs of numerics versions \[1, 2\]"):
+        paired(new, old, "success")
+    diff = paired(new, old, "success", across_numerics=True)
+    assert (diff.n, diff.mean) == (3, 0.5)
+    assert paired(old, old, "success").mean == 0.0  # one version: compared as before
+
+
+def test_the_numerics_study_holds_only_where_every_interval_holds_0_within_a_tenth(tmp_path):
+    runs = []
+    for preset in ("grid16-dospcot", "minigrid-doorkey-dospcot"):
+        for seed in range(4):
+            # the same on every seed but one, where numerics 2 gains 0.1: mean +0.025, within +-0.1
+            bump = 0.1 if seed == 0 else 0.0
+            runs.append(_run(tmp_path, preset, seed, 1, 0.5, 0.95))
+            runs.append(_run(tmp_path, preset, seed, 2, 0.5 + bump, 0.95))
+    text = "\n".join(tables(runs))
+    assert (
+        "| `grid16-dospcot` | 1 | 0.500" in text
+        and "| 100 CPU-s | 4 |" in text
+        and "| 200 CPU-s | 4 |" in text
+    )
+    assert text.count("**held**") == 4 and "not met" not in text
+    assert glance(runs).verdict == "same science"
+    assert glance([r for r in runs if numerics_of(r) == 1]).verdict.startswith("not measured yet")
+    # a seed where numerics 2 loses every success: the interval no longer lies within +-0.1
+    runs = [r for r in runs if not (r.trial.seed == 1 and numerics_of(r) == 2)]
+    (tmp_path / "lost").mkdir()
+    runs.append(_run(tmp_path / "lost", "minigrid-doorkey-dospcot", 1, 2, 0.0, 0.95))
+    assert "**not met**" in "\n".join(tables(runs))
+    assert glance(runs).verdict == "differs (or too wide)"
