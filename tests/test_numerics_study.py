@@ -2,10 +2,14 @@
 that mixes versions is refused, and the numerics study's verdicts on hand-made runs."""
 
 import json
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, ClassVar
 
 import pytest
 
+from dospcot.config.learning_sections import CoTrainingConfig
+from dospcot.config.loading import renamed_to_now
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies import STUDIES, Sweep, sweep_spec
 from dospcot.lab.studies.numerics import glance, tables
@@ -24,6 +28,31 @@ def _run(
     (run_dir / "run_info.json").write_text(json.dumps(info))
     summary = {"mean": {"success": success, "pseudo_accuracy": accuracy}}
     return TrialRun(Trial(preset, preset, {}, seed), summary, [], run_dir)
+
+
+@dataclass(frozen=True)
+class _Section:
+    """A section whose key ``version`` was added after folders were written, at 1, and defaults to 2."""
+
+    added_keys: ClassVar[dict[str, Any]] = {"version": 1}
+    version: int = 2
+    other: int = 0
+
+
+@dataclass(frozen=True)
+class _Config:
+    section: _Section = field(default_factory=_Section)
+
+
+def test_a_key_added_since_a_folder_was_written_reads_at_the_value_the_folder_ran_under():
+    assert renamed_to_now(_Config, {"section": {"other": 3}}) == {"section": {"version": 1, "other": 3}}
+    assert renamed_to_now(_Config, {"section": {"version": 2}}) == {"section": {"version": 2}}
+    # a checkpoint pickled before cotraining.numerics existed holds a config without it
+    state = dict(CoTrainingConfig(numerics=2).__dict__)
+    del state["numerics"]
+    old = CoTrainingConfig.__new__(CoTrainingConfig)
+    old.__setstate__(state)
+    assert old.numerics == 1
 
 
 def test_a_studys_sweep_pins_its_numerics_before_the_commands_overrides():

@@ -351,10 +351,10 @@ class CoTrainingConfig:
     :param classifier: the reward classifiers' hyperparameters.
     :param numerics: how the reward classifiers fit (:data:`dospcot.core.cotrainer.NUMERICS`): 1, in
         float64 over the whole pool; 2, in float32 over the samples that carry weight, several times
-        cheaper on large pools (docs/guide/profile.md), not yet confirmed to train the same agents
-        over seeds. Every run names it in ``run_info.json``; a run folder or checkpoint written before
-        the key existed reads as 1 (``added_keys``), and a study compares the two only where its grid
-        varies it.
+        cheaper on large pools (docs/guide/profile.md), but not the same science as 1 within the
+        numerics study's bound (docs/results/numerics.md), so not the default. Every run names it in
+        ``run_info.json``; a run folder or checkpoint written before the key existed reads as 1
+        (``added_keys``), and a study compares the two only where its grid varies it.
     :param ensemble_size: the reward-model peer's (``method = "reward-model"``) classifiers per view,
         each from its own initial parameters and its own bootstrap of the labels.
     """

@@ -180,7 +180,7 @@ class SelfPacedCoTrainer:
     @property
     def numerics(self) -> int:
         """The numerics version of the classifiers' fits (``cotraining.numerics``; a config pickled
-        before the key existed reads the field's default, 1, the only version there was)."""
+        before the key existed reads 1, the only version there was: ``CoTrainingConfig.added_keys``)."""
         return self.config.numerics
 
     @property

@@ -9,6 +9,7 @@ from dospcot.lab.studies.tables import (
     LABELS_COLUMN,
     LABELS_EXPLAINED,
     cpu_per_run,
+    held_lines,
     labels_cell,
     over_seeds,
     paired,
@@ -56,16 +57,9 @@ def tables(runs: list[TrialRun]) -> list[str]:
                     f"| `{preset}` | {path} | {cells} | {cpu_per_run(members)} | {len(members)} | "
                     f"{labels_cell(members)} |"
                 )
-    lines += ["", "Batched minus alone, paired by seed:", ""]
-    for preset in PRESETS:
-        for metric, diff in _differences(runs, preset).items():
-            if diff.n:
-                state = "**held**" if _held(diff) else "**not met**"
-                lines.append(
-                    f"- `{preset}` {metric}: {diff} over {diff.n} seeds; the interval holds 0 and its "
-                    f"half-width is at most {HALF_WIDTH}: {state}."
-                )
-    return lines
+    bound = f"the interval holds 0 and its half-width is at most {HALF_WIDTH}"
+    differences = {preset: _differences(runs, preset) for preset in PRESETS}
+    return [*lines, "", "Batched minus alone, paired by seed:", "", *held_lines(differences, _held, bound)]
 
 
 def glance(runs: list[TrialRun]) -> Glance:

@@ -7,7 +7,7 @@ from __future__ import annotations
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.batched_seeds import ALONE
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import cpu_per_run, numerics_of, over_seeds, paired
+from dospcot.lab.studies.tables import cpu_per_run, held_lines, numerics_of, over_seeds, paired
 from dospcot.metrics import SeedSummary
 
 PRESETS = ("grid16-dospcot", "minigrid-doorkey-dospcot")
@@ -48,16 +48,15 @@ def tables(runs: list[TrialRun]) -> list[str]:
                 cells = " | ".join(over_seeds(members, metric) for metric in METRICS)
                 cpu = cpu_per_run(members)
                 lines.append(f"| `{preset}` | {version} | {cells} | {cpu} | {len(members)} |")
-    lines += ["", "Numerics 2 minus numerics 1, paired by seed:", ""]
-    for preset in PRESETS:
-        for metric, diff in _differences(runs, preset).items():
-            if diff.n:
-                state = "**held**" if _held(diff) else "**not met**"
-                lines.append(
-                    f"- `{preset}` {metric}: {diff} over {diff.n} seeds; the interval holds 0 and lies "
-                    f"within +-{HALF_WIDTH}: {state}."
-                )
-    return lines
+    bound = f"the interval holds 0 and lies within +-{HALF_WIDTH}"
+    differences = {preset: _differences(runs, preset) for preset in PRESETS}
+    return [
+        *lines,
+        "",
+        "Numerics 2 minus numerics 1, paired by seed:",
+        "",
+        *held_lines(differences, _held, bound),
+    ]
 
 
 def glance(runs: list[TrialRun]) -> Glance:

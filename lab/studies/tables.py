@@ -172,6 +172,21 @@ def paired(
     return SeedSummary.of([run_value(a[s], metric) - run_value(b[s], metric) for s in seeds])
 
 
+def held_lines(
+    differences: dict[str, dict[str, SeedSummary]], held: Callable[[SeedSummary], bool], bound: str
+) -> list[str]:
+    """One line per preset and metric of ``differences`` (paired differences over seeds): the
+    difference, the ``bound`` (in words) it is held to, and whether ``held`` says it holds."""
+    return [
+        f"- `{preset}` {metric}: {diff} over {diff.n} seeds; {bound}: "
+        + ("**held**" if held(diff) else "**not met**")
+        + "."
+        for preset, by_metric in differences.items()
+        for metric, diff in by_metric.items()
+        if diff.n
+    ]
+
+
 def verdict(diff: SeedSummary, ours: str = "DOSPCoT", theirs: str = "self-training") -> str:
     """What a paired difference ``ours`` minus ``theirs`` shows: one above the other where its 95%
     interval excludes 0, else no difference."""
