@@ -61,7 +61,6 @@ def test_a_study_without_runs_publishes_no_figure(rendered):
         "equal-effort",
         "equal-effort-highway",
         "highway",
-        "third-view-doorkey",
     }
     for name in unpublished:
         page = rendered[name].page

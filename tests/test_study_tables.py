@@ -17,8 +17,10 @@ from dospcot.lab.studies.label_sources import (
     EFFORT_ARMS,
     EFFORT_HIGHWAY_ARMS,
     EXPERT,
+    THIRD_VIEW_ARMS,
     demonstration_tables,
     effort_tables,
+    third_view_tables,
 )
 from dospcot.lab.studies.minigrid import minigrid_tables
 from dospcot.lab.studies.provenance import header
@@ -189,6 +191,21 @@ def test_the_label_fraction_tables_give_each_cells_labels_in_the_same_shape():
         "| DOSPCoT (m = 2, patch + rays) | 10 | 44 |",  # 20 / 2; 132 / 3
         "| masked-zero | 9 | n/a |",
     ]
+
+
+def test_the_third_view_table_pairs_three_views_with_two_by_seed():
+    two, three = THIRD_VIEW_ARMS
+    success = {two: [0.0, 0.5, 1.0, 0.0], three: [1.0, 0.5, 1.0, 1.0]}
+    runs = [
+        _run("minigrid-doorkey-dospcot", THIRD_VIEW_ARMS[arm], seed, value, 0.99)
+        for arm, values in success.items()
+        for seed, value in enumerate(values)
+    ]
+    text = "\n".join(third_view_tables(runs))
+    assert "| arm | seeds | success | pseudo-reward accuracy | labels used per run |" in text
+    assert f"| {three} | 4 | {SeedSummary.of(success[three])} |" in text
+    diff = SeedSummary.of([1.0, 0.0, 0.0, 1.0])  # three views minus two, seed by seed
+    assert f"(paired by seed): {diff}; " in text
 
 
 def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():

@@ -194,7 +194,7 @@ THIRD_VIEW_ARMS: dict[str, dict[str, str]] = {
         STRATEGY: "random",
     },
 }
-THIRD_VIEW_COLUMNS = ("success", "agreement", "pseudo_accuracy")
+THIRD_VIEW_COLUMNS = ("success", "pseudo_accuracy")
 THIRD_VIEW_PRESET = "minigrid-doorkey-dospcot"
 
 
