@@ -14,6 +14,7 @@
     dospcot study demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
     dospcot study equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
     dospcot study equal-effort-highway --docs  # the same on the fast highway, 5 seeds
+    dospcot study third-view-doorkey --docs    # DoorKey: m = 3 vs m = 2 at 100 labels, seeds 0-9
     dospcot study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
     dospcot study second-view-highway --docs   # its highway monitor setting x seeds 0-4
     dospcot study budget-explore --docs   # label budgets, schedules and peers on MiniGrid, seeds 0-2

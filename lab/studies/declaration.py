@@ -16,8 +16,8 @@ class Sweep:
     seeds train per batch (docs/batched_seeds.md), where the study fixes it (None: the command's
     ``--batch-seeds``); and the numerics version its runs train under (``cotraining.numerics``, set
     for every trial, so the sweep keeps it when the default moves; None: the sweep's grid varies it,
-    or its configs have no co-training key, as the paper protocol's). The studies recorded before
-    numerics 2 became the default keep 1, the version their runs were trained under."""
+    or its configs have no co-training key, as the paper protocol's). The record's earlier studies
+    keep 1, the version their runs were trained under; the future-work studies pin 2."""
 
     name: str
     configs: tuple[str, ...]
