@@ -85,7 +85,7 @@ STUDIES: dict[str, Study] = {
         seeds=seeds,
     )
     for base, env, task, seeds, numerics in (
-        # highway-env's study had no runs when numerics 2 became the default
+        # highway-env's study is pre-registered under numerics 2 (docs/preregistration-future-work.md)
         ("highway", "highway-fast-v0", "highway-env's highway-fast-v0", 3, 2),
         ("fasthighway", "our fast highway env", "our fast highway (dospcot/FastHighway-v0)", 5, 1),
     )

@@ -55,8 +55,8 @@ def _arm_sweeps(
     prefix: str, arms: dict[str, dict[str, str]], shared: dict[str, str], preset: str = "grid16-dospcot"
 ) -> tuple[Sweep, ...]:
     """One sweep of ``preset`` per arm, named after it; ``shared`` names arms that another study's
-    sweep already holds (the same trials: they run once). The label-source studies had no runs when
-    numerics 2 became the default, so they train under it."""
+    sweep already holds (the same trials: they run once). They train under numerics 2, as their
+    pre-registration fixes (docs/preregistration-future-work.md)."""
     return tuple(
         Sweep(
             shared.get(arm) or prefix + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
@@ -268,9 +268,8 @@ STUDIES: dict[str, Study] = {
     ),
     "equal-effort-highway": Study(
         (
-            Sweep(
-                "effort-highway-oracle", ("fasthighway-oracle",), {}, numerics=2
-            ),  # first: it trains the expert
+            # first: it trains the expert
+            Sweep("effort-highway-oracle", ("fasthighway-oracle",), {}, numerics=2),
             *_arm_sweeps("effort-highway-", EFFORT_HIGHWAY_ARMS, {}, "fasthighway-dospcot"),
         ),
         partial(

@@ -136,7 +136,7 @@ def labels_cell(members: list[TrialRun]) -> str:
     if all(run.trial.config.endswith("-oracle") for run in members):
         return "every reward"
     known = [used for run in members if not math.isnan(used := labels_used(run))]
-    return f"{sum(known) / len(known):.0f}" if known else "unknown"
+    return f"{sum(known) / len(known):,.0f}" if known else "unknown"
 
 
 def numerics_of(run: TrialRun) -> int:
