@@ -92,10 +92,19 @@ def test_the_numerics_study_holds_only_where_every_interval_holds_0_within_a_ten
     )
     assert text.count("**held**") == 4 and "not met" not in text
     assert glance(runs).verdict == "same science"
-    assert glance([r for r in runs if numerics_of(r) == 1]).verdict.startswith("not measured yet")
+    assert glance([r for r in runs if numerics_of(r) == 1]).verdict == "not measured yet"
+    # DoorKey without its numerics-1 runs: grid16's difference heads the row, and the row waits for it
+    partial_runs = [r for r in runs if not (r.trial.config.startswith("minigrid") and numerics_of(r) == 1)]
+    assert glance(partial_runs).headline.startswith("grid16-dospcot success, numerics 2 minus 1")
+    assert glance(partial_runs).verdict.startswith("not measured yet (a preset lacks")
     # a seed where numerics 2 loses every success: the interval no longer lies within +-0.1
     runs = [r for r in runs if not (r.trial.seed == 1 and numerics_of(r) == 2)]
     (tmp_path / "lost").mkdir()
     runs.append(_run(tmp_path / "lost", "minigrid-doorkey-dospcot", 1, 2, 0.0, 0.95))
     assert "**not met**" in "\n".join(tables(runs))
     assert glance(runs).verdict == "differs (or too wide)"
+    # a measured difference that misses the bound is shown even while the other preset waits
+    grid_only = [r for r in runs if r.trial.config == "grid16-dospcot"]
+    grid_only += [_run(tmp_path / "lost", "grid16-dospcot", 9, 1, 0.0, 0.95)]
+    grid_only += [_run(tmp_path / "lost", "grid16-dospcot", 9, 2, 1.0, 0.95)]
+    assert glance(grid_only).verdict == "differs (or too wide)"
