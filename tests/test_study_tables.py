@@ -16,6 +16,7 @@ from dospcot.lab.studies.label_sources import (
     DEMO_ARMS,
     EFFORT_ARMS,
     EFFORT_HIGHWAY_ARMS,
+    EFFORT_TARGETS,
     EXPERT,
     THIRD_VIEW_ARMS,
     demonstration_tables,
@@ -224,7 +225,10 @@ def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
         assert f"| {arm} | 4 | {SeedSummary.of(values)} |" in text
     assert "as labels only" not in text  # an arm not run has no row
     diff = SeedSummary.of([0.0, 0.5, 0.0, 0.0])  # 1% + demonstrations minus 5%, seed by seed
-    assert f"(paired by seed): {diff}; target (at least 0): **met**" in text
+    assert (
+        f"(paired by seed): {diff}; target (at least 0): **met**; "
+        "demonstrations pay (the interval above 0): no" in text
+    )
     worse = [run for run in runs if run.trial.params != DEMO_ARMS["labels 5%"]] + [
         _run("grid16-dospcot", DEMO_ARMS["labels 5%"], seed, 1.0, 0.9) for seed in range(4)
     ]
@@ -253,8 +257,31 @@ def test_the_equal_effort_table_leads_with_effort_and_pairs_each_arm_with_per_st
     diff = SeedSummary.of([-1.0, 0.0, -1.0])
     assert (
         f"- success, segments of 4, equal effort minus per-step labels, 5% of keys (paired by seed): {diff}"
+        "; F2: **not met**" in text
+    )
+    # The demonstrations arm is compared, but F2 grades only the segments at equal effort.
+    assert (
+        "- success, labels 1% + 10 demonstrations minus per-step labels, 5% of keys (paired by seed): "
         in text
     )
+    assert text.count("F2:") == 1
+    glance = STUDIES["equal-effort"].glance(runs)
+    assert glance.headline.endswith(f"paired by seed: {diff}")
+    assert glance.verdict.startswith("F2: **not met**; ")
+
+
+@pytest.mark.parametrize(
+    ("differences", "grade"),
+    [
+        ((0.5, 0.5, 1.0), "F2: **met** (segments pay per unit of effort)"),
+        ((0.0, 0.0, -0.05), "F2: **no worse** (the interval's lower end is at least -0.1)"),
+        ((0.0, 0.5, -0.5), "F2: **not met**"),
+    ],
+)
+def test_f2_grades_segments_at_equal_effort_by_their_interval(differences, grade):
+    diff = SeedSummary.of(differences)
+    assert EFFORT_TARGETS[0].grade(diff) == grade
+    assert EFFORT_TARGETS[0].grade(SeedSummary.of([])) == "F2: not run"
     # The arm shared with the demo-labels study runs once, in that study's sweep.
     names = [sweep.name for sweep in STUDIES["equal-effort"].sweeps]
     assert "demonstrations-labels-1-10-demonstrations" in names
@@ -284,7 +311,10 @@ def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_orac
     diff = SeedSummary.of([-0.2, -0.2])
     pair = "segments of 4, 5% of segments minus per-step labels, 5% of steps (paired by seed)"
     assert f"- no-crash episodes, {pair}: {diff}" in text
-    assert f"- return, {pair}: {SeedSummary.of([-2.0, -2.0])}" in text  # the return is paired too
+    assert f"- return, {pair}: {SeedSummary.of([-2.0, -2.0])}; F3: **not met**" in text  # graded in return
+    assert "no-crash episodes, segments of 4, 5% of segments minus per-step labels, 5% of steps" in text
+    assert "F2" not in text and text.count("F3:") == 1
+    assert study_.glance(runs).verdict.startswith("F3: **not met**; ")
     # The expert trains first; the demonstrations arm reads its seed-0 agent.
     assert study_.sweeps[0].configs == ("fasthighway-oracle",)
     assert EXPERT.startswith(f"runs/sweeps/{study_.sweeps[0].name}/")

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import re
 from collections.abc import Sequence
+from dataclasses import dataclass
 from functools import partial
 
 from dospcot.lab.report import TrialRun
@@ -21,6 +22,7 @@ from dospcot.lab.studies.tables import (
     paired,
     verdict,
 )
+from dospcot.metrics import SeedSummary
 
 # A first comparison of label sources: expert demonstrations with 1% per-step labels against 5% per-step
 # labels, on grid16-dospcot, seeds 0-9. Each arm is a set of overrides of the preset, one sweep each.
@@ -101,9 +103,11 @@ def demonstration_tables(runs: list[TrialRun]) -> list[str]:
     if ours in by_arm and theirs in by_arm:
         diff = paired(by_arm[ours], by_arm[theirs], "success")
         met = "**met**" if diff.mean >= 0 else "**not met**"
+        pay = "yes" if diff.low > 0 else "no"
         lines += [
             "",
-            f"- success, {ours} minus {theirs} (paired by seed): {diff}; target (at least 0): {met}",
+            f"- success, {ours} minus {theirs} (paired by seed): {diff}; target (at least 0): {met}; "
+            f"demonstrations pay (the interval above 0): {pay}",
         ]
     return lines
 
@@ -125,6 +129,37 @@ EFFORT_ARMS: dict[str, dict[str, str]] = {  # the target's arms first: a partial
 }
 EFFORT_SHARED = {"labels 1% + 10 demonstrations": "demonstrations-labels-1-10-demonstrations"}
 EFFORT_COLUMNS = ("labelled_steps", "success", "agreement", "pseudo_accuracy")
+NO_WORSE = 0.1
+"""F2's margin (docs/preregistration-future-work.md): segments at equal effort are "no worse" than
+per-step labels where their paired interval in success starts at -0.1 or above."""
+
+
+@dataclass(frozen=True)
+class EffortTarget:
+    """A pre-registered target of a label-source study: ``metric`` of ``arm`` minus the per-step arm,
+    paired by seed, **met** where its interval lies above 0, **no worse** where its lower end is at
+    least ``-no_worse`` (None: no such grade), else **not met**."""
+
+    name: str
+    arm: str
+    metric: str
+    no_worse: float | None = None
+
+    def grade(self, diff: SeedSummary) -> str:
+        """The target's grade of ``diff``, the arm minus the per-step arm, e.g. "F2: **met** (...)"."""
+        if diff.n == 0:
+            return f"{self.name}: not run"
+        if diff.low > 0:
+            return f"{self.name}: **met** (segments pay per unit of effort)"
+        if self.no_worse is not None and diff.low >= -self.no_worse:
+            return f"{self.name}: **no worse** (the interval's lower end is at least -{self.no_worse})"
+        return f"{self.name}: **not met**"
+
+
+EFFORT_TARGETS = tuple(
+    EffortTarget("F2", arm, "success", NO_WORSE)
+    for arm in ("segments of 4, equal effort", "segments of 8, equal effort")
+)
 
 
 def effort_tables(
@@ -132,10 +167,11 @@ def effort_tables(
     arms: dict[str, dict[str, str]] = EFFORT_ARMS,
     columns: tuple[str, ...] = EFFORT_COLUMNS,
     preset: str = "grid16-dospcot",
+    targets: tuple[EffortTarget, ...] = EFFORT_TARGETS,
 ) -> list[str]:
     """One row per arm over seeds (effort first), then each arm's paired differences from the first
-    arm (per-step labels) in the outcome columns (return, where shown, and success); the preset's
-    oracle, where the study ran it, as a last row."""
+    arm (per-step labels) in the outcome columns (return, where shown, and success), each graded
+    where ``targets`` pre-registered it; the preset's oracle, where the study ran it, as a last row."""
     base = next(iter(arms))
     by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
     oracle = [run for run in runs if run.trial.config != preset]
@@ -166,7 +202,9 @@ def effort_tables(
             if arm != base and arm in by_arm:
                 for column in outcomes:
                     diff = paired(by_arm[arm], by_arm[base], column)
-                    lines.append(f"- {names[column]}, {arm} minus {base} (paired by seed): {diff}")
+                    grades = [t.grade(diff) for t in targets if (t.arm, t.metric) == (arm, column)]
+                    line = f"- {names[column]}, {arm} minus {base} (paired by seed): {diff}"
+                    lines.append("; ".join([line, *grades]))
     return lines
 
 
@@ -180,6 +218,8 @@ EFFORT_HIGHWAY_ARMS: dict[str, dict[str, str]] = {
     "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10", "demonstrations.agent": f'"{EXPERT}"'},
 }
 EFFORT_HIGHWAY_COLUMNS = ("labelled_steps", "greedy_return", "success", "pseudo_accuracy")
+F3 = EffortTarget("F3", "segments of 4, 5% of segments", "greedy_return")
+"""F3 (docs/preregistration-future-work.md): no "no worse" grade on the highway."""
 
 
 # A third view beyond grid16 (the seed paper's 6.3; grid16's m = 3 row is the grid16 study's): DoorKey-5x5
@@ -225,12 +265,17 @@ def arms_glance(
     theirs: str,
     metric: str = "success",
     preset: str = "grid16-dospcot",
+    target: EffortTarget | None = None,
 ) -> Glance:
-    """``metric`` of arm ``ours`` minus arm ``theirs`` (overrides of ``preset``), paired by seed."""
+    """``metric`` of arm ``ours`` minus arm ``theirs`` (overrides of ``preset``), paired by seed, with
+    its pre-registered grade where ``target`` names one."""
     by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
     diff = paired(by_arm.get(ours, {}), by_arm.get(theirs, {}), metric)
     words = metric.replace("greedy_", "")
-    return Glance(f"{words}, {ours} minus {theirs}, paired by seed: {diff}", verdict(diff, ours, theirs))
+    said = verdict(diff, ours, theirs)
+    if target is not None and diff.n:
+        said = f"{target.grade(diff)}; {said}"
+    return Glance(f"{words}, {ours} minus {theirs}, paired by seed: {diff}", said)
 
 
 STUDIES: dict[str, Study] = {
@@ -248,7 +293,11 @@ STUDIES: dict[str, Study] = {
         "Label sources at equal effort: per-step labels, segments, demonstrations (grid16)",
         "16 x 16 grid, layout 0: label sources at equal effort",
         partial(
-            arms_glance, arms=EFFORT_ARMS, ours="segments of 4, equal effort", theirs=next(iter(EFFORT_ARMS))
+            arms_glance,
+            arms=EFFORT_ARMS,
+            ours=EFFORT_TARGETS[0].arm,
+            theirs=next(iter(EFFORT_ARMS)),
+            target=EFFORT_TARGETS[0],
         ),
         seeds=10,
     ),
@@ -277,16 +326,18 @@ STUDIES: dict[str, Study] = {
             arms=EFFORT_HIGHWAY_ARMS,
             columns=EFFORT_HIGHWAY_COLUMNS,
             preset="fasthighway-dospcot",
+            targets=(F3,),
         ),
         "Label sources at equal effort: per-step labels, segments, demonstrations (fast highway)",
         "our fast highway: label sources at equal effort",
         partial(
             arms_glance,
             arms=EFFORT_HIGHWAY_ARMS,
-            ours="segments of 4, 5% of segments",
+            ours=F3.arm,
             theirs=next(iter(EFFORT_HIGHWAY_ARMS)),
-            metric="greedy_return",
+            metric=F3.metric,
             preset="fasthighway-dospcot",
+            target=F3,
         ),
     ),
 }
