@@ -12,6 +12,7 @@ import pytest
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies import STUDIES
 from dospcot.lab.studies.grid import grid16_tables, label_fraction_tables
+from dospcot.lab.studies.highway import cost_bound
 from dospcot.lab.studies.label_sources import (
     DEMO_ARMS,
     EFFORT_ARMS,
@@ -500,3 +501,25 @@ def test_the_queries_tables_name_arms_that_trained_the_same_runs(tmp_path):
         "- Identical runs (grid16, layouts 101, 202, 303): dospcot uncertainty @ 0.02 and dospcot random "
         "@ 0.02 trained byte-identical runs (metrics.csv) on 1 of their 2 pairs."
     ) in STUDIES["queries"].tables(runs)
+
+
+def test_highway_envs_cost_bound_judges_its_first_dospcot_run_and_trains_it_first(tmp_path):
+    def run(seed: int, minutes: float, preset: str = "highway-dospcot") -> TrialRun:
+        folder = tmp_path / f"{preset}-{seed}"
+        folder.mkdir()
+        (folder / "run_info.json").write_text(json.dumps({"cpu_time_s": minutes * 60}))
+        return TrialRun(Trial(preset, preset, {}, seed), {"mean": {}}, [], folder)
+
+    within = cost_bound([run(1, 95.0), run(0, 42.0), run(0, 10.0, "highway-oracle")])
+    assert within[0] == (
+        "Cost bound (pre-registered): `highway-dospcot` runs took 42 (seed 0), 95 (seed 1) CPU-minutes; "
+        "the first, seed 0, within the bound of 80: the study runs."
+    )
+    over = cost_bound([run(2, 81.0)])
+    assert over[0].endswith("the first, seed 2, over the bound of 80: the study is withdrawn.")
+    assert cost_bound([run(3, 5.0, "highway-oracle")]) == []  # no DOSPCoT run yet
+    # The bounded run trains first; the fast highway's sweep keeps the order its runs were trained in.
+    assert STUDIES["highway"].sweeps[0].configs[0] == "highway-dospcot"
+    assert STUDIES["fasthighway"].sweeps[0].configs == tuple(
+        f"fasthighway-{m}" for m in ("oracle", "masked-zero", "self-training", "dospcot")
+    )

@@ -146,10 +146,14 @@ def numerics_of(run: TrialRun) -> int:
     return int(json.loads(info.read_text()).get("numerics", 1)) if info.is_file() else 1
 
 
+def cpu_seconds(run: TrialRun) -> float | None:
+    """The CPU seconds a run's ``run_info.json`` recorded (a batch member's share), None where none."""
+    return json.loads((run.run_dir / "run_info.json").read_text()).get("cpu_time_s")
+
+
 def cpu_per_run(runs: list[TrialRun]) -> str:
     """The CPU time per run over ``runs`` (each run's ``cpu_time_s``; a batch member's share)."""
-    seconds = [json.loads((r.run_dir / "run_info.json").read_text()).get("cpu_time_s") for r in runs]
-    known = [s for s in seconds if s is not None]
+    known = [s for s in map(cpu_seconds, runs) if s is not None]
     return f"{sum(known) / len(known):.0f} CPU-s" if known else "unknown"
 
 
