@@ -287,6 +287,8 @@ def test_f2_grades_segments_at_equal_effort_by_their_interval(differences, grade
     names = [sweep.name for sweep in STUDIES["equal-effort"].sweeps]
     assert "demonstrations-labels-1-10-demonstrations" in names
     assert names[0] == "effort-per-step-labels-5-of-keys"
+    demo_names = [sweep.name for sweep in STUDIES["demo-labels"].sweeps]
+    assert demo_names[:2] == [names[0], "demonstrations-labels-1-10-demonstrations"]
 
 
 def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_oracle_runs():

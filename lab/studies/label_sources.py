@@ -128,6 +128,8 @@ EFFORT_ARMS: dict[str, dict[str, str]] = {  # the target's arms first: a partial
     "segments of 4, 5% of segments": {FRACTION: "0.05", SEGMENT: "4"},
 }
 EFFORT_SHARED = {"labels 1% + 10 demonstrations": "demonstrations-labels-1-10-demonstrations"}
+DEMO_SHARED = {"labels 5%": "effort-per-step-labels-5-of-keys"}
+"""The two studies' arms with the same overrides of the same preset train once, in one sweep."""
 EFFORT_COLUMNS = ("labelled_steps", "success", "agreement", "pseudo_accuracy")
 NO_WORSE = 0.1
 """F2's margin (docs/preregistration-future-work.md): segments at equal effort are "no worse" than
@@ -280,7 +282,7 @@ def arms_glance(
 
 STUDIES: dict[str, Study] = {
     "demo-labels": Study(
-        _arm_sweeps("demonstrations-", DEMO_ARMS, {}),
+        _arm_sweeps("demonstrations-", DEMO_ARMS, DEMO_SHARED),
         demonstration_tables,
         "Expert demonstrations against per-step labels (grid16)",
         "16 x 16 grid, layout 0: demonstrations or labels",
