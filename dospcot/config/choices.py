@@ -22,6 +22,9 @@ LabelStrategy = Literal[
 (:mod:`dospcot.core.queries`); ``"a+b"`` splits a round's chosen queries equally between a and b."""
 QuerySchedule = Literal["asap", "even", "decay"]
 """How a label budget (``training.label_budget``) spreads over the rounds (:mod:`dospcot.core.queries`)."""
+AgentDraws = Literal["shared", "own"]
+"""Whose random draws a run's agents make: the global generators in turn, or each its own
+(:mod:`dospcot.core.agent_draws`)."""
 ModelKind = Literal["mlp", "linear"]
 LossKind = Literal["cross_entropy", "hinge"]
 

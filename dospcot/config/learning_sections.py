@@ -17,6 +17,7 @@ from dospcot.config.choices import (
     QUERY_SCHEDULES,
     QUOTAS,
     WEIGHTINGS,
+    AgentDraws,
     LabelStrategy,
     LossKind,
     ModelKind,
@@ -29,8 +30,20 @@ DEVICE_PATTERN = re.compile(r"cpu|cuda(:\d+)?")
 """The devices a ``[dqn]`` section may name besides SB3's ``"auto"``."""
 
 
+class AddedKeys:
+    """A config section whose keys outlive its run folders: ``added_keys`` names each key added since
+    folders were first written, with the value a folder (or a pickled checkpoint) written before it
+    ran under, so that a change of the key's default never restates what an old run did."""
+
+    added_keys: ClassVar[dict[str, Any]] = {}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        # A checkpoint pickled before a key was added would otherwise read today's default.
+        self.__dict__.update({**self.added_keys, **state})
+
+
 @dataclass(frozen=True)
-class TrainingConfig:
+class TrainingConfig(AddedKeys):
     """The rounds of one run: the ``[training]`` section of a config, and the first fields of
     :class:`~dospcot.config.run_configs.TrainConfig`.
 
@@ -85,6 +98,12 @@ class TrainingConfig:
     :param rater: who answers the queries: ``"simulated"`` (the hidden reward) or ``"file"`` (a person:
         each round's queries go to the run folder's ``queries/round_<r>.csv`` and the run stops until
         ``dospcot train --resume`` finds them answered).
+    :param agent_draws: whose random draws (exploration, replay batches) the agents make:
+        ``"shared"``, the global generators in turn, so an agent's draws depend on the agents built
+        and trained before it; or ``"own"``, each agent its own, so agent k of a co-trained run with
+        every reward labelled computes what agent k of a one-view run computes, bit for bit
+        (:mod:`dospcot.core.agent_draws`). A one-agent run is the same under both. A batch of seeds
+        (``--batch-seeds``) always gives each member and agent its own stream.
     """
 
     rounds: int = 5
@@ -106,6 +125,9 @@ class TrainingConfig:
     query_random_share: float = 0.2
     query_recent_rounds: int = 0
     rater: Literal["simulated", "file"] = "simulated"
+    agent_draws: AgentDraws = "shared"
+
+    added_keys: ClassVar[dict[str, Any]] = {"agent_draws": "shared"}
 
     def __post_init__(self) -> None:
         check_at_least(self, 1, "segment_length")
@@ -330,7 +352,7 @@ class ClassifierConfig:
 
 
 @dataclass(frozen=True)
-class CoTrainingConfig:
+class CoTrainingConfig(AddedKeys):
     """Hyperparameters of the self-paced schedule.
 
     :param consensus_weight: the co-regularisation weight, SPaMCo's gamma (default 0.3): before
@@ -374,12 +396,6 @@ class CoTrainingConfig:
     renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
     """Keys of older configs and their names now."""
     added_keys: ClassVar[dict[str, Any]] = {"numerics": 1}
-    """Keys added since run folders were first written, each with the value a folder (or a pickled
-    checkpoint) written before it ran under, which differs from today's default."""
-
-    def __setstate__(self, state: dict[str, Any]) -> None:
-        # A checkpoint pickled before a key was added would otherwise read today's default.
-        self.__dict__.update({**self.added_keys, **state})
 
     def __post_init__(self) -> None:
         if self.consensus_weight < 0:

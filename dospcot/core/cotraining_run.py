@@ -49,15 +49,15 @@ from __future__ import annotations
 
 import dataclasses
 import io
-import random
 from collections.abc import Callable, Sequence
+from contextlib import AbstractContextManager, nullcontext
 from typing import TYPE_CHECKING, Any, Protocol
 
 import gymnasium as gym
 import numpy as np
-import torch as th
 from stable_baselines3.common.type_aliases import MaybeCallback
 
+from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
 from dospcot.core.cotrainer import RunCoTrainer, RunPool
 from dospcot.core.queries import QueriedTask, Rater, RewardQueries
 from dospcot.core.raters import SimulatedRater
@@ -206,10 +206,14 @@ class CoTrainingRun:
         if cfg.training.segment_length > 1:
             self.segments = SegmentStore(cfg.training.segment_length)
         buffer_kwargs = relabelling_kwargs(cfg.method, self.table)
-        self.agents: list[ExpectedSarsaDQN] = [
-            make_agent(self._agent_env(k, view), k, kind, view, cfg, buffer_kwargs, task.observations(view))
-            for k, (kind, view) in enumerate(zip(cfg.agent_kinds, cfg.views, strict=True))
-        ]
+        self.agent_draws = AgentDraws() if training.agent_draws == "own" else None
+        """Each agent's own draws (``training.agent_draws = "own"``), or None: the global generators."""
+        self.agents: list[ExpectedSarsaDQN] = []
+        for k, (kind, view) in enumerate(zip(cfg.agent_kinds, cfg.views, strict=True)):
+            env = self._agent_env(k, view)
+            self.agents.append(make_agent(env, k, kind, view, cfg, buffer_kwargs, task.observations(view)))
+            if self.agent_draws is not None:
+                self.agent_draws.add()  # as SB3 seeded the generators for agent k
         for k in range(len(self.agents)):
             self._give_demonstrations(k)
         self.trainer: RunCoTrainer | RewardModelTrainer | None = None
@@ -281,12 +285,20 @@ class CoTrainingRun:
             self.round += 1
             for k, agent in enumerate(self.agents):
                 self.seed_round_env(k)  # learn() then resets it, with that seed
-                agent.learn(self.cfg.training.steps_per_round, callback=callback, reset_num_timesteps=False)
+                with self._draws_of(k):
+                    agent.learn(
+                        self.cfg.training.steps_per_round, callback=callback, reset_num_timesteps=False
+                    )
             self.collected = True
         stats = self.label_and_cotrain()  # 1b-3.
-        for agent in self.agents:  # 4. policy update on the rewards and weights just written
-            agent.update(self.cfg.training.update_steps)
+        for k, agent in enumerate(self.agents):  # 4. policy update on the rewards and weights just written
+            with self._draws_of(k):
+                agent.update(self.cfg.training.update_steps)
         return self.close_round(stats)  # 5-6.
+
+    def _draws_of(self, k: int) -> AbstractContextManager[None]:
+        """Where agent ``k`` draws: its own generators under ``agent_draws = "own"``, else the global ones."""
+        return nullcontext() if self.agent_draws is None else self.agent_draws.of(k)
 
     def seed_round_env(self, k: int) -> None:
         """Seed agent ``k``'s env for this round and have it reset at the round's start."""
@@ -412,7 +424,8 @@ class CoTrainingRun:
             if self.queries is None
             else (self.queries.revealed, self.queries.met_round, self.queries.log),
             # SB3 draws exploration and replay batches from the legacy global generators.
-            "rng": {"python": random.getstate(), "numpy": np.random.get_state(), "torch": th.get_rng_state()},  # noqa: NPY002
+            "rng": global_draws(),
+            "agent_draws": None if self.agent_draws is None else self.agent_draws.states,
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
@@ -435,10 +448,10 @@ class CoTrainingRun:
             loaded.action_space.np_random.bit_generator.state = state["action_space_rng"][k]
             self.agents[k] = loaded
             self._give_demonstrations(k)
+        if self.agent_draws is not None:
+            self.agent_draws.states = state["agent_draws"]
         # Loading re-seeds the global generators (SB3's _setup_model): restore them last.
-        random.setstate(state["rng"]["python"])
-        np.random.set_state(state["rng"]["numpy"])  # noqa: NPY002
-        th.set_rng_state(state["rng"]["torch"])
+        set_global_draws(state["rng"])
 
     def _records(self, stats: dict) -> list[dict]:
         policy = self.evaluate_policies()
