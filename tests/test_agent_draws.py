@@ -3,6 +3,7 @@ reward labelled computes what agent k of a one-view run computes, bit for bit; a
 same under both settings; a run resumed from its checkpoint continues its agents' own draws."""
 
 import pickle
+from functools import cache
 
 import pytest
 import torch as th
@@ -15,15 +16,17 @@ from dospcot.tasks import load_config
 
 SHORT = [
     "training.rounds=2",
-    "training.steps_per_round=300",
-    "dqn.learning_starts=50",
-    "training.update_steps=50",
+    "training.steps_per_round=150",
+    "dqn.learning_starts=30",
+    "training.update_steps=20",
 ]
 """grid16-dospcot, shortened, with every reward labelled: the views' co-training changes no reward."""
 
 
-def _agent_params(views: str, draws: str, rounds: int = 2) -> list[th.Tensor]:
-    """Agent 0's parameters after each of ``rounds`` rounds of a run on ``views``."""
+@cache
+def _agent_params(views: str, draws: str, rounds: int = 1) -> list[th.Tensor]:
+    """Agent 0's parameters after each of ``rounds`` rounds of a run on ``views`` (trained once per
+    module: the tests only read them)."""
     overrides = [*SHORT, "training.label_fraction=1.0", f"views={views}", f'training.agent_draws="{draws}"']
     run = build_run(load_config("grid16-dospcot", overrides))
     params = []
