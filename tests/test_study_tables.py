@@ -227,13 +227,14 @@ def test_the_demonstrations_table_names_each_arm_and_pairs_the_target_by_seed():
     assert "as labels only" not in text  # an arm not run has no row
     diff = SeedSummary.of([0.0, 0.5, 0.0, 0.0])  # 1% + demonstrations minus 5%, seed by seed
     assert (
-        f"(paired by seed): {diff}; target (at least 0): **met**; "
+        f"(paired by seed): {diff}; F1, target (at least 0): **met**; "
         "demonstrations pay (the interval above 0): no" in text
     )
     worse = [run for run in runs if run.trial.params != DEMO_ARMS["labels 5%"]] + [
         _run("grid16-dospcot", DEMO_ARMS["labels 5%"], seed, 1.0, 0.9) for seed in range(4)
     ]
-    assert "target (at least 0): **not met**" in "\n".join(demonstration_tables(worse))
+    assert "F1, target (at least 0): **not met**" in "\n".join(demonstration_tables(worse))
+    assert STUDIES["demo-labels"].glance(runs).verdict.startswith("F1, target (at least 0): **met**; ")
 
 
 def test_the_equal_effort_table_leads_with_effort_and_pairs_each_arm_with_per_step_labels():

@@ -6,7 +6,7 @@ rater effort (its 6.1 and 6.2); on MiniGrid DoorKey-5x5, a third view against tw
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
@@ -102,14 +102,17 @@ def demonstration_tables(runs: list[TrialRun]) -> list[str]:
     ours, theirs = DEMO_TARGET
     if ours in by_arm and theirs in by_arm:
         diff = paired(by_arm[ours], by_arm[theirs], "success")
-        met = "**met**" if diff.mean >= 0 else "**not met**"
-        pay = "yes" if diff.low > 0 else "no"
-        lines += [
-            "",
-            f"- success, {ours} minus {theirs} (paired by seed): {diff}; target (at least 0): {met}; "
-            f"demonstrations pay (the interval above 0): {pay}",
-        ]
+        lines += ["", f"- success, {ours} minus {theirs} (paired by seed): {diff}; {f1_grade(diff)}"]
     return lines
+
+
+def f1_grade(diff: SeedSummary) -> str:
+    """F1's grade (docs/preregistration-future-work.md) of the demonstrations arm's success minus 5%
+    labels': **met** where the mean is at least 0; demonstrations *pay* only where the interval lies
+    above 0."""
+    met = "**met**" if diff.mean >= 0 else "**not met**"
+    pay = "yes" if diff.low > 0 else "no"
+    return f"F1, target (at least 0): {met}; demonstrations pay (the interval above 0): {pay}"
 
 
 # Label sources at equal rater effort, counted in labelled env steps (docs/segments.md): per-step
@@ -267,16 +270,16 @@ def arms_glance(
     theirs: str,
     metric: str = "success",
     preset: str = "grid16-dospcot",
-    target: EffortTarget | None = None,
+    grade: Callable[[SeedSummary], str] | None = None,
 ) -> Glance:
     """``metric`` of arm ``ours`` minus arm ``theirs`` (overrides of ``preset``), paired by seed, with
-    its pre-registered grade where ``target`` names one."""
+    its pre-registered ``grade`` where the study has one."""
     by_arm = _by_arm([run for run in runs if run.trial.config == preset], arms)
     diff = paired(by_arm.get(ours, {}), by_arm.get(theirs, {}), metric)
     words = metric.replace("greedy_", "")
     said = verdict(diff, ours, theirs)
-    if target is not None and diff.n:
-        said = f"{target.grade(diff)}; {said}"
+    if grade is not None and diff.n:
+        said = f"{grade(diff)}; {said}"
     return Glance(f"{words}, {ours} minus {theirs}, paired by seed: {diff}", said)
 
 
@@ -286,7 +289,7 @@ STUDIES: dict[str, Study] = {
         demonstration_tables,
         "Expert demonstrations against per-step labels (grid16)",
         "16 x 16 grid, layout 0: demonstrations or labels",
-        partial(arms_glance, arms=DEMO_ARMS, ours=DEMO_TARGET[0], theirs=DEMO_TARGET[1]),
+        partial(arms_glance, arms=DEMO_ARMS, ours=DEMO_TARGET[0], theirs=DEMO_TARGET[1], grade=f1_grade),
         seeds=10,
     ),
     "equal-effort": Study(
@@ -299,7 +302,7 @@ STUDIES: dict[str, Study] = {
             arms=EFFORT_ARMS,
             ours=EFFORT_TARGETS[0].arm,
             theirs=next(iter(EFFORT_ARMS)),
-            target=EFFORT_TARGETS[0],
+            grade=EFFORT_TARGETS[0].grade,
         ),
         seeds=10,
     ),
@@ -339,7 +342,7 @@ STUDIES: dict[str, Study] = {
             theirs=next(iter(EFFORT_HIGHWAY_ARMS)),
             metric=F3.metric,
             preset="fasthighway-dospcot",
-            target=F3,
+            grade=F3.grade,
         ),
     ),
 }
