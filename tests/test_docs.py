@@ -56,12 +56,7 @@ def test_the_results_at_a_glance_and_the_readme_blocks_come_from_the_same_record
 def test_a_study_without_runs_publishes_no_figure(rendered):
     """The unpublished studies' pages and rows name no number of theirs, only what would produce them."""
     unpublished = [name for name, result in rendered.items() if result.table is None]
-    assert set(unpublished) == {
-        "demo-labels",
-        "equal-effort",
-        "equal-effort-highway",
-        "highway",
-    }
+    assert set(unpublished) == {"highway"}
     for name in unpublished:
         page = rendered[name].page
         assert "Unpublished" in page and f"dospcot study {name} --docs" in page
@@ -87,7 +82,7 @@ OUTPUTS = {
     "runs/gym": "written by train_env",
     "runs/fasthighway-oracle/20261124-080000/agent_kinematics.zip": "an example path in a config",
     "runs/sweeps/effort-highway-oracle/trials/fasthighway-oracle/seed=0/agent_kinematics.zip": (
-        "the expert an unpublished study would train first"
+        "the expert the equal-effort-highway study trains first; the record keeps no agents"
     ),
     "runs/sweeps/probe-lavagap-all-labels": "a probe sweep, not kept",
     "docs/results/<study>.md": "a pattern",

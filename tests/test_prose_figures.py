@@ -348,8 +348,8 @@ FIGURES = [
     Figure(
         "unpublished studies",
         "README.md",
-        r"\*\*\w+ studies are unpublished\.\*\* .*? have no runs",
-        r"\*\*(\w+) studies are unpublished\.\*\* (.*?) have no runs",
+        r"\*\*\w+ stud(?:y is|ies are) unpublished\.\*\* .*? ha(?:s|ve) no runs",
+        r"\*\*(\w+) stud(?:y is|ies are) unpublished\.\*\* (.*?) ha(?:s|ve) no runs",
         unpublished,
         "results at a glance (the studies the record holds no run of)",
     ),
