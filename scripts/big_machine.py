@@ -18,7 +18,8 @@ and ``--guide`` rewrites the measured table of ``docs/guide/big-machines.md`` fr
 Usage::
 
     python scripts/big_machine.py --json big-machines.json           # on the machine to measure
-    python scripts/big_machine.py --render big-machines.json --guide docs/guide/big-machines.md
+    python scripts/big_machine.py --only gpu-batch --json gpu-batch.json  # one way, on the same machine
+    python scripts/big_machine.py --render big-machines.json gpu-batch.json --guide docs/guide/big-machines.md
     python scripts/big_machine.py --seeds 2 --steps-per-round 500 --json /tmp/b.json   # a quick check
 """
 
@@ -116,6 +117,21 @@ def measure(seeds: int, short: list[str], only: list[str] | None, out: Path | No
     return record
 
 
+def merged(records: list[dict[str, Any]]) -> dict[str, Any]:
+    """One record of the ways measured by several runs (``--only``) on one machine, in the order of
+    :func:`ways`; a way measured twice keeps its last figures."""
+    first = records[0]
+    same = ("gpu", "cpu", "cores", "torch")
+    for other in records[1:]:
+        if [other["machine"][key] for key in same] != [first["machine"][key] for key in same] or any(
+            other[key] != first[key] for key in ("preset", "overrides", "seeds")
+        ):
+            raise SystemExit("--render: these files were measured on different machines or settings")
+    found = {name: way for record in records for name, way in record["ways"].items()}
+    order = [name for name in LABELS if name in found]
+    return {**first, "ways": {name: found[name] for name in order}}
+
+
 LABELS = {
     "alone": "{workers} worker(s), every seed alone",
     "cpu-batches": "{workers} worker(s), CPU batches of {batch} seeds",
@@ -187,12 +203,18 @@ def main(argv: list[str] | None = None) -> int:
         "--steps-per-round", type=int, default=3000, help="env steps per round (default 3000, the bench's)"
     )
     parser.add_argument("--only", nargs="+", choices=list(LABELS), help="sweep only these ways")
-    parser.add_argument("--json", type=Path, help="write the figures here (after every way)")
-    parser.add_argument("--render", type=Path, help="render this JSON instead of measuring")
+    parser.add_argument(
+        "--json", type=Path, help="write the figures here (after every way; with --render, the merged ones)"
+    )
+    parser.add_argument(
+        "--render", type=Path, nargs="+", help="render these JSON files (one machine's) instead of measuring"
+    )
     parser.add_argument("--guide", type=Path, help=f"rewrite this page's measured table (e.g. {GUIDE})")
     args = parser.parse_args(argv)
     if args.render:
-        record = json.loads(args.render.read_text())
+        record = merged([json.loads(path.read_text()) for path in args.render])
+        if args.json:
+            args.json.write_text(json.dumps(record, indent=1) + "\n")
     else:
         short = [SHORT[0], f"training.steps_per_round={args.steps_per_round}", *SHORT[2:]]
         record = measure(args.seeds, short, args.only, args.json)
