@@ -13,6 +13,7 @@ import dataclasses
 import platform
 from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
+from functools import partial
 from pathlib import Path
 
 import torch
@@ -24,6 +25,7 @@ from dospcot.lab.bench_batched import (
     bench_batched_wall,
     bench_stacked_update,
 )
+from dospcot.lab.bench_cost import COST_TASKS, bench_cost, bench_release, bench_release_memory
 from dospcot.lab.bench_env_rows import (
     bench_cotraining_scaling,
     bench_fast_highway,
@@ -69,6 +71,9 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     ),
     "batched_wall": bench_batched_wall,
     "batched_memory": bench_batched_memory,
+    **{f"cost_{task}": partial(bench_cost, task) for task in COST_TASKS},
+    **{f"release_{task}": partial(bench_release, task) for task in COST_TASKS},
+    "release_memory": bench_release_memory,
 }
 
 GPU_BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
@@ -137,6 +142,12 @@ NOTES = [
     "(`dospcot.policies.stacked_esarsa.StackedExpectedSarsa`, as a batch of seeds takes them) and as each "
     "member's own `train()`, one member after another; it isolates what stacking saves per update, "
     "without the envs and classifiers of the batched-seeds rows.",
+    "- The cost rows (`cost_TASK`, `release_TASK`, `release_memory`) train whole `dospcot train` runs, each "
+    "a subprocess on one torch thread, at the preset's full length over seeds 0-2 (the seeds are the "
+    "repetitions), and read each run's CPU time (user + system) and peak resident memory from `os.wait4`: "
+    "the interpreter's start and imports count, as in a user's run. The last release (the peer of the "
+    "release rows) runs from commit 700346f's source installed into the user's cache (`pip install "
+    "--target`); a run serves every row that needs it, so a task's rows cost one set of runs.",
     "- The GPU column holds the rows that have a GPU form, measured by `dospcot bench --device cuda` on "
     "the machine its line above the table names: ours and the peer both on the GPU (`dqn.device = "
     "'cuda'` for the batched-seeds row, whose classifiers and envs stay on the CPU), in wall time, since "

@@ -17,8 +17,8 @@ from dospcot.core.queries import RewardQueries, choose_queries, class_floors, sc
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.round_records import class_rows
 from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.budget import STUDIES as BUDGET_STUDIES
 from dospcot.lab.studies.budget import labels_to_reach
+from dospcot.lab.studies.budget_explore import STUDIES as BUDGET_STUDIES
 from dospcot.lab.sweep import Trial
 from dospcot.run.cotraining import build_run
 from dospcot.tasks import load_config

@@ -218,6 +218,9 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert "FastHighwayVec vs highway-env's highway-fast-v0: env steps per second" in text
     assert "Tabular agents, vectorised vs a per-step Python loop: agent steps per second" in text
     assert "| ratio | target | met |" in text
+    assert text.count("A DOSPCoT run vs a self-training run: CPU time per run") == 4
+    assert text.count("This release vs the last (700346f): CPU time per DOSPCoT run") == 4
+    assert "This release vs the last (700346f): peak memory per DOSPCoT run" in text
 
 
 def _row(name: str, ours: float) -> bench_measure.Row:

@@ -18,6 +18,7 @@
     dospcot study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
     dospcot study second-view-highway --docs   # its highway monitor setting x seeds 0-4
     dospcot study budget-explore --docs   # label budgets, schedules and peers on MiniGrid, seeds 0-2
+    dospcot study budget-explore-doorkey --docs   # its DoorKey arms on seeds 0-9, own draws, numerics 2
     dospcot study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
 
 (``python scripts/study.py`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
@@ -57,7 +58,7 @@ from dospcot.config.presets import did_you_mean
 from dospcot.lab.report import TrialRun, load_runs, write_report
 from dospcot.lab.studies import (
     batched_seeds,
-    budget,
+    budget_explore,
     grid,
     highway,
     label_sources,
@@ -102,7 +103,7 @@ STUDIES: dict[str, Study] = {
     **paper.STUDIES,
     **queries.STUDIES,
     **batched_seeds.STUDIES,
-    **budget.STUDIES,
+    **budget_explore.STUDIES,
     **numerics.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""

@@ -1,6 +1,7 @@
 """Labels that pay (issue 58): a label budget counted in answers, spread over the rounds, against the
 reward-model peer, with label-efficiency curves. ``budget-explore`` is the exploration (seeds 0-2,
-recorded as exploratory); it chooses the settings a confirmatory study registers before its runs.
+recorded as exploratory; its studies are declared in :mod:`~dospcot.lab.studies.budget_explore`); it
+chooses the settings a confirmatory study registers before its runs.
 
 Its tables split a shortfall against the oracle into its parts: the labels each arm bought, its
 success round by round beside the oracle's (fewer rounds with a reward), the pseudo-rewards per hidden
@@ -17,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
 from dospcot.lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
 from dospcot.metrics import SeedSummary
 from dospcot.run.plots import Band, plot_bands
@@ -62,7 +62,8 @@ def arm_of(run: TrialRun) -> str:
     return " ".join(parts)
 
 
-def _by_arm(runs: list[TrialRun]) -> dict[str, list[TrialRun]]:
+def by_arm(runs: list[TrialRun]) -> dict[str, list[TrialRun]]:
+    """``runs`` by their arm (:func:`arm_of`), in the order the runs come."""
     arms: dict[str, list[TrialRun]] = {}
     for run in runs:
         arms.setdefault(arm_of(run), []).append(run)
@@ -208,7 +209,7 @@ def _efficiency(arms: dict[str, list[TrialRun]]) -> list[str]:
 def figure(runs: list[TrialRun], path: Path) -> None:
     """Success against labels used per arm (mean over seeds with its 95% interval), and the oracle's
     success as a flat line across the plot."""
-    arms = _by_arm(runs)
+    arms = by_arm(runs)
     bands = []
     for arm, members in arms.items():
         if arm == "oracle":
@@ -238,18 +239,29 @@ def _band(label: str, x: np.ndarray, stats: list[SeedSummary]) -> Band:
     )
 
 
-def _tables(tasks: dict[str, Callable[[TrialRun], bool]]) -> Callable[[list[TrialRun]], list[str]]:
+EXPLORATORY = (
+    "settings chosen here are confirmed on other seeds, maps and tasks by a study registered before its "
+    "runs. An arm names its method, label strategy, schedule and what else its sweep sets; labels used "
+    "counts the labels each run held at its end (bought answers, or a uniform mask's share of the samples "
+    "met), so equal budgets read as equal counts."
+)
+
+
+def exploration_tables(
+    tasks: dict[str, Callable[[TrialRun], bool]],
+    study: str,
+    seeds: str,
+    comparisons: tuple[tuple[str, str, str], ...],
+) -> Callable[[list[TrialRun]], list[str]]:
+    """The tables of exploratory study ``study`` (its figure ``<study>.png``), per task: ``seeds`` says
+    which seeds it ran, ``comparisons`` those it reads (arm a, arm b, what a minus b asks; see
+    :func:`descriptive`)."""
+
     def tables(runs: list[TrialRun]) -> list[str]:
-        lines = [
-            "Exploratory: seeds 0-2 (the oracle rows reuse the active-queries study's seeds 0-9), settings "
-            "chosen here are confirmed on other seeds, maps and tasks by a study registered before its "
-            "runs. An arm names its method, label strategy, schedule and what else its sweep sets; labels "
-            "used counts the labels each run held at its end (bought answers, or a uniform mask's share of "
-            "the samples met), so equal budgets read as equal counts.",
-        ]
-        lines += ["", "![success against labels used, per arm, and the oracle's](budget-explore.png)"]
+        lines = [f"Exploratory: {seeds}, {EXPLORATORY}"]
+        lines += ["", f"![success against labels used, per arm, and the oracle's]({study}.png)"]
         for task, belongs in tasks.items():
-            arms = _by_arm([r for r in runs if belongs(r)])
+            arms = by_arm([r for r in runs if belongs(r)])
             if not arms:
                 continue
             lines += ["", f"### {task}", "", *_arm_table(arms), *(["", *c] if (c := _controls(arms)) else [])]
@@ -258,9 +270,9 @@ def _tables(tasks: dict[str, Callable[[TrialRun], bool]]) -> Callable[[list[Tria
             classes = _class_table(arms)
             if classes:
                 lines += ["", "Pseudo-rewards per hidden reward class, last round:", "", *classes]
-            descriptive = _descriptive(arms)
-            if descriptive:
-                lines += ["", "Descriptive, exploratory comparisons:", "", *descriptive]
+            compared = descriptive(arms, comparisons)
+            if compared:
+                lines += ["", "Descriptive, exploratory comparisons:", "", *compared]
             efficiency = _efficiency(arms)
             if efficiency:
                 lines += ["", *efficiency]
@@ -303,128 +315,15 @@ def _controls(arms: dict[str, list[TrialRun]]) -> list[str]:
 
 
 ROUNDS_ARM = "exploration by rounds"
-DESCRIPTIVE = (
-    ("dospcot uniform " + ROUNDS_ARM, "dospcot uniform", "exploration by rounds against the pace, 10% mask"),
-    (
-        f"dospcot disagreement even {ROUNDS_ARM}",
-        f"dospcot disagreement asap {ROUNDS_ARM}",
-        "the budget spread evenly against spent at once",
-    ),
-    (
-        f"dospcot outcomes+disagreement even {ROUNDS_ARM}",
-        f"dospcot disagreement even {ROUNDS_ARM}",
-        "half the queries on episode ends under the even schedule",
-    ),
-    (
-        f"dospcot disagreement even {ROUNDS_ARM}",
-        f"self-training uncertainty even {ROUNDS_ARM}",
-        "the second view's disagreement against one view's uncertainty",
-    ),
-    (
-        f"dospcot disagreement even {ROUNDS_ARM}",
-        f"reward-model disagreement even {ROUNDS_ARM}",
-        "co-training against the reward-model peer",
-    ),
-)
-"""Comparisons the exploration reads (arm a, arm b, what a minus b asks), success paired by seed over
-the seeds both ran, with no threshold and no verdict."""
 
 
-def _descriptive(arms: dict[str, list[TrialRun]]) -> list[str]:
+def descriptive(arms: dict[str, list[TrialRun]], comparisons: tuple[tuple[str, str, str], ...]) -> list[str]:
+    """Each comparison (arm a, arm b, what a minus b asks) whose arms both ran: success of a minus b,
+    paired by seed over the seeds both ran, with no threshold and no verdict."""
     lines = []
-    for a, b, question in DESCRIPTIVE:
+    for a, b, question in comparisons:
         if a in arms and b in arms:
             diff = paired_difference(arms[a], arms[b])
             if diff.n:
                 lines.append(f"- {question}: success of {a} minus {b}, paired: {diff} over {diff.n} seeds.")
     return lines
-
-
-def _glance(runs: list[TrialRun]) -> Glance:
-    """The exploration's clearest lever: on DoorKey at a 10% mask, DOSPCoT exploring by rounds minus
-    the same arm exploring by the pace, success paired by seed."""
-    arms = _by_arm([r for r in runs if r.trial.config.startswith("minigrid-doorkey-")])
-    a, b, _ = DESCRIPTIVE[0]
-    if a not in arms or b not in arms:
-        return Glance("not rendered yet", "exploratory")
-    diff = paired_difference(arms[a], arms[b])
-    return Glance(
-        f"DoorKey success, 10% mask, exploring by rounds minus by the pace, paired: {diff}", "exploratory"
-    )
-
-
-def _of(prefix: str) -> Callable[[TrialRun], bool]:
-    return lambda run: run.trial.config.startswith(prefix)
-
-
-ROUNDS = {EXPLORATION: ("rounds",)}
-"""Exploration by the share of rounds done, as the oracle explores (the control's finding)."""
-
-EXPLORE_SWEEPS = (
-    # The control first: with every reward labelled, co-training has nothing to learn, so whatever
-    # it loses against the oracle is the machinery's.
-    Sweep(
-        "budget-explore-lavagap-control",
-        ("minigrid-lavagap-dospcot",),
-        {FRACTION: ("1.0",), EXPLORATION: ("rounds", "pace")},
-    ),
-    # One agent of the oracle's view with every reward labelled: the run differs from the oracle's only
-    # in the co-training machinery (the reward table, the keyed labels, the co-trainer's empty U).
-    Sweep(
-        "budget-explore-lavagap-control-single",
-        ("minigrid-lavagap-self-training",),
-        {FRACTION: ("1.0",), EXPLORATION: ("rounds",)},
-    ),
-    Sweep("queries-lavagap-oracle", ("minigrid-lavagap-oracle",), {}),
-    Sweep(
-        "queries-lavagap-dospcot",
-        ("minigrid-lavagap-dospcot",),
-        {FRACTION: ("0.1",), STRATEGY: ("uniform", "random", "uncertainty")},
-    ),
-    Sweep("budget-explore-lavagap-uniform", ("minigrid-lavagap-dospcot",), {FRACTION: ("0.1",), **ROUNDS}),
-    Sweep("queries-doorkey-oracle", ("minigrid-doorkey-oracle",), {}),
-    # The active-queries study's DOSPCoT arms at a 10% mask explore by the pace (seeds 0-9).
-    Sweep(
-        "queries-doorkey-dospcot",
-        ("minigrid-doorkey-dospcot",),
-        {FRACTION: ("0.1",), STRATEGY: ("uniform", "random", "uncertainty")},
-    ),
-    Sweep("budget-explore-doorkey-uniform", ("minigrid-doorkey-dospcot",), {FRACTION: ("0.1",), **ROUNDS}),
-    Sweep(
-        "budget-explore-doorkey-dospcot",
-        ("minigrid-doorkey-dospcot",),
-        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("asap", "even"), **ROUNDS},
-    ),
-    Sweep(
-        "budget-explore-doorkey-outcomes",
-        ("minigrid-doorkey-dospcot",),
-        {BUDGET: ("100",), STRATEGY: ('"outcomes+disagreement"',), SCHEDULE: ("even",), **ROUNDS},
-    ),
-    Sweep(
-        "budget-explore-doorkey-self-training",
-        ("minigrid-doorkey-self-training",),
-        {BUDGET: ("100",), STRATEGY: ("uncertainty",), SCHEDULE: ("even",), **ROUNDS},
-    ),
-    Sweep(
-        "budget-explore-doorkey-reward-model",
-        ("minigrid-doorkey-reward-model",),
-        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("even",), **ROUNDS},
-    ),
-)
-
-STUDIES: dict[str, Study] = {
-    "budget-explore": Study(
-        EXPLORE_SWEEPS,
-        _tables(
-            {
-                "MiniGrid-LavaGapS7-v0": _of("minigrid-lavagap-"),
-                "MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-"),
-            }
-        ),
-        "Labels that pay: exploring label budgets, schedules and the reward-model peer",
-        "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
-        _glance,
-        seeds=3,
-        figure=figure,
-    ),
-}

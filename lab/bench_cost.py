@@ -1,0 +1,146 @@
+"""The cost rows of ``dospcot bench`` (issue 59): a DOSPCoT run against a self-training run, and this
+release against the last, in CPU time and peak memory of whole ``dospcot train`` runs.
+
+Each run is a ``dospcot train`` subprocess on one torch thread, in a temporary folder, at its preset's
+full length (``--quick``: two rounds). Its CPU time (user + system) and peak resident memory come from
+``os.wait4``, so they count the run from the interpreter's start, imports included, as a user's run
+costs. The last release runs from its own install: the source of commit :data:`LAST_RELEASE`
+(``git archive``) installed once with ``pip install --no-deps --target`` into a folder under the
+user's cache, put first on ``PYTHONPATH``. A run trained for one row serves every row that needs it
+(the same preset, seed and release), so the three rows of a task cost one set of runs.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+from dospcot.lab.bench_measure import Row
+
+LAST_RELEASE = "700346f"
+"""The last release before issue 59's changes, the peer of the release rows."""
+COST_TASKS: dict[str, tuple[str, str]] = {
+    "grid16": ("grid16-dospcot", "grid16-self-training"),
+    "doorkey": ("minigrid-doorkey-dospcot", "minigrid-doorkey-self-training"),
+    "lavagap": ("minigrid-lavagap-dospcot", "minigrid-lavagap-self-training"),
+    "fasthighway": ("fasthighway-dospcot", "fasthighway-self-training"),
+}
+"""Each task's DOSPCoT preset and its one-agent peer."""
+COST_TARGET = 2.5
+"""A DOSPCoT run's CPU time over a self-training run's, at most (issue 59: two agents' floor is 2)."""
+RELEASE_TARGETS = {"grid16": 1.0, "doorkey": 1.0, "lavagap": 0.5, "fasthighway": 0.5}
+"""This release's CPU per DOSPCoT run over the last release's, at most: at least 2x less where issue
+59 asks it (LavaGap, the fast highway), no slower elsewhere."""
+MEMORY_TARGET = 1 / 3
+"""A LavaGap DOSPCoT run's peak memory over the last release's, at most (issue 59: 3x less)."""
+QUICK = ("training.rounds=2",)
+SEEDS, QUICK_SEEDS = 3, 1
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def release_site(commit: str = LAST_RELEASE) -> Path:
+    """A folder holding ``commit``'s package, installed once (``pip --target``) into the cache.
+
+    :raises RuntimeError: this code does not run from a git checkout that holds ``commit``, or the
+        install fails.
+    """
+    site = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dospcot" / "releases" / commit
+    if (site / "dospcot").is_dir():
+        return site
+    with tempfile.TemporaryDirectory() as source:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], capture_output=True)
+        if archive.returncode != 0:
+            raise RuntimeError(
+                f"the release rows install commit {commit} from this checkout's git history, which "
+                f"{ROOT} lacks: {archive.stderr.decode().strip()}"
+            )
+        subprocess.run(["tar", "-x", "-C", source], input=archive.stdout, check=True)
+        pip = [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation"]
+        installed = subprocess.run([*pip, "--target", str(site), source], capture_output=True, text=True)
+        if installed.returncode != 0:
+            raise RuntimeError(f"installing {commit} into {site} failed: {installed.stderr.strip()}")
+    return site
+
+
+@functools.cache
+def trained(preset: str, seed: int, release: str | None, quick: bool) -> tuple[float, float]:
+    """CPU seconds and peak resident MiB of one ``dospcot train`` run of ``preset`` at ``seed``, by
+    this code (``release`` None) or by commit ``release``'s install (:func:`release_site`)."""
+    env = dict(os.environ)
+    if release is not None:
+        env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(release_site(release)), env.get("PYTHONPATH")]))
+    overrides = [f"seed={seed}", *(QUICK if quick else ())]
+    with tempfile.TemporaryDirectory() as folder:
+        command = [sys.executable, "-m", "dospcot", "train", preset, "--runs-dir", folder, "--no-progress"]
+        command += [arg for key in overrides for arg in ("--set", key)]
+        log = Path(folder) / "stderr.txt"
+        # The folder as the working directory: a checkout's own dospcot/ must not shadow the install.
+        with log.open("w") as stderr:
+            process = subprocess.Popen(command, cwd=folder, env=env, stdout=subprocess.DEVNULL, stderr=stderr)
+            _, status, usage = os.wait4(process.pid, 0)
+        if os.waitstatus_to_exitcode(status) != 0:
+            what = release or "this release"
+            raise RuntimeError(f"{' '.join(command)} failed ({what}): {log.read_text()[-2000:]}")
+    return usage.ru_utime + usage.ru_stime, usage.ru_maxrss / 1024  # Linux gives ru_maxrss in KiB
+
+
+def _seeds(quick: bool) -> range:
+    return range(QUICK_SEEDS if quick else SEEDS)
+
+
+def _length(quick: bool) -> str:
+    return "two rounds (`--quick`)" if quick else "the preset's full length"
+
+
+def bench_cost(task: str, quick: bool, repeats: int) -> Row:
+    """A DOSPCoT run's CPU time against its self-training peer's, the same seeds (``repeats`` unused:
+    the seeds are the repetitions)."""
+    dospcot, single = COST_TASKS[task]
+    ours = [trained(dospcot, seed, None, quick)[0] for seed in _seeds(quick)]
+    peer = [trained(single, seed, None, quick)[0] for seed in _seeds(quick)]
+    return Row.measured(
+        "A DOSPCoT run vs a self-training run: CPU time per run",
+        f"`{dospcot}` vs `{single}`, {_length(quick)}, seeds 0-{len(ours) - 1}, "
+        "`dospcot train` on one thread",
+        "s",
+        ours,
+        peer,
+        higher_is_better=False,
+        target=COST_TARGET,
+    )
+
+
+def bench_release(task: str, quick: bool, repeats: int) -> Row:
+    """This release's CPU time per DOSPCoT run against the last release's, the same seeds."""
+    dospcot = COST_TASKS[task][0]
+    ours = [trained(dospcot, seed, None, quick)[0] for seed in _seeds(quick)]
+    peer = [trained(dospcot, seed, LAST_RELEASE, quick)[0] for seed in _seeds(quick)]
+    return Row.measured(
+        f"This release vs the last ({LAST_RELEASE}): CPU time per DOSPCoT run",
+        f"`{dospcot}`, {_length(quick)}, seeds 0-{len(ours) - 1}, `dospcot train` on one thread",
+        "s",
+        ours,
+        peer,
+        higher_is_better=False,
+        target=RELEASE_TARGETS[task],
+    )
+
+
+def bench_release_memory(quick: bool, repeats: int) -> Row:
+    """This release's peak memory per LavaGap DOSPCoT run against the last release's."""
+    dospcot = COST_TASKS["lavagap"][0]
+    ours = [trained(dospcot, seed, None, quick)[1] for seed in _seeds(quick)]
+    peer = [trained(dospcot, seed, LAST_RELEASE, quick)[1] for seed in _seeds(quick)]
+    return Row.measured(
+        f"This release vs the last ({LAST_RELEASE}): peak memory per DOSPCoT run",
+        f"`{dospcot}`, {_length(quick)}, seeds 0-{len(ours) - 1}, the process's peak resident memory",
+        "MiB",
+        ours,
+        peer,
+        higher_is_better=False,
+        target=round(MEMORY_TARGET, 3),
+    )

@@ -1,0 +1,217 @@
+"""The label-budget explorations (issue 58), declared: ``budget-explore`` (MiniGrid, seeds 0-2, the
+first) and ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
+from its own generators, numerics 2). Their tables are :mod:`~dospcot.lab.studies.budget`'s."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from dospcot.lab.report import TrialRun
+from dospcot.lab.studies.budget import (
+    BUDGET,
+    EXPLORATION,
+    ROUNDS_ARM,
+    SCHEDULE,
+    STRATEGY,
+    by_arm,
+    exploration_tables,
+    figure,
+    paired_difference,
+)
+from dospcot.lab.studies.declaration import Glance, Study, Sweep
+from dospcot.lab.studies.tables import FRACTION
+
+DESCRIPTIVE = (
+    ("dospcot uniform " + ROUNDS_ARM, "dospcot uniform", "exploration by rounds against the pace, 10% mask"),
+    (
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        f"dospcot disagreement asap {ROUNDS_ARM}",
+        "the budget spread evenly against spent at once",
+    ),
+    (
+        f"dospcot outcomes+disagreement even {ROUNDS_ARM}",
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        "half the queries on episode ends under the even schedule",
+    ),
+    (
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        f"self-training uncertainty even {ROUNDS_ARM}",
+        "the second view's disagreement against one view's uncertainty",
+    ),
+    (
+        f"dospcot disagreement even {ROUNDS_ARM}",
+        f"reward-model disagreement even {ROUNDS_ARM}",
+        "co-training against the reward-model peer",
+    ),
+)
+"""Comparisons the exploration reads (arm a, arm b, what a minus b asks), success paired by seed over
+the seeds both ran, with no threshold and no verdict."""
+
+
+def _glance(runs: list[TrialRun]) -> Glance:
+    """The exploration's clearest lever: on DoorKey at a 10% mask, DOSPCoT exploring by rounds minus
+    the same arm exploring by the pace, success paired by seed."""
+    arms = by_arm([r for r in runs if r.trial.config.startswith("minigrid-doorkey-")])
+    a, b, _ = DESCRIPTIVE[0]
+    if a not in arms or b not in arms:
+        return Glance("not rendered yet", "exploratory")
+    diff = paired_difference(arms[a], arms[b])
+    return Glance(
+        f"DoorKey success, 10% mask, exploring by rounds minus by the pace, paired: {diff}", "exploratory"
+    )
+
+
+def _of(prefix: str) -> Callable[[TrialRun], bool]:
+    return lambda run: run.trial.config.startswith(prefix)
+
+
+ROUNDS = {EXPLORATION: ("rounds",)}
+"""Exploration by the share of rounds done, as the oracle explores (the control's finding)."""
+
+EXPLORE_SWEEPS = (
+    # The control first: with every reward labelled, co-training has nothing to learn, so whatever
+    # it loses against the oracle is the machinery's.
+    Sweep(
+        "budget-explore-lavagap-control",
+        ("minigrid-lavagap-dospcot",),
+        {FRACTION: ("1.0",), EXPLORATION: ("rounds", "pace")},
+    ),
+    # One agent of the oracle's view with every reward labelled: the run differs from the oracle's only
+    # in the co-training machinery (the reward table, the keyed labels, the co-trainer's empty U).
+    Sweep(
+        "budget-explore-lavagap-control-single",
+        ("minigrid-lavagap-self-training",),
+        {FRACTION: ("1.0",), EXPLORATION: ("rounds",)},
+    ),
+    Sweep("queries-lavagap-oracle", ("minigrid-lavagap-oracle",), {}),
+    Sweep(
+        "queries-lavagap-dospcot",
+        ("minigrid-lavagap-dospcot",),
+        {FRACTION: ("0.1",), STRATEGY: ("uniform", "random", "uncertainty")},
+    ),
+    Sweep("budget-explore-lavagap-uniform", ("minigrid-lavagap-dospcot",), {FRACTION: ("0.1",), **ROUNDS}),
+    Sweep("queries-doorkey-oracle", ("minigrid-doorkey-oracle",), {}),
+    # The active-queries study's DOSPCoT arms at a 10% mask explore by the pace (seeds 0-9).
+    Sweep(
+        "queries-doorkey-dospcot",
+        ("minigrid-doorkey-dospcot",),
+        {FRACTION: ("0.1",), STRATEGY: ("uniform", "random", "uncertainty")},
+    ),
+    Sweep("budget-explore-doorkey-uniform", ("minigrid-doorkey-dospcot",), {FRACTION: ("0.1",), **ROUNDS}),
+    Sweep(
+        "budget-explore-doorkey-dospcot",
+        ("minigrid-doorkey-dospcot",),
+        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("asap", "even"), **ROUNDS},
+    ),
+    Sweep(
+        "budget-explore-doorkey-outcomes",
+        ("minigrid-doorkey-dospcot",),
+        {BUDGET: ("100",), STRATEGY: ('"outcomes+disagreement"',), SCHEDULE: ("even",), **ROUNDS},
+    ),
+    Sweep(
+        "budget-explore-doorkey-self-training",
+        ("minigrid-doorkey-self-training",),
+        {BUDGET: ("100",), STRATEGY: ("uncertainty",), SCHEDULE: ("even",), **ROUNDS},
+    ),
+    Sweep(
+        "budget-explore-doorkey-reward-model",
+        ("minigrid-doorkey-reward-model",),
+        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("even",), **ROUNDS},
+    ),
+)
+
+OWN = {"training.agent_draws": ("own",)}
+"""Each agent draws from its own generators (the control's finding: a shared draw made one arm's agent
+another draw of the same learner)."""
+OUTCOMES = '"outcomes+disagreement"'
+DOORKEY_SWEEPS = (
+    Sweep("budget-doorkey-oracle", ("minigrid-doorkey-oracle",), OWN, numerics=2),
+    Sweep(
+        "budget-doorkey-outcomes-even",
+        ("minigrid-doorkey-dospcot",),
+        {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("even",), **ROUNDS, **OWN},
+        numerics=2,
+    ),
+    Sweep(
+        "budget-doorkey-reward-model",
+        ("minigrid-doorkey-reward-model",),
+        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("even",), **ROUNDS, **OWN},
+        numerics=2,
+    ),
+    Sweep(
+        "budget-doorkey-outcomes-asap",
+        ("minigrid-doorkey-dospcot",),
+        {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("asap",), **ROUNDS, **OWN},
+        numerics=2,
+    ),
+    Sweep(
+        "budget-doorkey-uniform",
+        ("minigrid-doorkey-dospcot",),
+        {FRACTION: ("0.1",), **ROUNDS, **OWN},
+        numerics=2,
+    ),
+)
+"""The second exploration: DoorKey's most promising arms of the first, on seeds 0-9, each agent drawing
+from its own generators, under numerics 2 (the oracle too, so that no comparison mixes versions)."""
+DOORKEY_DESCRIPTIVE = (
+    (
+        f"dospcot outcomes+disagreement even {ROUNDS_ARM}",
+        f"dospcot outcomes+disagreement asap {ROUNDS_ARM}",
+        "the budget spread evenly against spent at once",
+    ),
+    (
+        f"dospcot outcomes+disagreement even {ROUNDS_ARM}",
+        f"reward-model disagreement even {ROUNDS_ARM}",
+        "co-training against the reward-model peer",
+    ),
+    (
+        f"dospcot outcomes+disagreement even {ROUNDS_ARM}",
+        f"dospcot uniform {ROUNDS_ARM}",
+        "100 chosen labels spread evenly against a blind 10% mask",
+    ),
+)
+
+
+def _doorkey_glance(runs: list[TrialRun]) -> Glance:
+    """The second exploration's headline: at 100 labels, the budget spread evenly minus spent at once."""
+    arms = by_arm(runs)
+    a, b, _ = DOORKEY_DESCRIPTIVE[0]
+    if a not in arms or b not in arms:
+        return Glance("not rendered yet", "exploratory")
+    diff = paired_difference(arms[a], arms[b])
+    return Glance(f"success, 100 labels spread evenly minus spent at once, paired: {diff}", "exploratory")
+
+
+STUDIES: dict[str, Study] = {
+    "budget-explore": Study(
+        EXPLORE_SWEEPS,
+        exploration_tables(
+            {
+                "MiniGrid-LavaGapS7-v0": _of("minigrid-lavagap-"),
+                "MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-"),
+            },
+            "budget-explore",
+            "seeds 0-2 (the oracle rows reuse the active-queries study's seeds 0-9)",
+            DESCRIPTIVE,
+        ),
+        "Labels that pay: exploring label budgets, schedules and the reward-model peer",
+        "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
+        _glance,
+        seeds=3,
+        figure=figure,
+    ),
+    "budget-explore-doorkey": Study(
+        DOORKEY_SWEEPS,
+        exploration_tables(
+            {"MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-")},
+            "budget-explore-doorkey",
+            "seeds 0-9, each agent drawing from its own generators, numerics 2",
+            DOORKEY_DESCRIPTIVE,
+        ),
+        "Labels that pay: the second exploration, DoorKey on ten seeds",
+        "MiniGrid DoorKey-5x5 (exploratory)",
+        _doorkey_glance,
+        seeds=10,
+        figure=figure,
+    ),
+}
