@@ -25,7 +25,7 @@ from dospcot.lab.bench_batched import (
     bench_batched_wall,
     bench_stacked_update,
 )
-from dospcot.lab.bench_cost import COST_TASKS, bench_cost, bench_release, bench_release_memory
+from dospcot.lab.bench_cost import COST_TASKS, bench_cost, bench_release
 from dospcot.lab.bench_env_rows import (
     bench_cotraining_scaling,
     bench_fast_highway,
@@ -73,7 +73,7 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "batched_memory": bench_batched_memory,
     **{f"cost_{task}": partial(bench_cost, task) for task in COST_TASKS},
     **{f"release_{task}": partial(bench_release, task) for task in COST_TASKS},
-    "release_memory": bench_release_memory,
+    "release_memory": partial(bench_release, "lavagap", memory=True),
 }
 
 GPU_BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {

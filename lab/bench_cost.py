@@ -114,33 +114,23 @@ def bench_cost(task: str, quick: bool, repeats: int) -> Row:
     )
 
 
-def bench_release(task: str, quick: bool, repeats: int) -> Row:
-    """This release's CPU time per DOSPCoT run against the last release's, the same seeds."""
-    dospcot = COST_TASKS[task][0]
-    ours = [trained(dospcot, seed, None, quick)[0] for seed in _seeds(quick)]
-    peer = [trained(dospcot, seed, LAST_RELEASE, quick)[0] for seed in _seeds(quick)]
-    return Row.measured(
-        f"This release vs the last ({LAST_RELEASE}): CPU time per DOSPCoT run",
-        f"`{dospcot}`, {_length(quick)}, seeds 0-{len(ours) - 1}, `dospcot train` on one thread",
-        "s",
-        ours,
-        peer,
-        higher_is_better=False,
-        target=RELEASE_TARGETS[task],
+def bench_release(task: str, quick: bool, repeats: int, memory: bool = False) -> Row:
+    """This release's CPU time (or, ``memory``, peak resident memory) per DOSPCoT run of ``task``
+    against the last release's, the same seeds (``repeats`` unused: the seeds are the repetitions)."""
+    dospcot, figure = COST_TASKS[task][0], int(memory)
+    ours = [trained(dospcot, seed, None, quick)[figure] for seed in _seeds(quick)]
+    peer = [trained(dospcot, seed, LAST_RELEASE, quick)[figure] for seed in _seeds(quick)]
+    what, how = (
+        ("peak memory", "the process's peak resident memory")
+        if memory
+        else ("CPU time", "`dospcot train` on one thread")
     )
-
-
-def bench_release_memory(quick: bool, repeats: int) -> Row:
-    """This release's peak memory per LavaGap DOSPCoT run against the last release's."""
-    dospcot = COST_TASKS["lavagap"][0]
-    ours = [trained(dospcot, seed, None, quick)[1] for seed in _seeds(quick)]
-    peer = [trained(dospcot, seed, LAST_RELEASE, quick)[1] for seed in _seeds(quick)]
     return Row.measured(
-        f"This release vs the last ({LAST_RELEASE}): peak memory per DOSPCoT run",
-        f"`{dospcot}`, {_length(quick)}, seeds 0-{len(ours) - 1}, the process's peak resident memory",
-        "MiB",
+        f"This release vs the last ({LAST_RELEASE}): {what} per DOSPCoT run",
+        f"`{dospcot}`, {_length(quick)}, seeds 0-{len(ours) - 1}, {how}",
+        "MiB" if memory else "s",
         ours,
         peer,
         higher_is_better=False,
-        target=round(MEMORY_TARGET, 3),
+        target=round(MEMORY_TARGET, 3) if memory else RELEASE_TARGETS[task],
     )

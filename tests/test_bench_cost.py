@@ -76,5 +76,5 @@ def test_rows_compare_cpu_and_memory_of_the_same_seeds(monkeypatch) -> None:
     assert "seeds 0-2" in cost.setting and "full length" in cost.setting
     release = bench_cost.bench_release("lavagap", False, 3)
     assert release.ratio == pytest.approx(40 / 90) and release.target == 0.5 and release.met
-    memory = bench_cost.bench_release_memory(False, 3)
+    memory = bench_cost.bench_release("lavagap", False, 3, memory=True)
     assert memory.ratio == pytest.approx(0.4) and not memory.met
