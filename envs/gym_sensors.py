@@ -152,7 +152,9 @@ def resolve_state_key(spec: str) -> StateKeyFn:
 
 class ObservationSensors(gym.Wrapper):
     """Give an env with ``Discrete`` actions the sensor interface: each view a function of the last
-    observation, flattened: to uint8 where the view gives uint8 or bool values, else to float32.
+    observation, flattened: to uint8 where the view gives uint8 or bool values, else to float32. A
+    view of bool values has the space ``Box(0, 1)`` (a replay buffer stores it as bits), one of uint8
+    values ``Box(0, 255)``.
 
     Each view's shape is read from the observation of a reset (seed 0) at construction; a view that
     raises, returns a non-numeric value or changes shape later fails with one line naming it.
@@ -185,9 +187,8 @@ class ObservationSensors(gym.Wrapper):
             )
         self._spaces = {}
         for name in self._fns:
-            value = self._read(name)
-            small = value.dtype == np.uint8
-            low, high = (0, 255) if small else (-np.inf, np.inf)
+            value, kind = self._read(name)
+            low, high = {"bool": (0, 1), "uint8": (0, 255)}.get(kind, (-np.inf, np.inf))
             self._spaces[name] = gym.spaces.Box(low, high, value.shape, value.dtype)
         if state_key is not None:
             self.state_key()  # an unhashable key fails here, before anything trains
@@ -212,21 +213,22 @@ class ObservationSensors(gym.Wrapper):
             ) from None
         return repr(key)
 
-    def _read(self, name: str) -> np.ndarray:
+    def _read(self, name: str) -> tuple[np.ndarray, str]:
         """The view ``name`` of the last observation, flat: uint8 where the view gives uint8 or bool
         values (MiniGrid's image and indicator maps: a quarter of float32's memory in the store and
         the replay buffers, and the same floats where read, as a network reads them through
-        ``float()``), float32 otherwise."""
+        ``float()``), float32 otherwise; and the kind of values the view gave ("bool", "uint8" or
+        "float")."""
         try:
             raw = self._fns[name](self._obs)
             value = np.asarray(raw)
-            dtype = np.uint8 if value.dtype in (np.uint8, np.bool_) else np.float32
-            value = np.asarray(raw, dtype=dtype)
+            kind = {np.dtype(bool): "bool", np.dtype(np.uint8): "uint8"}.get(value.dtype, "float")
+            value = np.asarray(raw, dtype=np.float32 if kind == "float" else np.uint8)
         except Exception as err:  # a user's function may raise anything: named, its error the cause
             raise ValueError(f"view {name!r} failed on an observation: {type(err).__name__}: {err}") from err
         if raw is None:
             raise ValueError(f"view {name!r} returned None; a view returns an array of numbers")
-        return value.ravel()
+        return value.ravel(), kind
 
     def view_space(self, name: str) -> gym.spaces.Box:
         """The flat ``Box`` of a view."""
@@ -236,16 +238,17 @@ class ObservationSensors(gym.Wrapper):
 
     def observe(self, name: str) -> np.ndarray:
         """The view ``name`` of the last observation, of ``view_space(name)``'s shape and type."""
-        value, space = self._read(name), self.view_space(name)
+        (value, kind), space = self._read(name), self.view_space(name)
         if value.shape != space.shape:
             raise ValueError(
                 f"view {name!r} changed shape: {space.shape[0]} values at the first "
                 f"reset, {value.size} now; a view must return the same shape on every observation"
             )
-        if value.dtype != space.dtype:
+        if value.dtype != space.dtype or (space.high.max() == 1 and kind != "bool"):
+            first = "bool" if space.high.max() == 1 else space.dtype
             raise ValueError(
-                f"view {name!r} changed type: {space.dtype} at the first reset, {value.dtype} now; a view "
-                "must return values of one type (uint8 or bool, stored as uint8; any other, as float32)"
+                f"view {name!r} changed type: {first} at the first reset, {kind} now; a view must return "
+                "values of one type (uint8 or bool, stored as uint8; any other, as float32)"
             )
         return value
 

@@ -73,10 +73,12 @@ def full_grid(env: gym.Env) -> np.ndarray:
 OBJECT_TYPES = 11
 """MiniGrid's object indices: unseen, empty, wall, floor, door, key, ball, box, goal, lava, agent."""
 
-_INDICATORS = np.eye(OBJECT_TYPES + 4, dtype=np.uint8)
-"""(15, 15) uint8 identity: row c marks object type c (c < 11), row 11 + s marks state s. uint8, not
-float32: a sensor view of uint8 values is stored as uint8 (:class:`~dospcot.envs.gym_sensors.
-ObservationSensors`), a quarter of the memory, and a network reads the same 0.0 and 1.0."""
+_INDICATORS = np.eye(OBJECT_TYPES + 4, dtype=bool)
+"""(15, 15) bool identity: row c marks object type c (c < 11), row 11 + s marks state s. bool, not
+float32: a sensor view of bool values is stored as uint8 in a ``Box(0, 1)`` (:class:`~dospcot.envs.
+gym_sensors.ObservationSensors`), a quarter of the memory, and a replay buffer packs it into bits
+(:class:`~dospcot.policies.esarsa_dqn.RelabellingReplayBuffer`), a thirty-second; a network reads
+the same 0.0 and 1.0."""
 
 
 def full_one_hot(env: gym.Env) -> np.ndarray:
@@ -86,7 +88,7 @@ def full_one_hot(env: gym.Env) -> np.ndarray:
     the agent's cell is one input per cell. With every reward revealed on LavaGapS7, a DQN agent on
     the indicators reached the goal more often than on the raw numbers (docs/your_env.md)."""
     grid = full_grid(env)
-    return _INDICATORS[grid[..., 0]] + _INDICATORS[OBJECT_TYPES + grid[..., 2]]
+    return _INDICATORS[grid[..., 0]] | _INDICATORS[OBJECT_TYPES + grid[..., 2]]
 
 
 def egocentric_map(env: gym.Env) -> np.ndarray:

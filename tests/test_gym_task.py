@@ -557,7 +557,7 @@ def test_the_egocentric_map_puts_the_agent_at_its_centre_facing_up(doorkey):
     for direction in range(4):
         unwrapped.agent_dir = direction
         view = minigrid_views.egocentric_map(unwrapped)
-        assert view.shape == (9, 9, 15) and view.flags.c_contiguous
+        assert view.shape == (9, 9, 15) and view.flags.c_contiguous and view.dtype == bool  # stored as bits
         x, y = unwrapped.agent_pos
         assert view[centre, centre, 10] == 1  # the agent
         dx, dy = ahead[direction]

@@ -147,11 +147,21 @@ class RelabellingReplayBuffer(ReplayBuffer):
         if not 0 < gamma <= 1:
             raise ValueError(f"gamma must lie in (0, 1], got {gamma}")
         self.n_steps, self.gamma = int(n_steps), float(gamma)
+        self.packed = _binary(observation_space)
+        if self.packed:  # SB3's arrays are calloc'd, never touched: replacing them costs nothing
+            width = (int(np.prod(self.obs_shape)) + 7) // 8
+            self.observations = np.zeros((self.buffer_size, self.n_envs, width), dtype=np.uint8)
+            if not optimize_memory_usage:
+                self.next_observations = np.zeros_like(self.observations)
         self.reward_table = reward_table
         self.masked_reward = masked_reward
         self.store_ids = np.full((self.buffer_size, self.n_envs), -1, dtype=np.int64)
         self.observed = np.ones((self.buffer_size, self.n_envs), dtype=bool)
         self.explored = np.zeros((self.buffer_size, self.n_envs), dtype=bool)
+
+    packed = False
+    """Whether observations are stored as bits (a ``Box(0, 1)`` of uint8: one-hot views); a buffer
+    pickled before the attribute existed reads False."""
 
     def __getstate__(self) -> dict[str, Any]:
         """The buffer for pickling, its rows not yet written as the one row they all repeat: a run's
@@ -193,7 +203,25 @@ class RelabellingReplayBuffer(ReplayBuffer):
             self.observed[self.pos, i] = info.get("reward_observed", True)
             self.store_ids[self.pos, i] = info.get("store_id", -1)
             self.explored[self.pos, i] = info.get("explored", False)
+        if self.packed:
+            obs, next_obs = self._pack(obs), self._pack(next_obs)
         super().add(obs, next_obs, action, reward, done, infos)
+
+    def _pack(self, obs: np.ndarray) -> np.ndarray:
+        """(n_envs, ceil(d / 8)) uint8: ``obs`` (n_envs, *obs_shape) of 0s and 1s as bits."""
+        flat = np.asarray(obs).reshape(self.n_envs, -1)
+        if flat.max(initial=0) > 1:
+            raise ValueError(
+                f"an observation of a Box(0, 1) space holds {flat.max()} at buffer position {self.pos}"
+            )
+        return np.packbits(flat, axis=-1)
+
+    def _unpack(self, rows: np.ndarray) -> np.ndarray:
+        """(batch, *obs_shape) uint8: the observations that :meth:`_pack` stored as ``rows``."""
+        if not self.packed:
+            return rows
+        flat = np.unpackbits(rows, axis=-1, count=int(np.prod(self.obs_shape)))
+        return flat.reshape(len(rows), *self.obs_shape)
 
     def relabel(self, batch_inds: np.ndarray, env_indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Current (reward, weight) of the stored transitions ``(batch_inds, env_indices)`` (arrays of
@@ -262,12 +290,11 @@ class RelabellingReplayBuffer(ReplayBuffer):
         weight: np.ndarray,
         env: VecNormalize | None,
     ) -> WeightedReplayBufferSamples:
+        observations = self._unpack(self.observations[batch_inds, env_indices, :])
         return WeightedReplayBufferSamples(
-            observations=self.to_torch(
-                self._normalize_obs(self.observations[batch_inds, env_indices, :], env)
-            ),
+            observations=self.to_torch(self._normalize_obs(observations, env)),
             actions=self.to_torch(self.actions[batch_inds, env_indices, :]),
-            next_observations=self.to_torch(self._normalize_obs(next_obs, env)),
+            next_observations=self.to_torch(self._normalize_obs(self._unpack(next_obs), env)),
             dones=self.to_torch(dones.reshape(-1, 1)),
             rewards=self.to_torch(
                 self._normalize_reward(reward.reshape(-1, 1).astype(np.float32, copy=False), env)
@@ -275,3 +302,13 @@ class RelabellingReplayBuffer(ReplayBuffer):
             discounts=None if discounts is None else self.to_torch(discounts.reshape(-1, 1)),
             weights=self.to_torch(weight.reshape(-1, 1).astype(np.float32, copy=False)),
         )
+
+
+def _binary(space: spaces.Space) -> bool:
+    """Whether ``space`` holds 0s and 1s alone: a ``Box`` of uint8 from 0 to 1."""
+    return (
+        isinstance(space, spaces.Box)
+        and space.dtype == np.uint8
+        and bool(np.all(space.low == 0))
+        and bool(np.all(space.high == 1))
+    )
