@@ -73,10 +73,13 @@ class SweepSpec:
             for values in product(*self.grid.values())
         ]
 
-    def trials(self) -> list[Trial]:
+    def trials(self, check_task: bool = True) -> list[Trial]:
         """Every trial, each config's checked now so that a bad grid fails before anything runs: its
         fields, and once per combination of grid values its task's check step (files, imports, the env).
 
+        :param check_task: run the task's check step. Off where the trials are only compared with a
+            record (:func:`~dospcot.lab.studies.check_record`): a fresh clone's record lacks the files
+            a run read, such as the saved expert agent that recorded its demonstrations.
         :raises ConfigError: a combination the config rejects (naming the key).
         """
         keys = list(self.grid)
@@ -87,7 +90,7 @@ class SweepSpec:
                 for index, seed in enumerate(self.seeds):
                     trial = Trial(config, "", params, seed, self.overrides)
                     cfg = load_config(config, trial.overrides())
-                    if index == 0:  # the seed changes nothing the check step reads
+                    if index == 0 and check_task:  # the seed changes nothing the check step reads
                         get_task(cfg.task).check(cfg)
                     trials.append(replace(trial, name=cfg.name))
                     kinds.add(type(cfg))

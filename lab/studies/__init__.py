@@ -139,8 +139,9 @@ def study_runs(
             continue
         runs += finished
         sweep_dirs.append(sweep_dir)
-        if len(finished) < len(spec.trials()):
-            unfinished.append(f"`{sweep_dir.name}` ({len(finished)} of its {len(spec.trials())} runs)")
+        planned = len(spec.trials(check_task=False))
+        if len(finished) < planned:
+            unfinished.append(f"`{sweep_dir.name}` ({len(finished)} of its {planned} runs)")
     return runs, sweep_dirs, unfinished
 
 
@@ -177,7 +178,8 @@ def check_record(
     for sweep in study.sweeps:
         sweep_dir = runs_dir / f"{sweep.name}{suffix}"
         if sweep_dir.is_dir():  # a sweep never started has nothing stale
-            check_not_stale(sweep_dir, sweep_spec(sweep, seeds, overrides, study.first_seed).trials())
+            spec = sweep_spec(sweep, seeds, overrides, study.first_seed)
+            check_not_stale(sweep_dir, spec.trials(check_task=False))
 
 
 @dataclass(frozen=True)
