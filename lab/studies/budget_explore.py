@@ -48,17 +48,20 @@ DESCRIPTIVE = (
 the seeds both ran, with no threshold and no verdict."""
 
 
-def _glance(runs: list[TrialRun]) -> Glance:
-    """The exploration's clearest lever: on DoorKey at a 10% mask, DOSPCoT exploring by rounds minus
-    the same arm exploring by the pace, success paired by seed."""
-    arms = by_arm([r for r in runs if r.trial.config.startswith("minigrid-doorkey-")])
-    a, b, _ = DESCRIPTIVE[0]
-    if a not in arms or b not in arms:
-        return Glance("not rendered yet", "exploratory")
-    diff = paired_difference(arms[a], arms[b])
-    return Glance(
-        f"DoorKey success, 10% mask, exploring by rounds minus by the pace, paired: {diff}", "exploratory"
-    )
+def _glance(
+    comparison: tuple[str, str, str], headline: str, task: str = ""
+) -> Callable[[list[TrialRun]], Glance]:
+    """A study's row at a glance: ``headline``, then success of ``comparison``'s arm a minus arm b,
+    paired by seed, over the runs of the presets starting ``task``."""
+
+    def glance(runs: list[TrialRun]) -> Glance:
+        arms = by_arm([r for r in runs if r.trial.config.startswith(task)])
+        a, b, _ = comparison
+        if a not in arms or b not in arms:
+            return Glance("not rendered yet", "exploratory")
+        return Glance(f"{headline}, paired: {paired_difference(arms[a], arms[b])}", "exploratory")
+
+    return glance
 
 
 def _of(prefix: str) -> Callable[[TrialRun], bool]:
@@ -124,32 +127,23 @@ OWN = {"training.agent_draws": ("own",)}
 """Each agent draws from its own generators (the control's finding: a shared draw made one arm's agent
 another draw of the same learner)."""
 OUTCOMES = '"outcomes+disagreement"'
+
+
+def _doorkey(name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+    """A sweep of the second exploration: exploring by rounds, each agent's own draws, numerics 2."""
+    return Sweep(
+        f"budget-doorkey-{name}", (f"minigrid-doorkey-{preset}",), {**grid, **ROUNDS, **OWN}, numerics=2
+    )
+
+
 DOORKEY_SWEEPS = (
     Sweep("budget-doorkey-oracle", ("minigrid-doorkey-oracle",), OWN, numerics=2),
-    Sweep(
-        "budget-doorkey-outcomes-even",
-        ("minigrid-doorkey-dospcot",),
-        {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("even",), **ROUNDS, **OWN},
-        numerics=2,
+    _doorkey("outcomes-even", "dospcot", {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("even",)}),
+    _doorkey(
+        "reward-model", "reward-model", {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("even",)}
     ),
-    Sweep(
-        "budget-doorkey-reward-model",
-        ("minigrid-doorkey-reward-model",),
-        {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("even",), **ROUNDS, **OWN},
-        numerics=2,
-    ),
-    Sweep(
-        "budget-doorkey-outcomes-asap",
-        ("minigrid-doorkey-dospcot",),
-        {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("asap",), **ROUNDS, **OWN},
-        numerics=2,
-    ),
-    Sweep(
-        "budget-doorkey-uniform",
-        ("minigrid-doorkey-dospcot",),
-        {FRACTION: ("0.1",), **ROUNDS, **OWN},
-        numerics=2,
-    ),
+    _doorkey("outcomes-asap", "dospcot", {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("asap",)}),
+    _doorkey("uniform", "dospcot", {FRACTION: ("0.1",)}),
 )
 """The second exploration: DoorKey's most promising arms of the first, on seeds 0-9, each agent drawing
 from its own generators, under numerics 2 (the oracle too, so that no comparison mixes versions)."""
@@ -172,16 +166,6 @@ DOORKEY_DESCRIPTIVE = (
 )
 
 
-def _doorkey_glance(runs: list[TrialRun]) -> Glance:
-    """The second exploration's headline: at 100 labels, the budget spread evenly minus spent at once."""
-    arms = by_arm(runs)
-    a, b, _ = DOORKEY_DESCRIPTIVE[0]
-    if a not in arms or b not in arms:
-        return Glance("not rendered yet", "exploratory")
-    diff = paired_difference(arms[a], arms[b])
-    return Glance(f"success, 100 labels spread evenly minus spent at once, paired: {diff}", "exploratory")
-
-
 STUDIES: dict[str, Study] = {
     "budget-explore": Study(
         EXPLORE_SWEEPS,
@@ -196,7 +180,12 @@ STUDIES: dict[str, Study] = {
         ),
         "Labels that pay: exploring label budgets, schedules and the reward-model peer",
         "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
-        _glance,
+        # The first exploration's clearest lever: on DoorKey at a 10% mask, exploring by rounds or the pace.
+        _glance(
+            DESCRIPTIVE[0],
+            "DoorKey success, 10% mask, exploring by rounds minus by the pace",
+            "minigrid-doorkey-",
+        ),
         seeds=3,
         figure=figure,
     ),
@@ -210,7 +199,7 @@ STUDIES: dict[str, Study] = {
         ),
         "Labels that pay: the second exploration, DoorKey on ten seeds",
         "MiniGrid DoorKey-5x5 (exploratory)",
-        _doorkey_glance,
+        _glance(DOORKEY_DESCRIPTIVE[0], "success, 100 labels spread evenly minus spent at once"),
         seeds=10,
         figure=figure,
     ),
