@@ -17,6 +17,7 @@ from dospcot.core.queries import RewardQueries, choose_queries, class_floors, sc
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.round_records import class_rows
 from dospcot.lab.report import TrialRun
+from dospcot.lab.studies import budget
 from dospcot.lab.studies.budget import labels_to_reach
 from dospcot.lab.studies.budget_explore import STUDIES as BUDGET_STUDIES
 from dospcot.lab.sweep import Trial
@@ -300,6 +301,55 @@ def test_the_budget_tables_pair_arms_by_seed_and_count_their_labels(tmp_path):
     assert "paired: 0.250 [0.200, 0.300] over 3 seeds." in text
     # 90% of the oracle's 1.0 is 0.9: the even arm's one budget (0.85) does not reach it.
     assert f"| {arm} | 100 | not reached |" in text
+
+
+def test_the_third_exploration_names_the_admitted_share_and_pairs_all_against_half_per_task(tmp_path):
+    half = {"training.label_fraction": "0.1", "training.exploration": "rounds"}
+    every = {**half, "cotraining.add_fraction_start": "1.0"}
+    grid_half = {
+        "env.layout_seed": "11",
+        "cotraining.add_fraction_start": "0.5",
+        "training.exploration": "rounds",
+    }
+    grid_all = {**grid_half, "cotraining.add_fraction_start": "1.0"}
+    runs = []
+    for seed in range(2):
+        runs.append(_budget_run(tmp_path, "minigrid-doorkey-dospcot", half, seed, [0.0, 0.4], 90))
+        runs.append(
+            _budget_run(tmp_path, "minigrid-doorkey-dospcot", every, seed, [0.5, 0.9 - 0.1 * seed], 90)
+        )
+        runs.append(_budget_run(tmp_path, "grid16-dospcot", grid_half, seed, [0.0, 0.7], 40))
+        runs.append(_budget_run(tmp_path, "grid16-dospcot", grid_all, seed, [0.2, 0.5], 40))
+    text = "\n".join(BUDGET_STUDIES["budget-explore-admit"].tables(runs))
+    doorkey, grid = text.split("### grid16, layout 11")
+    arm = "dospcot uniform exploration by rounds admitting 100% of U in round 1"
+    assert f"| {arm} | 0.50 | 0.85 |" in doorkey  # success after each round, mean over the seeds
+    # All minus half, paired by seed: DoorKey 0.5 and 0.4; grid16 -0.2 on both seeds.
+    assert "a blind 10% mask, admitting all of U in round 1 against half: success of " in doorkey
+    assert "paired: 0.450 [0.400, 0.500] over 2 seeds." in doorkey
+    assert "grid16's 5% mask, admitting all of U in round 1 against half: success of " in grid
+    assert "paired: -0.200 [-0.200, -0.200] over 2 seeds." in grid
+    assert "grid16's 5% mask" not in doorkey and "a blind 10% mask" not in grid
+
+
+def test_the_budget_figure_draws_each_task_in_its_own_panel(tmp_path, monkeypatch):
+    drawn = {}
+    monkeypatch.setattr(budget, "plot_bands", lambda panels, *args, **kwargs: drawn.update(panels))
+    mask = {"training.label_fraction": "0.1"}
+    runs = [
+        _budget_run(tmp_path, "minigrid-doorkey-oracle", {}, 0, [1.0], 900),
+        _budget_run(tmp_path, "minigrid-doorkey-dospcot", mask, 0, [0.5], 90),
+        _budget_run(tmp_path, "grid16-dospcot", mask, 0, [0.8], 40),
+    ]
+    BUDGET_STUDIES["budget-explore-admit"].figure(runs, tmp_path / "figure.png")
+    assert list(drawn) == ["MiniGrid-DoorKey-5x5-v0", "grid16, layout 11"]
+    doorkey, grid = drawn.values()
+    # DoorKey's mask arm at its 90 labels and the oracle's line across it; grid16's arm alone, at 40.
+    assert [(b.label, list(b.x), list(b.mean)) for b in doorkey] == [
+        ("dospcot uniform", [90.0], [0.5]),
+        ("oracle (every reward)", [90.0, 90.0], [1.0, 1.0]),
+    ]
+    assert [(b.label, list(b.x)) for b in grid] == [("dospcot uniform", [40.0])]
 
 
 def test_the_control_one_view_co_trained_with_every_reward_labelled_is_the_oracle_bit_for_bit():

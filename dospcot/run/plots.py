@@ -69,12 +69,22 @@ def plot_bands(
     log_x: bool = False,
     markers: bool = False,
     share_y: bool = True,
+    legend_below: bool = False,
 ) -> None:
-    """One panel per key of ``panels`` (its title), each line with its shaded band."""
-    cols = min(3, len(panels))
+    """One panel per key of ``panels`` (its title), each line with its shaded band; ``legend_below``:
+    each panel's legend under it, one line per band (for labels too long to sit inside the axes)."""
+    cols = 1 if legend_below else min(3, len(panels))
     rows = -(-len(panels) // cols)
+    width, height = 5.2, 3.8
+    if legend_below:  # one panel a row, wide enough for long labels, tall enough for a line each
+        width, height = 7.5, height + 0.2 * max(len(bands) for bands in panels.values())
     fig, axes = plt.subplots(
-        rows, cols, figsize=(5.2 * cols, 3.8 * rows), squeeze=False, constrained_layout=True, sharey=share_y
+        rows,
+        cols,
+        figsize=(width * cols, height * rows),
+        squeeze=False,
+        constrained_layout=True,
+        sharey=share_y,
     )
     for ax, (title, bands) in zip(axes.flat, panels.items(), strict=False):
         for band in bands:
@@ -86,7 +96,10 @@ def plot_bands(
         if log_x:
             ax.set_xscale("log")
         ax.grid(alpha=0.3)
-        ax.legend(fontsize="small")
+        if legend_below:
+            ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.18), ncols=1)
+        else:
+            ax.legend(fontsize="small")
     for ax in list(axes.flat)[len(panels) :]:
         ax.set_visible(False)
     atomic_write(path, partial(fig.savefig, dpi=100, format="png"))

@@ -28,6 +28,7 @@ BUDGET = "training.label_budget"
 SCHEDULE = "training.query_schedule"
 FIRST_SHARE = "training.first_round_share"
 EXPLORATION = "training.exploration"
+ADMIT = "cotraining.add_fraction_start"
 ORACLE_SHARE = 0.9
 """Label efficiency: the labels an arm needs to reach this share of the oracle's success."""
 
@@ -59,6 +60,8 @@ def arm_of(run: TrialRun) -> str:
         parts.append(
             ROUNDS_ARM if params[EXPLORATION] == "rounds" else f"exploration by {params[EXPLORATION]}"
         )
+    if ADMIT in params:
+        parts.append(f"admitting {float(params[ADMIT]):.0%} of U in round 1")
     return " ".join(parts)
 
 
@@ -206,10 +209,24 @@ def _efficiency(arms: dict[str, list[TrialRun]]) -> list[str]:
     return lines
 
 
-def figure(runs: list[TrialRun], path: Path) -> None:
-    """Success against labels used per arm (mean over seeds with its 95% interval), and the oracle's
-    success as a flat line across the plot."""
-    arms = by_arm(runs)
+def figure(tasks: dict[str, Callable[[TrialRun], bool]]) -> Callable[[list[TrialRun], Path], None]:
+    """The figure of a study over ``tasks`` (title, whether a run belongs to it): one panel per task,
+    success against labels used per arm (mean over seeds with its 95% interval), and the oracle's
+    success as a flat line across the panel."""
+
+    def draw(runs: list[TrialRun], path: Path) -> None:
+        panels = {}
+        for task, belongs in tasks.items():
+            bands = _arm_bands(by_arm([r for r in runs if belongs(r)]))
+            if bands:
+                panels[task] = bands
+        if panels:
+            plot_bands(panels, "labels used per run", "success", path, markers=True, legend_below=True)
+
+    return draw
+
+
+def _arm_bands(arms: dict[str, list[TrialRun]]) -> list[Band]:
     bands = []
     for arm, members in arms.items():
         if arm == "oracle":
@@ -223,10 +240,7 @@ def figure(runs: list[TrialRun], path: Path) -> None:
         stat = _success(arms["oracle"])
         x = np.array([min(b.x.min() for b in bands), max(b.x.max() for b in bands)])
         bands.append(_band("oracle (every reward)", x, [stat, stat]))
-    if bands:
-        plot_bands(
-            {"success against labels used": bands}, "labels used per run", "success", path, markers=True
-        )
+    return bands
 
 
 def _band(label: str, x: np.ndarray, stats: list[SeedSummary]) -> Band:

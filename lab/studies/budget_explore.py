@@ -1,6 +1,7 @@
 """The label-budget explorations (issue 58), declared: ``budget-explore`` (MiniGrid, seeds 0-2, the
-first) and ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
-from its own generators, numerics 2). Their tables are :mod:`~dospcot.lab.studies.budget`'s."""
+first), ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
+from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all of U in round 1, on
+DoorKey and a grid16 layout no study used). Their tables are :mod:`~dospcot.lab.studies.budget`'s."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ from collections.abc import Callable
 
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.budget import (
+    ADMIT,
     BUDGET,
     EXPLORATION,
     ROUNDS_ARM,
@@ -19,6 +21,7 @@ from dospcot.lab.studies.budget import (
     paired_difference,
 )
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
+from dospcot.lab.studies.grid import LAYOUT
 from dospcot.lab.studies.tables import FRACTION
 
 DESCRIPTIVE = (
@@ -165,15 +168,62 @@ DOORKEY_DESCRIPTIVE = (
     ),
 )
 
+ALL_OF_U = {ADMIT: ("1.0",)}
+"""Every unlabelled sample admitted in round 1 (``add_fraction_start`` 1.0, against the presets' 0.5): in
+the second exploration every labelled arm's pseudo-rewards were right, yet half of U weighed 0 through
+round 2, and a sample of weight 0 in a replay window stops its update, so the reward did not reach the
+start of the episode until round 3."""
+GRID_LAYOUT = {LAYOUT: ("11",)}
+"""A grid16 layout no study had used (the grid16-layouts study's are 101, 202 and 303)."""
+ADMIT_SWEEPS = (
+    *DOORKEY_SWEEPS[:2],
+    DOORKEY_SWEEPS[4],
+    _doorkey(
+        "outcomes-even-all",
+        "dospcot",
+        {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("even",), **ALL_OF_U},
+    ),
+    _doorkey("uniform-all", "dospcot", {FRACTION: ("0.1",), **ALL_OF_U}),
+    # Where pseudo-rewards are not all right, admitting everything at once may cost what pacing saves.
+    Sweep("budget-grid16-oracle", ("grid16-oracle",), {**GRID_LAYOUT, **OWN}, numerics=2),
+    Sweep(
+        "budget-grid16-uniform",
+        ("grid16-dospcot",),
+        {**GRID_LAYOUT, ADMIT: ("0.5", "1.0"), **ROUNDS, **OWN},
+        numerics=2,
+    ),
+)
+"""The third exploration: DoorKey's even and blind arms of the second admitting all of U in round 1
+(beside the second's runs of them, reused), and grid16's 5% mask on layout 11 admitting half or all."""
+ALL_ARM = "admitting 100% of U in round 1"
+ADMIT_DESCRIPTIVE = (
+    (
+        f"dospcot outcomes+disagreement even {ROUNDS_ARM} {ALL_ARM}",
+        f"dospcot outcomes+disagreement even {ROUNDS_ARM}",
+        "100 chosen labels, admitting all of U in round 1 against half",
+    ),
+    (
+        f"dospcot uniform {ROUNDS_ARM} {ALL_ARM}",
+        f"dospcot uniform {ROUNDS_ARM}",
+        "a blind 10% mask, admitting all of U in round 1 against half",
+    ),
+    (
+        f"dospcot uniform {ROUNDS_ARM} {ALL_ARM}",
+        f"dospcot uniform {ROUNDS_ARM} admitting 50% of U in round 1",
+        "grid16's 5% mask, admitting all of U in round 1 against half",
+    ),
+)
+
+DOORKEY = {"MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-")}
+MINIGRID = {"MiniGrid-LavaGapS7-v0": _of("minigrid-lavagap-"), **DOORKEY}
+DOORKEY_AND_GRID = {**DOORKEY, "grid16, layout 11": _of("grid16-")}
+"""Each exploration's tasks: a table and a figure's panel each, of the runs whose preset starts so."""
 
 STUDIES: dict[str, Study] = {
     "budget-explore": Study(
         EXPLORE_SWEEPS,
         exploration_tables(
-            {
-                "MiniGrid-LavaGapS7-v0": _of("minigrid-lavagap-"),
-                "MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-"),
-            },
+            MINIGRID,
             "budget-explore",
             "seeds 0-2 (the oracle rows reuse the active-queries study's seeds 0-9)",
             DESCRIPTIVE,
@@ -187,12 +237,12 @@ STUDIES: dict[str, Study] = {
             "minigrid-doorkey-",
         ),
         seeds=3,
-        figure=figure,
+        figure=figure(MINIGRID),
     ),
     "budget-explore-doorkey": Study(
         DOORKEY_SWEEPS,
         exploration_tables(
-            {"MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-")},
+            DOORKEY,
             "budget-explore-doorkey",
             "seeds 0-9, each agent drawing from its own generators, numerics 2",
             DOORKEY_DESCRIPTIVE,
@@ -201,6 +251,22 @@ STUDIES: dict[str, Study] = {
         "MiniGrid DoorKey-5x5 (exploratory)",
         _glance(DOORKEY_DESCRIPTIVE[0], "success, 100 labels spread evenly minus spent at once"),
         seeds=10,
-        figure=figure,
+        figure=figure(DOORKEY),
+    ),
+    "budget-explore-admit": Study(
+        ADMIT_SWEEPS,
+        exploration_tables(
+            DOORKEY_AND_GRID,
+            "budget-explore-admit",
+            "seeds 0-9, each agent drawing from its own generators, numerics 2",
+            ADMIT_DESCRIPTIVE,
+        ),
+        "Labels that pay: the third exploration, admitting all of U in round 1",
+        "MiniGrid DoorKey-5x5 and grid16 layout 11 (exploratory)",
+        _glance(
+            ADMIT_DESCRIPTIVE[0], "DoorKey success, 100 labels, admitting all of U minus half", "minigrid-"
+        ),
+        seeds=10,
+        figure=figure(DOORKEY_AND_GRID),
     ),
 }
