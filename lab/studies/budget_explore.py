@@ -192,9 +192,19 @@ ADMIT_SWEEPS = (
         {**GRID_LAYOUT, ADMIT: ("0.5", "1.0"), **ROUNDS, **OWN},
         numerics=2,
     ),
+    # The fast highway's five reward classes are harder to tell apart than DoorKey's two; its preset
+    # admits a fifth of U in round 1.
+    Sweep(
+        "budget-fasthighway-uniform",
+        ("fasthighway-dospcot",),
+        {ADMIT: ("0.2", "1.0"), **ROUNDS, **OWN},
+        numerics=2,
+    ),
+    Sweep("budget-fasthighway-oracle", ("fasthighway-oracle",), OWN, numerics=2),
 )
 """The third exploration: DoorKey's even and blind arms of the second admitting all of U in round 1
-(beside the second's runs of them, reused), and grid16's 5% mask on layout 11 admitting half or all."""
+(beside the second's runs of them, reused), grid16's 5% mask on layout 11 admitting half or all, and
+the fast highway's 10% mask admitting a fifth (its preset) or all."""
 ALL_ARM = "admitting 100% of U in round 1"
 ADMIT_DESCRIPTIVE = (
     (
@@ -212,11 +222,16 @@ ADMIT_DESCRIPTIVE = (
         f"dospcot uniform {ROUNDS_ARM} admitting 50% of U in round 1",
         "grid16's 5% mask, admitting all of U in round 1 against half",
     ),
+    (
+        f"dospcot uniform {ROUNDS_ARM} {ALL_ARM}",
+        f"dospcot uniform {ROUNDS_ARM} admitting 20% of U in round 1",
+        "the fast highway's 10% mask, admitting all of U in round 1 against a fifth",
+    ),
 )
 
 DOORKEY = {"MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-")}
 MINIGRID = {"MiniGrid-LavaGapS7-v0": _of("minigrid-lavagap-"), **DOORKEY}
-DOORKEY_AND_GRID = {**DOORKEY, "grid16, layout 11": _of("grid16-")}
+ADMIT_TASKS = {**DOORKEY, "grid16, layout 11": _of("grid16-"), "fast highway": _of("fasthighway-")}
 """Each exploration's tasks: a table and a figure's panel each, of the runs whose preset starts so."""
 
 STUDIES: dict[str, Study] = {
@@ -256,17 +271,17 @@ STUDIES: dict[str, Study] = {
     "budget-explore-admit": Study(
         ADMIT_SWEEPS,
         exploration_tables(
-            DOORKEY_AND_GRID,
+            ADMIT_TASKS,
             "budget-explore-admit",
             "seeds 0-9, each agent drawing from its own generators, numerics 2",
             ADMIT_DESCRIPTIVE,
         ),
         "Labels that pay: the third exploration, admitting all of U in round 1",
-        "MiniGrid DoorKey-5x5 and grid16 layout 11 (exploratory)",
+        "MiniGrid DoorKey-5x5, grid16 layout 11 and the fast highway (exploratory)",
         _glance(
             ADMIT_DESCRIPTIVE[0], "DoorKey success, 100 labels, admitting all of U minus half", "minigrid-"
         ),
         seeds=10,
-        figure=figure(DOORKEY_AND_GRID),
+        figure=figure(ADMIT_TASKS),
     ),
 }
