@@ -1,7 +1,8 @@
 """The label-budget explorations (issue 58), declared: ``budget-explore`` (MiniGrid, seeds 0-2, the
 first), ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
 from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all of U in round 1, on
-DoorKey and a grid16 layout no study used). Their tables are :mod:`~dospcot.lab.studies.budget`'s."""
+DoorKey, a grid16 layout no study used and the fast highway). Their tables are
+:mod:`~dospcot.lab.studies.budget`'s."""
 
 from __future__ import annotations
 
@@ -169,10 +170,10 @@ DOORKEY_DESCRIPTIVE = (
 )
 
 ALL_OF_U = {ADMIT: ("1.0",)}
-"""Every unlabelled sample admitted in round 1 (``add_fraction_start`` 1.0, against the presets' 0.5): in
-the second exploration every labelled arm's pseudo-rewards were right, yet half of U weighed 0 through
-round 2, and a sample of weight 0 in a replay window stops its update, so the reward did not reach the
-start of the episode until round 3."""
+"""Every unlabelled sample admitted in round 1 (``add_fraction_start`` 1.0, against the presets' 0.5,
+the fast highway's 0.2): in the second exploration every labelled arm's pseudo-rewards were right,
+yet half of U weighed 0 through round 2, and a sample of weight 0 in a replay window stops its
+update, so the reward did not reach the start of the episode until round 3."""
 GRID_LAYOUT = {LAYOUT: ("11",)}
 """A grid16 layout no study had used (the grid16-layouts study's are 101, 202 and 303)."""
 ADMIT_SWEEPS = (
