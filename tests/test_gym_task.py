@@ -37,7 +37,7 @@ from dospcot.run.run_folder import RunFolderError
 from dospcot.run.train import evaluate, resume, train
 from dospcot.tasks import load_config
 from dospcot.tasks.adapters.sensor import SensorAdapter
-from dospcot.tasks.adapters.sensor_store import KeyedStepStore
+from dospcot.tasks.adapters.sensor_store import KeyedStepStore, StepStore
 
 LENGTH = 10
 
@@ -814,7 +814,6 @@ def test_a_minigrid_query_names_its_state_by_a_short_digest_the_same_in_every_qu
 
 def test_minigrid_indicator_views_are_stored_as_uint8_and_read_as_the_same_floats():
     pytest.importorskip("minigrid")
-    from dospcot.tasks.adapters.sensor_store import StepStore
 
     views = {"ego": "minigrid.egocentric_map", "image": "image"}
     env = make_masked_gym("minigrid:MiniGrid-DoorKey-5x5-v0", "ego", tuple(views), 1.0, view_specs=views)
@@ -845,3 +844,23 @@ def test_minigrid_indicator_views_are_stored_as_uint8_and_read_as_the_same_float
             new, old = compact.features(view, 3, termination), wide.features(view, 3, termination)
             assert new.dtype == old.dtype == np.float32
             np.testing.assert_array_equal(new, old)
+
+
+def test_store_features_in_float64_hold_the_float32_values():
+    """The classifiers' float64 inputs are built directly, with the values the float32 inputs hold:
+    a float64 view is rounded to float32 first (1/3 has no float32 form), a uint8 view is exact."""
+    store = StepStore({"fine": (2,), "onehot": (3,)}, {"fine": np.float64, "onehot": np.uint8})
+    rows = [
+        store.add_row({"fine": np.array([1 / 3, 2.0]), "onehot": np.eye(3, dtype=np.uint8)[i]})
+        for i in range(2)
+    ]
+    store.add(rows[0], 1, rows[1], True, 0.0, 0.0, ends=(True, False))
+    for view in ("fine", "onehot"):
+        wide = store.features(view, 2, termination=True, dtype=np.float64)
+        narrow = store.features(view, 2, termination=True)
+        assert wide.dtype == np.float64 and narrow.dtype == np.float32
+        np.testing.assert_array_equal(wide, narrow.astype(np.float64))
+    wide = store.features("fine", 2, termination=True, dtype=np.float64)
+    assert wide[0, 0] == float(np.float32(1 / 3)) != 1 / 3
+    np.testing.assert_array_equal(wide[0, 2:4], [0.0, 1.0])  # the one-hot action
+    assert wide[0, -1] == 1.0  # it ended its episode

@@ -304,6 +304,11 @@ class RunCoTrainer:
         return self._batch.numerics
 
     @property
+    def dtype_np(self) -> type:
+        """The classifiers' inputs' numpy dtype (:attr:`SelfPacedCoTrainer.dtype_np`)."""
+        return self._batch.dtype_np
+
+    @property
     def classifiers(self) -> list[BatchedRewardClassifier]:
         """Each view's reward classifier (a batch of one model, as
         :func:`~dospcot.core.classifier.save_classifier` writes it)."""

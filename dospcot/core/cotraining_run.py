@@ -100,8 +100,9 @@ class TaskAdapter(QueriedTask, Protocol):
     def feature_dims(self) -> list[int]:
         """Each view's classifier input width."""
 
-    def pool(self) -> RunPool:
-        """This round's pool, after the classes have seen every label so far."""
+    def pool(self, dtype: type = np.float32) -> RunPool:
+        """This round's pool, after the classes have seen every label so far, its features in
+        ``dtype`` (the classifiers' own, so that a fit makes no copy of them)."""
 
     def true_class(self) -> np.ndarray:
         """(N,) each pool sample's hidden reward as a class of the run, -1 where the reward is a value
@@ -335,7 +336,8 @@ class CoTrainingRun:
     def cotrain(self) -> dict:
         """Steps 2-3 of a round: co-train on the task's pool and write the pseudo-rewards and their
         weights into the reward table; returns the round's co-training figures."""
-        pool = self.task.pool()
+        # Segment features are sums of step features, taken in float32 as they always were.
+        pool = self.task.pool(np.float32 if self.segments is not None else self.trainer.dtype_np)
         if self.segments is not None:
             return self._cotrain_segments(pool)
         result = self.trainer.step(pool)
@@ -379,7 +381,9 @@ class CoTrainingRun:
 
     def _probabilities(self) -> np.ndarray | None:
         """(m, N, K) the views' class probabilities of the task's pool, or None before any fit."""
-        return None if self.trainer is None else self.trainer.probabilities(self.task.pool())
+        if self.trainer is None:
+            return None
+        return self.trainer.probabilities(self.task.pool(self.trainer.dtype_np))
 
     def step_model_seeds(self) -> list[int]:
         """One seed per view: the initial parameters of its per-step reward model under segment labels."""

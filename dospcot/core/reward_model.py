@@ -60,11 +60,16 @@ class RewardModelTrainer:
         """The classifiers' parameters and inputs."""
         return NUMERICS[self.numerics].dtype
 
+    @property
+    def dtype_np(self) -> type:
+        """:attr:`dtype` as numpy's."""
+        return NUMERICS[self.numerics].np_dtype
+
     def _inputs(self, pool: RunPool, rows: np.ndarray | slice) -> tuple[list[torch.Tensor], torch.Tensor]:
         """Each view's inputs of the samples ``rows``, (E, n, d_j), and their class mask, one copy per
         member."""
         members = self.config.ensemble_size
-        np_dtype = NUMERICS[self.numerics].np_dtype
+        np_dtype = self.dtype_np
         xs = [
             torch.from_numpy(np.asarray(f[rows], dtype=np_dtype))[None].expand(members, -1, -1)
             for f in pool.features
@@ -88,7 +93,7 @@ class RewardModelTrainer:
         y = torch.from_numpy(pool.label_class[rows])[None].expand(members, -1)
         losses = np.zeros(m)
         for j, clf in enumerate(self.classifiers):
-            weight = torch.from_numpy(counts[j].astype(NUMERICS[self.numerics].np_dtype))
+            weight = torch.from_numpy(counts[j].astype(self.dtype_np))
             losses[j] = float(clf.fit(xs[j], y, weight, mask).mean()) if rows.size else float("nan")
         probabilities = self.probabilities(pool).reshape(m, members, *pool.labelled.shape, -1)
         view_class = probabilities.mean(axis=1).argmax(axis=-1)

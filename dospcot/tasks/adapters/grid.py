@@ -222,14 +222,14 @@ class GridAdapter(StoreQueries):
     def feature_dims(self) -> list[int]:
         return [2 * self.mdp.views[v].shape[1] + self.mdp.n_actions for v in self.cfg.views]
 
-    def pool(self) -> RunPool:
+    def pool(self, dtype: type = np.float32) -> RunPool:
         store = self.store
         labelled = store.visited & store.labelled
         unlabelled = store.visited & ~store.labelled
         self.classes.observe(np.unique(store.label_value[labelled]))
         label_class = np.where(labelled, self.classes.encode(store.label_value), -1)
         features = [
-            key_features(self.mdp.views[v], store.next_state, store.visited, self.mdp.n_actions)
+            key_features(self.mdp.views[v], store.next_state, store.visited, self.mdp.n_actions).astype(dtype)
             for v in self.cfg.views
         ]
         return RunPool(features, labelled, label_class, unlabelled, self.classes.mask)

@@ -147,14 +147,14 @@ class SensorAdapter(StoreQueries):
         extra = int(self.section.read_termination)
         return [2 * int(np.prod(self.shapes[v])) + self.n_actions + extra for v in self.cfg.views]
 
-    def pool(self) -> RunPool:
+    def pool(self, dtype: type = np.float32) -> RunPool:
         store = self.store
         n = len(store)
         labelled, unlabelled = store.labelled[:n], ~store.labelled[:n]
         self.classes.fit(store.label_value[:n][labelled])
         label_class = np.where(labelled, self.classes.encode(store.label_value[:n]), -1)
         termination = self.section.read_termination
-        features = [store.features(v, self.n_actions, termination) for v in self.cfg.views]
+        features = [store.features(v, self.n_actions, termination, dtype) for v in self.cfg.views]
         class_mask = self.classes.mask
         if self.section.episode_end_classes:
             class_mask = episode_end_class_mask(label_class, labelled, store.terminal[:n], class_mask)

@@ -134,16 +134,21 @@ class StepStore(InPlaceState):
         """Whether a step of ``action`` from the state named ``key`` starts a new sample."""
         return self.sample_of(key, action) is None
 
-    def features(self, view: str, n_actions: int, termination: bool = False) -> np.ndarray:
-        """(len, 2 d + A) float32 (whatever the rows' type): view of s, one-hot action, view of s' of
-        every step; with ``termination``, (len, 2 d + A + 1): then whether the step ended its episode
-        (0 or 1)."""
+    def features(
+        self, view: str, n_actions: int, termination: bool = False, dtype: type = np.float32
+    ) -> np.ndarray:
+        """(len, 2 d + A) in ``dtype`` (float32 or float64, whatever the rows' type): view of s, one-hot
+        action, view of s' of every step; with ``termination``, (len, 2 d + A + 1): then whether the
+        step ended its episode (0 or 1). The views' values are float32's in either ``dtype``."""
         rows, n = self.rows[view], self._n
-        onehot = np.eye(n_actions, dtype=np.float32)[self.action[:n]]
-        parts = [rows[self.state_row[:n]], onehot, rows[self.next_row[:n]]]
+        onehot = np.eye(n_actions, dtype=dtype)[self.action[:n]]
+        state, next_state = (_as_float32_values(rows[r[:n]]) for r in (self.state_row, self.next_row))
+        parts = [state, onehot, next_state]
         if termination:
-            parts.append(self.terminal[:n, None].astype(np.float32))
-        return np.concatenate(parts, axis=1, dtype=np.float32)
+            parts.append(self.terminal[:n, None].astype(dtype))
+        # Built in the classifiers' dtype: a float32 copy beside their float64 one was a third of a
+        # MiniGrid run's peak memory.
+        return np.concatenate(parts, axis=1, dtype=dtype)
 
 
 class KeyedStepStore(StepStore):
@@ -171,6 +176,12 @@ class KeyedStepStore(StepStore):
 
     def first_visit(self, key: Hashable, action: int, n: int) -> None:
         self.ids[key, action] = n
+
+
+def _as_float32_values(rows: np.ndarray) -> np.ndarray:
+    """``rows`` rounded to float32 where their type is a wider float (an env's float64 view), so that a
+    sample's classifier inputs hold the same values whichever dtype they are built in."""
+    return rows.astype(np.float32) if rows.dtype.kind == "f" and rows.dtype.itemsize > 4 else rows
 
 
 def _grow(array: np.ndarray, extra: int) -> np.ndarray:
