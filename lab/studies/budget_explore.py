@@ -1,7 +1,8 @@
 """The label-budget explorations (issue 58), declared: ``budget-explore`` (MiniGrid, seeds 0-2, the
 first), ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
 from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all of U in round 1, on
-DoorKey, a grid16 layout no study used and the fast highway). Their tables are
+DoorKey, a grid16 layout no study used and the fast highway) and ``budget-explore-peers`` (the arms
+the hypotheses compare, at 100 labels on both MiniGrid tasks). Their tables are
 :mod:`~dospcot.lab.studies.budget`'s."""
 
 from __future__ import annotations
@@ -133,21 +134,25 @@ another draw of the same learner)."""
 OUTCOMES = '"outcomes+disagreement"'
 
 
-def _doorkey(name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
-    """A sweep of the second exploration: exploring by rounds, each agent's own draws, numerics 2."""
+def _minigrid(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+    """A sweep of MiniGrid ``task`` (``doorkey`` or ``lavagap``) as the second exploration ran them:
+    exploring by rounds, each agent's own draws, numerics 2."""
     return Sweep(
-        f"budget-doorkey-{name}", (f"minigrid-doorkey-{preset}",), {**grid, **ROUNDS, **OWN}, numerics=2
+        f"budget-{task}-{name}", (f"minigrid-{task}-{preset}",), {**grid, **ROUNDS, **OWN}, numerics=2
     )
+
+
+def _at_100(strategy: str, schedule: str = "even") -> dict[str, tuple[str, ...]]:
+    """100 labels chosen by ``strategy``, spent on ``schedule``."""
+    return {BUDGET: ("100",), STRATEGY: (strategy,), SCHEDULE: (schedule,)}
 
 
 DOORKEY_SWEEPS = (
     Sweep("budget-doorkey-oracle", ("minigrid-doorkey-oracle",), OWN, numerics=2),
-    _doorkey("outcomes-even", "dospcot", {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("even",)}),
-    _doorkey(
-        "reward-model", "reward-model", {BUDGET: ("100",), STRATEGY: ("disagreement",), SCHEDULE: ("even",)}
-    ),
-    _doorkey("outcomes-asap", "dospcot", {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("asap",)}),
-    _doorkey("uniform", "dospcot", {FRACTION: ("0.1",)}),
+    _minigrid("doorkey", "outcomes-even", "dospcot", _at_100(OUTCOMES)),
+    _minigrid("doorkey", "reward-model", "reward-model", _at_100("disagreement")),
+    _minigrid("doorkey", "outcomes-asap", "dospcot", _at_100(OUTCOMES, "asap")),
+    _minigrid("doorkey", "uniform", "dospcot", {FRACTION: ("0.1",)}),
 )
 """The second exploration: DoorKey's most promising arms of the first, on seeds 0-9, each agent drawing
 from its own generators, under numerics 2 (the oracle too, so that no comparison mixes versions)."""
@@ -179,12 +184,8 @@ GRID_LAYOUT = {LAYOUT: ("11",)}
 ADMIT_SWEEPS = (
     *DOORKEY_SWEEPS[:2],
     DOORKEY_SWEEPS[4],
-    _doorkey(
-        "outcomes-even-all",
-        "dospcot",
-        {BUDGET: ("100",), STRATEGY: (OUTCOMES,), SCHEDULE: ("even",), **ALL_OF_U},
-    ),
-    _doorkey("uniform-all", "dospcot", {FRACTION: ("0.1",), **ALL_OF_U}),
+    _minigrid("doorkey", "outcomes-even-all", "dospcot", {**_at_100(OUTCOMES), **ALL_OF_U}),
+    _minigrid("doorkey", "uniform-all", "dospcot", {FRACTION: ("0.1",), **ALL_OF_U}),
     # Where pseudo-rewards are not all right, admitting everything at once may cost what pacing saves.
     Sweep("budget-grid16-oracle", ("grid16-oracle",), {**GRID_LAYOUT, **OWN}, numerics=2),
     Sweep(
@@ -227,6 +228,41 @@ ADMIT_DESCRIPTIVE = (
         f"dospcot uniform {ROUNDS_ARM} {ALL_ARM}",
         f"dospcot uniform {ROUNDS_ARM} admitting 20% of U in round 1",
         "the fast highway's 10% mask, admitting all of U in round 1 against a fifth",
+    ),
+)
+
+
+PEER_SWEEPS = (
+    *DOORKEY_SWEEPS[:2],
+    DOORKEY_SWEEPS[3],
+    _minigrid("doorkey", "random-even", "dospcot", _at_100("random")),
+    _minigrid("doorkey", "self-training", "self-training", _at_100("uncertainty")),
+    _minigrid("doorkey", "reward-model-outcomes", "reward-model", _at_100(OUTCOMES)),
+    Sweep("budget-lavagap-oracle", ("minigrid-lavagap-oracle",), OWN, numerics=2),
+    _minigrid("lavagap", "outcomes-even", "dospcot", _at_100(OUTCOMES)),
+    _minigrid("lavagap", "outcomes-asap", "dospcot", _at_100(OUTCOMES, "asap")),
+    _minigrid("lavagap", "random-even", "dospcot", _at_100("random")),
+    _minigrid("lavagap", "self-training", "self-training", _at_100("uncertainty")),
+    _minigrid("lavagap", "reward-model-outcomes", "reward-model", _at_100(OUTCOMES)),
+)
+"""The fourth exploration: on both MiniGrid tasks at 100 labels, the arms the label-budget hypotheses
+compare, each against DOSPCoT's half on episode ends and half by disagreement spread evenly: spent at
+once (spreading), random queries on the same schedule (the blind control), self-training with
+uncertainty and the reward-model peer given the same strategy (the second view). DoorKey's first
+three are the second exploration's runs, reused; every preset admits half of U in round 1."""
+EVEN = f"dospcot outcomes+disagreement even {ROUNDS_ARM}"
+PEER_DESCRIPTIVE = (
+    (
+        EVEN,
+        f"dospcot outcomes+disagreement asap {ROUNDS_ARM}",
+        "the budget spread evenly against spent at once",
+    ),
+    (EVEN, f"dospcot random even {ROUNDS_ARM}", "the views' choice against random queries, same schedule"),
+    (EVEN, f"self-training uncertainty even {ROUNDS_ARM}", "two views against one view's uncertainty"),
+    (
+        EVEN,
+        f"reward-model outcomes+disagreement even {ROUNDS_ARM}",
+        "co-training against the reward-model peer, same strategy",
     ),
 )
 
@@ -284,5 +320,23 @@ STUDIES: dict[str, Study] = {
         ),
         seeds=10,
         figure=figure(ADMIT_TASKS),
+    ),
+    "budget-explore-peers": Study(
+        PEER_SWEEPS,
+        exploration_tables(
+            MINIGRID,
+            "budget-explore-peers",
+            "seeds 0-9, each agent drawing from its own generators, numerics 2",
+            PEER_DESCRIPTIVE,
+        ),
+        "Labels that pay: the fourth exploration, the peers on both MiniGrid tasks",
+        "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
+        _glance(
+            PEER_DESCRIPTIVE[3],
+            "LavaGap success, 100 labels, DOSPCoT minus the reward-model peer",
+            "minigrid-lavagap-",
+        ),
+        seeds=10,
+        figure=figure(MINIGRID),
     ),
 }
