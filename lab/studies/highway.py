@@ -98,11 +98,11 @@ STUDIES: dict[str, Study] = {
         (Sweep(base, tuple(f"{base}-{m}" for m in methods), {}, numerics=numerics),),
         with_headline(
             partial(highway_tables, bound=base == "highway"),
-            partial(glance_versus, prefix=base, metric="greedy_return"),
+            partial(glance_versus, prefix=base, metric="greedy_return", labels=True),
         ),
         f"The highway study on {env}",
         f"{task}, 10% of steps labelled",
-        partial(glance_versus, prefix=base, metric="greedy_return"),
+        partial(glance_versus, prefix=base, metric="greedy_return", labels=True),
         seeds=seeds,
     )
     for base, env, task, seeds, numerics, methods in (

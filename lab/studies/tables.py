@@ -217,13 +217,19 @@ def versus(
 
 
 def glance_versus(
-    runs: list[TrialRun], prefix: str, metric: str, paired_by: str = "seed", **kwargs
+    runs: list[TrialRun], prefix: str, metric: str, paired_by: str = "seed", labels: bool = False, **kwargs
 ) -> Glance:
     """The usual headline: ``metric``, DOSPCoT minus self-training (the presets ``<prefix>-dospcot``
-    and ``<prefix>-self-training``), paired by seed, with its verdict."""
-    diff = versus(runs, f"{prefix}-dospcot", f"{prefix}-self-training", metric, **kwargs)
+    and ``<prefix>-self-training``), paired by seed, with its verdict; with ``labels``, the labels a
+    run of each held (where a mask labels a share of the steps met, two agents meet twice the steps)."""
+    a, b = f"{prefix}-dospcot", f"{prefix}-self-training"
+    diff = versus(runs, a, b, metric, **kwargs)
     name = COLUMNS.get(metric, metric.replace("_", " "))
-    return Glance(f"{name}, DOSPCoT minus self-training, paired by {paired_by}: {diff}", verdict(diff))
+    arms = ("DOSPCoT", "self-training")
+    if labels:
+        held = [labels_cell([r for r in runs if r.trial.config == preset]) for preset in (a, b)]
+        arms = (f"DOSPCoT ({held[0]} labels a run)", f"self-training ({held[1]})")
+    return Glance(f"{name}, {arms[0]} minus {arms[1]}, paired by {paired_by}: {diff}", verdict(diff))
 
 
 def with_headline(
