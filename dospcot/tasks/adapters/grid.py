@@ -229,7 +229,9 @@ class GridAdapter(StoreQueries):
         self.classes.observe(np.unique(store.label_value[labelled]))
         label_class = np.where(labelled, self.classes.encode(store.label_value), -1)
         features = [
-            key_features(self.mdp.views[v], store.next_state, store.visited, self.mdp.n_actions).astype(dtype)
+            key_features(self.mdp.views[v], store.next_state, store.visited, self.mdp.n_actions).astype(
+                dtype, copy=False
+            )
             for v in self.cfg.views
         ]
         return RunPool(features, labelled, label_class, unlabelled, self.classes.mask)
