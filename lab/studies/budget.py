@@ -273,7 +273,8 @@ def exploration_tables(
 
     def tables(runs: list[TrialRun]) -> list[str]:
         lines = [f"Exploratory: {seeds}, {EXPLORATORY}"]
-        lines += ["", f"![success against labels used, per arm, and the oracle's]({study}.png)"]
+        if set(by_arm(runs)) - {"oracle"}:  # the figure draws the other arms against the oracle's line
+            lines += ["", f"![success against labels used, per arm, and the oracle's]({study}.png)"]
         for task, belongs in tasks.items():
             arms = by_arm([r for r in runs if belongs(r)])
             if not arms:

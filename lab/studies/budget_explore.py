@@ -2,7 +2,8 @@
 first), ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
 from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all of U in round 1, on
 DoorKey, a grid16 layout no study used and the fast highway) and ``budget-explore-peers`` (the arms
-the hypotheses compare, at 100 labels on both MiniGrid tasks). Their tables are
+the hypotheses compare, at 100 labels on both MiniGrid tasks) and ``budget-explore-grid-highway``
+(those settings on grid16 and the fast highway). Their tables are
 :mod:`~dospcot.lab.studies.budget`'s."""
 
 from __future__ import annotations
@@ -134,17 +135,20 @@ another draw of the same learner)."""
 OUTCOMES = '"outcomes+disagreement"'
 
 
-def _minigrid(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
-    """A sweep of MiniGrid ``task`` (``doorkey`` or ``lavagap``) as the second exploration ran them:
+def _arm(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+    """Sweep ``budget-<task>-<name>`` of preset ``preset`` as the second exploration ran its arms:
     exploring by rounds, each agent's own draws, numerics 2."""
-    return Sweep(
-        f"budget-{task}-{name}", (f"minigrid-{task}-{preset}",), {**grid, **ROUNDS, **OWN}, numerics=2
-    )
+    return Sweep(f"budget-{task}-{name}", (preset,), {**grid, **ROUNDS, **OWN}, numerics=2)
 
 
-def _at_100(strategy: str, schedule: str = "even") -> dict[str, tuple[str, ...]]:
-    """100 labels chosen by ``strategy``, spent on ``schedule``."""
-    return {BUDGET: ("100",), STRATEGY: (strategy,), SCHEDULE: (schedule,)}
+def _minigrid(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+    """An arm (:func:`_arm`) of MiniGrid ``task`` (``doorkey`` or ``lavagap``) and method ``preset``."""
+    return _arm(task, name, f"minigrid-{task}-{preset}", grid)
+
+
+def _at_100(strategy: str, schedule: str = "even", labels: str = "100") -> dict[str, tuple[str, ...]]:
+    """``labels`` labels (100 unless said) chosen by ``strategy``, spent on ``schedule``."""
+    return {BUDGET: (labels,), STRATEGY: (strategy,), SCHEDULE: (schedule,)}
 
 
 DOORKEY_SWEEPS = (
@@ -266,9 +270,60 @@ PEER_DESCRIPTIVE = (
     ),
 )
 
+GRID_LABELS = "20"
+"""grid16's budget: about what a 2% mask revealed to one agent (17 labels) in the active-queries study."""
+HIGHWAY_LABELS = "400"
+"""The fast highway's: what a 2% mask revealed to one agent there (400)."""
+
+
+def _peers(task: str, prefix: str, labels: str, grid: dict[str, tuple[str, ...]]) -> tuple[Sweep, ...]:
+    """The arms the fifth exploration runs on a task (``prefix`` its presets' name) at ``labels``:
+    DOSPCoT's MiniGrid settings, self-training with uncertainty and with the same strategy's one-view
+    form, and the reward-model peer with disagreement, every arm on the even schedule."""
+    return (
+        _arm(task, "outcomes-even", f"{prefix}-dospcot", {**grid, **_at_100(OUTCOMES, labels=labels)}),
+        _arm(
+            task,
+            "self-training",
+            f"{prefix}-self-training",
+            {**grid, **_at_100("uncertainty", labels=labels)},
+        ),
+        _arm(
+            task,
+            "self-training-outcomes",
+            f"{prefix}-self-training",
+            {**grid, **_at_100('"outcomes+uncertainty"', labels=labels)},
+        ),
+        _arm(
+            task, "reward-model", f"{prefix}-reward-model", {**grid, **_at_100("disagreement", labels=labels)}
+        ),
+    )
+
+
+OTHER_SWEEPS = (
+    ADMIT_SWEEPS[5],
+    *_peers("grid16", "grid16", GRID_LABELS, GRID_LAYOUT),
+    ADMIT_SWEEPS[-1],
+    *_peers("fasthighway", "fasthighway", HIGHWAY_LABELS, {}),
+)
+"""The fifth exploration: DOSPCoT's MiniGrid settings (half its queries on episode ends, half by the
+views' disagreement, spread evenly) on grid16's layout 11 and the fast highway, at budgets about what
+one agent's 2% mask revealed there, against the one-view peers and the reward-model peer of the
+label-budget hypotheses, on seeds 0-4; the oracles are the third exploration's runs, reused."""
+OTHER_DESCRIPTIVE = (
+    (EVEN, f"self-training uncertainty even {ROUNDS_ARM}", "two views against one view's uncertainty"),
+    (
+        EVEN,
+        f"self-training outcomes+uncertainty even {ROUNDS_ARM}",
+        "two views against one view, the same split of queries",
+    ),
+    (EVEN, f"reward-model disagreement even {ROUNDS_ARM}", "co-training against the reward-model peer"),
+)
+
 DOORKEY = {"MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-")}
 MINIGRID = {"MiniGrid-LavaGapS7-v0": _of("minigrid-lavagap-"), **DOORKEY}
-ADMIT_TASKS = {**DOORKEY, "grid16, layout 11": _of("grid16-"), "fast highway": _of("fasthighway-")}
+OTHER_TASKS = {"grid16, layout 11": _of("grid16-"), "fast highway": _of("fasthighway-")}
+ADMIT_TASKS = {**DOORKEY, **OTHER_TASKS}
 """Each exploration's tasks: a table and a figure's panel each, of the runs whose preset starts so."""
 
 STUDIES: dict[str, Study] = {
@@ -338,5 +393,23 @@ STUDIES: dict[str, Study] = {
         ),
         seeds=10,
         figure=figure(MINIGRID),
+    ),
+    "budget-explore-grid-highway": Study(
+        OTHER_SWEEPS,
+        exploration_tables(
+            OTHER_TASKS,
+            "budget-explore-grid-highway",
+            "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2",
+            OTHER_DESCRIPTIVE,
+        ),
+        "Labels that pay: the fifth exploration, the MiniGrid settings on grid16 and the fast highway",
+        f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
+        _glance(
+            OTHER_DESCRIPTIVE[2],
+            "fast highway success, DOSPCoT minus the reward-model peer",
+            "fasthighway-",
+        ),
+        seeds=5,
+        figure=figure(OTHER_TASKS),
     ),
 }
