@@ -21,6 +21,7 @@
     dospcot study budget-explore-doorkey --docs   # its DoorKey arms on seeds 0-9, own draws, numerics 2
     dospcot study budget-explore-admit --docs     # all of U in round 1: DoorKey, grid16, fast highway
     dospcot study budget-explore-peers --docs     # the peers at 100 labels on DoorKey and LavaGap
+    dospcot study budget-explore-decay --docs     # a decaying schedule on DoorKey and LavaGap
     dospcot study budget-explore-grid-highway --docs  # those settings on grid16 and the fast highway
     dospcot study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
 

@@ -18,6 +18,8 @@ from pathlib import Path
 import numpy as np
 
 from dospcot.lab.report import TrialRun
+from dospcot.lab.studies.declaration import Sweep
+from dospcot.lab.studies.grid import LAYOUT
 from dospcot.lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
 from dospcot.metrics import SeedSummary
 from dospcot.run.plots import Band, plot_bands
@@ -31,6 +33,25 @@ EXPLORATION = "training.exploration"
 ADMIT = "cotraining.add_fraction_start"
 ORACLE_SHARE = 0.9
 """Label efficiency: the labels an arm needs to reach this share of the oracle's success."""
+ROUNDS = {EXPLORATION: ("rounds",)}
+"""Exploration by the share of rounds done, as the oracle explores (the first exploration's control)."""
+OWN = {"training.agent_draws": ("own",)}
+"""Each agent draws from its own generators (the control's finding: a shared draw made one arm's agent
+another draw of the same learner)."""
+OUTCOMES = '"outcomes+disagreement"'
+"""Half of a round's chosen queries on episode ends, half by the views' disagreement (a TOML string)."""
+
+
+def spend(strategy: str, schedule: str = "even", *labels: str) -> dict[str, tuple[str, ...]]:
+    """A grid that buys ``labels`` labels (100 unless given) chosen by ``strategy``, spent on
+    ``schedule``."""
+    return {BUDGET: labels or ("100",), STRATEGY: (strategy,), SCHEDULE: (schedule,)}
+
+
+def budget_sweep(name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+    """Sweep ``name`` of ``preset`` over ``grid`` as the label-budget studies run every arm since the
+    second exploration: exploring by rounds, each agent's own draws, numerics 2."""
+    return Sweep(name, (preset,), {**grid, **ROUNDS, **OWN}, numerics=2)
 
 
 def method_of(run: TrialRun) -> str:
@@ -277,35 +298,48 @@ def exploration_tables(
             lines += ["", f"![success against labels used, per arm, and the oracle's]({study}.png)"]
         for task, belongs in tasks.items():
             arms = by_arm([r for r in runs if belongs(r)])
-            if not arms:
-                continue
-            lines += ["", f"### {task}", "", *_arm_table(arms), *(["", *c] if (c := _controls(arms)) else [])]
-            lines += ["", "Success after each round:", ""]
-            lines += _rounds_table(arms)
-            classes = _class_table(arms)
-            if classes:
-                lines += ["", "Pseudo-rewards per hidden reward class, last round:", "", *classes]
-            compared = descriptive(arms, comparisons)
-            if compared:
-                lines += ["", "Descriptive, exploratory comparisons:", "", *compared]
-            efficiency = _efficiency(arms)
-            if efficiency:
-                lines += ["", *efficiency]
+            if arms:
+                compared = descriptive(arms, comparisons)
+                lines += task_tables(task, arms, ["Descriptive, exploratory comparisons:", "", *compared])
         return lines
 
     return tables
+
+
+def task_tables(task: str, arms: dict[str, list[TrialRun]], read: list[str]) -> list[str]:
+    """One task's tables of a label-budget study: its arms, any control against the oracle, success
+    after each round, pseudo-rewards per hidden reward class, then ``read`` (the study's comparisons
+    on the task, left out with its heading where it holds nothing past it) and label efficiency."""
+    lines = ["", f"### {task}", "", *_arm_table(arms), *(["", *c] if (c := _controls(arms)) else [])]
+    lines += ["", "Success after each round:", "", *_rounds_table(arms)]
+    classes = _class_table(arms)
+    if classes:
+        lines += ["", "Pseudo-rewards per hidden reward class, last round:", "", *classes]
+    if any(line.startswith("- ") for line in read):
+        lines += ["", *read]
+    efficiency = _efficiency(arms)
+    return [*lines, *(["", *efficiency] if efficiency else [])]
 
 
 def _view_success(run: TrialRun, view: str | None) -> float:
     return (run.summary["per_view"][view] if view else run.summary["mean"])["success"]
 
 
+def _pair(run: TrialRun) -> tuple[str, int]:
+    return run.trial.params.get(LAYOUT, ""), run.trial.seed
+
+
+def paired_values(first: list[TrialRun], second: list[TrialRun], view: str | None = None) -> list[float]:
+    """Success of ``first`` minus ``second``, paired by seed and, on the grid, layout (the pairs both
+    ran): the runs' mean over their agents, or (``view``) the agent of that view in ``first``."""
+    a = {_pair(r): _view_success(r, view) for r in first}
+    b = {_pair(r): r.summary["mean"]["success"] for r in second}
+    return [a[key] - b[key] for key in sorted(set(a) & set(b))]
+
+
 def paired_difference(first: list[TrialRun], second: list[TrialRun], view: str | None = None) -> SeedSummary:
-    """Success of ``first`` minus ``second``, paired by seed (the seeds both ran): the runs' mean over
-    their agents, or (``view``) the agent of that view in ``first``."""
-    a = {r.trial.seed: _view_success(r, view) for r in first}
-    b = {r.trial.seed: r.summary["mean"]["success"] for r in second}
-    return SeedSummary.of([a[seed] - b[seed] for seed in sorted(set(a) & set(b))])
+    """:func:`paired_values` summarised: its mean and 95% bootstrap interval."""
+    return SeedSummary.of(paired_values(first, second, view))
 
 
 def _controls(arms: dict[str, list[TrialRun]]) -> list[str]:

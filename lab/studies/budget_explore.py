@@ -2,8 +2,9 @@
 first), ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
 from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all of U in round 1, on
 DoorKey, a grid16 layout no study used and the fast highway) and ``budget-explore-peers`` (the arms
-the hypotheses compare, at 100 labels on both MiniGrid tasks) and ``budget-explore-grid-highway``
-(those settings on grid16 and the fast highway). Their tables are
+the hypotheses compare, at 100 labels on both MiniGrid tasks), ``budget-explore-decay`` (a decaying
+schedule on both) and ``budget-explore-grid-highway`` (those settings on grid16 and the fast
+highway). Their tables are
 :mod:`~dospcot.lab.studies.budget`'s."""
 
 from __future__ import annotations
@@ -15,13 +16,18 @@ from dospcot.lab.studies.budget import (
     ADMIT,
     BUDGET,
     EXPLORATION,
+    OUTCOMES,
+    OWN,
+    ROUNDS,
     ROUNDS_ARM,
     SCHEDULE,
     STRATEGY,
+    budget_sweep,
     by_arm,
     exploration_tables,
     figure,
     paired_difference,
+    spend,
 )
 from dospcot.lab.studies.declaration import Glance, Study, Sweep
 from dospcot.lab.studies.grid import LAYOUT
@@ -73,9 +79,6 @@ def _glance(
 def _of(prefix: str) -> Callable[[TrialRun], bool]:
     return lambda run: run.trial.config.startswith(prefix)
 
-
-ROUNDS = {EXPLORATION: ("rounds",)}
-"""Exploration by the share of rounds done, as the oracle explores (the control's finding)."""
 
 EXPLORE_SWEEPS = (
     # The control first: with every reward labelled, co-training has nothing to learn, so whatever
@@ -129,16 +132,10 @@ EXPLORE_SWEEPS = (
     ),
 )
 
-OWN = {"training.agent_draws": ("own",)}
-"""Each agent draws from its own generators (the control's finding: a shared draw made one arm's agent
-another draw of the same learner)."""
-OUTCOMES = '"outcomes+disagreement"'
-
 
 def _arm(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
-    """Sweep ``budget-<task>-<name>`` of preset ``preset`` as the second exploration ran its arms:
-    exploring by rounds, each agent's own draws, numerics 2."""
-    return Sweep(f"budget-{task}-{name}", (preset,), {**grid, **ROUNDS, **OWN}, numerics=2)
+    """Sweep ``budget-<task>-<name>`` of preset ``preset`` (:func:`budget_sweep`)."""
+    return budget_sweep(f"budget-{task}-{name}", preset, grid)
 
 
 def _minigrid(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
@@ -146,16 +143,11 @@ def _minigrid(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]
     return _arm(task, name, f"minigrid-{task}-{preset}", grid)
 
 
-def _at_100(strategy: str, schedule: str = "even", labels: str = "100") -> dict[str, tuple[str, ...]]:
-    """``labels`` labels (100 unless said) chosen by ``strategy``, spent on ``schedule``."""
-    return {BUDGET: (labels,), STRATEGY: (strategy,), SCHEDULE: (schedule,)}
-
-
 DOORKEY_SWEEPS = (
     Sweep("budget-doorkey-oracle", ("minigrid-doorkey-oracle",), OWN, numerics=2),
-    _minigrid("doorkey", "outcomes-even", "dospcot", _at_100(OUTCOMES)),
-    _minigrid("doorkey", "reward-model", "reward-model", _at_100("disagreement")),
-    _minigrid("doorkey", "outcomes-asap", "dospcot", _at_100(OUTCOMES, "asap")),
+    _minigrid("doorkey", "outcomes-even", "dospcot", spend(OUTCOMES)),
+    _minigrid("doorkey", "reward-model", "reward-model", spend("disagreement")),
+    _minigrid("doorkey", "outcomes-asap", "dospcot", spend(OUTCOMES, "asap")),
     _minigrid("doorkey", "uniform", "dospcot", {FRACTION: ("0.1",)}),
 )
 """The second exploration: DoorKey's most promising arms of the first, on seeds 0-9, each agent drawing
@@ -188,7 +180,7 @@ GRID_LAYOUT = {LAYOUT: ("11",)}
 ADMIT_SWEEPS = (
     *DOORKEY_SWEEPS[:2],
     DOORKEY_SWEEPS[4],
-    _minigrid("doorkey", "outcomes-even-all", "dospcot", {**_at_100(OUTCOMES), **ALL_OF_U}),
+    _minigrid("doorkey", "outcomes-even-all", "dospcot", {**spend(OUTCOMES), **ALL_OF_U}),
     _minigrid("doorkey", "uniform-all", "dospcot", {FRACTION: ("0.1",), **ALL_OF_U}),
     # Where pseudo-rewards are not all right, admitting everything at once may cost what pacing saves.
     Sweep("budget-grid16-oracle", ("grid16-oracle",), {**GRID_LAYOUT, **OWN}, numerics=2),
@@ -239,15 +231,15 @@ ADMIT_DESCRIPTIVE = (
 PEER_SWEEPS = (
     *DOORKEY_SWEEPS[:2],
     DOORKEY_SWEEPS[3],
-    _minigrid("doorkey", "random-even", "dospcot", _at_100("random")),
-    _minigrid("doorkey", "self-training", "self-training", _at_100("uncertainty")),
-    _minigrid("doorkey", "reward-model-outcomes", "reward-model", _at_100(OUTCOMES)),
+    _minigrid("doorkey", "random-even", "dospcot", spend("random")),
+    _minigrid("doorkey", "self-training", "self-training", spend("uncertainty")),
+    _minigrid("doorkey", "reward-model-outcomes", "reward-model", spend(OUTCOMES)),
     Sweep("budget-lavagap-oracle", ("minigrid-lavagap-oracle",), OWN, numerics=2),
-    _minigrid("lavagap", "outcomes-even", "dospcot", _at_100(OUTCOMES)),
-    _minigrid("lavagap", "outcomes-asap", "dospcot", _at_100(OUTCOMES, "asap")),
-    _minigrid("lavagap", "random-even", "dospcot", _at_100("random")),
-    _minigrid("lavagap", "self-training", "self-training", _at_100("uncertainty")),
-    _minigrid("lavagap", "reward-model-outcomes", "reward-model", _at_100(OUTCOMES)),
+    _minigrid("lavagap", "outcomes-even", "dospcot", spend(OUTCOMES)),
+    _minigrid("lavagap", "outcomes-asap", "dospcot", spend(OUTCOMES, "asap")),
+    _minigrid("lavagap", "random-even", "dospcot", spend("random")),
+    _minigrid("lavagap", "self-training", "self-training", spend("uncertainty")),
+    _minigrid("lavagap", "reward-model-outcomes", "reward-model", spend(OUTCOMES)),
 )
 """The fourth exploration: on both MiniGrid tasks at 100 labels, the arms the label-budget hypotheses
 compare, each against DOSPCoT's half on episode ends and half by disagreement spread evenly: spent at
@@ -276,26 +268,50 @@ HIGHWAY_LABELS = "400"
 """The fast highway's: what a 2% mask revealed to one agent there (400)."""
 
 
+DECAY_SWEEPS = (
+    *PEER_SWEEPS[6:9],
+    _minigrid("lavagap", "outcomes-decay", "dospcot", spend(OUTCOMES, "decay")),
+    *DOORKEY_SWEEPS[:2],
+    DOORKEY_SWEEPS[3],
+    _minigrid("doorkey", "outcomes-decay", "dospcot", spend(OUTCOMES, "decay")),
+)
+"""The fifth exploration: DOSPCoT's 100 labels on a decaying schedule (round r's share in proportion to
+1 / r, 44% in round 1 of 5) on both MiniGrid tasks, seeds 0-9, beside the fourth's oracle, even and
+at-once arms, reused. In the fourth, LavaGap's even arm left the goal unlabelled through round 1 on
+most seeds, and its agents rarely reached it."""
+DECAY = f"dospcot outcomes+disagreement decay {ROUNDS_ARM}"
+DECAY_DESCRIPTIVE = (
+    (DECAY, EVEN, "a decaying schedule against an even one"),
+    (
+        DECAY,
+        f"dospcot outcomes+disagreement asap {ROUNDS_ARM}",
+        "a decaying schedule against spending at once",
+    ),
+)
+
+GRID_LABELS = "20"
+"""grid16's budget: about what a 2% mask revealed to one agent (17 labels) in the active-queries study."""
+HIGHWAY_LABELS = "400"
+"""The fast highway's: what a 2% mask revealed to one agent there (400)."""
+
+
 def _peers(task: str, prefix: str, labels: str, grid: dict[str, tuple[str, ...]]) -> tuple[Sweep, ...]:
-    """The arms the fifth exploration runs on a task (``prefix`` its presets' name) at ``labels``:
-    DOSPCoT's MiniGrid settings, self-training with uncertainty and with the same strategy's one-view
-    form, and the reward-model peer with disagreement, every arm on the even schedule."""
+    """The arms the sixth exploration runs on a task (``prefix`` its presets' name) at ``labels``, each
+    on the decaying schedule: DOSPCoT's MiniGrid strategy, self-training with uncertainty and the
+    reward-model peer with disagreement."""
     return (
-        _arm(task, "outcomes-even", f"{prefix}-dospcot", {**grid, **_at_100(OUTCOMES, labels=labels)}),
+        _arm(task, "outcomes-decay", f"{prefix}-dospcot", {**grid, **spend(OUTCOMES, "decay", labels)}),
         _arm(
             task,
-            "self-training",
+            "self-training-decay",
             f"{prefix}-self-training",
-            {**grid, **_at_100("uncertainty", labels=labels)},
+            {**grid, **spend("uncertainty", "decay", labels)},
         ),
         _arm(
             task,
-            "self-training-outcomes",
-            f"{prefix}-self-training",
-            {**grid, **_at_100('"outcomes+uncertainty"', labels=labels)},
-        ),
-        _arm(
-            task, "reward-model", f"{prefix}-reward-model", {**grid, **_at_100("disagreement", labels=labels)}
+            "reward-model-decay",
+            f"{prefix}-reward-model",
+            {**grid, **spend("disagreement", "decay", labels)},
         ),
     )
 
@@ -306,18 +322,14 @@ OTHER_SWEEPS = (
     ADMIT_SWEEPS[-1],
     *_peers("fasthighway", "fasthighway", HIGHWAY_LABELS, {}),
 )
-"""The fifth exploration: DOSPCoT's MiniGrid settings (half its queries on episode ends, half by the
-views' disagreement, spread evenly) on grid16's layout 11 and the fast highway, at budgets about what
-one agent's 2% mask revealed there, against the one-view peers and the reward-model peer of the
-label-budget hypotheses, on seeds 0-4; the oracles are the third exploration's runs, reused."""
+"""The sixth exploration: the MiniGrid settings (half the queries on episode ends, half by the views'
+disagreement, on the decaying schedule) on grid16's layout 11 and the fast highway, at budgets about
+what one agent's 2% mask revealed there, against the one-view peer and the reward-model peer of the
+label-budget hypotheses on the same schedule, seeds 0-4; the oracles are the third exploration's
+runs, reused."""
 OTHER_DESCRIPTIVE = (
-    (EVEN, f"self-training uncertainty even {ROUNDS_ARM}", "two views against one view's uncertainty"),
-    (
-        EVEN,
-        f"self-training outcomes+uncertainty even {ROUNDS_ARM}",
-        "two views against one view, the same split of queries",
-    ),
-    (EVEN, f"reward-model disagreement even {ROUNDS_ARM}", "co-training against the reward-model peer"),
+    (DECAY, f"self-training uncertainty decay {ROUNDS_ARM}", "two views against one view's uncertainty"),
+    (DECAY, f"reward-model disagreement decay {ROUNDS_ARM}", "co-training against the reward-model peer"),
 )
 
 DOORKEY = {"MiniGrid-DoorKey-5x5-v0": _of("minigrid-doorkey-")}
@@ -394,6 +406,22 @@ STUDIES: dict[str, Study] = {
         seeds=10,
         figure=figure(MINIGRID),
     ),
+    "budget-explore-decay": Study(
+        DECAY_SWEEPS,
+        exploration_tables(
+            MINIGRID,
+            "budget-explore-decay",
+            "seeds 0-9, each agent drawing from its own generators, numerics 2",
+            DECAY_DESCRIPTIVE,
+        ),
+        "Labels that pay: the fifth exploration, a decaying schedule on both MiniGrid tasks",
+        "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
+        _glance(
+            DECAY_DESCRIPTIVE[0], "LavaGap success, 100 labels, decaying minus even", "minigrid-lavagap-"
+        ),
+        seeds=10,
+        figure=figure(MINIGRID),
+    ),
     "budget-explore-grid-highway": Study(
         OTHER_SWEEPS,
         exploration_tables(
@@ -402,10 +430,10 @@ STUDIES: dict[str, Study] = {
             "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2",
             OTHER_DESCRIPTIVE,
         ),
-        "Labels that pay: the fifth exploration, the MiniGrid settings on grid16 and the fast highway",
+        "Labels that pay: the sixth exploration, the MiniGrid settings on grid16 and the fast highway",
         f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
         _glance(
-            OTHER_DESCRIPTIVE[2],
+            OTHER_DESCRIPTIVE[1],
             "fast highway success, DOSPCoT minus the reward-model peer",
             "fasthighway-",
         ),
