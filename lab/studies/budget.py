@@ -157,6 +157,43 @@ def _rounds_table(arms: dict[str, list[TrialRun]]) -> list[str]:
     return lines
 
 
+def _last_round(run: TrialRun) -> list[dict[str, str]] | None:
+    """The rows of the run's ``pseudo_rewards.csv`` for its last round (None without the file)."""
+    path = run.run_dir / PSEUDO_REWARDS_FILE
+    if not path.is_file():
+        return None
+    with path.open(newline="") as handle:
+        table = list(csv.DictReader(handle))
+    last = max(int(row["round"]) for row in table)
+    return [row for row in table if int(row["round"]) == last]
+
+
+def _by_class(tables: list[list[dict[str, str]]]) -> dict[str, list[dict[str, str]]]:
+    """Rows of several runs' last rounds by reward class, keyed by the reward in words. A class is its
+    reward where the runs share their rewards; where they share only the number of classes (MiniGrid's
+    goal pays by the step count, so each run's goal reward differs), its index, with the rewards' range."""
+    values = {tuple(row["reward"] for row in rows) for rows in tables}
+    if len(values) == 1 or len({len(v) for v in values}) > 1:
+        key = {row["reward"]: f"{float(row['reward']):g}" for rows in tables for row in rows}
+        grouped: dict[str, list[dict[str, str]]] = {}
+        for rows in tables:
+            for row in rows:
+                grouped.setdefault(row["reward"], []).append(row)
+        return {key[r]: grouped[r] for r in sorted(grouped, key=float)}
+    by_index: dict[str, list[dict[str, str]]] = {}
+    for rows in tables:
+        for row in rows:
+            by_index.setdefault(row["class"], []).append(row)
+    words = {}
+    for index in sorted(by_index, key=int):
+        low, high = min(r := [float(row["reward"]) for row in by_index[index]]), max(r)
+        if np.isnan(low):  # class -1: hidden rewards of a class no label showed the run
+            words["never labelled"] = by_index[index]
+        else:
+            words[f"{low:g}" if low == high else f"{low:g} to {high:g}"] = by_index[index]
+    return words
+
+
 def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
     """The last round's pseudo-rewards per hidden reward class, mean over each arm's runs: recall (the
     share of a class's unlabelled samples given it) and precision (the share of those given it that
@@ -166,18 +203,8 @@ def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
         "|---|---|---|---|---|---|---|",
     ]
     for arm, members in arms.items():
-        rows: dict[str, list[dict[str, str]]] = {}
-        for run in members:
-            path = run.run_dir / PSEUDO_REWARDS_FILE
-            if not path.is_file():
-                continue
-            with path.open(newline="") as handle:
-                table = list(csv.DictReader(handle))
-            last = max(int(row["round"]) for row in table)
-            for row in table:
-                if int(row["round"]) == last:
-                    rows.setdefault(row["reward"], []).append(row)
-        for reward, members_rows in sorted(rows.items(), key=lambda item: float(item[0])):
+        tables = [rows for run in members if (rows := _last_round(run)) is not None]
+        for reward, members_rows in _by_class(tables).items():
             mean = {
                 key: SeedSummary.of([float(row[key]) for row in members_rows]).mean
                 for key in ("samples", "labelled", "recall", "precision")
@@ -186,7 +213,7 @@ def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
                 key: "n/a" if np.isnan(mean[key]) else f"{mean[key]:.3f}" for key in ("recall", "precision")
             }
             lines.append(
-                f"| {arm} | {float(reward):g} | {mean['samples']:.0f} | {mean['labelled']:.0f} | "
+                f"| {arm} | {reward} | {mean['samples']:.0f} | {mean['labelled']:.0f} | "
                 f"{share['recall']} | {share['precision']} | {len(members_rows)} |"
             )
     return lines if len(lines) > 2 else []

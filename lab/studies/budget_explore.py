@@ -262,12 +262,6 @@ PEER_DESCRIPTIVE = (
     ),
 )
 
-GRID_LABELS = "20"
-"""grid16's budget: about what a 2% mask revealed to one agent (17 labels) in the active-queries study."""
-HIGHWAY_LABELS = "400"
-"""The fast highway's: what a 2% mask revealed to one agent there (400)."""
-
-
 DECAY_SWEEPS = (
     *PEER_SWEEPS[6:9],
     _minigrid("lavagap", "outcomes-decay", "dospcot", spend(OUTCOMES, "decay")),
