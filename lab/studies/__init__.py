@@ -169,7 +169,7 @@ def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = (), first_se
     return SweepSpec(
         sweep.configs,
         sweep.grid,
-        tuple(range(first_seed, first_seed + seeds)),
+        tuple(range(first_seed, first_seed + (sweep.seeds or seeds))),
         (*sweep.overrides(), *overrides),
     )
 

@@ -10,6 +10,7 @@ highway). Their tables are
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import replace
 
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.budget import (
@@ -311,9 +312,9 @@ def _peers(task: str, prefix: str, labels: str, grid: dict[str, tuple[str, ...]]
 
 
 OTHER_SWEEPS = (
-    ADMIT_SWEEPS[5],
+    replace(ADMIT_SWEEPS[5], seeds=10),
     *_peers("grid16", "grid16", GRID_LABELS, GRID_LAYOUT),
-    ADMIT_SWEEPS[-1],
+    replace(ADMIT_SWEEPS[-1], seeds=10),
     *_peers("fasthighway", "fasthighway", HIGHWAY_LABELS, {}),
 )
 """The sixth exploration: the MiniGrid settings (half the queries on episode ends, half by the views'

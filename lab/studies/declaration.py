@@ -24,6 +24,9 @@ class Sweep:
     grid: dict[str, tuple[str, ...]]
     batch_seeds: int | None = None
     numerics: int | None = 1
+    seeds: int | None = None
+    """Its own seed count, where it is another study's sweep reused with more seeds than this study
+    runs (None: the study's)."""
 
     def overrides(self) -> tuple[str, ...]:
         """The settings every trial of the sweep gets before the grid's: its numerics version."""
