@@ -4,6 +4,7 @@ worked by hand, small pools, equal counts across arms, and the leakage test for 
 
 from __future__ import annotations
 
+import re
 from functools import partial
 
 import numpy as np
@@ -17,8 +18,9 @@ from dospcot.core.queries import RewardQueries, choose_queries, class_floors, sc
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.round_records import class_rows
 from dospcot.lab.report import TrialRun
-from dospcot.lab.studies import budget
+from dospcot.lab.studies import budget, sweep_spec
 from dospcot.lab.studies.budget import labels_to_reach
+from dospcot.lab.studies.budget_confirm import STUDIES as BUDGET_CONFIRM
 from dospcot.lab.studies.budget_explore import STUDIES as BUDGET_STUDIES
 from dospcot.lab.sweep import Trial
 from dospcot.run.cotraining import build_run
@@ -367,3 +369,126 @@ def test_the_control_one_view_co_trained_with_every_reward_labelled_is_the_oracl
         assert [r[key] for r in control_rows] == [r[key] for r in oracle_rows], key
     for p, q in zip(oracle.agents[0].policy.parameters(), control.agents[0].policy.parameters(), strict=True):
         assert np.array_equal(p.detach().numpy(), q.detach().numpy())
+
+
+def _confirmatory_runs(tmp_path, success) -> list[TrialRun]:
+    """Every trial of the confirmatory study, finished with ``success(sweep name, params, seed)``."""
+    runs = []
+    for sweep in BUDGET_CONFIRM["budget"].sweeps:
+        for trial in sweep_spec(sweep, 10, (), 100).trials(check_task=False):
+            labels = float(trial.params.get("training.label_budget", 900))
+            run = _budget_run(tmp_path, trial.config, trial.params, trial.seed, [0.0, 0.0], labels)
+            run.summary["mean"]["success"] = success(sweep.name, trial.params, trial.seed)
+            runs.append(run)
+    return runs
+
+
+def test_the_confirmatory_study_decides_b1_to_b4_as_registered(tmp_path):
+    def success(name: str, params: dict, seed: int) -> float:
+        budget = params.get("training.label_budget")
+        if name.endswith("-oracle"):
+            return 0.4 if "unlock" in name else 1.0
+        if name.endswith("-random"):  # the blind control: 0.95 at 400 labels, 0.5 at 200
+            return 0.95 if budget == "400" else 0.5
+        if name.endswith("-asap"):
+            return 0.8 - 0.01 * (seed % 2)
+        if "grid16" in name:  # DOSPCoT ahead of both peers on one layout, behind on another
+            step = {"404": 0.1, "505": -0.1, "606": 0.0}[params["env.layout_seed"]]
+            return 0.9 + step if name.endswith("-dospcot") else 0.9
+        if name.endswith("-dospcot") or name.endswith("-dospcot-200"):
+            return 0.92
+        return 0.7 if "doorkey" in name else 0.95  # the peers: behind on DoorKey, ahead on LavaGap
+
+    runs = _confirmatory_runs(tmp_path, success)
+    text = "\n".join(BUDGET_CONFIRM["budget"].tables(runs))
+    # B1: 0.92 minus 0.80 or 0.79 on 20 pairs, pooled over the two tasks.
+    assert re.search(r"paired: 0\.125 \[0\.12\d, 0\.12\d\] over 20 pairs; interval above 0: \*\*held", text)
+    # B2: only DoorKey beat both peers (grid16's 30 pairs, by layout and seed, average 0; LavaGap's
+    # and the highway's peers lead): 1 of 4 tasks.
+    assert re.search(
+        r"B2 \(grid16\): success of DOSPCoT minus the reward-model peer, paired: -?0\.000 \[", text
+    )
+    assert "over 30 pairs (20 against 20 labels a run); interval above 0: **not met**." in text
+    assert "DOSPCoT beat both peers on 1 of 4 tasks; at least two: **not met**." in text
+    # B3: DOSPCoT's 0.92 at 100 labels reaches 0.9; the control's 0.5 at 200 does not: held on both.
+    assert "- B3 (doorkey): target 0.900; DOSPCoT at 100 labels 0.920, the blind control at 200 0.500" in text
+    assert "- B3: held on both MiniGrid tasks: **held**." in text
+    # B4: the oracle reaches the door in 0.4 of its episodes, too few to anchor the share.
+    assert (
+        "B4 (Unlock): DOSPCoT at 100 labels 0.920, the oracle 0.400; the oracle is below 0.5, so B4 is not"
+        in text
+    )
+    assert BUDGET_CONFIRM["budget"].glance(runs).verdict.endswith("B4: not testable")
+
+
+def test_the_confirmatory_verdicts_wait_for_every_pair(tmp_path):
+    runs = [r for r in _confirmatory_runs(tmp_path, lambda *_: 0.5) if r.trial.seed < 105]
+    text = "\n".join(BUDGET_CONFIRM["budget"].tables(runs))
+    assert "over 10 pairs; interval above 0: not decided yet." in text  # B1 on half the seeds
+    assert "**held**" not in text and "**not met**" not in text
+
+
+def test_the_confirmatory_comparisons_flag_arms_whose_labels_differ_by_more_than_2_percent(tmp_path):
+    runs = _confirmatory_runs(tmp_path, lambda *_: 0.5)
+    for run in runs:  # the reward-model peer's runs on grid16 held 21 labels against DOSPCoT's 20
+        if run.trial.config == "grid16-reward-model":
+            run.summary["mean"]["labelled_steps"] = 21.0
+    text = "\n".join(BUDGET_CONFIRM["budget"].tables(runs))
+    assert "(20 against 21 labels a run (labels unequal: more than 2% apart))" in text
+    assert "(20 against 20 labels a run); interval" in text  # grid16's self-training arm: equal
+
+
+def test_the_class_table_groups_goal_rewards_that_differ_by_run_under_one_class():
+    def rows(*classes):
+        return [
+            {"class": c, "reward": r, "samples": "10", "labelled": "1", "recall": "1", "precision": "1"}
+            for c, r in classes
+        ]
+
+    # MiniGrid: the goal pays by the step count, so each run's goal reward differs; one run never saw it.
+    minigrid = budget._by_class(
+        [
+            rows(("0", "0.0"), ("1", "0.6")),
+            rows(("0", "0.0"), ("1", "0.9")),
+            rows(("-1", "nan"), ("0", "0.0")),
+        ]
+    )
+    assert {key: len(value) for key, value in minigrid.items()} == {
+        "never labelled": 1,
+        "0": 3,
+        "0.6 to 0.9": 2,
+    }
+    # Shared rewards, one run short of a class: by value, as the grid and the highway read.
+    grid = budget._by_class(
+        [rows(("0", "-1.0"), ("1", "0.0"), ("2", "10.0")), rows(("0", "-1.0"), ("1", "10.0"))]
+    )
+    assert {key: len(value) for key, value in grid.items()} == {"-1": 2, "0": 1, "10": 2}
+
+
+def test_the_confirmatory_study_trains_what_its_pre_registration_names():
+    from dospcot.lab.studies import budget_confirm
+
+    trials = [
+        (sweep, trial)
+        for sweep in BUDGET_CONFIRM["budget"].sweeps
+        for trial in sweep_spec(sweep, 10, (), 100).trials(check_task=False)
+    ]
+    assert len(trials) == 310 and {t.seed for _, t in trials} == set(range(100, 110))
+    for sweep, trial in trials:
+        assert sweep.numerics == 2 and trial.params["training.exploration"] == "rounds"
+        assert trial.params["training.agent_draws"] == "own"
+        schedule = trial.params.get("training.query_schedule")  # the oracles buy no labels
+        assert schedule == ("asap" if sweep.name.endswith("-asap") else budget_confirm.SCHEDULE) or (
+            schedule is None and sweep.name.endswith("-oracle")
+        )
+    layouts = {t.params["env.layout_seed"] for _, t in trials if "env.layout_seed" in t.params}
+    assert layouts == {"404", "505", "606"}
+    # Each task's peers buy DOSPCoT's budget.
+    for task, labels in budget_confirm.LABELS.items():
+        named = {
+            t.params["training.label_budget"]
+            for s, t in trials
+            if s.name.startswith(f"budget-confirm-{task}-")
+            and s.name.split("-")[-1] in ("dospcot", "training", "model")
+        }
+        assert named == {labels}, task

@@ -23,6 +23,7 @@
     dospcot study budget-explore-peers --docs     # the peers at 100 labels on DoorKey and LavaGap
     dospcot study budget-explore-decay --docs     # a decaying schedule on DoorKey and LavaGap
     dospcot study budget-explore-grid-highway --docs  # those settings on grid16 and the fast highway
+    dospcot study budget --docs           # docs/preregistration-budget.md: B1-B4, seeds 100-109
     dospcot study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
 
 (``python scripts/study.py`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
@@ -62,6 +63,7 @@ from dospcot.config.presets import did_you_mean
 from dospcot.lab.report import TrialRun, load_runs, write_report
 from dospcot.lab.studies import (
     batched_seeds,
+    budget_confirm,
     budget_explore,
     grid,
     highway,
@@ -108,6 +110,7 @@ STUDIES: dict[str, Study] = {
     **queries.STUDIES,
     **batched_seeds.STUDIES,
     **budget_explore.STUDIES,
+    **budget_confirm.STUDIES,
     **numerics.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
