@@ -118,6 +118,8 @@ TASKS = {
 }
 """Each task's title, its key in :data:`LABELS` and whether a run belongs to it."""
 TASKS_BY_KEY = {key: belongs for key, belongs in TASKS.values()}
+MINIGRID = ("doorkey", "lavagap")
+"""The keys of the MiniGrid tasks B1 pools and B3 reads."""
 PAIRS = {"grid16": SEEDS * len(GRID_LAYOUTS)}
 """The pairs a comparison on a task holds once run (by seed, and layout on the grid)."""
 
@@ -149,8 +151,8 @@ def _b1_values(runs: list[TrialRun]) -> list[float]:
     """B1's pairs: DOSPCoT on :data:`SCHEDULE` minus spending at once, at 100 labels, both MiniGrid
     tasks pooled."""
     values = []
-    for task in ("doorkey", "lavagap"):
-        arms = by_arm([r for r in runs if TASKS_BY_KEY[task](r)])
+    for key in MINIGRID:
+        arms = by_arm([r for r in runs if TASKS_BY_KEY[key](r)])
         values += paired_values(_at(arms, DOSPCOT, "100"), _at(arms, ASAP, "100"))
     return values
 
@@ -160,7 +162,7 @@ def _b1(runs: list[TrialRun]) -> tuple[SeedSummary, bool | None, str]:
     labels were unequal."""
     values = _b1_values(runs)
     diff = SeedSummary.of(values)
-    arms = [by_arm([r for r in runs if TASKS_BY_KEY[task](r)]) for task in ("doorkey", "lavagap")]
+    arms = [by_arm([r for r in runs if TASKS_BY_KEY[key](r)]) for key in MINIGRID]
     unequal = _unequal(*([r for a in arms for r in _at(a, arm, "100")] for arm in (DOSPCOT, ASAP)))
     return diff, None if len(values) < 2 * SEEDS else diff.low > 0, unequal
 
@@ -232,7 +234,7 @@ def _hypotheses(key: str, arms: dict[str, list[TrialRun]]) -> list[str]:
             f"- B2 ({key}): success of DOSPCoT minus {name}, paired: {diff} over {diff.n} pairs ({mine} "
             f"against {theirs} labels a run{unequal}); interval above 0: {_verdict(held)}."
         )
-    if key in ("doorkey", "lavagap"):
+    if key in MINIGRID:
         text, held = _b3(arms)
         reach = "DOSPCoT reaches it where the control at twice its labels does not"
         lines.append(f"- B3 ({key}): {text}; {reach}: {_verdict(held)}.")
@@ -262,7 +264,7 @@ def _tables(runs: list[TrialRun]) -> list[str]:
 
 
 def _b3_both(runs: list[TrialRun]) -> bool | None:
-    verdicts = [_b3(by_arm([r for r in runs if TASKS_BY_KEY[key](r)]))[1] for key in ("doorkey", "lavagap")]
+    verdicts = [_b3(by_arm([r for r in runs if TASKS_BY_KEY[key](r)]))[1] for key in MINIGRID]
     if False in verdicts:
         return False
     return None if None in verdicts else True
