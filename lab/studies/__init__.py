@@ -65,6 +65,7 @@ from dospcot.lab.studies import (
     batched_seeds,
     budget_confirm,
     budget_explore,
+    budget_floors,
     grid,
     highway,
     label_sources,
@@ -110,6 +111,7 @@ STUDIES: dict[str, Study] = {
     **queries.STUDIES,
     **batched_seeds.STUDIES,
     **budget_explore.STUDIES,
+    **budget_floors.STUDIES,
     **budget_confirm.STUDIES,
     **numerics.STUDIES,
 }

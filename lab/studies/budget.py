@@ -29,6 +29,7 @@ STRATEGY = "training.label_strategy"
 BUDGET = "training.label_budget"
 SCHEDULE = "training.query_schedule"
 FIRST_SHARE = "training.first_round_share"
+FLOOR = "training.query_class_floor"
 EXPLORATION = "training.exploration"
 ADMIT = "cotraining.add_fraction_start"
 ORACLE_SHARE = 0.9
@@ -75,6 +76,8 @@ def arm_of(run: TrialRun) -> str:
         parts.append(params[SCHEDULE])
     if FIRST_SHARE in params:
         parts.append(f"round 1 <= {params[FIRST_SHARE]}")
+    if FLOOR in params:
+        parts.append(f"class floors {float(params[FLOOR]):.0%}")
     if params.get(FRACTION) == "1.0":
         parts.append("every reward labelled")
     if EXPLORATION in params:
