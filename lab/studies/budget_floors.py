@@ -21,9 +21,9 @@ from dospcot.lab.studies.budget_explore import (
     MINIGRID,
     OTHER_SWEEPS,
     OTHER_TASKS,
-    _arm,
-    _glance,
-    _minigrid,
+    arm_sweep,
+    glance_of,
+    minigrid_sweep,
 )
 from dospcot.lab.studies.declaration import Study, Sweep
 
@@ -39,7 +39,7 @@ def _five(sweep: Sweep) -> Sweep:
 
 def _floored(sweep: Sweep, task: str, preset: str) -> Sweep:
     """``sweep``'s arm with class floors: sweep ``budget-<task>-<its name>-floors`` of ``preset``."""
-    return _arm(
+    return arm_sweep(
         task, f"{sweep.name.removeprefix(f'budget-{task}-')}-floors", preset, {**sweep.grid, **FLOORS}
     )
 
@@ -51,7 +51,7 @@ FLOOR_SWEEPS = (
     _five(GRID_OUTCOMES),
     _five(_floored(GRID_OUTCOMES, "grid16", "grid16-dospcot")),
     _five(
-        _arm(
+        arm_sweep(
             "grid16",
             "disagreement-decay-floors",
             "grid16-dospcot",
@@ -63,10 +63,10 @@ FLOOR_SWEEPS = (
     _five(_floored(HIGHWAY_OUTCOMES, "fasthighway", "fasthighway-dospcot")),
     DECAY_SWEEPS[4],
     DOORKEY_OUTCOMES,
-    _minigrid("doorkey", "outcomes-decay-floors", "dospcot", {**spend(OUTCOMES, "decay"), **FLOORS}),
+    minigrid_sweep("doorkey", "outcomes-decay-floors", "dospcot", {**spend(OUTCOMES, "decay"), **FLOORS}),
     DECAY_SWEEPS[0],
     LAVAGAP_OUTCOMES,
-    _minigrid("lavagap", "outcomes-decay-floors", "dospcot", {**spend(OUTCOMES, "decay"), **FLOORS}),
+    minigrid_sweep("lavagap", "outcomes-decay-floors", "dospcot", {**spend(OUTCOMES, "decay"), **FLOORS}),
 )
 """Class floors beside the sixth exploration's DOSPCoT arm on grid16's layout 11 and the fast highway
 (seeds 0-4) and the fifth's on both MiniGrid tasks (seeds 0-9), and disagreement alone with floors on
@@ -100,7 +100,7 @@ STUDIES: dict[str, Study] = {
         "Labels that pay: the seventh exploration, a floor of queries for every reward class",
         f"grid16 layout 11 at {GRID_LABELS} labels, both MiniGrid tasks at 100, the fast highway at "
         f"{HIGHWAY_LABELS} (exploratory)",
-        _glance(FLOOR_DESCRIPTIVE[0], "grid16 success, 20 labels, class floors minus none", "grid16-"),
+        glance_of(FLOOR_DESCRIPTIVE[0], "grid16 success, 20 labels, class floors minus none", "grid16-"),
         seeds=10,
         figure=figure(TASKS),
     )
