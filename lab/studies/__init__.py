@@ -63,9 +63,9 @@ from dospcot.config.presets import did_you_mean
 from dospcot.lab.report import TrialRun, load_runs, write_report
 from dospcot.lab.studies import (
     batched_seeds,
+    budget_classes,
     budget_confirm,
     budget_explore,
-    budget_floors,
     grid,
     highway,
     label_sources,
@@ -111,7 +111,7 @@ STUDIES: dict[str, Study] = {
     **queries.STUDIES,
     **batched_seeds.STUDIES,
     **budget_explore.STUDIES,
-    **budget_floors.STUDIES,
+    **budget_classes.STUDIES,
     **budget_confirm.STUDIES,
     **numerics.STUDIES,
 }

@@ -4,7 +4,7 @@ from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all
 DoorKey, a grid16 layout no study used and the fast highway) and ``budget-explore-peers`` (the arms
 the hypotheses compare, at 100 labels on both MiniGrid tasks), ``budget-explore-decay`` (a decaying
 schedule on both) and ``budget-explore-grid-highway`` (those settings on grid16 and the fast
-highway); the seventh is :mod:`~dospcot.lab.studies.budget_floors`'s. Their tables are
+highway); the seventh is :mod:`~dospcot.lab.studies.budget_classes`'s. Their tables are
 :mod:`~dospcot.lab.studies.budget`'s."""
 
 from __future__ import annotations
