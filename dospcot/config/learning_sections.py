@@ -379,6 +379,11 @@ class CoTrainingConfig(AddedKeys):
         (``added_keys``), and a study compares the two only where its grid varies it.
     :param ensemble_size: the reward-model peer's (``method = "reward-model"``) classifiers per view,
         each from its own initial parameters and its own bootstrap of the labels.
+    :param refit_new_classes: when a run's labels show a reward class for the first time after round
+        1, each view's classifier first learns the labels alone again, as in round 1, before the round
+        selects: a class's output had never been trained, so its scores were those of its random
+        initial parameters, and the consensus could give it to most of the pool (off: the runs the
+        record holds before issue 58's seventh exploration).
     """
 
     consensus_weight: float = 0.3
@@ -392,10 +397,11 @@ class CoTrainingConfig(AddedKeys):
     classifier: ClassifierConfig = field(default_factory=ClassifierConfig)
     numerics: int = 1
     ensemble_size: int = 3
+    refit_new_classes: bool = False
 
     renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
     """Keys of older configs and their names now."""
-    added_keys: ClassVar[dict[str, Any]] = {"numerics": 1}
+    added_keys: ClassVar[dict[str, Any]] = {"numerics": 1, "refit_new_classes": False}
 
     def __post_init__(self) -> None:
         if self.consensus_weight < 0:

@@ -70,6 +70,28 @@ def _fit(
     return clf.fit(x, y, weight, mask)
 
 
+def _fit_runs(
+    clf: BatchedRewardClassifier,
+    numerics: Numerics,
+    x: torch.Tensor,
+    y: torch.Tensor,
+    weight: torch.Tensor,
+    mask: torch.Tensor,
+    runs: np.ndarray,
+) -> None:
+    """Fit (:func:`_fit`) the models of the ``runs`` (B,) bool alone: the others keep their parameters,
+    as a fit of no samples would still move them (the penalty and Adam's steps)."""
+    if runs.all():
+        _fit(clf, numerics, x, y, weight, mask)
+        return
+    kept = [p.detach().clone() for p in clf.parameters()]
+    _fit(clf, numerics, x, y, weight, mask)
+    keep = torch.from_numpy(~runs)
+    with torch.no_grad():
+        for p, old in zip(clf.parameters(), kept, strict=True):
+            p[keep] = old[keep]
+
+
 @dataclass(frozen=True)
 class Pool:
     """The samples of one round, for B runs over N pool slots.
@@ -155,6 +177,9 @@ class SelfPacedCoTrainer:
     :param n_classes: K, the most reward classes a run may hold (the classifiers' outputs).
     """
 
+    _seen: np.ndarray | None = None
+    """(B, K) the classes each run's labels have shown so far (None in a checkpoint older than it)."""
+
     def __init__(
         self,
         view_dims: list[int],
@@ -176,6 +201,7 @@ class SelfPacedCoTrainer:
         self.round = 0
         self._previous: np.ndarray | None = None
         self._weights: np.ndarray | None = None
+        self._seen = np.zeros((n_runs, n_classes), dtype=bool)
 
     @property
     def numerics(self) -> int:
@@ -209,9 +235,15 @@ class SelfPacedCoTrainer:
         share = _label_share(pool)
         add_num = np.ceil(self.add_fraction * pool.unlabelled.sum(axis=1) - 1e-9).astype(np.int64)
 
-        if self.round == 0:  # the paper's initialisation: each classifier first learns the labels alone
+        seen = share > 0
+        before = seen if self._seen is None else self._seen  # None: a checkpoint from before the key
+        fresh = np.ones(seen.shape[0], dtype=bool) if self.round == 0 else (seen & ~before).any(axis=1)
+        self._seen = before | seen
+        if self.round == 0 or (cfg.refit_new_classes and fresh.any()):
+            # The paper's initialisation: each classifier first learns the labels alone; again where a
+            # class first shows, whose output no fit has trained.
             for clf, x in zip(self.classifiers, xs, strict=True):
-                _fit(clf, numerics, x, label_class, labelled_w, mask)
+                _fit_runs(clf, numerics, x, label_class, labelled_w, mask, fresh)
         scores = [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
         losses = np.stack([_class_losses(clf, x, mask) for clf, x in zip(self.classifiers, xs, strict=True)])
         n_runs, n_samples = pool.labelled.shape

@@ -63,6 +63,7 @@ from dospcot.config.presets import did_you_mean
 from dospcot.lab.report import TrialRun, load_runs, write_report
 from dospcot.lab.studies import (
     batched_seeds,
+    budget_classes,
     budget_confirm,
     budget_explore,
     grid,
@@ -110,6 +111,7 @@ STUDIES: dict[str, Study] = {
     **queries.STUDIES,
     **batched_seeds.STUDIES,
     **budget_explore.STUDIES,
+    **budget_classes.STUDIES,
     **budget_confirm.STUDIES,
     **numerics.STUDIES,
 }

@@ -29,6 +29,9 @@ STRATEGY = "training.label_strategy"
 BUDGET = "training.label_budget"
 SCHEDULE = "training.query_schedule"
 FIRST_SHARE = "training.first_round_share"
+FLOOR = "training.query_class_floor"
+RANDOM_SHARE = "training.query_random_share"
+REFIT = "cotraining.refit_new_classes"
 EXPLORATION = "training.exploration"
 ADMIT = "cotraining.add_fraction_start"
 ORACLE_SHARE = 0.9
@@ -75,6 +78,12 @@ def arm_of(run: TrialRun) -> str:
         parts.append(params[SCHEDULE])
     if FIRST_SHARE in params:
         parts.append(f"round 1 <= {params[FIRST_SHARE]}")
+    if FLOOR in params:
+        parts.append(f"class floors {float(params[FLOOR]):.0%}")
+    if RANDOM_SHARE in params:
+        parts.append(f"{float(params[RANDOM_SHARE]):.0%} at random")
+    if params.get(REFIT) == "true":
+        parts.append("refit on a new class")
     if params.get(FRACTION) == "1.0":
         parts.append("every reward labelled")
     if EXPLORATION in params:

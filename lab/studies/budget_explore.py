@@ -4,7 +4,7 @@ from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all
 DoorKey, a grid16 layout no study used and the fast highway) and ``budget-explore-peers`` (the arms
 the hypotheses compare, at 100 labels on both MiniGrid tasks), ``budget-explore-decay`` (a decaying
 schedule on both) and ``budget-explore-grid-highway`` (those settings on grid16 and the fast
-highway). Their tables are
+highway); the seventh is :mod:`~dospcot.lab.studies.budget_classes`'s. Their tables are
 :mod:`~dospcot.lab.studies.budget`'s."""
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ DESCRIPTIVE = (
 the seeds both ran, with no threshold and no verdict."""
 
 
-def _glance(
+def glance_of(
     comparison: tuple[str, str, str], headline: str, task: str = ""
 ) -> Callable[[list[TrialRun]], Glance]:
     """A study's row at a glance: ``headline``, then success of ``comparison``'s arm a minus arm b,
@@ -134,22 +134,22 @@ EXPLORE_SWEEPS = (
 )
 
 
-def _arm(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+def arm_sweep(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
     """Sweep ``budget-<task>-<name>`` of preset ``preset`` (:func:`budget_sweep`)."""
     return budget_sweep(f"budget-{task}-{name}", preset, grid)
 
 
-def _minigrid(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
-    """An arm (:func:`_arm`) of MiniGrid ``task`` (``doorkey`` or ``lavagap``) and method ``preset``."""
-    return _arm(task, name, f"minigrid-{task}-{preset}", grid)
+def minigrid_sweep(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+    """An arm (:func:`arm_sweep`) of MiniGrid ``task`` (``doorkey`` or ``lavagap``) and method ``preset``."""
+    return arm_sweep(task, name, f"minigrid-{task}-{preset}", grid)
 
 
 DOORKEY_SWEEPS = (
     Sweep("budget-doorkey-oracle", ("minigrid-doorkey-oracle",), OWN, numerics=2),
-    _minigrid("doorkey", "outcomes-even", "dospcot", spend(OUTCOMES)),
-    _minigrid("doorkey", "reward-model", "reward-model", spend("disagreement")),
-    _minigrid("doorkey", "outcomes-asap", "dospcot", spend(OUTCOMES, "asap")),
-    _minigrid("doorkey", "uniform", "dospcot", {FRACTION: ("0.1",)}),
+    minigrid_sweep("doorkey", "outcomes-even", "dospcot", spend(OUTCOMES)),
+    minigrid_sweep("doorkey", "reward-model", "reward-model", spend("disagreement")),
+    minigrid_sweep("doorkey", "outcomes-asap", "dospcot", spend(OUTCOMES, "asap")),
+    minigrid_sweep("doorkey", "uniform", "dospcot", {FRACTION: ("0.1",)}),
 )
 """The second exploration: DoorKey's most promising arms of the first, on seeds 0-9, each agent drawing
 from its own generators, under numerics 2 (the oracle too, so that no comparison mixes versions)."""
@@ -181,8 +181,8 @@ GRID_LAYOUT = {LAYOUT: ("11",)}
 ADMIT_SWEEPS = (
     *DOORKEY_SWEEPS[:2],
     DOORKEY_SWEEPS[4],
-    _minigrid("doorkey", "outcomes-even-all", "dospcot", {**spend(OUTCOMES), **ALL_OF_U}),
-    _minigrid("doorkey", "uniform-all", "dospcot", {FRACTION: ("0.1",), **ALL_OF_U}),
+    minigrid_sweep("doorkey", "outcomes-even-all", "dospcot", {**spend(OUTCOMES), **ALL_OF_U}),
+    minigrid_sweep("doorkey", "uniform-all", "dospcot", {FRACTION: ("0.1",), **ALL_OF_U}),
     # Where pseudo-rewards are not all right, admitting everything at once may cost what pacing saves.
     Sweep("budget-grid16-oracle", ("grid16-oracle",), {**GRID_LAYOUT, **OWN}, numerics=2),
     Sweep(
@@ -232,15 +232,15 @@ ADMIT_DESCRIPTIVE = (
 PEER_SWEEPS = (
     *DOORKEY_SWEEPS[:2],
     DOORKEY_SWEEPS[3],
-    _minigrid("doorkey", "random-even", "dospcot", spend("random")),
-    _minigrid("doorkey", "self-training", "self-training", spend("uncertainty")),
-    _minigrid("doorkey", "reward-model-outcomes", "reward-model", spend(OUTCOMES)),
+    minigrid_sweep("doorkey", "random-even", "dospcot", spend("random")),
+    minigrid_sweep("doorkey", "self-training", "self-training", spend("uncertainty")),
+    minigrid_sweep("doorkey", "reward-model-outcomes", "reward-model", spend(OUTCOMES)),
     Sweep("budget-lavagap-oracle", ("minigrid-lavagap-oracle",), OWN, numerics=2),
-    _minigrid("lavagap", "outcomes-even", "dospcot", spend(OUTCOMES)),
-    _minigrid("lavagap", "outcomes-asap", "dospcot", spend(OUTCOMES, "asap")),
-    _minigrid("lavagap", "random-even", "dospcot", spend("random")),
-    _minigrid("lavagap", "self-training", "self-training", spend("uncertainty")),
-    _minigrid("lavagap", "reward-model-outcomes", "reward-model", spend(OUTCOMES)),
+    minigrid_sweep("lavagap", "outcomes-even", "dospcot", spend(OUTCOMES)),
+    minigrid_sweep("lavagap", "outcomes-asap", "dospcot", spend(OUTCOMES, "asap")),
+    minigrid_sweep("lavagap", "random-even", "dospcot", spend("random")),
+    minigrid_sweep("lavagap", "self-training", "self-training", spend("uncertainty")),
+    minigrid_sweep("lavagap", "reward-model-outcomes", "reward-model", spend(OUTCOMES)),
 )
 """The fourth exploration: on both MiniGrid tasks at 100 labels, the arms the label-budget hypotheses
 compare, each against DOSPCoT's half on episode ends and half by disagreement spread evenly: spent at
@@ -265,10 +265,10 @@ PEER_DESCRIPTIVE = (
 
 DECAY_SWEEPS = (
     *PEER_SWEEPS[6:9],
-    _minigrid("lavagap", "outcomes-decay", "dospcot", spend(OUTCOMES, "decay")),
+    minigrid_sweep("lavagap", "outcomes-decay", "dospcot", spend(OUTCOMES, "decay")),
     *DOORKEY_SWEEPS[:2],
     DOORKEY_SWEEPS[3],
-    _minigrid("doorkey", "outcomes-decay", "dospcot", spend(OUTCOMES, "decay")),
+    minigrid_sweep("doorkey", "outcomes-decay", "dospcot", spend(OUTCOMES, "decay")),
 )
 """The fifth exploration: DOSPCoT's 100 labels on a decaying schedule (round r's share in proportion to
 1 / r, 44% in round 1 of 5) on both MiniGrid tasks, seeds 0-9, beside the fourth's oracle, even and
@@ -295,14 +295,14 @@ def _peers(task: str, prefix: str, labels: str, grid: dict[str, tuple[str, ...]]
     on the decaying schedule: DOSPCoT's MiniGrid strategy, self-training with uncertainty and the
     reward-model peer with disagreement."""
     return (
-        _arm(task, "outcomes-decay", f"{prefix}-dospcot", {**grid, **spend(OUTCOMES, "decay", labels)}),
-        _arm(
+        arm_sweep(task, "outcomes-decay", f"{prefix}-dospcot", {**grid, **spend(OUTCOMES, "decay", labels)}),
+        arm_sweep(
             task,
             "self-training-decay",
             f"{prefix}-self-training",
             {**grid, **spend("uncertainty", "decay", labels)},
         ),
-        _arm(
+        arm_sweep(
             task,
             "reward-model-decay",
             f"{prefix}-reward-model",
@@ -345,7 +345,7 @@ STUDIES: dict[str, Study] = {
         "Labels that pay: exploring label budgets, schedules and the reward-model peer",
         "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
         # The first exploration's clearest lever: on DoorKey at a 10% mask, exploring by rounds or the pace.
-        _glance(
+        glance_of(
             DESCRIPTIVE[0],
             "DoorKey success, 10% mask, exploring by rounds minus by the pace",
             "minigrid-doorkey-",
@@ -363,7 +363,7 @@ STUDIES: dict[str, Study] = {
         ),
         "Labels that pay: the second exploration, DoorKey on ten seeds",
         "MiniGrid DoorKey-5x5 (exploratory)",
-        _glance(DOORKEY_DESCRIPTIVE[0], "success, 100 labels spread evenly minus spent at once"),
+        glance_of(DOORKEY_DESCRIPTIVE[0], "success, 100 labels spread evenly minus spent at once"),
         seeds=10,
         figure=figure(DOORKEY),
     ),
@@ -377,7 +377,7 @@ STUDIES: dict[str, Study] = {
         ),
         "Labels that pay: the third exploration, admitting all of U in round 1",
         "MiniGrid DoorKey-5x5, grid16 layout 11 and the fast highway (exploratory)",
-        _glance(
+        glance_of(
             ADMIT_DESCRIPTIVE[0], "DoorKey success, 100 labels, admitting all of U minus half", "minigrid-"
         ),
         seeds=10,
@@ -393,7 +393,7 @@ STUDIES: dict[str, Study] = {
         ),
         "Labels that pay: the fourth exploration, the peers on both MiniGrid tasks",
         "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
-        _glance(
+        glance_of(
             PEER_DESCRIPTIVE[3],
             "LavaGap success, 100 labels, DOSPCoT minus the reward-model peer",
             "minigrid-lavagap-",
@@ -411,7 +411,7 @@ STUDIES: dict[str, Study] = {
         ),
         "Labels that pay: the fifth exploration, a decaying schedule on both MiniGrid tasks",
         "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
-        _glance(
+        glance_of(
             DECAY_DESCRIPTIVE[0], "LavaGap success, 100 labels, decaying minus even", "minigrid-lavagap-"
         ),
         seeds=10,
@@ -427,7 +427,7 @@ STUDIES: dict[str, Study] = {
         ),
         "Labels that pay: the sixth exploration, the MiniGrid settings on grid16 and the fast highway",
         f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
-        _glance(
+        glance_of(
             OTHER_DESCRIPTIVE[1],
             "fast highway success, DOSPCoT minus the reward-model peer",
             "fasthighway-",

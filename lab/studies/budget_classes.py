@@ -1,0 +1,181 @@
+"""The label-budget explorations (issue 58) of reward classes that go missing, declared. In the sixth,
+DOSPCoT's MiniGrid settings (half the queries on episode ends, half by the views' disagreement, on
+the decaying schedule) failed on grid16: its pseudo-rewards never gave the lava class.
+
+- ``budget-explore-floors`` (the seventh) asks whether the queries were at fault: a floor of each
+  round's chosen queries for every reward class the views predict, disagreement alone (round 1 at
+  random), and half of each round's queries at random, on grid16 (and floors on the fast highway).
+- ``budget-explore-refit`` (the eighth) tries what the seventh's runs showed instead: a class first
+  labelled after round 1 had an output no fit had trained, so the consensus gave it to no sample, or
+  to almost all. ``cotraining.refit_new_classes`` has each classifier learn the labels alone again
+  when a class first shows.
+
+Their tables are :mod:`~dospcot.lab.studies.budget`'s; every arm without the new setting and the
+oracles are the earlier explorations' runs, reused."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+from dospcot.lab.studies.budget import (
+    FLOOR,
+    RANDOM_SHARE,
+    REFIT,
+    ROUNDS_ARM,
+    exploration_tables,
+    figure,
+    spend,
+)
+from dospcot.lab.studies.budget_explore import (
+    DECAY,
+    DECAY_SWEEPS,
+    GRID_LABELS,
+    GRID_LAYOUT,
+    HIGHWAY_LABELS,
+    MINIGRID,
+    OTHER_SWEEPS,
+    OTHER_TASKS,
+    arm_sweep,
+    glance_of,
+)
+from dospcot.lab.studies.declaration import Study, Sweep
+
+FLOORS = {FLOOR: ("0.5",)}
+"""Half of a round's chosen queries spread over the reward classes the views predict, from round 2, the
+rarest class and its least certain samples first (``training.query_class_floor``)."""
+GRID_DISAGREEMENT = {**GRID_LAYOUT, **spend("disagreement", "decay", GRID_LABELS)}
+"""grid16's 20 labels by the views' disagreement alone, on the decaying schedule (round 1 at random)."""
+
+
+def _five(sweep: Sweep) -> Sweep:
+    """``sweep`` on seeds 0-4, as grid16's and the fast highway's arms run in a study of 10 seeds."""
+    return replace(sweep, seeds=5)
+
+
+def _floored(sweep: Sweep, task: str, preset: str) -> Sweep:
+    """``sweep``'s arm with class floors: sweep ``budget-<task>-<its name>-floors`` of ``preset``."""
+    return arm_sweep(
+        task, f"{sweep.name.removeprefix(f'budget-{task}-')}-floors", preset, {**sweep.grid, **FLOORS}
+    )
+
+
+GRID_OUTCOMES, HIGHWAY_OUTCOMES = OTHER_SWEEPS[1], OTHER_SWEEPS[5]
+DOORKEY_OUTCOMES, LAVAGAP_OUTCOMES = DECAY_SWEEPS[7], DECAY_SWEEPS[3]
+FLOOR_SWEEPS = (
+    OTHER_SWEEPS[0],
+    _five(GRID_OUTCOMES),
+    _five(_floored(GRID_OUTCOMES, "grid16", "grid16-dospcot")),
+    _five(
+        arm_sweep("grid16", "disagreement-decay-floors", "grid16-dospcot", {**GRID_DISAGREEMENT, **FLOORS})
+    ),
+    _five(arm_sweep("grid16", "disagreement-decay", "grid16-dospcot", GRID_DISAGREEMENT)),
+    _five(
+        arm_sweep(
+            "grid16",
+            "outcomes-decay-random-half",
+            "grid16-dospcot",
+            {**GRID_OUTCOMES.grid, RANDOM_SHARE: ("0.5",)},
+        )
+    ),
+    OTHER_SWEEPS[4],
+    _five(HIGHWAY_OUTCOMES),
+    _five(_floored(HIGHWAY_OUTCOMES, "fasthighway", "fasthighway-dospcot")),
+)
+"""The seventh exploration: class floors beside the sixth exploration's DOSPCoT arm on grid16's layout
+11 and the fast highway, and on grid16 disagreement alone with and without floors and half of each
+round's queries at random (seeds 0-4), with each task's oracle (seeds 0-9). Its MiniGrid arms were
+stopped after the grid's runs showed the queries were not at fault (the eighth exploration)."""
+FLOORED = f"dospcot outcomes+disagreement decay class floors 50% {ROUNDS_ARM}"
+ALONE = f"dospcot disagreement decay {ROUNDS_ARM}"
+FLOOR_DESCRIPTIVE = (
+    (FLOORED, DECAY, "class floors against none"),
+    (ALONE, DECAY, "disagreement alone against half the queries on episode ends"),
+    (
+        f"dospcot disagreement decay class floors 50% {ROUNDS_ARM}",
+        ALONE,
+        "disagreement alone, with floors against without",
+    ),
+    (
+        f"dospcot outcomes+disagreement decay 50% at random {ROUNDS_ARM}",
+        DECAY,
+        "half of each round's queries at random against a fifth",
+    ),
+)
+TASKS = {**OTHER_TASKS, **MINIGRID}
+
+REFIT_ON = {REFIT: ("true",)}
+"""Each classifier learns the labels alone again when a class first shows
+(``cotraining.refit_new_classes``)."""
+
+
+def _refit(sweep: Sweep, task: str, preset: str) -> Sweep:
+    """``sweep``'s arm refitting on a new class: sweep ``budget-<task>-<its name>-refit`` of ``preset``."""
+    name = sweep.name.removeprefix(f"budget-{task}-")
+    return replace(arm_sweep(task, f"{name}-refit", preset, {**sweep.grid, **REFIT_ON}), seeds=sweep.seeds)
+
+
+REFIT_SWEEPS = (
+    OTHER_SWEEPS[0],
+    _five(GRID_OUTCOMES),
+    _refit(_five(GRID_OUTCOMES), "grid16", "grid16-dospcot"),
+    _five(OTHER_SWEEPS[2]),
+    _refit(_five(OTHER_SWEEPS[2]), "grid16", "grid16-self-training"),
+    DECAY_SWEEPS[4],
+    DOORKEY_OUTCOMES,
+    _refit(DOORKEY_OUTCOMES, "doorkey", "minigrid-doorkey-dospcot"),
+    OTHER_SWEEPS[4],
+    _five(HIGHWAY_OUTCOMES),
+    _refit(_five(HIGHWAY_OUTCOMES), "fasthighway", "fasthighway-dospcot"),
+    DECAY_SWEEPS[0],
+    LAVAGAP_OUTCOMES,
+    _refit(LAVAGAP_OUTCOMES, "lavagap", "minigrid-lavagap-dospcot"),
+)
+"""The eighth exploration: DOSPCoT's MiniGrid settings refitting on a new class, beside the same
+settings without (the fifth's and sixth's runs), on grid16's layout 11 and the fast highway (seeds
+0-4) and both MiniGrid tasks (seeds 0-9); on grid16 the one-view peer too, whose one classifier
+shares the fault. The oracles are the earlier explorations' runs (seeds 0-9)."""
+REFITTED = f"dospcot outcomes+disagreement decay refit on a new class {ROUNDS_ARM}"
+REFIT_DESCRIPTIVE = (
+    (REFITTED, DECAY, "refitting on a new class against not"),
+    (
+        f"self-training uncertainty decay refit on a new class {ROUNDS_ARM}",
+        f"self-training uncertainty decay {ROUNDS_ARM}",
+        "the one-view peer refitting on a new class against not",
+    ),
+    (
+        REFITTED,
+        f"self-training uncertainty decay refit on a new class {ROUNDS_ARM}",
+        "two views against one view's uncertainty, both refitting",
+    ),
+)
+
+
+SEEDS = (
+    "grid16 and the fast highway seeds 0-4, MiniGrid seeds 0-9 (the oracles' 0-9), each agent drawing "
+    "from its own generators, numerics 2"
+)
+
+
+STUDIES: dict[str, Study] = {
+    "budget-explore-floors": Study(
+        FLOOR_SWEEPS,
+        exploration_tables(OTHER_TASKS, "budget-explore-floors", SEEDS, FLOOR_DESCRIPTIVE),
+        "Labels that pay: the seventh exploration, class floors and disagreement alone",
+        f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
+        glance_of(FLOOR_DESCRIPTIVE[0], "grid16 success, 20 labels, class floors minus none", "grid16-"),
+        seeds=10,
+        figure=figure(OTHER_TASKS),
+    ),
+    "budget-explore-refit": Study(
+        REFIT_SWEEPS,
+        exploration_tables(TASKS, "budget-explore-refit", SEEDS, REFIT_DESCRIPTIVE),
+        "Labels that pay: the eighth exploration, refitting the classifiers on a new class",
+        f"grid16 layout 11 at {GRID_LABELS} labels, both MiniGrid tasks at 100, the fast highway at "
+        f"{HIGHWAY_LABELS} (exploratory)",
+        glance_of(
+            REFIT_DESCRIPTIVE[0], "grid16 success, 20 labels, refitting on a new class minus not", "grid16-"
+        ),
+        seeds=10,
+        figure=figure(TASKS),
+    ),
+}
