@@ -463,6 +463,20 @@ def test_the_class_table_groups_goal_rewards_that_differ_by_run_under_one_class(
         [rows(("0", "-1.0"), ("1", "0.0"), ("2", "10.0")), rows(("0", "-1.0"), ("1", "10.0"))]
     )
     assert {key: len(value) for key, value in grid.items()} == {"-1": 2, "0": 1, "10": 2}
+    # grid16: each run numbers its classes in the order it met them, and one never saw the lava.
+    met = budget._by_class(
+        [
+            rows(("0", "-1.0"), ("1", "0.0"), ("2", "-100.0")),
+            rows(("0", "-1.0"), ("1", "-100.0"), ("2", "0.0")),
+            rows(("-1", "nan"), ("0", "-1.0"), ("1", "0.0")),
+        ]
+    )
+    assert [(key, len(value)) for key, value in met.items()] == [
+        ("never labelled", 1),
+        ("-100", 2),
+        ("-1", 3),
+        ("0", 3),
+    ]
 
 
 def test_the_confirmatory_study_trains_what_its_pre_registration_names():

@@ -178,28 +178,33 @@ def _last_round(run: TrialRun) -> list[dict[str, str]] | None:
 
 
 def _by_class(tables: list[list[dict[str, str]]]) -> dict[str, list[dict[str, str]]]:
-    """Rows of several runs' last rounds by reward class, keyed by the reward in words. A class is its
-    reward where the runs share their rewards; where they share only the number of classes (MiniGrid's
-    goal pays by the step count, so each run's goal reward differs), its index, with the rewards' range."""
-    values = {tuple(row["reward"] for row in rows) for rows in tables}
-    if len(values) == 1 or len({len(v) for v in values}) > 1:
-        key = {row["reward"]: f"{float(row['reward']):g}" for rows in tables for row in rows}
-        grouped: dict[str, list[dict[str, str]]] = {}
-        for rows in tables:
-            for row in rows:
-                grouped.setdefault(row["reward"], []).append(row)
-        return {key[r]: grouped[r] for r in sorted(grouped, key=float)}
-    by_index: dict[str, list[dict[str, str]]] = {}
-    for rows in tables:
-        for row in rows:
-            by_index.setdefault(row["class"], []).append(row)
-    words = {}
-    for index in sorted(by_index, key=int):
-        low, high = min(r := [float(row["reward"]) for row in by_index[index]]), max(r)
-        if np.isnan(low):  # class -1: hidden rewards of a class no label showed the run
-            words["never labelled"] = by_index[index]
+    """Rows of several runs' last rounds by hidden reward class, keyed by the reward in words: "never
+    labelled" for a class no label showed the run (class -1), first. A class is its reward where the
+    runs' rewards are one small set (grid16's step cost, goal and lava, in whatever order each run met
+    them); where each run's differ (MiniGrid's goal pays by the step count), its index, with the
+    rewards' range."""
+    if not tables:
+        return {}
+    shown = [row for rows in tables for row in rows if row["class"] != "-1"]
+    by_reward = len({row["reward"] for row in shown}) <= max(map(len, tables))
+    groups: dict[str, list[dict[str, str]]] = {}
+    order: dict[str, float] = {}
+    for row in (row for rows in tables for row in rows):
+        if row["class"] == "-1":
+            key, rank = "never labelled", -np.inf
+        elif by_reward:
+            key, rank = f"{float(row['reward']):g}", float(row["reward"])
         else:
-            words[f"{low:g}" if low == high else f"{low:g} to {high:g}"] = by_index[index]
+            key, rank = row["class"], float(row["class"])
+        groups.setdefault(key, []).append(row)
+        order[key] = rank
+    words = {}
+    for key in sorted(groups, key=order.__getitem__):
+        if by_reward or key == "never labelled":
+            words[key] = groups[key]
+        else:
+            low, high = min(r := [float(row["reward"]) for row in groups[key]]), max(r)
+            words[f"{low:g}" if low == high else f"{low:g} to {high:g}"] = groups[key]
     return words
 
 

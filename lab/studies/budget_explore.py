@@ -30,7 +30,7 @@ from dospcot.lab.studies.budget import (
     paired_difference,
     spend,
 )
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
+from dospcot.lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot.lab.studies.grid import LAYOUT
 from dospcot.lab.studies.tables import FRACTION
 
@@ -71,8 +71,8 @@ def glance_of(
         arms = by_arm([r for r in runs if r.trial.config.startswith(task)])
         a, b, _ = comparison
         if a not in arms or b not in arms:
-            return Glance("not rendered yet", "exploratory")
-        return Glance(f"{headline}, paired: {paired_difference(arms[a], arms[b])}", "exploratory")
+            return Glance("not rendered yet", EXPLORATORY)
+        return Glance(f"{headline}, paired: {paired_difference(arms[a], arms[b])}", EXPLORATORY)
 
     return glance
 

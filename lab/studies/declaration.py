@@ -42,6 +42,10 @@ class Glance:
     verdict: str
 
 
+EXPLORATORY = "exploratory"
+"""The verdict of a study that names no hypothesis: its settings are confirmed by another."""
+
+
 @dataclass(frozen=True)
 class Study:
     """A study: its sweeps, the tables built from their finished runs, its page's title, the task it

@@ -8,7 +8,7 @@ import re
 from pathlib import Path
 
 from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Study
+from dospcot.lab.studies.declaration import EXPLORATORY, Study
 from dospcot.lab.studies.readme import README, RESULTS, read_block, replace_block
 
 PAGES = Path(__file__).resolve().parent / "pages"
@@ -62,15 +62,22 @@ def glance_cells(study: Study, runs: list[TrialRun]) -> list[str]:
     return [study.task, glance.headline, f"{len(seeds)} ({seeds[0]}-{seeds[-1]})", glance.verdict]
 
 
-def glance_table(rows: dict[str, list[str]], order: list[str], link: str) -> str:
+def glance_table(rows: dict[str, list[str]], order: list[str], link: str, brief: bool = False) -> str:
     """The results at a glance: a row per study of ``order`` (``rows`` holds each one's cells; a study
     without them is named with the command that renders it), each study linked to its page under
     ``link`` (``docs/results/`` from the README, nothing beside the pages), and a line that counts the
-    studies whose headline finds DOSPCoT above self-training."""
+    studies whose headline finds DOSPCoT above self-training. ``brief`` (the README's) leaves out the
+    exploratory studies' rows and says where they are."""
     lines = list(GLANCE_HEAD)
+    left_out = []
     for name in order:
         cells = rows.get(name) or ["", "not rendered yet", "", f"`dospcot study {name} --render-only --docs`"]
+        if brief and cells[3] == EXPLORATORY:
+            left_out.append(name)
+            continue
         lines.append(f"| [{name}]({link}{name}.md) | " + " | ".join(cells) + " |")
+    if left_out:
+        lines += ["", f"And {len(left_out)} exploratory studies, in the [full table]({link}index.md)."]
     paired = [cells for cells in rows.values() if "DOSPCoT minus self-training" in cells[1]]
     above = [cells for cells in paired if "DOSPCoT above self-training" in cells[3]]
     lines += [
@@ -92,9 +99,9 @@ def glance_rows(text: str) -> dict[str, list[str]]:
 
 
 def write_glance(name: str, cells: list[str], order: list[str]) -> None:
-    """Replace study ``name``'s row of the results at a glance in README.md and docs/results/index.md,
-    keeping the other studies' rows as their last render wrote them."""
-    rows = glance_rows(read_block(README, GLANCE))
+    """Replace study ``name``'s row of the results at a glance in docs/results/index.md and README.md
+    (without the exploratory rows), keeping the other studies' rows as their last render wrote them."""
+    rows = glance_rows(read_block(RESULTS / "index.md", GLANCE))
     rows[name] = cells
-    replace_block(README, GLANCE, glance_table(rows, order, "docs/results/"))
+    replace_block(README, GLANCE, glance_table(rows, order, "docs/results/", brief=True))
     replace_block(RESULTS / "index.md", GLANCE, glance_table(rows, order, ""))
