@@ -32,6 +32,7 @@ FIRST_SHARE = "training.first_round_share"
 FLOOR = "training.query_class_floor"
 RANDOM_SHARE = "training.query_random_share"
 REFIT = "cotraining.refit_new_classes"
+QUOTA = "cotraining.quota"
 EXPLORATION = "training.exploration"
 ADMIT = "cotraining.add_fraction_start"
 ORACLE_SHARE = 0.9
@@ -84,6 +85,8 @@ def arm_of(run: TrialRun) -> str:
         parts.append(f"{float(params[RANDOM_SHARE]):.0%} at random")
     if params.get(REFIT) == "true":
         parts.append("refit on a new class")
+    if QUOTA in params:
+        parts.append("quota " + params[QUOTA].strip('"'))
     if params.get(FRACTION) == "1.0":
         parts.append("every reward labelled")
     if EXPLORATION in params:

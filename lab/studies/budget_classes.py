@@ -19,6 +19,7 @@ from dataclasses import replace
 
 from dospcot.lab.studies.budget import (
     FLOOR,
+    QUOTA,
     RANDOM_SHARE,
     REFIT,
     ROUNDS_ARM,
@@ -120,6 +121,17 @@ REFIT_SWEEPS = (
     _refit(_five(GRID_OUTCOMES), "grid16", "grid16-dospcot"),
     _five(OTHER_SWEEPS[2]),
     _refit(_five(OTHER_SWEEPS[2]), "grid16", "grid16-self-training"),
+    FLOOR_SWEEPS[4],
+    _refit(FLOOR_SWEEPS[4], "grid16", "grid16-dospcot"),
+    replace(
+        arm_sweep(
+            "grid16",
+            "outcomes-decay-refit-candidates",
+            "grid16-dospcot",
+            {**GRID_OUTCOMES.grid, **REFIT_ON, QUOTA: ('"candidates"',)},
+        ),
+        seeds=5,
+    ),
     DECAY_SWEEPS[4],
     DOORKEY_OUTCOMES,
     _refit(DOORKEY_OUTCOMES, "doorkey", "minigrid-doorkey-dospcot"),
@@ -133,7 +145,11 @@ REFIT_SWEEPS = (
 """The eighth exploration: DOSPCoT's MiniGrid settings refitting on a new class, beside the same
 settings without (the fifth's and sixth's runs), on grid16's layout 11 and the fast highway (seeds
 0-4) and both MiniGrid tasks (seeds 0-9); on grid16 the one-view peer too, whose one classifier
-shares the fault. The oracles are the earlier explorations' runs (seeds 0-9)."""
+shares the fault, disagreement alone (the seventh's arm, which the fault cost two seeds), and the
+MiniGrid settings with each class admitting the same share of its own candidates
+(``cotraining.quota = "candidates"``): half the queries on episode ends make the goal a tenth of
+grid16's labels, and SPaMCo's quota then admits a tenth of the pool as the goal, where two samples
+are. The oracles are the earlier explorations' runs (seeds 0-9)."""
 REFITTED = f"dospcot outcomes+disagreement decay refit on a new class {ROUNDS_ARM}"
 REFIT_DESCRIPTIVE = (
     (REFITTED, DECAY, "refitting on a new class against not"),
