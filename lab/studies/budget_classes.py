@@ -30,10 +30,10 @@ from dospcot.lab.studies.budget import (
 from dospcot.lab.studies.budget_explore import (
     DECAY,
     DECAY_SWEEPS,
+    DOORKEY,
     GRID_LABELS,
     GRID_LAYOUT,
     HIGHWAY_LABELS,
-    MINIGRID,
     OTHER_SWEEPS,
     OTHER_TASKS,
     arm_sweep,
@@ -62,7 +62,7 @@ def _floored(sweep: Sweep, task: str, preset: str) -> Sweep:
 
 
 GRID_OUTCOMES, HIGHWAY_OUTCOMES = OTHER_SWEEPS[1], OTHER_SWEEPS[5]
-DOORKEY_OUTCOMES, LAVAGAP_OUTCOMES = DECAY_SWEEPS[7], DECAY_SWEEPS[3]
+DOORKEY_OUTCOMES = DECAY_SWEEPS[7]
 FLOOR_SWEEPS = (
     OTHER_SWEEPS[0],
     _five(GRID_OUTCOMES),
@@ -103,7 +103,7 @@ FLOOR_DESCRIPTIVE = (
         "half of each round's queries at random against a fifth",
     ),
 )
-TASKS = {**OTHER_TASKS, **MINIGRID}
+REFIT_TASKS = {"grid16, layout 11": OTHER_TASKS["grid16, layout 11"], **DOORKEY}
 
 REFIT_ON = {REFIT: ("true",)}
 """Each classifier learns the labels alone again when a class first shows
@@ -116,13 +116,6 @@ def _refit(sweep: Sweep, task: str, preset: str) -> Sweep:
     return replace(arm_sweep(task, f"{name}-refit", preset, {**sweep.grid, **REFIT_ON}), seeds=sweep.seeds)
 
 
-def _alone_refit(task: str) -> Sweep:
-    """MiniGrid ``task``'s DOSPCoT arm of 100 labels by disagreement alone, refitting on a new class."""
-    return minigrid_sweep(
-        task, "disagreement-decay-refit", "dospcot", {**spend("disagreement", "decay"), **REFIT_ON}
-    )
-
-
 REFIT_SWEEPS = (
     OTHER_SWEEPS[0],
     _five(GRID_OUTCOMES),
@@ -131,6 +124,7 @@ REFIT_SWEEPS = (
     _refit(_five(OTHER_SWEEPS[2]), "grid16", "grid16-self-training"),
     FLOOR_SWEEPS[4],
     _refit(FLOOR_SWEEPS[4], "grid16", "grid16-dospcot"),
+    _five(OTHER_SWEEPS[3]),
     replace(
         arm_sweep(
             "grid16",
@@ -143,25 +137,21 @@ REFIT_SWEEPS = (
     DECAY_SWEEPS[4],
     DOORKEY_OUTCOMES,
     _refit(DOORKEY_OUTCOMES, "doorkey", "minigrid-doorkey-dospcot"),
-    _alone_refit("doorkey"),
-    OTHER_SWEEPS[4],
-    _five(HIGHWAY_OUTCOMES),
-    _refit(_five(HIGHWAY_OUTCOMES), "fasthighway", "fasthighway-dospcot"),
-    DECAY_SWEEPS[0],
-    LAVAGAP_OUTCOMES,
-    _alone_refit("lavagap"),
-    _refit(LAVAGAP_OUTCOMES, "lavagap", "minigrid-lavagap-dospcot"),
+    minigrid_sweep(
+        "doorkey", "disagreement-decay-refit", "dospcot", {**spend("disagreement", "decay"), **REFIT_ON}
+    ),
 )
-"""The eighth exploration: DOSPCoT's MiniGrid settings refitting on a new class, beside the same
-settings without (the fifth's and sixth's runs), on grid16's layout 11 and the fast highway (seeds
-0-4) and both MiniGrid tasks (seeds 0-9); disagreement alone with the refit on grid16 (beside the
-seventh's arm without it, which the fault cost two seeds) and both MiniGrid tasks; on grid16 the
-one-view peer too, whose one classifier shares the fault, and the
-MiniGrid settings with each class admitting the same share of its own candidates
-(``cotraining.quota = "candidates"``): half the queries on episode ends make the goal a tenth of
-grid16's labels, and SPaMCo's quota then admits a tenth of the pool as the goal, where two samples
-are. The oracles are the earlier explorations' runs (seeds 0-9)."""
+"""The eighth exploration, on grid16's layout 11 (seeds 0-4) and DoorKey (seeds 0-9), each arm with the
+refit beside its runs without it where they exist: DOSPCoT's MiniGrid settings (the fifth's and
+sixth's arm) and disagreement alone (the seventh's; on DoorKey it has no run without the refit); on
+grid16 the one-view peer, whose one classifier shares the fault, beside the sixth's reward-model peer,
+which the fault does not touch (it fits on the labels alone), and the MiniGrid settings with each class
+admitting the same share of its own candidates (``cotraining.quota = "candidates"``): half the
+queries on episode ends make the goal a tenth of grid16's labels, and SPaMCo's quota then admits a
+tenth of the pool as the goal, where two samples are. The oracles are the earlier explorations'
+runs (seeds 0-9). LavaGap and the fast highway with the refit are not run yet."""
 REFITTED = f"dospcot outcomes+disagreement decay refit on a new class {ROUNDS_ARM}"
+ALONE_REFITTED = f"dospcot disagreement decay refit on a new class {ROUNDS_ARM}"
 REFIT_DESCRIPTIVE = (
     (REFITTED, DECAY, "refitting on a new class against not"),
     (
@@ -175,14 +165,24 @@ REFIT_DESCRIPTIVE = (
         "two views against one view's uncertainty, both refitting",
     ),
     (
-        f"dospcot disagreement decay refit on a new class {ROUNDS_ARM}",
+        ALONE_REFITTED,
         ALONE,
         "disagreement alone, refitting on a new class against not",
     ),
     (
-        f"dospcot disagreement decay refit on a new class {ROUNDS_ARM}",
+        ALONE_REFITTED,
         REFITTED,
         "disagreement alone against half the queries on episode ends, both refitting",
+    ),
+    (
+        ALONE_REFITTED,
+        f"self-training uncertainty decay refit on a new class {ROUNDS_ARM}",
+        "disagreement alone against one view's uncertainty, both refitting",
+    ),
+    (
+        ALONE_REFITTED,
+        f"reward-model disagreement decay {ROUNDS_ARM}",
+        "disagreement alone, refitting, against the reward-model peer",
     ),
     (
         f"dospcot outcomes+disagreement decay refit on a new class quota candidates {ROUNDS_ARM}",
@@ -190,9 +190,9 @@ REFIT_DESCRIPTIVE = (
         "each class admitting a share of its own candidates against SPaMCo's quota, both refitting",
     ),
 )
-SEEDS = (
-    "grid16 and the fast highway seeds 0-4, MiniGrid seeds 0-9 (the oracles' 0-9), each agent drawing "
-    "from its own generators, numerics 2"
+REFIT_SEEDS = (
+    "grid16 seeds 0-4, DoorKey seeds 0-9 (the oracles' 0-9), each agent drawing from its own generators, "
+    "numerics 2"
 )
 FIVE_SEEDS = "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2"
 
@@ -209,14 +209,13 @@ STUDIES: dict[str, Study] = {
     ),
     "budget-explore-refit": Study(
         REFIT_SWEEPS,
-        exploration_tables(TASKS, "budget-explore-refit", SEEDS, REFIT_DESCRIPTIVE),
+        exploration_tables(REFIT_TASKS, "budget-explore-refit", REFIT_SEEDS, REFIT_DESCRIPTIVE),
         "Labels that pay: the eighth exploration, refitting the classifiers on a new class",
-        f"grid16 layout 11 at {GRID_LABELS} labels, both MiniGrid tasks at 100, the fast highway at "
-        f"{HIGHWAY_LABELS} (exploratory)",
+        f"grid16 layout 11 at {GRID_LABELS} labels, DoorKey-5x5 at 100 (exploratory)",
         glance_of(
             REFIT_DESCRIPTIVE[0], "grid16 success, 20 labels, refitting on a new class minus not", "grid16-"
         ),
         seeds=10,
-        figure=figure(TASKS),
+        figure=figure(REFIT_TASKS),
     ),
 }
