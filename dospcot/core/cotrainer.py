@@ -60,36 +60,24 @@ def _fit(
     y: torch.Tensor,
     weight: torch.Tensor,
     mask: torch.Tensor,
+    runs: np.ndarray | None = None,
 ) -> torch.Tensor:
-    """Fit ``clf`` under ``numerics``: on a batch of one run, only the weighted samples if it says so."""
+    """Fit ``clf`` under ``numerics``: on a batch of one run, only the weighted samples if it says so.
+    With ``runs`` ((B,) bool), only those runs' models change: the others get their parameters back,
+    as a fit of no samples would still move them (the penalty and Adam's steps)."""
+    kept = None if runs is None or runs.all() else [p.detach().clone() for p in clf.parameters()]
     if numerics.weighted_only and x.shape[0] == 1:
         keep = weight[0] > 0
         if mask.dim() == 3:
             mask = mask[:, keep]
         x, y, weight = x[:, keep], y[:, keep], weight[:, keep]
-    return clf.fit(x, y, weight, mask)
-
-
-def _fit_runs(
-    clf: BatchedRewardClassifier,
-    numerics: Numerics,
-    x: torch.Tensor,
-    y: torch.Tensor,
-    weight: torch.Tensor,
-    mask: torch.Tensor,
-    runs: np.ndarray,
-) -> None:
-    """Fit (:func:`_fit`) the models of the ``runs`` (B,) bool alone: the others keep their parameters,
-    as a fit of no samples would still move them (the penalty and Adam's steps)."""
-    if runs.all():
-        _fit(clf, numerics, x, y, weight, mask)
-        return
-    kept = [p.detach().clone() for p in clf.parameters()]
-    _fit(clf, numerics, x, y, weight, mask)
-    keep = torch.from_numpy(~runs)
-    with torch.no_grad():
-        for p, old in zip(clf.parameters(), kept, strict=True):
-            p[keep] = old[keep]
+    loss = clf.fit(x, y, weight, mask)
+    if kept is not None:
+        others = torch.from_numpy(~runs)
+        with torch.no_grad():
+            for p, old in zip(clf.parameters(), kept, strict=True):
+                p[others] = old[others]
+    return loss
 
 
 @dataclass(frozen=True)
@@ -243,7 +231,7 @@ class SelfPacedCoTrainer:
             # The paper's initialisation: each classifier first learns the labels alone; again where a
             # class first shows, whose output no fit has trained.
             for clf, x in zip(self.classifiers, xs, strict=True):
-                _fit_runs(clf, numerics, x, label_class, labelled_w, mask, fresh)
+                _fit(clf, numerics, x, label_class, labelled_w, mask, fresh)
         scores = [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
         losses = np.stack([_class_losses(clf, x, mask) for clf, x in zip(self.classifiers, xs, strict=True)])
         n_runs, n_samples = pool.labelled.shape
