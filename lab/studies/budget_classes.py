@@ -54,11 +54,10 @@ def _five(sweep: Sweep) -> Sweep:
     return replace(sweep, seeds=5)
 
 
-def _floored(sweep: Sweep, task: str, preset: str) -> Sweep:
-    """``sweep``'s arm with class floors: sweep ``budget-<task>-<its name>-floors`` of ``preset``."""
-    return arm_sweep(
-        task, f"{sweep.name.removeprefix(f'budget-{task}-')}-floors", preset, {**sweep.grid, **FLOORS}
-    )
+def _with(sweep: Sweep, suffix: str, settings: dict[str, tuple[str, ...]]) -> Sweep:
+    """``sweep``'s arm with ``settings`` added to its grid: sweep ``<its name>-<suffix>``, of its preset
+    and seeds."""
+    return replace(sweep, name=f"{sweep.name}-{suffix}", grid={**sweep.grid, **settings})
 
 
 GRID_OUTCOMES, HIGHWAY_OUTCOMES = OTHER_SWEEPS[1], OTHER_SWEEPS[5]
@@ -66,7 +65,7 @@ DOORKEY_OUTCOMES = DECAY_SWEEPS[7]
 FLOOR_SWEEPS = (
     OTHER_SWEEPS[0],
     _five(GRID_OUTCOMES),
-    _five(_floored(GRID_OUTCOMES, "grid16", "grid16-dospcot")),
+    _five(_with(GRID_OUTCOMES, "floors", FLOORS)),
     _five(
         arm_sweep("grid16", "disagreement-decay-floors", "grid16-dospcot", {**GRID_DISAGREEMENT, **FLOORS})
     ),
@@ -81,7 +80,7 @@ FLOOR_SWEEPS = (
     ),
     OTHER_SWEEPS[4],
     _five(HIGHWAY_OUTCOMES),
-    _five(_floored(HIGHWAY_OUTCOMES, "fasthighway", "fasthighway-dospcot")),
+    _five(_with(HIGHWAY_OUTCOMES, "floors", FLOORS)),
 )
 """The seventh exploration: class floors beside the sixth exploration's DOSPCoT arm on grid16's layout
 11 and the fast highway, and on grid16 disagreement alone with and without floors and half of each
@@ -109,34 +108,21 @@ REFIT_ON = {REFIT: ("true",)}
 """Each classifier learns the labels alone again when a class first shows
 (``cotraining.refit_new_classes``)."""
 
-
-def _refit(sweep: Sweep, task: str, preset: str) -> Sweep:
-    """``sweep``'s arm refitting on a new class: sweep ``budget-<task>-<its name>-refit`` of ``preset``."""
-    name = sweep.name.removeprefix(f"budget-{task}-")
-    return replace(arm_sweep(task, f"{name}-refit", preset, {**sweep.grid, **REFIT_ON}), seeds=sweep.seeds)
-
+GRID_REFIT = _with(_five(GRID_OUTCOMES), "refit", REFIT_ON)
 
 REFIT_SWEEPS = (
     OTHER_SWEEPS[0],
     _five(GRID_OUTCOMES),
-    _refit(_five(GRID_OUTCOMES), "grid16", "grid16-dospcot"),
+    GRID_REFIT,
     _five(OTHER_SWEEPS[2]),
-    _refit(_five(OTHER_SWEEPS[2]), "grid16", "grid16-self-training"),
+    _with(_five(OTHER_SWEEPS[2]), "refit", REFIT_ON),
     FLOOR_SWEEPS[4],
-    _refit(FLOOR_SWEEPS[4], "grid16", "grid16-dospcot"),
+    _with(FLOOR_SWEEPS[4], "refit", REFIT_ON),
     _five(OTHER_SWEEPS[3]),
-    replace(
-        arm_sweep(
-            "grid16",
-            "outcomes-decay-refit-candidates",
-            "grid16-dospcot",
-            {**GRID_OUTCOMES.grid, **REFIT_ON, QUOTA: ('"candidates"',)},
-        ),
-        seeds=5,
-    ),
+    _with(GRID_REFIT, "candidates", {QUOTA: ('"candidates"',)}),
     DECAY_SWEEPS[4],
     DOORKEY_OUTCOMES,
-    _refit(DOORKEY_OUTCOMES, "doorkey", "minigrid-doorkey-dospcot"),
+    _with(DOORKEY_OUTCOMES, "refit", REFIT_ON),
     minigrid_sweep(
         "doorkey", "disagreement-decay-refit", "dospcot", {**spend("disagreement", "decay"), **REFIT_ON}
     ),
