@@ -349,20 +349,24 @@ def test_a_class_first_labelled_after_round_1_is_learnt_from_the_labels_before_i
         assert (old[truth == 1] != 1).all()
 
 
-def test_a_refit_for_one_runs_new_class_leaves_the_other_runs_of_a_batch_as_they_would_be_alone():
-    config = CoTrainingConfig(max_classes=2, add_fraction_start=0.5, refit_new_classes=True)
-    first, _ = _late_class_pool(False)
-    second, _ = _late_class_pool(True)
-    stack = lambda a, b: Pool(  # noqa: E731
+def _stack(a: Pool, b: Pool) -> Pool:
+    """Two one-run pools as a batch of two runs."""
+    return Pool(
         [np.concatenate([f, g]) for f, g in zip(a.features, b.features, strict=True)],
         *(
             np.concatenate([getattr(a, k), getattr(b, k)])
             for k in ("labelled", "label_class", "unlabelled", "class_mask")
         ),
     )
+
+
+def test_a_refit_for_one_runs_new_class_leaves_the_other_runs_of_a_batch_as_they_would_be_alone():
+    config = CoTrainingConfig(max_classes=2, add_fraction_start=0.5, refit_new_classes=True)
+    first, _ = _late_class_pool(False)
+    second, _ = _late_class_pool(True)
     batch = SelfPacedCoTrainer([2, 2], 2, config, [0, 1], 2)
-    batch.step(stack(first, first))
-    both = batch.step(stack(second, first))  # run 0 sees class 1 now, run 1 does not
+    batch.step(_stack(first, first))
+    both = batch.step(_stack(second, first))  # run 0 sees class 1 now, run 1 does not
     alone = SelfPacedCoTrainer([2, 2], 1, config, [1], 2)
     alone.step(first)
     one = alone.step(first)
