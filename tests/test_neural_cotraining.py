@@ -24,8 +24,11 @@ from dospcot.envs import (
     monitored_states,
     view_blind_spots,
 )
+from dospcot.run.cotraining import build_run
+from dospcot.tasks import load_config
 
 LAYOUT = GridWorld(size=6, layout_seed=0).layout
+
 VIEWS = grid_views(LAYOUT, patch_size=3)
 LABEL_FRACTION = 0.2
 SECTIONS = {
@@ -129,6 +132,27 @@ def test_leakage_under_blind_spots_and_a_monitor_agents_stay_bit_identical():
     b.run()
     assert a.store.labelled[a.store.visited].mean() > 0.2  # the monitor revealed more than the share
     assert_same_learners(a, b)
+
+
+def test_episode_end_classes_keep_the_goal_off_keys_that_go_on():
+    """Only the keys into the goal end an episode, and the goal's class is labelled only there: with
+    ``env.episode_end_classes`` every other key may not take it, in the pool's mask and in the round's
+    pseudo-rewards; without it the mask is the run's classes alone."""
+    run = build_run(load_config("tiny", ["seed=5", "env.episode_end_classes=true"]))
+    run.run()
+    store, pool = run.store, run.task.pool()
+    ends = store.visited & store.terminated
+    assert (store.labelled & ends).any()  # seed 5 labels the key into the goal
+    assert (run.task.mdp.reward.ravel()[ends] == 0.0).all()
+    goal = int(run.task.classes.encode(np.array([0.0]))[0])
+    assert pool.class_mask.shape == (store.visited.size, run.task.n_classes)
+    np.testing.assert_array_equal(pool.class_mask[:, goal], store.terminated)
+    result = run.trainer.step(pool)
+    goes_on = ~store.terminated & pool.unlabelled
+    assert goes_on.any() and (result.pseudo_class[goes_on] != goal).all()
+    plain = build_run(load_config("tiny", ["seed=5"]))
+    plain.run()
+    assert plain.task.pool().class_mask.shape == (plain.task.n_classes,)
 
 
 def test_a_mix_of_tabular_and_neural_agents_cotrains_and_resumes_from_its_state():

@@ -9,10 +9,11 @@ from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
 from dospcot.config.checks import check_at_least
+from dospcot.config.learning_sections import AddedKeys
 
 
 @dataclass(frozen=True)
-class EnvConfig:
+class EnvConfig(AddedKeys):
     """The masked grid world (:class:`dospcot.envs.GridWorld`).
 
     :param size: side N of the map.
@@ -39,6 +40,11 @@ class EnvConfig:
         view misses the same cells, the control).
     :param monitored_columns: a reward monitor: every reward of a state in the map's first this many
         columns is revealed, and ``training.label_fraction`` is the share of the other keys (0: none).
+    :param episode_end_classes: a reward class the labels show only on keys whose step ended the
+        episode (the goal) is given only to such keys, as the ``[gym]`` key of that name does: with a
+        goal a tenth of the labels, its pseudo-reward otherwise spreads to ordinary steps, each one a
+        reward the agent can collect again and again
+        (:func:`dospcot.core.reward_classes.episode_end_class_mask`).
     """
 
     size: int = 16
@@ -57,6 +63,9 @@ class EnvConfig:
     blind_spot_rate: float = 0.0
     blind_spots: Literal["independent", "identical"] = "independent"
     monitored_columns: int = 0
+    episode_end_classes: bool = False
+
+    added_keys: ClassVar[dict[str, Any]] = {"episode_end_classes": False}
 
     def __post_init__(self) -> None:
         if not 4 <= self.size <= 256:

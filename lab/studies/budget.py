@@ -33,6 +33,7 @@ FLOOR = "training.query_class_floor"
 RANDOM_SHARE = "training.query_random_share"
 REFIT = "cotraining.refit_new_classes"
 QUOTA = "cotraining.quota"
+ENDS = "env.episode_end_classes"
 EXPLORATION = "training.exploration"
 ADMIT = "cotraining.add_fraction_start"
 ORACLE_SHARE = 0.9
@@ -87,6 +88,8 @@ def arm_of(run: TrialRun) -> str:
         parts.append("refit on a new class")
     if QUOTA in params:
         parts.append("quota " + params[QUOTA].strip('"'))
+    if params.get(ENDS) == "true":
+        parts.append("goal on episode ends only")
     if params.get(FRACTION) == "1.0":
         parts.append("every reward labelled")
     if EXPLORATION in params:

@@ -9,6 +9,11 @@ the decaying schedule) reached grid16's goal on none of five seeds.
   labelled after round 1 had an output no fit had trained, so the consensus gave it to no sample, or
   to almost all. ``cotraining.refit_new_classes`` has each classifier learn the labels alone again
   when a class first shows.
+- ``budget-explore-ends`` (the ninth) tries what the eighth's grid16 runs showed: with half the
+  queries on episode ends the goal is a tenth of the labels, and its reward spread to ordinary steps.
+  ``env.episode_end_classes`` gives a class labelled only on keys that ended their episode to such
+  keys alone, as the MiniGrid presets' ``[gym]`` key of that name does; and it runs the refit on
+  LavaGap and the fast highway.
 
 Their tables are :mod:`~dospcot.lab.studies.budget`'s; every arm without the new setting and the
 oracles are the earlier explorations' runs, reused."""
@@ -18,6 +23,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 from dospcot.lab.studies.budget import (
+    ENDS,
     FLOOR,
     QUOTA,
     RANDOM_SHARE,
@@ -34,6 +40,7 @@ from dospcot.lab.studies.budget_explore import (
     GRID_LABELS,
     GRID_LAYOUT,
     HIGHWAY_LABELS,
+    MINIGRID,
     OTHER_SWEEPS,
     OTHER_TASKS,
     arm_sweep,
@@ -182,6 +189,65 @@ REFIT_SEEDS = (
 )
 FIVE_SEEDS = "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2"
 
+ENDS_ON = {ENDS: ("true",)}
+"""A reward class labelled only on keys that ended their episode (grid16's goal) is given to such keys
+alone (``env.episode_end_classes``)."""
+
+
+def _ends(sweep: Sweep) -> Sweep:
+    """``sweep``'s grid16 arm with the goal kept to episode ends, on seeds 0-9."""
+    return replace(_with(sweep, "ends", ENDS_ON), seeds=10)
+
+
+LAVAGAP_DECAY = DECAY_SWEEPS[3]
+ENDS_SWEEPS = (
+    OTHER_SWEEPS[0],
+    GRID_REFIT,
+    _ends(GRID_REFIT),
+    REFIT_SWEEPS[6],
+    _ends(REFIT_SWEEPS[6]),
+    REFIT_SWEEPS[4],
+    _ends(REFIT_SWEEPS[4]),
+    REFIT_SWEEPS[7],
+    _ends(REFIT_SWEEPS[7]),
+    DECAY_SWEEPS[0],
+    LAVAGAP_DECAY,
+    _with(LAVAGAP_DECAY, "refit", REFIT_ON),
+    OTHER_SWEEPS[4],
+    FLOOR_SWEEPS[7],
+    _with(FLOOR_SWEEPS[7], "refit", REFIT_ON),
+)
+"""The ninth exploration: on grid16's layout 11 (seeds 0-9) the eighth's refitting arms (DOSPCoT's
+MiniGrid settings, disagreement alone, the one-view peer) and the sixth's reward-model peer, each
+with the goal kept to episode ends, beside their runs without it (seeds 0-4); the refit on LavaGap
+(seeds 0-9) and the fast highway (seeds 0-4) with the MiniGrid settings, beside their runs without
+it. The oracles are the earlier explorations' runs (seeds 0-9)."""
+ENDS_TASKS = {"grid16, layout 11": OTHER_TASKS["grid16, layout 11"], **MINIGRID, **OTHER_TASKS}
+ENDED = f"{REFITTED.removesuffix(ROUNDS_ARM)}goal on episode ends only {ROUNDS_ARM}"
+ENDS_DESCRIPTIVE = (
+    (ENDED, REFITTED, "the goal kept to episode ends against not, both refitting"),
+    (
+        f"{ALONE_REFITTED.removesuffix(ROUNDS_ARM)}goal on episode ends only {ROUNDS_ARM}",
+        ALONE_REFITTED,
+        "disagreement alone, the goal kept to episode ends against not",
+    ),
+    (
+        ENDED,
+        f"self-training uncertainty decay refit on a new class goal on episode ends only {ROUNDS_ARM}",
+        "two views against one view's uncertainty, with the refit and the goal on episode ends",
+    ),
+    (
+        ENDED,
+        f"reward-model disagreement decay goal on episode ends only {ROUNDS_ARM}",
+        "co-training against the reward-model peer, the goal on episode ends",
+    ),
+    (REFITTED, DECAY, "refitting on a new class against not"),
+)
+ENDS_SEEDS = (
+    "grid16 seeds 0-9 with the goal on episode ends (0-4 without), LavaGap seeds 0-9, the fast highway "
+    "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2"
+)
+
 
 STUDIES: dict[str, Study] = {
     "budget-explore-floors": Study(
@@ -203,5 +269,17 @@ STUDIES: dict[str, Study] = {
         ),
         seeds=10,
         figure=figure(REFIT_TASKS),
+    ),
+    "budget-explore-ends": Study(
+        ENDS_SWEEPS,
+        exploration_tables(ENDS_TASKS, "budget-explore-ends", ENDS_SEEDS, ENDS_DESCRIPTIVE),
+        "Labels that pay: the ninth exploration, the goal kept to episode ends",
+        f"grid16 layout 11 at {GRID_LABELS} labels, LavaGapS7 at 100, the fast highway at {HIGHWAY_LABELS} "
+        "(exploratory)",
+        glance_of(
+            ENDS_DESCRIPTIVE[0], "grid16 success, 20 labels, the goal on episode ends minus not", "grid16-"
+        ),
+        seeds=10,
+        figure=figure(ENDS_TASKS),
     ),
 }

@@ -26,7 +26,7 @@ from dospcot import metrics
 from dospcot.core.cotrainer import RunPool
 from dospcot.core.key_pool import key_features
 from dospcot.core.queries import StoreQueries
-from dospcot.core.reward_classes import RunRewardClasses
+from dospcot.core.reward_classes import RunRewardClasses, episode_end_class_mask
 from dospcot.demonstrations import expert_demonstrations
 from dospcot.envs import GridLayout, GridWorld, grid_views, view_blind_spots
 from dospcot.envs.masking import RewardMaskWrapper
@@ -234,7 +234,10 @@ class GridAdapter(StoreQueries):
             )
             for v in self.cfg.views
         ]
-        return RunPool(features, labelled, label_class, unlabelled, self.classes.mask)
+        class_mask = self.classes.mask
+        if self.cfg.env.episode_end_classes:
+            class_mask = episode_end_class_mask(label_class, labelled, store.terminated, class_mask)
+        return RunPool(features, labelled, label_class, unlabelled, class_mask)
 
     def true_class(self) -> np.ndarray:
         return self.classes.encode(self.store.hidden_reward)
