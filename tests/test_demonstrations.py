@@ -133,6 +133,10 @@ def test_demonstrated_rewards_are_labels_for_the_classifiers_and_the_agents_own_
     # Before any step, the pool holds exactly the demonstrated keys as labelled, with their rewards.
     assert set(np.flatnonzero(store.labelled)) == set(keys.tolist())
     np.testing.assert_array_equal(store.label_value[keys], mdp.reward[demos.states, demos.actions])
+    # Each demonstrated key into the goal ended its episode, as an agent's step there does (the goal
+    # class kept to episode ends reads it: env.episode_end_classes).
+    np.testing.assert_array_equal(store.terminated[keys], mdp.terminal[demos.states, demos.actions])
+    assert store.terminated[keys].sum() >= 1 and not store.truncated.any()
     # The agents' mask reveals the drawn keys and the demonstrated ones, and no other.
     mask = run.agents[0].get_env().envs[0].get_wrapper_attr("mask")
     assert set(np.flatnonzero(mask.labelled.ravel())) == set(np.flatnonzero(drawn)) | set(keys.tolist())

@@ -193,6 +193,8 @@ def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_lab
                 "training.first_round_share=0.3",
                 "training.query_pool_factor=3",
                 "training.query_skip_confidence=0.9",
+                "cotraining.refit_new_classes=true",
+                "env.episode_end_classes=true",
             ],
         ),
         ("uncertainty", ['training.query_schedule="even"', "training.query_class_floor=0.5"]),
@@ -497,6 +499,12 @@ def test_the_confirmatory_study_trains_what_its_pre_registration_names():
         )
     layouts = {t.params["env.layout_seed"] for _, t in trials if "env.layout_seed" in t.params}
     assert layouts == {"404", "505", "606"}
+    # Every co-training arm refits on a new class; every grid16 arm keeps the goal to episode ends.
+    for sweep, trial in trials:
+        oracle_or_peer = trial.config.endswith(("-oracle", "-reward-model"))
+        assert (trial.params.get("cotraining.refit_new_classes") == "true") != oracle_or_peer, sweep.name
+        grid = trial.config.startswith("grid16-")
+        assert (trial.params.get("env.episode_end_classes") == "true") == grid, sweep.name
     # Each task's peers buy DOSPCoT's budget.
     for task, labels in budget_confirm.LABELS.items():
         named = {

@@ -36,6 +36,8 @@ QUOTA = "cotraining.quota"
 ENDS = "env.episode_end_classes"
 EXPLORATION = "training.exploration"
 ADMIT = "cotraining.add_fraction_start"
+ENDS_ARM = "goal on episode ends only"
+"""The words of an arm name that say its grid kept a class labelled only on episode ends there."""
 ORACLE_SHARE = 0.9
 """Label efficiency: the labels an arm needs to reach this share of the oracle's success."""
 ROUNDS = {EXPLORATION: ("rounds",)}
@@ -45,6 +47,12 @@ OWN = {"training.agent_draws": ("own",)}
 another draw of the same learner)."""
 OUTCOMES = '"outcomes+disagreement"'
 """Half of a round's chosen queries on episode ends, half by the views' disagreement (a TOML string)."""
+REFIT_ON = {REFIT: ("true",)}
+"""Each classifier learns the labels alone again when a class first shows
+(``cotraining.refit_new_classes``)."""
+ENDS_ON = {ENDS: ("true",)}
+"""On the grid, a reward class labelled only on keys that ended their episode (grid16's goal) is given
+to such keys alone (``env.episode_end_classes``)."""
 
 
 def spend(strategy: str, schedule: str = "even", *labels: str) -> dict[str, tuple[str, ...]]:
@@ -89,7 +97,7 @@ def arm_of(run: TrialRun) -> str:
     if QUOTA in params:
         parts.append("quota " + params[QUOTA].strip('"'))
     if params.get(ENDS) == "true":
-        parts.append("goal on episode ends only")
+        parts.append(ENDS_ARM)
     if params.get(FRACTION) == "1.0":
         parts.append("every reward labelled")
     if EXPLORATION in params:

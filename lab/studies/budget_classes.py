@@ -23,11 +23,12 @@ from __future__ import annotations
 from dataclasses import replace
 
 from dospcot.lab.studies.budget import (
-    ENDS,
+    ENDS_ARM,
+    ENDS_ON,
     FLOOR,
     QUOTA,
     RANDOM_SHARE,
-    REFIT,
+    REFIT_ON,
     ROUNDS_ARM,
     exploration_tables,
     figure,
@@ -111,9 +112,6 @@ FLOOR_DESCRIPTIVE = (
 )
 REFIT_TASKS = {"grid16, layout 11": OTHER_TASKS["grid16, layout 11"], **DOORKEY}
 
-REFIT_ON = {REFIT: ("true",)}
-"""Each classifier learns the labels alone again when a class first shows
-(``cotraining.refit_new_classes``)."""
 
 GRID_REFIT = _with(_five(GRID_OUTCOMES), "refit", REFIT_ON)
 
@@ -189,10 +187,6 @@ REFIT_SEEDS = (
 )
 FIVE_SEEDS = "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2"
 
-ENDS_ON = {ENDS: ("true",)}
-"""A reward class labelled only on keys that ended their episode (grid16's goal) is given to such keys
-alone (``env.episode_end_classes``)."""
-
 
 def _ends(sweep: Sweep) -> Sweep:
     """``sweep``'s grid16 arm with the goal kept to episode ends, on seeds 0-9."""
@@ -223,22 +217,22 @@ with the goal kept to episode ends, beside their runs without it (seeds 0-4); th
 (seeds 0-9) and the fast highway (seeds 0-4) with the MiniGrid settings, beside their runs without
 it. The oracles are the earlier explorations' runs (seeds 0-9)."""
 ENDS_TASKS = {"grid16, layout 11": OTHER_TASKS["grid16, layout 11"], **MINIGRID, **OTHER_TASKS}
-ENDED = f"{REFITTED.removesuffix(ROUNDS_ARM)}goal on episode ends only {ROUNDS_ARM}"
+ENDED = f"{REFITTED.removesuffix(ROUNDS_ARM)}{ENDS_ARM} {ROUNDS_ARM}"
 ENDS_DESCRIPTIVE = (
     (ENDED, REFITTED, "the goal kept to episode ends against not, both refitting"),
     (
-        f"{ALONE_REFITTED.removesuffix(ROUNDS_ARM)}goal on episode ends only {ROUNDS_ARM}",
+        f"{ALONE_REFITTED.removesuffix(ROUNDS_ARM)}{ENDS_ARM} {ROUNDS_ARM}",
         ALONE_REFITTED,
         "disagreement alone, the goal kept to episode ends against not",
     ),
     (
         ENDED,
-        f"self-training uncertainty decay refit on a new class goal on episode ends only {ROUNDS_ARM}",
+        f"self-training uncertainty decay refit on a new class {ENDS_ARM} {ROUNDS_ARM}",
         "two views against one view's uncertainty, with the refit and the goal on episode ends",
     ),
     (
         ENDED,
-        f"reward-model disagreement decay goal on episode ends only {ROUNDS_ARM}",
+        f"reward-model disagreement decay {ENDS_ARM} {ROUNDS_ARM}",
         "co-training against the reward-model peer, the goal on episode ends",
     ),
     (REFITTED, DECAY, "refitting on a new class against not"),

@@ -1,4 +1,4 @@
-"""The label-budget study (issue 58), confirmatory: the settings the six explorations chose, on seeds
+"""The label-budget study (issue 58), confirmatory: the settings the nine explorations chose, on seeds
 100-109, grid16 layouts no study had used, both MiniGrid tasks, the fast highway and MiniGrid's
 Unlock, which no one here had trained on, with the hypotheses B1-B4 of
 docs/preregistration-budget.md. Its tables are :mod:`~dospcot.lab.studies.budget`'s, each task's
@@ -13,8 +13,11 @@ import numpy as np
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.budget import (
     BUDGET,
+    ENDS_ARM,
+    ENDS_ON,
     ORACLE_SHARE,
     OUTCOMES,
+    REFIT_ON,
     ROUNDS_ARM,
     budget_sweep,
     by_arm,
@@ -43,16 +46,33 @@ SECOND = "200"
 
 SCHEDULE = "decay"
 """The schedule named for every arm but B1's reference, which spends at once (``"asap"``)."""
-DOSPCOT = f"dospcot outcomes+disagreement {SCHEDULE} {ROUNDS_ARM}"
-ASAP = f"dospcot outcomes+disagreement asap {ROUNDS_ARM}"
-SELF_TRAINING = f"self-training uncertainty {SCHEDULE} {ROUNDS_ARM}"
+REFIT_ARM = "refit on a new class"
+DOSPCOT = f"dospcot outcomes+disagreement {SCHEDULE} {REFIT_ARM} {ROUNDS_ARM}"
+ASAP = f"dospcot outcomes+disagreement asap {REFIT_ARM} {ROUNDS_ARM}"
+SELF_TRAINING = f"self-training uncertainty {SCHEDULE} {REFIT_ARM} {ROUNDS_ARM}"
 REWARD_MODEL = f"reward-model disagreement {SCHEDULE} {ROUNDS_ARM}"
-BLIND = f"dospcot random {SCHEDULE} {ROUNDS_ARM}"
+BLIND = f"dospcot random {SCHEDULE} {REFIT_ARM} {ROUNDS_ARM}"
 FIGURE = "![success against labels used, per arm, and the oracle's](budget.png)"
 
 
+GOAL_ON_ENDS = frozenset({"grid16"})
+"""The keys of :data:`LABELS` whose arms keep the goal to episode ends by a key of their sweep
+(``env.episode_end_classes``); the MiniGrid presets do so by their own ``gym.episode_end_classes``."""
+
+
+def _on(key: str, arm: str) -> str:
+    """Arm ``arm``'s name on the task of key ``key`` (:data:`GOAL_ON_ENDS`)."""
+    return arm.replace(ROUNDS_ARM, f"{ENDS_ARM} {ROUNDS_ARM}") if key in GOAL_ON_ENDS else arm
+
+
 def _sweep(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
-    return budget_sweep(f"budget-confirm-{task}-{name}", preset, grid)
+    """A sweep of the study: every arm that co-trains (DOSPCoT's and self-training's) refits its
+    classifiers when a class first shows (the reward-model peer fits on the labels alone every round),
+    and every arm of a task in :data:`GOAL_ON_ENDS` keeps the goal to episode ends."""
+    settings = {**grid, **(ENDS_ON if task in GOAL_ON_ENDS else {})}
+    if not preset.endswith(("-oracle", "-reward-model")):
+        settings.update(REFIT_ON)
+    return budget_sweep(f"budget-confirm-{task}-{name}", preset, settings)
 
 
 def _peers(task: str, prefix: str, grid: dict[str, tuple[str, ...]]) -> tuple[Sweep, ...]:
@@ -142,7 +162,7 @@ def _versus(arms: dict[str, list[TrialRun]], task: str, b: str) -> tuple[SeedSum
     """Success of DOSPCoT minus arm ``b`` at the task's budget, paired, and whether its interval lies
     above 0 (None until every pair has run)."""
     labels = LABELS[task]
-    values = paired_values(_at(arms, DOSPCOT, labels), _at(arms, b, labels))
+    values = paired_values(_at(arms, _on(task, DOSPCOT), labels), _at(arms, _on(task, b), labels))
     diff = SeedSummary.of(values)
     return diff, None if len(values) < PAIRS.get(task, SEEDS) else diff.low > 0
 
@@ -228,8 +248,8 @@ def _hypotheses(key: str, arms: dict[str, list[TrialRun]]) -> list[str]:
         ("the reward-model peer", REWARD_MODEL),
     ):
         diff, held = _versus(arms, key, peer)
-        mine, theirs = (labels_cell(_at(arms, arm, LABELS[key])) for arm in (DOSPCOT, peer))
-        unequal = _unequal(_at(arms, DOSPCOT, LABELS[key]), _at(arms, peer, LABELS[key]))
+        mine, theirs = (labels_cell(_at(arms, _on(key, arm), LABELS[key])) for arm in (DOSPCOT, peer))
+        unequal = _unequal(*(_at(arms, _on(key, arm), LABELS[key]) for arm in (DOSPCOT, peer)))
         lines.append(
             f"- B2 ({key}): success of DOSPCoT minus {name}, paired: {diff} over {diff.n} pairs ({mine} "
             f"against {theirs} labels a run{unequal}); interval above 0: {_verdict(held)}."

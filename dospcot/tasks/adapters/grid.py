@@ -170,10 +170,12 @@ class GridAdapter(StoreQueries):
             self.revealed_keys[self.demos.states, self.demos.actions] = True
             # Labelled samples of the pool from the start, as if the agents had stepped there.
             nxt = self.mdp.next_state[self.demos.states, self.demos.actions]
-            for s, a, s2, r in zip(
-                self.demos.states, self.demos.actions, nxt, self.demos.rewards, strict=True
+            ends = self.mdp.terminal[self.demos.states, self.demos.actions]
+            for s, a, s2, r, end in zip(
+                self.demos.states, self.demos.actions, nxt, self.demos.rewards, ends, strict=True
             ):
-                self.store.add(int(s), int(a), int(s2), True, float(r), float(r))
+                # Whether a demonstrated step ended its episode is the task's, as on an agent's step.
+                self.store.add(int(s), int(a), int(s2), True, float(r), float(r), (bool(end), False))
 
     # What the reward queries read of the pool (dospcot.core.queries.QueriedTask): never a hidden reward.
     def met(self) -> np.ndarray:
