@@ -36,6 +36,8 @@ QUOTA = "cotraining.quota"
 ENDS = "env.episode_end_classes"
 EXPLORATION = "training.exploration"
 ADMIT = "cotraining.add_fraction_start"
+REFIT_ARM = "refit on a new class"
+"""The words of an arm name that say its classifiers refit when a class first showed."""
 ENDS_ARM = "goal on episode ends only"
 """The words of an arm name that say its grid kept a class labelled only on episode ends there."""
 ORACLE_SHARE = 0.9
@@ -93,7 +95,7 @@ def arm_of(run: TrialRun) -> str:
     if RANDOM_SHARE in params:
         parts.append(f"{float(params[RANDOM_SHARE]):.0%} at random")
     if params.get(REFIT) == "true":
-        parts.append("refit on a new class")
+        parts.append(REFIT_ARM)
     if QUOTA in params:
         parts.append("quota " + params[QUOTA].strip('"'))
     if params.get(ENDS) == "true":

@@ -17,6 +17,7 @@ from dospcot.lab.studies.budget import (
     ENDS_ON,
     ORACLE_SHARE,
     OUTCOMES,
+    REFIT_ARM,
     REFIT_ON,
     ROUNDS_ARM,
     budget_sweep,
@@ -46,7 +47,6 @@ SECOND = "200"
 
 SCHEDULE = "decay"
 """The schedule named for every arm but B1's reference, which spends at once (``"asap"``)."""
-REFIT_ARM = "refit on a new class"
 DOSPCOT = f"dospcot outcomes+disagreement {SCHEDULE} {REFIT_ARM} {ROUNDS_ARM}"
 ASAP = f"dospcot outcomes+disagreement asap {REFIT_ARM} {ROUNDS_ARM}"
 SELF_TRAINING = f"self-training uncertainty {SCHEDULE} {REFIT_ARM} {ROUNDS_ARM}"
