@@ -423,6 +423,12 @@ def _controls(arms: dict[str, list[TrialRun]]) -> list[str]:
 ROUNDS_ARM = "exploration by rounds"
 
 
+def goal_on_ends(arm: str) -> str:
+    """Arm ``arm``'s name where its grid also keeps the goal to episode ends (:data:`ENDS_ARM`, which
+    :func:`arm_of` puts before the exploration's words)."""
+    return arm.replace(ROUNDS_ARM, f"{ENDS_ARM} {ROUNDS_ARM}")
+
+
 def descriptive(arms: dict[str, list[TrialRun]], comparisons: tuple[tuple[str, str, str], ...]) -> list[str]:
     """Each comparison (arm a, arm b, what a minus b asks) whose arms both ran: success of a minus b,
     paired by seed over the seeds both ran, with no threshold and no verdict."""

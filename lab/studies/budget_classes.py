@@ -23,15 +23,16 @@ from __future__ import annotations
 from dataclasses import replace
 
 from dospcot.lab.studies.budget import (
-    ENDS_ARM,
     ENDS_ON,
     FLOOR,
     QUOTA,
     RANDOM_SHARE,
+    REFIT_ARM,
     REFIT_ON,
     ROUNDS_ARM,
     exploration_tables,
     figure,
+    goal_on_ends,
     spend,
 )
 from dospcot.lab.studies.budget_explore import (
@@ -141,18 +142,19 @@ admitting the same share of its own candidates (``cotraining.quota = "candidates
 queries on episode ends make the goal a tenth of grid16's labels, and SPaMCo's quota then admits a
 tenth of the pool as the goal, where two samples are. The oracles are the earlier explorations'
 runs (seeds 0-9). LavaGap and the fast highway with the refit are not run yet."""
-REFITTED = f"dospcot outcomes+disagreement decay refit on a new class {ROUNDS_ARM}"
-ALONE_REFITTED = f"dospcot disagreement decay refit on a new class {ROUNDS_ARM}"
+REFITTED = f"dospcot outcomes+disagreement decay {REFIT_ARM} {ROUNDS_ARM}"
+ALONE_REFITTED = f"dospcot disagreement decay {REFIT_ARM} {ROUNDS_ARM}"
+SELF_REFITTED = f"self-training uncertainty decay {REFIT_ARM} {ROUNDS_ARM}"
 REFIT_DESCRIPTIVE = (
     (REFITTED, DECAY, "refitting on a new class against not"),
     (
-        f"self-training uncertainty decay refit on a new class {ROUNDS_ARM}",
+        SELF_REFITTED,
         f"self-training uncertainty decay {ROUNDS_ARM}",
         "the one-view peer refitting on a new class against not",
     ),
     (
         REFITTED,
-        f"self-training uncertainty decay refit on a new class {ROUNDS_ARM}",
+        SELF_REFITTED,
         "two views against one view's uncertainty, both refitting",
     ),
     (
@@ -167,7 +169,7 @@ REFIT_DESCRIPTIVE = (
     ),
     (
         ALONE_REFITTED,
-        f"self-training uncertainty decay refit on a new class {ROUNDS_ARM}",
+        SELF_REFITTED,
         "disagreement alone against one view's uncertainty, both refitting",
     ),
     (
@@ -176,7 +178,7 @@ REFIT_DESCRIPTIVE = (
         "disagreement alone, refitting, against the reward-model peer",
     ),
     (
-        f"dospcot outcomes+disagreement decay refit on a new class quota candidates {ROUNDS_ARM}",
+        f"dospcot outcomes+disagreement decay {REFIT_ARM} quota candidates {ROUNDS_ARM}",
         REFITTED,
         "each class admitting a share of its own candidates against SPaMCo's quota, both refitting",
     ),
@@ -217,22 +219,22 @@ with the goal kept to episode ends, beside their runs without it (seeds 0-4); th
 (seeds 0-9) and the fast highway (seeds 0-4) with the MiniGrid settings, beside their runs without
 it. The oracles are the earlier explorations' runs (seeds 0-9)."""
 ENDS_TASKS = {"grid16, layout 11": OTHER_TASKS["grid16, layout 11"], **MINIGRID, **OTHER_TASKS}
-ENDED = f"{REFITTED.removesuffix(ROUNDS_ARM)}{ENDS_ARM} {ROUNDS_ARM}"
+ENDED = goal_on_ends(REFITTED)
 ENDS_DESCRIPTIVE = (
     (ENDED, REFITTED, "the goal kept to episode ends against not, both refitting"),
     (
-        f"{ALONE_REFITTED.removesuffix(ROUNDS_ARM)}{ENDS_ARM} {ROUNDS_ARM}",
+        goal_on_ends(ALONE_REFITTED),
         ALONE_REFITTED,
         "disagreement alone, the goal kept to episode ends against not",
     ),
     (
         ENDED,
-        f"self-training uncertainty decay refit on a new class {ENDS_ARM} {ROUNDS_ARM}",
+        goal_on_ends(SELF_REFITTED),
         "two views against one view's uncertainty, with the refit and the goal on episode ends",
     ),
     (
         ENDED,
-        f"reward-model disagreement decay {ENDS_ARM} {ROUNDS_ARM}",
+        goal_on_ends(f"reward-model disagreement decay {ROUNDS_ARM}"),
         "co-training against the reward-model peer, the goal on episode ends",
     ),
     (REFITTED, DECAY, "refitting on a new class against not"),

@@ -13,7 +13,6 @@ import numpy as np
 from dospcot.lab.report import TrialRun
 from dospcot.lab.studies.budget import (
     BUDGET,
-    ENDS_ARM,
     ENDS_ON,
     ORACLE_SHARE,
     OUTCOMES,
@@ -23,6 +22,7 @@ from dospcot.lab.studies.budget import (
     budget_sweep,
     by_arm,
     figure,
+    goal_on_ends,
     paired_values,
     spend,
     task_tables,
@@ -62,7 +62,7 @@ GOAL_ON_ENDS = frozenset({"grid16"})
 
 def _on(key: str, arm: str) -> str:
     """Arm ``arm``'s name on the task of key ``key`` (:data:`GOAL_ON_ENDS`)."""
-    return arm.replace(ROUNDS_ARM, f"{ENDS_ARM} {ROUNDS_ARM}") if key in GOAL_ON_ENDS else arm
+    return goal_on_ends(arm) if key in GOAL_ON_ENDS else arm
 
 
 def _sweep(task: str, name: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
