@@ -349,6 +349,22 @@ def test_a_class_first_labelled_after_round_1_is_learnt_from_the_labels_before_i
         assert (old[truth == 1] != 1).all()
 
 
+def test_a_co_trainer_restored_between_rounds_still_refits_on_a_class_it_had_not_seen():
+    import pickle
+
+    config = CoTrainingConfig(max_classes=2, add_fraction_start=1.0, refit_new_classes=True)
+    kept = SelfPacedCoTrainer([2, 2], 1, config, [0], 2)
+    kept.step(_late_class_pool(False)[0])
+    # A checkpoint between the rounds carries which classes the labels have shown, so the restored
+    # co-trainer knows class 1 is new in round 2 (without it, it would take class 1 as seen before).
+    restored = pickle.loads(pickle.dumps(kept))
+    pool, truth = _late_class_pool(True)
+    ours, theirs = restored.step(pool), kept.step(pool)
+    np.testing.assert_array_equal(ours.pseudo_class, theirs.pseudo_class)
+    np.testing.assert_array_equal(ours.view_weight, theirs.view_weight)
+    assert (ours.pseudo_class[0][pool.unlabelled[0]] == truth[pool.unlabelled[0]]).all()
+
+
 def _stack(a: Pool, b: Pool) -> Pool:
     """Two one-run pools as a batch of two runs."""
     return Pool(
