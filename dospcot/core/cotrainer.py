@@ -53,6 +53,28 @@ weight (the others add exactly 0 to the loss, so they move nothing but rounding)
 measured in docs/guide/profile.md."""
 
 
+class FitsUnderNumerics:
+    """A trainer whose reward classifiers fit under its config's numerics version (:data:`NUMERICS`)."""
+
+    config: CoTrainingConfig
+
+    @property
+    def numerics(self) -> int:
+        """The numerics version of the classifiers' fits (``cotraining.numerics``; a config pickled
+        before the key existed reads 1, the only version there was: ``CoTrainingConfig.added_keys``)."""
+        return self.config.numerics
+
+    @property
+    def dtype(self) -> torch.dtype:
+        """The classifiers' parameters and inputs: float64 (numerics 1) or float32 (numerics 2)."""
+        return NUMERICS[self.numerics].dtype
+
+    @property
+    def dtype_np(self) -> type:
+        """:attr:`dtype` as numpy's."""
+        return NUMERICS[self.numerics].np_dtype
+
+
 def _fit(
     clf: BatchedRewardClassifier,
     numerics: Numerics,
@@ -155,7 +177,7 @@ class RunRound(RoundResult):
     ``pace``, ``changed`` and ``stopped`` plain numbers."""
 
 
-class SelfPacedCoTrainer:
+class SelfPacedCoTrainer(FitsUnderNumerics):
     """m reward classifiers co-trained by serial SPaMCo over B independent runs.
 
     :param view_dims: input width of each view's classifier (m entries).
@@ -190,22 +212,6 @@ class SelfPacedCoTrainer:
         self._previous: np.ndarray | None = None
         self._weights: np.ndarray | None = None
         self._seen = np.zeros((n_runs, n_classes), dtype=bool)
-
-    @property
-    def numerics(self) -> int:
-        """The numerics version of the classifiers' fits (``cotraining.numerics``; a config pickled
-        before the key existed reads 1, the only version there was: ``CoTrainingConfig.added_keys``)."""
-        return self.config.numerics
-
-    @property
-    def dtype(self) -> torch.dtype:
-        """The classifiers' parameters and inputs: float64 (numerics 1) or float32 (numerics 2)."""
-        return NUMERICS[self.numerics].dtype
-
-    @property
-    def dtype_np(self) -> type:
-        """:attr:`dtype` as numpy's."""
-        return NUMERICS[self.numerics].np_dtype
 
     @property
     def add_fraction(self) -> float:

@@ -20,11 +20,11 @@ import torch
 
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.core.classifier import BatchedRewardClassifier
-from dospcot.core.cotrainer import NUMERICS, RunPool, RunRound
+from dospcot.core.cotrainer import FitsUnderNumerics, RunPool, RunRound
 from dospcot.seeding import bootstrap_seed, ensemble_seed
 
 
-class RewardModelTrainer:
+class RewardModelTrainer(FitsUnderNumerics):
     """The ensembles of one run's reward model, one per view.
 
     :param view_dims: input width of each view's classifiers (m entries).
@@ -49,21 +49,6 @@ class RewardModelTrainer:
         ]
         self.round = 0
         self._previous: np.ndarray | None = None
-
-    @property
-    def numerics(self) -> int:
-        """The numerics version of the classifiers' fits (:data:`~dospcot.core.cotrainer.NUMERICS`)."""
-        return self.config.numerics
-
-    @property
-    def dtype(self) -> torch.dtype:
-        """The classifiers' parameters and inputs."""
-        return NUMERICS[self.numerics].dtype
-
-    @property
-    def dtype_np(self) -> type:
-        """:attr:`dtype` as numpy's."""
-        return NUMERICS[self.numerics].np_dtype
 
     def _inputs(self, pool: RunPool, rows: np.ndarray | slice) -> tuple[list[torch.Tensor], torch.Tensor]:
         """Each view's inputs of the samples ``rows``, (E, n, d_j), and their class mask, one copy per
