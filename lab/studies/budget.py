@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Sweep
+from dospcot.lab.studies.declaration import Glance, Study, Sweep
 from dospcot.lab.studies.grid import LAYOUT
 from dospcot.lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
 from dospcot.metrics import SeedSummary
@@ -361,6 +361,24 @@ def exploration_tables(
         return lines
 
     return tables
+
+
+def exploration(
+    study: str,
+    sweeps: tuple[Sweep, ...],
+    tasks: dict[str, Callable[[TrialRun], bool]],
+    seeds_line: str,
+    comparisons: tuple[tuple[str, str, str], ...],
+    title: str,
+    task: str,
+    glance: Callable[[list[TrialRun]], Glance],
+    seeds: int = 10,
+) -> Study:
+    """Exploratory study ``study`` of the label budgets: its ``sweeps`` on ``seeds`` seeds, a table per
+    task of ``tasks`` reading ``comparisons`` (:func:`exploration_tables`, ``seeds_line`` saying
+    which seeds ran) and a figure with a panel each (:func:`figure`)."""
+    tables = exploration_tables(tasks, study, seeds_line, comparisons)
+    return Study(sweeps, tables, title, task, glance, seeds=seeds, figure=figure(tasks))
 
 
 def task_tables(task: str, arms: dict[str, list[TrialRun]], read: list[str]) -> list[str]:

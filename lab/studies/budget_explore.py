@@ -25,8 +25,7 @@ from dospcot.lab.studies.budget import (
     STRATEGY,
     budget_sweep,
     by_arm,
-    exploration_tables,
-    figure,
+    exploration,
     paired_difference,
     spend,
 )
@@ -333,15 +332,15 @@ OTHER_TASKS = {"grid16, layout 11": _of("grid16-"), "fast highway": _of("fasthig
 ADMIT_TASKS = {**DOORKEY, **OTHER_TASKS}
 """Each exploration's tasks: a table and a figure's panel each, of the runs whose preset starts so."""
 
+TEN_SEEDS = "seeds 0-9, each agent drawing from its own generators, numerics 2"
+
 STUDIES: dict[str, Study] = {
-    "budget-explore": Study(
+    "budget-explore": exploration(
+        "budget-explore",
         EXPLORE_SWEEPS,
-        exploration_tables(
-            MINIGRID,
-            "budget-explore",
-            "seeds 0-2 (the oracle rows reuse the active-queries study's seeds 0-9)",
-            DESCRIPTIVE,
-        ),
+        MINIGRID,
+        "seeds 0-2 (the oracle rows reuse the active-queries study's seeds 0-9)",
+        DESCRIPTIVE,
         "Labels that pay: exploring label budgets, schedules and the reward-model peer",
         "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
         # The first exploration's clearest lever: on DoorKey at a 10% mask, exploring by rounds or the pace.
@@ -351,46 +350,35 @@ STUDIES: dict[str, Study] = {
             "minigrid-doorkey-",
         ),
         seeds=3,
-        figure=figure(MINIGRID),
     ),
-    "budget-explore-doorkey": Study(
+    "budget-explore-doorkey": exploration(
+        "budget-explore-doorkey",
         DOORKEY_SWEEPS,
-        exploration_tables(
-            DOORKEY,
-            "budget-explore-doorkey",
-            "seeds 0-9, each agent drawing from its own generators, numerics 2",
-            DOORKEY_DESCRIPTIVE,
-        ),
+        DOORKEY,
+        TEN_SEEDS,
+        DOORKEY_DESCRIPTIVE,
         "Labels that pay: the second exploration, DoorKey on ten seeds",
         "MiniGrid DoorKey-5x5 (exploratory)",
         glance_of(DOORKEY_DESCRIPTIVE[0], "success, 100 labels spread evenly minus spent at once"),
-        seeds=10,
-        figure=figure(DOORKEY),
     ),
-    "budget-explore-admit": Study(
+    "budget-explore-admit": exploration(
+        "budget-explore-admit",
         ADMIT_SWEEPS,
-        exploration_tables(
-            ADMIT_TASKS,
-            "budget-explore-admit",
-            "seeds 0-9, each agent drawing from its own generators, numerics 2",
-            ADMIT_DESCRIPTIVE,
-        ),
+        ADMIT_TASKS,
+        TEN_SEEDS,
+        ADMIT_DESCRIPTIVE,
         "Labels that pay: the third exploration, admitting all of U in round 1",
         "MiniGrid DoorKey-5x5, grid16 layout 11 and the fast highway (exploratory)",
         glance_of(
             ADMIT_DESCRIPTIVE[0], "DoorKey success, 100 labels, admitting all of U minus half", "minigrid-"
         ),
-        seeds=10,
-        figure=figure(ADMIT_TASKS),
     ),
-    "budget-explore-peers": Study(
+    "budget-explore-peers": exploration(
+        "budget-explore-peers",
         PEER_SWEEPS,
-        exploration_tables(
-            MINIGRID,
-            "budget-explore-peers",
-            "seeds 0-9, each agent drawing from its own generators, numerics 2",
-            PEER_DESCRIPTIVE,
-        ),
+        MINIGRID,
+        TEN_SEEDS,
+        PEER_DESCRIPTIVE,
         "Labels that pay: the fourth exploration, the peers on both MiniGrid tasks",
         "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
         glance_of(
@@ -398,33 +386,25 @@ STUDIES: dict[str, Study] = {
             "LavaGap success, 100 labels, DOSPCoT minus the reward-model peer",
             "minigrid-lavagap-",
         ),
-        seeds=10,
-        figure=figure(MINIGRID),
     ),
-    "budget-explore-decay": Study(
+    "budget-explore-decay": exploration(
+        "budget-explore-decay",
         DECAY_SWEEPS,
-        exploration_tables(
-            MINIGRID,
-            "budget-explore-decay",
-            "seeds 0-9, each agent drawing from its own generators, numerics 2",
-            DECAY_DESCRIPTIVE,
-        ),
+        MINIGRID,
+        TEN_SEEDS,
+        DECAY_DESCRIPTIVE,
         "Labels that pay: the fifth exploration, a decaying schedule on both MiniGrid tasks",
         "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
         glance_of(
             DECAY_DESCRIPTIVE[0], "LavaGap success, 100 labels, decaying minus even", "minigrid-lavagap-"
         ),
-        seeds=10,
-        figure=figure(MINIGRID),
     ),
-    "budget-explore-grid-highway": Study(
+    "budget-explore-grid-highway": exploration(
+        "budget-explore-grid-highway",
         OTHER_SWEEPS,
-        exploration_tables(
-            OTHER_TASKS,
-            "budget-explore-grid-highway",
-            "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2",
-            OTHER_DESCRIPTIVE,
-        ),
+        OTHER_TASKS,
+        "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2",
+        OTHER_DESCRIPTIVE,
         "Labels that pay: the sixth exploration, the MiniGrid settings on grid16 and the fast highway",
         f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
         glance_of(
@@ -433,6 +413,5 @@ STUDIES: dict[str, Study] = {
             "fasthighway-",
         ),
         seeds=5,
-        figure=figure(OTHER_TASKS),
     ),
 }
