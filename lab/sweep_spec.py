@@ -4,6 +4,7 @@ still matches its spec."""
 
 from __future__ import annotations
 
+import hashlib
 import json
 import re
 from collections.abc import Sequence
@@ -20,6 +21,8 @@ from dospcot.tasks import get_task, load_config, load_run_config
 SWEEP_FILE = "sweep.json"
 TRIAL_FILE = "trial.json"
 SWEEP_FORMAT = 1
+NAME_MAX = 255
+"""The longest file name, in bytes, that Linux's and macOS's file systems take."""
 Backend = Literal["local", "ray"]
 
 
@@ -132,9 +135,17 @@ class Trial:
 
     @property
     def trial_id(self) -> str:
-        """``<config name>/<key=value>__...__seed=<s>``: the trial's folder under ``trials/``."""
-        parts = [f"{key}={_folder_text(value)}" for key, value in self.params.items()]
-        return f"{self.name}/{'__'.join([*parts, f'seed={self.seed}'])}"
+        """``<config name>/<key=value>__...__seed=<s>``: the trial's folder under ``trials/``. A folder
+        name past :data:`NAME_MAX` bytes, which no file system would take, keeps its start and its seed
+        with a digest of the whole between them, so trials still get a folder each."""
+        params = "__".join(f"{key}={_folder_text(value)}" for key, value in self.params.items())
+        seed = f"seed={self.seed}"
+        folder = f"{params}__{seed}" if params else seed
+        if len(folder.encode()) > NAME_MAX:
+            digest = hashlib.sha256(params.encode()).hexdigest()[:16]
+            tail = f"__{digest}__{seed}"
+            folder = params.encode()[: NAME_MAX - len(tail)].decode(errors="ignore") + tail
+        return f"{self.name}/{folder}"
 
 
 def _folder_text(value: str) -> str:

@@ -54,6 +54,33 @@ def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
         SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}).trials()
 
 
+def test_a_trial_whose_folder_name_would_pass_255_bytes_gets_a_shortened_one_of_its_own(tmp_path):
+    # The confirmatory label-budget study's Unlock arm: nine grid values, 292 bytes of folder name.
+    params = {
+        "gym.env_id": "minigrid:MiniGrid-Unlock-v0",
+        "gym.episode_steps": "288",
+        "training.label_budget": "100",
+        "training.label_strategy": "outcomes+disagreement",
+        "training.query_schedule": "decay",
+        "cotraining.refit_new_classes": "true",
+        "training.exploration": "rounds",
+        "training.agent_draws": "own",
+    }
+    trial = Trial("minigrid-doorkey-dospcot", "minigrid-doorkey-dospcot", params, 100)
+    name, folder = trial.trial_id.split("/")
+    assert name == "minigrid-doorkey-dospcot" and len(folder.encode()) == 255
+    assert folder.startswith("gym.env_id=minigridMiniGrid-Unlock-v0__gym.episode_steps=288__")
+    assert folder.endswith("__seed=100")
+    others = [
+        Trial(trial.config, trial.name, params, 101),
+        Trial(trial.config, trial.name, {**params, "training.agent_draws": "shared"}, 100),
+    ]
+    assert len({trial.trial_id, *(t.trial_id for t in others)}) == 3
+    (trial_dir(tmp_path, trial) / "config.toml").parent.mkdir(parents=True)
+    (trial_dir(tmp_path, trial) / "config.toml").write_text("")  # the file system takes it
+    assert [p.name for p in (tmp_path / "trials" / name).iterdir()] == [folder]
+
+
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`; the fast tests below resume and skip trials
 def test_local_sweep_runs_every_trial_once_whatever_its_workers_and_reruns_nothing(tmp_path):
     spec = SweepSpec(("tiny",), GRID, (0, 1))
