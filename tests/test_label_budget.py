@@ -438,6 +438,11 @@ def test_the_confirmatory_comparisons_flag_arms_whose_labels_differ_by_more_than
     text = "\n".join(BUDGET_CONFIRM["budget"].tables(runs))
     assert "(20 against 21 labels a run (labels unequal: more than 2% apart))" in text
     assert "(20 against 20 labels a run); interval" in text  # grid16's self-training arm: equal
+    # An arm with no run yet has no labels to compare: the line waits rather than warns.
+    text = "\n".join(
+        BUDGET_CONFIRM["budget"].tables([r for r in runs if r.trial.config != "grid16-reward-model"])
+    )
+    assert "(20 against n/a labels a run); interval above 0: not decided yet." in text
 
 
 def test_the_class_table_groups_goal_rewards_that_differ_by_run_under_one_class():

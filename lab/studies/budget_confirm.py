@@ -149,8 +149,11 @@ def _at(arms: dict[str, list[TrialRun]], arm: str, labels: str) -> list[TrialRun
 
 
 def _unequal(first: list[TrialRun], second: list[TrialRun]) -> str:
-    """A warning where two arms' mean labels used lie more than 2% apart: their budget was not equal."""
-    a, b = (float(np.mean([labels_used(r) for r in runs])) if runs else 0.0 for runs in (first, second))
+    """A warning where two arms' mean labels used lie more than 2% apart: their budget was not equal
+    (none while either arm has no run to count)."""
+    if not first or not second:
+        return ""
+    a, b = (float(np.mean([labels_used(r) for r in runs])) for runs in (first, second))
     return " (labels unequal: more than 2% apart)" if abs(a - b) > 0.02 * max(a, b) else ""
 
 
