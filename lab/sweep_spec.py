@@ -137,7 +137,7 @@ class Trial:
     def trial_id(self) -> str:
         """``<config name>/<key=value>__...__seed=<s>``: the trial's folder under ``trials/``. A folder
         name past :data:`NAME_MAX` bytes, which no file system would take, keeps its start and its seed
-        with a digest of the whole between them, so trials still get a folder each."""
+        with a digest of its grid values between them, so trials still get a folder each."""
         params = "__".join(f"{key}={_folder_text(value)}" for key, value in self.params.items())
         seed = f"seed={self.seed}"
         folder = f"{params}__{seed}" if params else seed

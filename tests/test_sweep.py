@@ -55,7 +55,7 @@ def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
 
 
 def test_a_trial_whose_folder_name_would_pass_255_bytes_gets_a_shortened_one_of_its_own(tmp_path):
-    # The confirmatory label-budget study's Unlock arm: nine grid values, 292 bytes of folder name.
+    # The confirmatory label-budget study's Unlock arm: eight grid values, 265 bytes of folder name.
     params = {
         "gym.env_id": "minigrid:MiniGrid-Unlock-v0",
         "gym.episode_steps": "288",
