@@ -8,6 +8,7 @@ from __future__ import annotations
 import os
 import subprocess
 import sys
+import time
 import tomllib
 from pathlib import Path
 
@@ -21,7 +22,7 @@ from dospcot.config.presets import preset_names
 from dospcot.config.reference import REFERENCE_END, REFERENCE_START
 from dospcot.run import sizes
 from dospcot.run.cores import usable_cores
-from dospcot.run.run_folder import LOCK_FILE, process_start, run_lock, write_toml
+from dospcot.run.run_folder import LOCK_FILE, process_command, process_start, run_lock, write_toml
 from dospcot.run.sizes import MAX_SEEDS, check_sizes
 from dospcot.tasks import get_task, load_config
 
@@ -167,6 +168,7 @@ def test_a_lock_naming_a_live_process_that_is_no_dospcot_run_says_how_to_clear_i
     run = _run_folder(tmp_path)
     other = subprocess.Popen(["sleep", "60"])
     try:
+        _wait_until_started(other.pid, "sleep 60")
         (run / LOCK_FILE).write_text(str(other.pid))  # a lock as an old dospcot wrote it: the id alone
         err = _one_line(capsys, ["train", "--resume", str(run), "--no-progress"])
         assert err == (
@@ -182,6 +184,37 @@ def test_a_lock_naming_a_live_process_that_is_no_dospcot_run_says_how_to_clear_i
     finally:
         other.kill()
         other.wait()
+
+
+def _wait_until_started(pid: int, command: str) -> None:
+    """Wait (at most 30 s) until ``/proc`` shows ``pid`` running ``command``: Popen returns while the
+    child may still be part-way into the new program, its command line empty."""
+    for _ in range(3000):
+        if process_command(pid) == command:
+            return
+        time.sleep(0.01)
+    raise AssertionError(f"process {pid} never showed {command!r}")
+
+
+def test_a_lock_naming_a_process_with_no_command_line_says_both_ways_to_clear_it(capsys, tmp_path):
+    run = _run_folder(tmp_path)
+    gone = subprocess.Popen(["true"])  # exits at once; unreaped, it keeps its id and an empty command line
+    try:
+        for _ in range(3000):
+            if Path(f"/proc/{gone.pid}/stat").read_text().rpartition(")")[2].split()[0] == "Z":
+                break
+            time.sleep(0.01)
+        else:
+            raise AssertionError(f"process {gone.pid} never exited")
+        assert process_command(gone.pid) is None
+        (run / LOCK_FILE).write_text(str(gone.pid))
+        err = _one_line(capsys, ["train", "--resume", str(run), "--no-progress"])
+        assert err == (
+            f"dospcot train: error: {run} is being trained by process {gone.pid} (its {LOCK_FILE}); wait for "
+            f"it or stop it, then resume; if process {gone.pid} is no dospcot run, remove {run / LOCK_FILE}"
+        )
+    finally:
+        gone.wait()
 
 
 def test_a_leading_dot_number_in_set_is_a_number():

@@ -249,7 +249,7 @@ def _held_line(run_dir: Path, doing: str, pid: int) -> str:
     for; another (its id reused since a dospcot run died) holds nothing, and its lock can go."""
     command = process_command(pid)
     lock = run_dir / LOCK_FILE
-    if command is None:  # no /proc to read: say both
+    if command is None:  # nothing to judge the process by: say both
         return (
             f"{run_dir} is being {doing} by process {pid} (its {LOCK_FILE}); wait for it or stop it, then "
             f"resume; if process {pid} is no dospcot run, remove {lock}"
@@ -264,12 +264,15 @@ def _held_line(run_dir: Path, doing: str, pid: int) -> str:
 
 def process_command(pid: int, width: int = 80) -> str | None:
     """The command line of the process ``pid`` (shortened to ``width`` characters), or None where the
-    system does not say (no ``/proc``)."""
+    system does not say: no ``/proc``, or an empty line (a process part-way through starting a new
+    program, or one that has exited but not been reaped), which names no program to judge by."""
     try:
         raw = Path(f"/proc/{pid}/cmdline").read_bytes()
     except OSError:
         return None
-    command = " ".join(part.decode(errors="replace") for part in raw.split(b"\0") if part) or "?"
+    command = " ".join(part.decode(errors="replace") for part in raw.split(b"\0") if part)
+    if not command:
+        return None
     return command if len(command) <= width else command[: width - 3] + "..."
 
 
