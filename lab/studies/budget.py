@@ -373,12 +373,13 @@ def exploration(
     task: str,
     glance: Callable[[list[TrialRun]], Glance],
     seeds: int = 10,
-) -> Study:
-    """Exploratory study ``study`` of the label budgets: its ``sweeps`` on ``seeds`` seeds, a table per
-    task of ``tasks`` reading ``comparisons`` (:func:`exploration_tables`, ``seeds_line`` saying
-    which seeds ran) and a figure with a panel each (:func:`figure`)."""
+) -> tuple[str, Study]:
+    """Exploratory study ``study`` of the label budgets, with its name (a registry's entry): its
+    ``sweeps`` on ``seeds`` seeds, a table per task of ``tasks`` reading ``comparisons``
+    (:func:`exploration_tables`, ``seeds_line`` saying which seeds ran) and a figure with a panel each
+    (:func:`figure`)."""
     tables = exploration_tables(tasks, study, seeds_line, comparisons)
-    return Study(sweeps, tables, title, task, glance, seeds=seeds, figure=figure(tasks))
+    return study, Study(sweeps, tables, title, task, glance, seeds=seeds, figure=figure(tasks))
 
 
 def task_tables(task: str, arms: dict[str, list[TrialRun]], read: list[str]) -> list[str]:

@@ -244,40 +244,46 @@ ENDS_SEEDS = (
 )
 
 
-STUDIES: dict[str, Study] = {
-    "budget-explore-floors": exploration(
-        "budget-explore-floors",
-        FLOOR_SWEEPS,
-        OTHER_TASKS,
-        FIVE_SEEDS,
-        FLOOR_DESCRIPTIVE,
-        "Labels that pay: the seventh exploration, class floors and disagreement alone",
-        f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
-        glance_of(FLOOR_DESCRIPTIVE[0], "grid16 success, 20 labels, class floors minus none", "grid16-"),
-    ),
-    "budget-explore-refit": exploration(
-        "budget-explore-refit",
-        REFIT_SWEEPS,
-        REFIT_TASKS,
-        REFIT_SEEDS,
-        REFIT_DESCRIPTIVE,
-        "Labels that pay: the eighth exploration, refitting the classifiers on a new class",
-        f"grid16 layout 11 at {GRID_LABELS} labels, DoorKey-5x5 at 100 (exploratory)",
-        glance_of(
-            REFIT_DESCRIPTIVE[0], "grid16 success, 20 labels, refitting on a new class minus not", "grid16-"
+STUDIES: dict[str, Study] = dict(
+    (
+        exploration(
+            "budget-explore-floors",
+            FLOOR_SWEEPS,
+            OTHER_TASKS,
+            FIVE_SEEDS,
+            FLOOR_DESCRIPTIVE,
+            "Labels that pay: the seventh exploration, class floors and disagreement alone",
+            f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
+            glance_of(FLOOR_DESCRIPTIVE[0], "grid16 success, 20 labels, class floors minus none", "grid16-"),
         ),
-    ),
-    "budget-explore-ends": exploration(
-        "budget-explore-ends",
-        ENDS_SWEEPS,
-        ENDS_TASKS,
-        ENDS_SEEDS,
-        ENDS_DESCRIPTIVE,
-        "Labels that pay: the ninth exploration, the goal kept to episode ends",
-        f"grid16 layout 11 at {GRID_LABELS} labels, LavaGapS7 at 100, the fast highway at {HIGHWAY_LABELS} "
-        "(exploratory)",
-        glance_of(
-            ENDS_DESCRIPTIVE[0], "grid16 success, 20 labels, the goal on episode ends minus not", "grid16-"
+        exploration(
+            "budget-explore-refit",
+            REFIT_SWEEPS,
+            REFIT_TASKS,
+            REFIT_SEEDS,
+            REFIT_DESCRIPTIVE,
+            "Labels that pay: the eighth exploration, refitting the classifiers on a new class",
+            f"grid16 layout 11 at {GRID_LABELS} labels, DoorKey-5x5 at 100 (exploratory)",
+            glance_of(
+                REFIT_DESCRIPTIVE[0],
+                "grid16 success, 20 labels, refitting on a new class minus not",
+                "grid16-",
+            ),
         ),
-    ),
-}
+        exploration(
+            "budget-explore-ends",
+            ENDS_SWEEPS,
+            ENDS_TASKS,
+            ENDS_SEEDS,
+            ENDS_DESCRIPTIVE,
+            "Labels that pay: the ninth exploration, the goal kept to episode ends",
+            f"grid16 layout 11 at {GRID_LABELS} labels, LavaGapS7 at 100, the fast highway at "
+            f"{HIGHWAY_LABELS} (exploratory)",
+            glance_of(
+                ENDS_DESCRIPTIVE[0],
+                "grid16 success, 20 labels, the goal on episode ends minus not",
+                "grid16-",
+            ),
+        ),
+    )
+)

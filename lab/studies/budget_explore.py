@@ -334,84 +334,89 @@ ADMIT_TASKS = {**DOORKEY, **OTHER_TASKS}
 
 TEN_SEEDS = "seeds 0-9, each agent drawing from its own generators, numerics 2"
 
-STUDIES: dict[str, Study] = {
-    "budget-explore": exploration(
-        "budget-explore",
-        EXPLORE_SWEEPS,
-        MINIGRID,
-        "seeds 0-2 (the oracle rows reuse the active-queries study's seeds 0-9)",
-        DESCRIPTIVE,
-        "Labels that pay: exploring label budgets, schedules and the reward-model peer",
-        "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
-        # The first exploration's clearest lever: on DoorKey at a 10% mask, exploring by rounds or the pace.
-        glance_of(
-            DESCRIPTIVE[0],
-            "DoorKey success, 10% mask, exploring by rounds minus by the pace",
-            "minigrid-doorkey-",
+STUDIES: dict[str, Study] = dict(
+    (
+        exploration(
+            "budget-explore",
+            EXPLORE_SWEEPS,
+            MINIGRID,
+            "seeds 0-2 (the oracle rows reuse the active-queries study's seeds 0-9)",
+            DESCRIPTIVE,
+            "Labels that pay: exploring label budgets, schedules and the reward-model peer",
+            "MiniGrid LavaGapS7 and DoorKey-5x5 (exploratory)",
+            # The first exploration's clearest lever: on DoorKey at a 10% mask, exploring by rounds or
+            # the pace.
+            glance_of(
+                DESCRIPTIVE[0],
+                "DoorKey success, 10% mask, exploring by rounds minus by the pace",
+                "minigrid-doorkey-",
+            ),
+            seeds=3,
         ),
-        seeds=3,
-    ),
-    "budget-explore-doorkey": exploration(
-        "budget-explore-doorkey",
-        DOORKEY_SWEEPS,
-        DOORKEY,
-        TEN_SEEDS,
-        DOORKEY_DESCRIPTIVE,
-        "Labels that pay: the second exploration, DoorKey on ten seeds",
-        "MiniGrid DoorKey-5x5 (exploratory)",
-        glance_of(DOORKEY_DESCRIPTIVE[0], "success, 100 labels spread evenly minus spent at once"),
-    ),
-    "budget-explore-admit": exploration(
-        "budget-explore-admit",
-        ADMIT_SWEEPS,
-        ADMIT_TASKS,
-        TEN_SEEDS,
-        ADMIT_DESCRIPTIVE,
-        "Labels that pay: the third exploration, admitting all of U in round 1",
-        "MiniGrid DoorKey-5x5, grid16 layout 11 and the fast highway (exploratory)",
-        glance_of(
-            ADMIT_DESCRIPTIVE[0], "DoorKey success, 100 labels, admitting all of U minus half", "minigrid-"
+        exploration(
+            "budget-explore-doorkey",
+            DOORKEY_SWEEPS,
+            DOORKEY,
+            TEN_SEEDS,
+            DOORKEY_DESCRIPTIVE,
+            "Labels that pay: the second exploration, DoorKey on ten seeds",
+            "MiniGrid DoorKey-5x5 (exploratory)",
+            glance_of(DOORKEY_DESCRIPTIVE[0], "success, 100 labels spread evenly minus spent at once"),
         ),
-    ),
-    "budget-explore-peers": exploration(
-        "budget-explore-peers",
-        PEER_SWEEPS,
-        MINIGRID,
-        TEN_SEEDS,
-        PEER_DESCRIPTIVE,
-        "Labels that pay: the fourth exploration, the peers on both MiniGrid tasks",
-        "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
-        glance_of(
-            PEER_DESCRIPTIVE[3],
-            "LavaGap success, 100 labels, DOSPCoT minus the reward-model peer",
-            "minigrid-lavagap-",
+        exploration(
+            "budget-explore-admit",
+            ADMIT_SWEEPS,
+            ADMIT_TASKS,
+            TEN_SEEDS,
+            ADMIT_DESCRIPTIVE,
+            "Labels that pay: the third exploration, admitting all of U in round 1",
+            "MiniGrid DoorKey-5x5, grid16 layout 11 and the fast highway (exploratory)",
+            glance_of(
+                ADMIT_DESCRIPTIVE[0],
+                "DoorKey success, 100 labels, admitting all of U minus half",
+                "minigrid-",
+            ),
         ),
-    ),
-    "budget-explore-decay": exploration(
-        "budget-explore-decay",
-        DECAY_SWEEPS,
-        MINIGRID,
-        TEN_SEEDS,
-        DECAY_DESCRIPTIVE,
-        "Labels that pay: the fifth exploration, a decaying schedule on both MiniGrid tasks",
-        "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
-        glance_of(
-            DECAY_DESCRIPTIVE[0], "LavaGap success, 100 labels, decaying minus even", "minigrid-lavagap-"
+        exploration(
+            "budget-explore-peers",
+            PEER_SWEEPS,
+            MINIGRID,
+            TEN_SEEDS,
+            PEER_DESCRIPTIVE,
+            "Labels that pay: the fourth exploration, the peers on both MiniGrid tasks",
+            "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
+            glance_of(
+                PEER_DESCRIPTIVE[3],
+                "LavaGap success, 100 labels, DOSPCoT minus the reward-model peer",
+                "minigrid-lavagap-",
+            ),
         ),
-    ),
-    "budget-explore-grid-highway": exploration(
-        "budget-explore-grid-highway",
-        OTHER_SWEEPS,
-        OTHER_TASKS,
-        "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2",
-        OTHER_DESCRIPTIVE,
-        "Labels that pay: the sixth exploration, the MiniGrid settings on grid16 and the fast highway",
-        f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
-        glance_of(
-            OTHER_DESCRIPTIVE[1],
-            "fast highway success, DOSPCoT minus the reward-model peer",
-            "fasthighway-",
+        exploration(
+            "budget-explore-decay",
+            DECAY_SWEEPS,
+            MINIGRID,
+            TEN_SEEDS,
+            DECAY_DESCRIPTIVE,
+            "Labels that pay: the fifth exploration, a decaying schedule on both MiniGrid tasks",
+            "MiniGrid LavaGapS7 and DoorKey-5x5 at 100 labels (exploratory)",
+            glance_of(
+                DECAY_DESCRIPTIVE[0], "LavaGap success, 100 labels, decaying minus even", "minigrid-lavagap-"
+            ),
         ),
-        seeds=5,
-    ),
-}
+        exploration(
+            "budget-explore-grid-highway",
+            OTHER_SWEEPS,
+            OTHER_TASKS,
+            "seeds 0-4 (the oracles' 0-9), each agent drawing from its own generators, numerics 2",
+            OTHER_DESCRIPTIVE,
+            "Labels that pay: the sixth exploration, the MiniGrid settings on grid16 and the fast highway",
+            f"grid16 layout 11 at {GRID_LABELS} labels, the fast highway at {HIGHWAY_LABELS} (exploratory)",
+            glance_of(
+                OTHER_DESCRIPTIVE[1],
+                "fast highway success, DOSPCoT minus the reward-model peer",
+                "fasthighway-",
+            ),
+            seeds=5,
+        ),
+    )
+)
