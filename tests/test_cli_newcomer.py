@@ -10,6 +10,7 @@ import subprocess
 import sys
 import time
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 import pytest
@@ -168,7 +169,8 @@ def test_a_lock_naming_a_live_process_that_is_no_dospcot_run_says_how_to_clear_i
     run = _run_folder(tmp_path)
     other = subprocess.Popen(["sleep", "60"])
     try:
-        _wait_until_started(other.pid, "sleep 60")
+        # Popen returns while the child may still be part-way into the new program, its command line empty.
+        _wait_until(lambda: process_command(other.pid) == "sleep 60", f"process {other.pid} shows 'sleep 60'")
         (run / LOCK_FILE).write_text(str(other.pid))  # a lock as an old dospcot wrote it: the id alone
         err = _one_line(capsys, ["train", "--resume", str(run), "--no-progress"])
         assert err == (
@@ -186,14 +188,14 @@ def test_a_lock_naming_a_live_process_that_is_no_dospcot_run_says_how_to_clear_i
         other.wait()
 
 
-def _wait_until_started(pid: int, command: str) -> None:
-    """Wait (at most 30 s) until ``/proc`` shows ``pid`` running ``command``: Popen returns while the
-    child may still be part-way into the new program, its command line empty."""
+def _wait_until(holds: Callable[[], bool], what: str) -> None:
+    """Wait (at most 30 s) until ``holds()``: a child process's state, as ``/proc`` shows it, lags
+    the parent's call that changed it."""
     for _ in range(3000):
-        if process_command(pid) == command:
+        if holds():
             return
         time.sleep(0.01)
-    raise AssertionError(f"process {pid} never showed {command!r}")
+    raise AssertionError(f"never: {what}")
 
 
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="reads a process's state from /proc")
@@ -201,12 +203,10 @@ def test_a_lock_naming_a_process_with_no_command_line_says_both_ways_to_clear_it
     run = _run_folder(tmp_path)
     gone = subprocess.Popen(["true"])  # exits at once; unreaped, it keeps its id and an empty command line
     try:
-        for _ in range(3000):
-            if Path(f"/proc/{gone.pid}/stat").read_text().rpartition(")")[2].split()[0] == "Z":
-                break
-            time.sleep(0.01)
-        else:
-            raise AssertionError(f"process {gone.pid} never exited")
+        state = Path(f"/proc/{gone.pid}/stat")
+        _wait_until(
+            lambda: state.read_text().rpartition(")")[2].split()[0] == "Z", f"process {gone.pid} exits"
+        )
         assert process_command(gone.pid) is None
         (run / LOCK_FILE).write_text(str(gone.pid))
         err = _one_line(capsys, ["train", "--resume", str(run), "--no-progress"])
