@@ -1,3 +1,3 @@
-"""The lab beside the library: sweeps and their reports, the benchmarks and the published studies
-with their page writers. Nothing in the library imports it; ``dospcot sweep``, ``report``, ``bench``
-and ``study`` do."""
+"""The lab of the dospcot repository: the published studies and their pages, the benchmarks and the
+record's own figures. It imports the library and is never imported by it; it ships apart from the
+library's wheel (``lab/pyproject.toml``), with its own command, ``dospcot-lab``."""

@@ -1,9 +1,9 @@
-"""``dospcot bench``: performance claims measured against a peer in the same run, written to
+"""``dospcot-lab bench``: performance claims measured against a peer in the same run, written to
 BENCHMARKS.md by this module (never by hand).
 
 Every row reports our figure and the peer's, each the median of its repetitions with its min and
 max, their ratio, the target, and how the row was made: the benchmark that measured it, its
-repetitions, when, the commit and the CPU (:class:`~dospcot.lab.bench_measure.Provenance`).
+repetitions, when, the commit and the CPU (:class:`~dospcot_lab.bench_measure.Provenance`).
 Repetitions of ours and the peer alternate, so drift in the machine's speed hits both alike.
 """
 
@@ -19,28 +19,28 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
-from dospcot.lab.bench_batched import (
+from dospcot.run.interrupts import Interrupted
+from dospcot.run.run_folder import cpu_description
+from dospcot_lab.bench_batched import (
     bench_batched_memory,
     bench_batched_seeds,
     bench_batched_wall,
     bench_stacked_update,
 )
-from dospcot.lab.bench_cost import COST_TASKS, bench_cost, bench_release
-from dospcot.lab.bench_env_rows import (
+from dospcot_lab.bench_cost import COST_TASKS, bench_cost, bench_release
+from dospcot_lab.bench_env_rows import (
     bench_cotraining_scaling,
     bench_fast_highway,
     bench_minigrid_wrappers,
     bench_store_memory,
 )
-from dospcot.lab.bench_measure import Provenance, Row, short_commit
-from dospcot.lab.bench_rows import (
+from dospcot_lab.bench_measure import Provenance, Row, short_commit
+from dospcot_lab.bench_rows import (
     bench_cotraining_overhead,
     bench_esarsa_dqn,
     bench_sweep_throughput,
     bench_tabular,
 )
-from dospcot.run.interrupts import Interrupted
-from dospcot.run.run_folder import cpu_description
 
 
 def _esarsa_dqn(net: list[int], batch: int, **options: str) -> Callable[[bool, int], Row]:
@@ -82,7 +82,7 @@ GPU_BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     "stacked_update": lambda quick, repeats: bench_stacked_update(quick, repeats, device="cuda"),
     "batched_seeds": lambda quick, repeats: bench_batched_seeds(quick, repeats, device="cuda"),
 }
-"""The rows ``dospcot bench --device cuda`` measures on a GPU, into the GPU column of the row of the same
+"""The rows ``dospcot-lab bench --device cuda`` measures on a GPU, into the GPU column of the row of the same
 benchmark and setting: both sides on the GPU, in wall time."""
 
 NOTES = [
@@ -127,7 +127,7 @@ NOTES = [
     "- The batched-seeds CPU-time rows train the same seeds of a shortened preset (two rounds) as one "
     "batch (`dospcot.core.batched_runs.BatchedRuns`, one process) and as runs of their own one after "
     "another (the same process), counting the process's CPU time per seed, run set-up included. The "
-    "targets (4x for grid16 and the fast highway, 2.5x for grid32) are issue 48's; the batch shares the "
+    "targets (4x for grid16 and the fast highway, 2.5x for grid32) are the batched-seeds aims; the batch shares the "
     "networks' arithmetic, not the classifiers' fits or the envs' steps, which docs/batched_seeds.md "
     "measures as what limits the ratio.",
     "- The batched wall-time row runs `dospcot sweep --workers 2` over the same cell twice in fresh "
@@ -148,7 +148,7 @@ NOTES = [
     "the interpreter's start and imports count, as in a user's run. The last release (the peer of the "
     "release rows) runs from commit 700346f's source installed into the user's cache (`pip install "
     "--target`); a run serves every row that needs it, so a task's rows cost one set of runs.",
-    "- The GPU column holds the rows that have a GPU form, measured by `dospcot bench --device cuda` on "
+    "- The GPU column holds the rows that have a GPU form, measured by `dospcot-lab bench --device cuda` on "
     "the machine its line above the table names: ours and the peer both on the GPU (`dqn.device = "
     "'cuda'` for the batched-seeds row, whose classifiers and envs stay on the CPU), in wall time, since "
     "the CPU only queues a GPU's work; the cell gives the ratio, whether it meets the row's target, and "
@@ -169,7 +169,7 @@ WITHOUT_GPU = "| benchmark | setting | ours | peer | ratio | target | met |"
 """The header of a table written before the GPU column, which a rerun gives the column."""
 FIGURES = (
     "Each figure: the median of its row's repetitions [min, max]; ours and the peer alternate in the same "
-    "run. A row's *made by* cell says how it was made: the benchmark (`dospcot bench --only NAME` "
+    "run. A row's *made by* cell says how it was made: the benchmark (`dospcot-lab bench --only NAME` "
     "measures it again), its repetitions, when (UTC), the commit of the source that measured it (`+dirty`: "
     "with uncommitted changes) and the CPU with torch's kernels."
 )
@@ -270,7 +270,7 @@ def run_benchmarks(
     table = text if any(h in text for h in (TABLE_HEADER, WITHOUT_PROVENANCE, WITHOUT_GPU)) else None
     if (only or device != "cpu") and table is None:
         raise ValueError(
-            f"--only and --device update the table of a file a full `dospcot bench` wrote; {out} holds none"
+            f"--only and --device update the table of a file a full `dospcot-lab bench` wrote; {out} holds none"
         )
     try:  # before the rows, which take most of an hour, not after
         out.parent.mkdir(parents=True, exist_ok=True)
@@ -279,7 +279,7 @@ def run_benchmarks(
     torch.set_num_threads(1)
     rows: list[Row] = []
     chosen = {name: catalogue[name] for name in only} if only else catalogue
-    with tqdm(chosen.items(), desc="dospcot bench", unit="row", dynamic_ncols=True) as bar:
+    with tqdm(chosen.items(), desc="dospcot-lab bench", unit="row", dynamic_ncols=True) as bar:
         for name, bench in bar:
             bar.set_postfix_str(name)
             try:

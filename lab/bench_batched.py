@@ -1,4 +1,4 @@
-"""The batched-seeds rows of ``dospcot bench`` (docs/batched_seeds.md): a cell's seeds trained as one
+"""The batched-seeds rows of ``dospcot-lab bench`` (docs/batched_seeds.md): a cell's seeds trained as one
 batch against runs of their own, in CPU time, wall time and memory."""
 
 from __future__ import annotations
@@ -16,13 +16,13 @@ import torch as th
 
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.batched_runs import BatchedRuns
-from dospcot.lab.bench_measure import Clock, Row, alternating, onehot_cliff
-from dospcot.lab.sweep import run_sweep
-from dospcot.lab.sweep_spec import SweepSpec
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
 from dospcot.run.cotraining import build_run
+from dospcot.sweeps.sweep import run_sweep
+from dospcot.sweeps.sweep_spec import SweepSpec
 from dospcot.tasks import load_config
+from dospcot_lab.bench_measure import Clock, Row, alternating, onehot_cliff
 
 
 def _seconds_per_seed(cfgs: list[TrainConfig], batched: bool) -> float:

@@ -1,4 +1,4 @@
-"""The cost rows of ``dospcot bench`` (issue 59): a DOSPCoT run against a self-training run, and this
+"""The cost rows of ``dospcot-lab bench``: a DOSPCoT run against a self-training run, and this
 release against the last, in CPU time and peak memory of whole ``dospcot train`` runs.
 
 Each run is a ``dospcot train`` subprocess on one torch thread, in a temporary folder, at its preset's
@@ -19,10 +19,11 @@ import sys
 import tempfile
 from pathlib import Path
 
-from dospcot.lab.bench_measure import Row
+from dospcot_lab.bench_measure import Row
+from dospcot_lab.repository import find_repository
 
 LAST_RELEASE = "700346f"
-"""The last release before issue 59's changes, the peer of the release rows."""
+"""The last release before the agents' cost work, the peer of the release rows."""
 COST_TASKS: dict[str, tuple[str, str]] = {
     "grid16": ("grid16-dospcot", "grid16-self-training"),
     "doorkey": ("minigrid-doorkey-dospcot", "minigrid-doorkey-self-training"),
@@ -31,32 +32,33 @@ COST_TASKS: dict[str, tuple[str, str]] = {
 }
 """Each task's DOSPCoT preset and its one-agent peer."""
 COST_TARGET = 2.5
-"""A DOSPCoT run's CPU time over a self-training run's, at most (issue 59: two agents' floor is 2)."""
+"""A DOSPCoT run's CPU time over a self-training run's, at most (two agents' floor is 2)."""
 RELEASE_TARGETS = {"grid16": 1.0, "doorkey": 1.0, "lavagap": 0.5, "fasthighway": 0.5}
-"""This release's CPU per DOSPCoT run over the last release's, at most: at least 2x less where issue
-59 asks it (LavaGap, the fast highway), no slower elsewhere."""
+"""This release's CPU per DOSPCoT run over the last release's, at most: at least 2x less on LavaGap and
+the fast highway, no slower elsewhere."""
 MEMORY_TARGET = 1 / 3
-"""A LavaGap DOSPCoT run's peak memory over the last release's, at most (issue 59: 3x less)."""
+"""A LavaGap DOSPCoT run's peak memory over the last release's, at most (3x less)."""
 QUICK = ("training.rounds=2",)
 SEEDS, QUICK_SEEDS = 3, 1
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def release_site(commit: str = LAST_RELEASE) -> Path:
     """A folder holding ``commit``'s package, installed once (``pip --target``) into the cache.
 
-    :raises RuntimeError: this code does not run from a git checkout that holds ``commit``, or the
+    :raises RuntimeError: the checkout the working folder lies in does not hold ``commit``, or the
         install fails.
+    :raises NotARepository: the working folder lies in no checkout of the repository.
     """
     site = Path(os.environ.get("XDG_CACHE_HOME", Path.home() / ".cache")) / "dospcot" / "releases" / commit
     if (site / "dospcot").is_dir():
         return site
+    root = find_repository().root
     with tempfile.TemporaryDirectory() as source:
-        archive = subprocess.run(["git", "-C", str(ROOT), "archive", commit], capture_output=True)
+        archive = subprocess.run(["git", "-C", str(root), "archive", commit], capture_output=True)
         if archive.returncode != 0:
             raise RuntimeError(
                 f"the release rows install commit {commit} from this checkout's git history, which "
-                f"{ROOT} lacks: {archive.stderr.decode().strip()}"
+                f"{root} lacks: {archive.stderr.decode().strip()}"
             )
         subprocess.run(["tar", "-x", "-C", source], input=archive.stdout, check=True)
         pip = [sys.executable, "-m", "pip", "install", "-q", "--no-deps", "--no-build-isolation"]

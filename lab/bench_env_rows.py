@@ -1,4 +1,4 @@
-"""The rows of ``dospcot bench`` on envs and stores: the fast highway against highway-env, MiniGrid's
+"""The rows of ``dospcot-lab bench`` on envs and stores: the fast highway against highway-env, MiniGrid's
 sensor wrappers, the key store's memory and the co-trainer's scaling with the pool."""
 
 from __future__ import annotations
@@ -13,9 +13,9 @@ import numpy as np
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.envs import StateActionMask
-from dospcot.lab.bench_measure import Row, alternating
 from dospcot.run.cotraining import build_run
 from dospcot.tasks import load_config
+from dospcot_lab.bench_measure import Row, alternating
 
 
 def _random_steps_per_second(env: gym.Env, steps: int, seed: int) -> float:

@@ -1,4 +1,4 @@
-"""How ``dospcot bench`` measures (:mod:`dospcot.lab.bench`): a figure's median, min and max over
+"""How ``dospcot-lab bench`` measures (:mod:`dospcot_lab.bench`): a figure's median, min and max over
 repetitions that alternate between ours and the peer's, a row of the table, how the row was made (its
 provenance), and the timers."""
 
@@ -72,7 +72,7 @@ class Row:
     higher_is_better: bool
     target: float
     made: Provenance | None = None
-    """How the row was made; ``dospcot bench`` stamps it as the row lands (None: not stamped)."""
+    """How the row was made; ``dospcot-lab bench`` stamps it as the row lands (None: not stamped)."""
 
     @classmethod
     def measured(
@@ -96,7 +96,7 @@ class Row:
 @dataclass(frozen=True)
 class Provenance:
     """How a row of BENCHMARKS.md was made: the benchmark that measured it (a key of
-    :data:`dospcot.lab.bench.BENCHMARKS`), its repetitions, when (UTC), the source's commit and the CPU.
+    :data:`dospcot_lab.bench.BENCHMARKS`), its repetitions, when (UTC), the source's commit and the CPU.
     Written in the row's *made by* cell as its five fields, ``; ``-separated; a field a row written
     before rows carried their provenance lacks reads :data:`NOT_RECORDED`."""
 

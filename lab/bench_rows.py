@@ -1,4 +1,4 @@
-"""The rows of ``dospcot bench`` (:mod:`dospcot.lab.bench`): each measures one of the project's
+"""The rows of ``dospcot-lab bench`` (:mod:`dospcot_lab.bench`): each measures one of the project's
 performance claims, ours and a peer's figure in the same run, with the measurement's median, min and
 max over repetitions that alternate between the two."""
 
@@ -18,16 +18,16 @@ from dospcot.config.learning_sections import TabularConfig
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.tabular_cotraining import TabularCoTraining
 from dospcot.envs import ViewObservationWrapper
-from dospcot.lab.bench_measure import Clock, Row, alternating, onehot_cliff
-from dospcot.lab.sweep import run_sweep
-from dospcot.lab.sweep_spec import SweepSpec
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.tabular import TABULAR_KINDS, expected_value
 from dospcot.run import paper_protocol as paper
 from dospcot.run.cotraining import build_run
 from dospcot.seeding import agent_seed
+from dospcot.sweeps.sweep import run_sweep
+from dospcot.sweeps.sweep_spec import SweepSpec
 from dospcot.tasks import load_config
 from dospcot.tasks.adapters.grid import grid_world
+from dospcot_lab.bench_measure import Clock, Row, alternating, onehot_cliff
 
 
 def _steps_per_second(

@@ -1,14 +1,13 @@
 """The record's own figures, counted from its files (``runs/sweeps/``, runs/README.md): its sweeps,
 runs, files and bytes, and which runs keep which file; and the block of runs/README.md they fill.
 
-``python -m dospcot.lab.record --write`` writes the block (between its markers) from the record as it
-is; ``tests/test_prose_figures.py`` fails while the block is stale, and checks the prose figures that
+``dospcot-lab record --write`` writes the block (between its markers) from the record as it is;
+``tests/lab/test_prose_figures.py`` fails while the block is stale, and checks the prose figures that
 restate the record elsewhere against the functions here. Nothing here trains or imports torch.
 """
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import tomllib
@@ -17,9 +16,6 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-"""The checkout this module lies in (an editable install): its ``runs/sweeps/`` is the record."""
-RUNS_README = ROOT / "runs" / "README.md"
 SIZE_BLOCK = "record-size"
 """The generated block of runs/README.md: the record's size."""
 BLOCK = 4096
@@ -30,7 +26,7 @@ BLOCK = 4096
 class Record:
     """The record under ``root`` (a checkout): what its sweeps and runs hold, read from its files."""
 
-    root: Path = ROOT
+    root: Path
 
     @property
     def sweeps_dir(self) -> Path:
@@ -116,7 +112,7 @@ class Record:
         run = _bytes(total / len(self.runs))
         disk = blocks * BLOCK / 2**20
         return (
-            "**Its size**, counted from its files by `python -m dospcot.lab.record --write` (which writes "
+            "**Its size**, counted from its files by `dospcot-lab record --write` (which writes "
             f"this paragraph; a test fails while it is stale): {len(self.sweeps)} sweeps, "
             f"{len(self.runs):,} runs, {len(self.files):,} files, {_bytes(total)} of content, about {run} a "
             f"run ({per_name}). On a disk with {BLOCK // 1024} kB blocks, each file and folder rounded up "
@@ -146,7 +142,7 @@ def read_block(text: str, name: str) -> str:
     return text.split(start)[1].split(end)[0].strip("\n")
 
 
-def write_size(record: Record, readme: Path = RUNS_README) -> None:
+def write_size(record: Record, readme: Path) -> None:
     """Write ``record``'s size paragraph into ``readme``'s block, keeping the rest."""
     text = readme.read_text()
     read_block(text, SIZE_BLOCK)  # checks the markers
@@ -154,21 +150,3 @@ def write_size(record: Record, readme: Path = RUNS_README) -> None:
     head, rest = text.split(start)
     _, tail = rest.split(end)
     readme.write_text(f"{head}{start}\n{record.size_paragraph()}\n{end}{tail}")
-
-
-def main(argv: list[str] | None = None) -> None:
-    """``python -m dospcot.lab.record [--write]``: print the record's size paragraph; with ``--write``,
-    write it into runs/README.md."""
-    parser = argparse.ArgumentParser(description=main.__doc__)
-    parser.add_argument("--write", action="store_true", help="write the paragraph into runs/README.md")
-    args = parser.parse_args(argv)
-    record = Record()
-    if args.write:
-        write_size(record)
-        print(f"wrote {RUNS_README}")
-    else:
-        print(record.size_paragraph())
-
-
-if __name__ == "__main__":
-    main()

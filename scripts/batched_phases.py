@@ -31,10 +31,10 @@ import torch.nn.functional as F
 from dospcot.core.batched_runs import BatchedRuns
 from dospcot.core.classifier import BatchedRewardClassifier
 from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.lab.bench_batched import BATCHED_CELLS
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.run.cotraining import build_run
 from dospcot.tasks import load_config
+from dospcot_lab.bench_batched import BATCHED_CELLS
 
 PHASES: dict[str, tuple[type, str]] = {
     "collect": (ExpectedSarsaDQN, "learn"),

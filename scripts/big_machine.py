@@ -1,4 +1,4 @@
-"""How a big machine is best used: one cell's seeds swept four ways, timed side by side (issue 59).
+"""How a big machine is best used: one cell's seeds swept four ways, timed side by side.
 
 Sweeps ``--seeds`` seeds of the bench's shortened ``grid16-dospcot`` (the overrides of
 ``BATCHED_CELLS`` in ``lab/bench_batched.py``) with ``dospcot sweep``, each way in a fresh folder under

@@ -5,7 +5,7 @@
   :mod:`dospcot.config.reference` (the source ``dospcot config`` reads too; the ``[dqn]`` keys that
   come from stable-baselines3's ``DQN`` take SB3's own descriptions). The build fills it in fresh;
   ``python scripts/mkdocs_hooks.py --write`` writes it into the repository's page, and
-  ``tests/test_docs.py`` checks that the page is current.
+  ``tests/lab/test_docs.py`` checks that the page is current.
 - The API reference's coverage: every module of the package must be rendered by some page under
   ``docs/api/`` (a ``::: module`` line), and every public name of those modules must have a
   docstring. Either gap is logged as a warning, which ``mkdocs build --strict`` turns into a failed
@@ -31,17 +31,20 @@ ROOT = Path(__file__).resolve().parents[1]
 API_PAGES = ROOT / "docs" / "api"
 CONFIGURATION_PAGE = ROOT / "docs" / "guide" / "configuration.md"
 """The guide's page that holds the configuration reference (between its markers)."""
-PACKAGES = ("dospcot", "dospcot.envs", "dospcot.policies", "dospcot.lab")
-"""The package and the sub-packages that live in folders of their own (``envs/``, ``policies/``,
-``lab/``)."""
+PACKAGES = ("dospcot", "dospcot.envs", "dospcot.policies", "dospcot_lab")
+"""The library's package and the sub-packages that live in folders of their own (``envs/``,
+``policies/``), and the lab's package (``lab/``, installed apart as ``dospcot_lab``)."""
 NOT_API = {
     "dospcot.__main__",
     "dospcot.cli",
     "dospcot.cli.__main__",
     "dospcot.cli.commands",
     "dospcot.cli.parser",
+    "dospcot_lab.__main__",
+    "dospcot_lab.cli",
 }
-"""Modules that are a command, not an API: ``dospcot --help`` and the guide document them."""
+"""Modules that are a command, not an API: ``dospcot --help``, ``dospcot-lab --help`` and the guides
+document them."""
 KNOWN_GAPS = {
     "dospcot.envs.gridworld.GridLayout.goal",
     "dospcot.envs.gridworld.GridLayout.size",
@@ -161,14 +164,14 @@ def documentation_gaps() -> tuple[list[str], list[str]]:
 
 
 API_SOURCE = ROOT / "build" / "api-source"
-"""The package as it imports (``dospcot/`` with ``envs/``, ``policies/`` and ``lab/`` inside), for the API
-reference's static analysis; mkdocs.yml points mkdocstrings here."""
+"""The packages as they import (``dospcot/`` with ``envs/`` and ``policies/`` inside, and ``lab/`` as
+``dospcot_lab/``), for the API reference's static analysis; mkdocs.yml points mkdocstrings here."""
 
 
 def lay_out_api_source() -> Path:
-    """Build :data:`API_SOURCE`: symbolic links to every entry of ``dospcot/``, and to ``envs/``,
-    ``policies/`` and ``lab/`` as ``dospcot/envs``, ``dospcot/policies`` and ``dospcot/lab``, as
-    pyproject's ``package-dir`` maps them."""
+    """Build :data:`API_SOURCE`: symbolic links to every entry of ``dospcot/``, to ``envs/`` and
+    ``policies/`` as ``dospcot/envs`` and ``dospcot/policies``, as pyproject's ``package-dir`` maps
+    them, and to ``lab/`` as ``dospcot_lab``, as the lab's own pyproject does."""
     package = API_SOURCE / "dospcot"
     if API_SOURCE.exists():
         shutil.rmtree(API_SOURCE)
@@ -176,8 +179,9 @@ def lay_out_api_source() -> Path:
     for entry in (ROOT / "dospcot").iterdir():
         if entry.name != "__pycache__":
             (package / entry.name).symlink_to(entry)
-    for name in ("envs", "policies", "lab"):
+    for name in ("envs", "policies"):
         (package / name).symlink_to(ROOT / name)
+    (API_SOURCE / "dospcot_lab").symlink_to(ROOT / "lab")
     return package
 
 

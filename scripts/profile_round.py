@@ -1,4 +1,4 @@
-"""Where a DOSPCoT run's CPU goes, phase by phase, against a self-training run (issue 59).
+"""Where a DOSPCoT run's CPU goes, phase by phase, against a self-training run.
 
 Trains one seed of each of four DOSPCoT presets and of its self-training peer, each in its own
 subprocess (one at a time, one torch thread, as ``dospcot train --threads 1``), through ``dospcot

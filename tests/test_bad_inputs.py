@@ -391,11 +391,19 @@ def test_the_commands_refuse_what_they_would_ignore_or_misread(capsys, tmp_path)
         (["reproduce-paper", "--seeds", "1"], "one seed cannot give"),
         (["sweep", "tiny", "--grid", "training.rounds=1,1"], "1 is given twice"),
         (["sweep", "tiny", "--ray-address", "10.0.0.1:6379"], "it needs --backend ray"),
-        (["bench", "--quick", "--out", str(tmp_path / "x" / "BENCHMARKS.md")], "never go into BENCHMARKS.md"),
-        (["bench", "--quick", "--out", "/proc/nope/bench.md"], "cannot make its folder"),
     ]
     for argv, message in cases:
         assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert message in err and err.count("\n") == 1, err
+    from dospcot_lab.cli import main as lab_main
+
+    lab_cases = [
+        (["bench", "--quick", "--out", str(tmp_path / "x" / "BENCHMARKS.md")], "never go into BENCHMARKS.md"),
+        (["bench", "--quick", "--out", "/proc/nope/bench.md"], "cannot make its folder"),
+    ]
+    for argv, message in lab_cases:
+        assert lab_main(argv) == 2, argv
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1, err
 
@@ -424,7 +432,8 @@ def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on
     "interrupted", and the study's own command to go on."""
     from types import SimpleNamespace
 
-    from dospcot.lab import studies
+    from dospcot_lab import studies
+    from dospcot_lab.cli import main as lab_main
 
     started = []
 
@@ -436,26 +445,21 @@ def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on
 
     monkeypatch.setattr(studies, "run_sweep", run_sweep)
     runs = tmp_path / "sweeps"
-    assert main(["study", "minigrid", "--runs-dir", str(runs)]) == 130
+    assert lab_main(["study", "minigrid", "--runs-dir", str(runs)]) == 130
     assert len(started) == 2
     err = capsys.readouterr().err
     assert err == (
-        f"dospcot study: interrupted; kept every trial that finished, under {runs}; "
-        f"resume with: dospcot study minigrid --runs-dir {runs}\n"
+        f"dospcot-lab study: interrupted; kept every trial that finished, under {runs}; "
+        f"resume with: dospcot-lab study minigrid --runs-dir {runs}\n"
     )
-    started.clear()
-    with pytest.raises(SystemExit) as stop:  # the script says the same
-        studies.main(["minigrid", "--runs-dir", str(runs)])
-    assert stop.value.code == 130
-    assert capsys.readouterr().err.startswith("study.py: interrupted; kept every trial that finished")
 
 
 def test_a_stop_as_a_sweep_closes_counts_what_finished(tmp_path, monkeypatch):
     """SIGTERM after the last trial ended, while the sweep shuts its workers down: the line still says
     what was kept, not a bare "interrupted"."""
-    from dospcot.lab import sweep as sweep_module
-    from dospcot.lab.sweep_spec import SweepSpec
     from dospcot.run.interrupts import Interrupted
+    from dospcot.sweeps import sweep as sweep_module
+    from dospcot.sweeps.sweep_spec import SweepSpec
 
     class StoppedAsItCloses(sweep_module.tqdm):
         stops = 1  # once: tqdm closes again when collected

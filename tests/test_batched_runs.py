@@ -136,8 +136,8 @@ def test_a_batch_killed_after_a_round_resumes_to_the_files_of_one_never_stopped(
 
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`; the grouping alone, untrained, is checked below
 def test_a_sweep_batches_its_seeds_and_a_batchs_grouping_changes_no_members_files(tmp_path):
-    from dospcot.lab.sweep import run_sweep
-    from dospcot.lab.sweep_spec import SweepSpec, trial_dir
+    from dospcot.sweeps.sweep import run_sweep
+    from dospcot.sweeps.sweep_spec import SweepSpec, trial_dir
 
     spec = SweepSpec(("tiny",), {"training.label_fraction": ("0.2",)}, (0, 1, 2), tuple(TINY))
     folders = {}
@@ -190,8 +190,8 @@ def test_a_batch_reports_its_progress_to_a_sweep_in_trials(tmp_path):
 def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_never_stopped(
     tmp_path, capsys, started, other
 ):
-    from dospcot.lab.sweep import run_sweep
-    from dospcot.lab.sweep_spec import SweepSpec, trial_dir
+    from dospcot.sweeps.sweep import run_sweep
+    from dospcot.sweeps.sweep_spec import SweepSpec, trial_dir
 
     steps = ["training.rounds=3", "training.steps_per_round=600"]
     spec = SweepSpec(("tiny",), {}, (0, 1, 2), tuple(steps))
@@ -229,9 +229,9 @@ def test_a_killed_sweep_resumes_with_its_own_batch_seeds_to_the_files_of_one_nev
 def test_a_sweep_groups_its_seeds_by_batch_seeds_and_refuses_another_once_its_trials_began(tmp_path, capsys):
     """The two slow tests above without their training: --batch-seeds K puts a cell's seeds in jobs of
     at most K, and a sweep whose trials began under K refuses another K in one line."""
-    from dospcot.lab.sweep import plan_jobs
-    from dospcot.lab.sweep_spec import SweepSpec, open_sweep, store_batch_seeds, trial_dir
     from dospcot.run.run_folder import write_toml
+    from dospcot.sweeps.sweep import plan_jobs
+    from dospcot.sweeps.sweep_spec import SweepSpec, open_sweep, store_batch_seeds, trial_dir
     from dospcot.tasks import get_task
 
     spec = SweepSpec(("tiny",), {"training.label_fraction": ("0.2",)}, (0, 1, 2), tuple(TINY))

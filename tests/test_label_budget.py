@@ -17,14 +17,14 @@ from dospcot.core.cotrainer import RunRound
 from dospcot.core.queries import RewardQueries, choose_queries, class_floors, scheduled_labels
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.round_records import class_rows
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies import budget, sweep_spec
-from dospcot.lab.studies.budget import labels_to_reach
-from dospcot.lab.studies.budget_confirm import STUDIES as BUDGET_CONFIRM
-from dospcot.lab.studies.budget_explore import STUDIES as BUDGET_STUDIES
-from dospcot.lab.sweep import Trial
 from dospcot.run.cotraining import build_run
+from dospcot.sweeps.report import TrialRun
+from dospcot.sweeps.sweep import Trial
 from dospcot.tasks import load_config
+from dospcot_lab.studies import budget, sweep_spec
+from dospcot_lab.studies.budget import labels_to_reach
+from dospcot_lab.studies.budget_confirm import STUDIES as BUDGET_CONFIRM
+from dospcot_lab.studies.budget_explore import STUDIES as BUDGET_STUDIES
 
 BUDGET = ["training.label_budget=30", "training.rounds=3"]
 SHORT_BUDGET = ["training.label_budget=20", "training.rounds=2"]
@@ -487,7 +487,7 @@ def test_the_class_table_groups_goal_rewards_that_differ_by_run_under_one_class(
 
 
 def test_the_confirmatory_study_trains_what_its_pre_registration_names():
-    from dospcot.lab.studies import budget_confirm
+    from dospcot_lab.studies import budget_confirm
 
     trials = [
         (sweep, trial)

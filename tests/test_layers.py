@@ -1,6 +1,8 @@
-"""The package's layers import downward only (docs/design.md, "Layers"): config -> the parts (envs,
-policies, seeding, metrics, demonstrations) -> core -> tasks -> run (and the rating page) -> lab -> cli,
-with no import circle among the modules; and reading a config costs no training stack."""
+"""The packages' layers import downward only (docs/design.md, "Layers"): config -> the parts (envs,
+policies, seeding, metrics, statistics, demonstrations) -> core -> tasks -> run (and the rating page)
+-> sweeps -> cli, and above the library the lab, which nothing in the library imports; no import circle
+among the modules; reading a config costs no training stack, and training loads neither the lab nor
+the statistics' SciPy."""
 
 from __future__ import annotations
 
@@ -17,17 +19,25 @@ FOLDERS = {
     "dospcot": ROOT / "dospcot",
     "dospcot.envs": ROOT / "envs",
     "dospcot.policies": ROOT / "policies",
-    "dospcot.lab": ROOT / "lab",
+    "dospcot_lab": ROOT / "lab",
 }
 """Where each installed package's files lie (pyproject.toml's package-dir)."""
 LAYERS: tuple[tuple[str, ...], ...] = (
     ("dospcot.config", "dospcot"),
-    ("dospcot.envs", "dospcot.policies", "dospcot.seeding", "dospcot.metrics", "dospcot.demonstrations"),
+    (
+        "dospcot.envs",
+        "dospcot.policies",
+        "dospcot.seeding",
+        "dospcot.metrics",
+        "dospcot.statistics",
+        "dospcot.demonstrations",
+    ),
     ("dospcot.core",),
     ("dospcot.tasks",),
     ("dospcot.run", "dospcot.rating"),
-    ("dospcot.lab",),
+    ("dospcot.sweeps",),
     ("dospcot.cli", "dospcot.__main__"),
+    ("dospcot_lab",),
 )
 """Each layer's modules by prefix, bottom first; a module belongs to the longest prefix it starts with."""
 
@@ -123,13 +133,12 @@ def test_the_checks_find_a_circle_and_an_upward_import():
     assert (
         layer_of("dospcot.config.loading")
         < layer_of("dospcot.core.cotrainer")
-        < layer_of("dospcot.lab.sweep")
+        < layer_of("dospcot.sweeps.sweep")
     )
     assert layer_of("dospcot.tasks.adapters.grid") == layer_of("dospcot.tasks")
     assert "dospcot.tasks.registry" in imports_of("dospcot.tasks.loading")
-    assert "dospcot.lab.report" in imports_of("dospcot.lab.sweep") or "dospcot.lab.sweep_spec" in imports_of(
-        "dospcot.lab.sweep"
-    )
+    assert "dospcot.sweeps.sweep_spec" in imports_of("dospcot.sweeps.sweep")
+    assert layer_of("dospcot.cli.commands") < layer_of("dospcot_lab.studies")
 
 
 def test_no_import_circle_among_the_modules():
@@ -159,3 +168,21 @@ def test_reading_a_config_imports_no_training_stack(preset):
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout) == []
+
+
+def test_no_library_module_imports_the_lab():
+    library = [name for name in MODULES if not name.startswith("dospcot_lab")]
+    assert [name for name in library if any(t.startswith("dospcot_lab") for t in imports_of(name))] == []
+
+
+def test_training_loads_neither_the_lab_nor_the_statistics(tmp_path):
+    script = (
+        "import json, sys\n"
+        "from dospcot.cli import main\n"
+        f"status = main(['train', 'tiny', '--set', 'training.rounds=1', '--runs-dir', {str(tmp_path)!r},"
+        " '--no-progress'])\n"
+        "loaded = sorted(m for m in sys.modules if m.split('.')[0] in ('dospcot_lab', 'scipy'))\n"
+        "print(json.dumps([status, loaded]))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert json.loads(out.stdout.splitlines()[-1]) == [0, []]

@@ -42,7 +42,7 @@ LOAD = "from pathlib import Path\n\nfrom stable_baselines3 import DQN"
 BUILD_RUN = "import torch\n\nfrom dospcot.run.cotraining import build_run"
 TRAIN_ENV = "from dospcot.run.python_api import train_env"
 SWEEP = "dospcot sweep tiny"
-STUDY = "dospcot study grid16 --render-only"
+STUDY = "dospcot-lab study grid16 --render-only"
 MAKE = "make run"
 TESTED = (TRAIN, EVALUATE, TENSORBOARD, LOAD, BUILD_RUN, TRAIN_ENV, SWEEP, STUDY, MAKE)
 

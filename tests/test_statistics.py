@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from dospcot.metrics import SeedSummary, bootstrap_ci, iqm
+from dospcot.statistics import SeedSummary, bootstrap_ci, iqm
 
 
 def test_the_percentile_interval_of_a_tiny_sample_is_the_one_worked_on_paper():

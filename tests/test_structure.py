@@ -151,13 +151,18 @@ def test_no_module_of_the_package_is_over_500_lines():
     assert long == {}
 
 
-def test_the_studies_are_a_command_of_the_package(capsys, tmp_path):
+def test_the_studies_are_the_labs_command_and_the_library_says_where_they_are(capsys, tmp_path):
     from dospcot.cli import main
+    from dospcot_lab.cli import main as lab_main
 
-    assert main(["study", "nope"]) == 2
+    for command in ("study", "bench"):
+        assert main([command, "grid16"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith(f"dospcot {command}: error: the studies and benchmarks are the repository's")
+        assert f"`dospcot-lab {command} ...`" in err and err.count("\n") == 1
+    assert lab_main(["study", "nope"]) == 2
     err = capsys.readouterr().err
-    assert (
-        err.startswith("dospcot study: error: no study 'nope'; the studies: grid16,") and err.count("\n") == 1
-    )
+    assert err.startswith("dospcot-lab study: error: no study 'nope'; the studies: grid16,")
+    assert err.count("\n") == 1
     with pytest.raises(SystemExit, match="no finished run of this study under"):
-        main(["study", "grid16", "--render-only", "--runs-dir", str(tmp_path)])
+        lab_main(["study", "grid16", "--render-only", "--runs-dir", str(tmp_path)])

@@ -17,11 +17,11 @@ import torch
 from dospcot.cli import main
 from dospcot.cli.parser import build_parser
 from dospcot.config.errors import ConfigError
-from dospcot.lab.report import load_runs, write_report
-from dospcot.lab.sweep import run_sweep
-from dospcot.lab.sweep_spec import SweepError, SweepSpec, Trial, open_sweep, parse_grid, trial_dir
 from dospcot.run import run_folder
 from dospcot.run.cores import usable_cores
+from dospcot.sweeps.report import load_runs, write_report
+from dospcot.sweeps.sweep import run_sweep
+from dospcot.sweeps.sweep_spec import SweepError, SweepSpec, Trial, open_sweep, parse_grid, trial_dir
 from dospcot.tasks import load_config
 
 GRID = {"training.label_fraction": ("0.1", "0.5"), "cotraining.consensus_weight": ("0", "0.3")}
@@ -115,8 +115,10 @@ def test_local_sweep_runs_every_trial_once_whatever_its_workers_and_reruns_nothi
     [("sweep", "trials at once"), ("study", "trials at once"), ("reproduce-paper", "processes")],
 )
 def test_workers_default_to_the_cores_this_process_may_use(command, what, capsys):
+    from dospcot_lab.cli import build_parser as lab_parser
+
     cores = usable_cores()
-    parser = build_parser()
+    parser = lab_parser() if command == "study" else build_parser()
     assert parser.parse_args([command, *(["grid16"] if command == "study" else [])]).workers == cores
     with pytest.raises(SystemExit):
         parser.parse_args([command, "--help"])

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from dospcot import metrics
+from dospcot import metrics, statistics
 from dospcot.core.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
 from dospcot.envs import StateActionMask
 from dospcot.policies.tabular import TabularAgents, epsilon_greedy_probs, expected_value
@@ -122,7 +122,7 @@ def test_a_run_is_the_same_alone_or_in_a_batch(mdp):
 def test_the_benchmarks_per_step_python_loop_is_the_same_learner(mdp, all_methods):
     """The tabular benchmark's reference does the vectorised agents' work one step at a time: every
     kind, every method, the same Q-tables and records bit for bit, and the same step count."""
-    from dospcot.lab.bench_rows import PerStepTabularCoTraining
+    from dospcot_lab.bench_rows import PerStepTabularCoTraining
 
     ours, a = all_methods
     loop = PerStepTabularCoTraining(mdp, ALL_METHODS, SMALL)
@@ -169,10 +169,10 @@ def test_unknown_view_in_a_spec_raises(mdp):
 
 
 def test_metrics_by_hand():
-    assert metrics.iqm(np.arange(10.0)) == pytest.approx(np.mean(np.arange(2.0, 8.0)))
-    low, high = metrics.bootstrap_ci(np.array([1.0, 1.0, 1.0]))
+    assert statistics.iqm(np.arange(10.0)) == pytest.approx(np.mean(np.arange(2.0, 8.0)))
+    low, high = statistics.bootstrap_ci(np.array([1.0, 1.0, 1.0]))
     assert low == high == 1.0
-    low, high = metrics.bootstrap_ci(np.arange(100.0))
+    low, high = statistics.bootstrap_ci(np.arange(100.0))
     assert low < 49.5 < high and high - low < 25
     ref = metrics.paper_reference_policy()
     assert ref.shape == (48,)

@@ -9,7 +9,7 @@ import shlex
 import sys
 from collections.abc import Sequence
 
-from dospcot.cli.commands import RUN_COMMANDS, bench
+from dospcot.cli.commands import RUN_COMMANDS
 from dospcot.cli.parser import build_parser
 
 PIPE_CLOSED = 141
@@ -29,8 +29,20 @@ def main(argv: Sequence[str] | None = None) -> int:
     return status
 
 
+LAB_COMMANDS = ("study", "bench")
+"""Commands that live in the repository's lab (``dospcot-lab``), not in the library."""
+
+
 def _main(argv: Sequence[str] | None) -> int:
     argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] in LAB_COMMANDS:
+        print(
+            f"dospcot {argv[0]}: error: the studies and benchmarks are the repository's lab, not part of the "
+            f"library: in a checkout of the dospcot repository, run `dospcot-lab {argv[0]} ...` "
+            "(`make install` installs it)",
+            file=sys.stderr,
+        )
+        return 2
     args = build_parser().parse_args(argv)
     command = shlex.join(["dospcot", *argv])
     if args.command == "train" and args.list:  # before any import of torch: a list answers at once
@@ -60,35 +72,34 @@ def _main(argv: Sequence[str] | None) -> int:
 
 
 def _run(args: argparse.Namespace, command: str) -> int:
-    """Run the parsed command; its bad inputs end in one line on stderr and exit status 2."""
-    if args.command in RUN_COMMANDS:  # torch and the training stack: only past --help and usage errors
-        from dospcot.config.errors import ConfigError
-        from dospcot.core.raters import QueriesPending, RaterError
-        from dospcot.envs import EnvRaisedError, NonFiniteError
-        from dospcot.lab.sweep_spec import SweepError
-        from dospcot.run.run_folder import RunFolderError
+    """Run the parsed command; its bad inputs end in one line on stderr and exit status 2. Torch and the
+    training stack load here only: past ``--help`` and usage errors."""
+    from dospcot.config.errors import ConfigError
+    from dospcot.core.raters import QueriesPending, RaterError
+    from dospcot.envs import EnvRaisedError, NonFiniteError
+    from dospcot.run.run_folder import RunFolderError
+    from dospcot.sweeps.sweep_spec import SweepError
 
-        try:
-            return RUN_COMMANDS[args.command](args, command)
-        except QueriesPending as pending:  # not an error: the run waits for a person's answers
-            run_dir = pending.path.parent.parent
-            print(
-                f"{run_dir}: {pending.count} reward queries wait in {pending.path}; write each answer in its "
-                f"reward column, then: dospcot train --resume {run_dir}"
-            )
-            return 0
-        except (ConfigError, RunFolderError, SweepError, RaterError) as err:
-            print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
-            return 2
-        except MemoryError as err:  # a buffer the size checks' lower bound let through (run/sizes.py)
-            reason = str(err).strip() or "no detail"
-            print(
-                f"dospcot {args.command}: error: out of memory ({reason}); lower dqn.buffer_size or "
-                "train fewer seeds at once",
-                file=sys.stderr,
-            )
-            return 2
-        except (NonFiniteError, EnvRaisedError) as err:  # the env's fault, not the command line's
-            print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
-            return 1
-    return bench(args, command)
+    try:
+        return RUN_COMMANDS[args.command](args, command)
+    except QueriesPending as pending:  # not an error: the run waits for a person's answers
+        run_dir = pending.path.parent.parent
+        print(
+            f"{run_dir}: {pending.count} reward queries wait in {pending.path}; write each answer in its "
+            f"reward column, then: dospcot train --resume {run_dir}"
+        )
+        return 0
+    except (ConfigError, RunFolderError, SweepError, RaterError) as err:
+        print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except MemoryError as err:  # a buffer the size checks' lower bound let through (run/sizes.py)
+        reason = str(err).strip() or "no detail"
+        print(
+            f"dospcot {args.command}: error: out of memory ({reason}); lower dqn.buffer_size or "
+            "train fewer seeds at once",
+            file=sys.stderr,
+        )
+        return 2
+    except (NonFiniteError, EnvRaisedError) as err:  # the env's fault, not the command line's
+        print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+        return 1

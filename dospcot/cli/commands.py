@@ -7,14 +7,12 @@ import argparse
 import shlex
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING
 
-from dospcot.cli.parser import QUICK_BENCH_OUT
 from dospcot.rating import rate_command
 
 if TYPE_CHECKING:
-    from dospcot.lab.sweep_spec import SweepSpec
+    from dospcot.sweeps.sweep_spec import SweepSpec
 
 
 def _train(args: argparse.Namespace, command: str) -> int:
@@ -78,9 +76,9 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
     from dataclasses import replace
 
     from dospcot.config.errors import ConfigError
-    from dospcot.lab.sweep import default_sweep_dir, run_sweep
-    from dospcot.lab.sweep_spec import SweepSpec
     from dospcot.run.sizes import check_sizes
+    from dospcot.sweeps.sweep import default_sweep_dir, run_sweep
+    from dospcot.sweeps.sweep_spec import SweepSpec
 
     if args.ray_address and args.backend != "ray":
         raise ConfigError("--ray-address names a Ray cluster: it needs --backend ray")
@@ -92,13 +90,13 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
         sweep_dir, spec = args.resume, None
         warn("sweep", check_sizes([], len(args.seeds or ()), args.workers))
         if args.seeds is not None:
-            from dospcot.lab.sweep_spec import add_seeds
+            from dospcot.sweeps.sweep_spec import add_seeds
 
             spec = add_seeds(sweep_dir, list(args.seeds))
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
-        from dospcot.lab.sweep_spec import parse_grid
+        from dospcot.sweeps.sweep_spec import parse_grid
 
         seeds = args.seeds or (0,)
         spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), (0,), tuple(args.overrides))
@@ -160,7 +158,7 @@ def _config(args: argparse.Namespace, command: str) -> int:
 
 
 def _report(args: argparse.Namespace, command: str) -> int:
-    from dospcot.lab.report import write_report
+    from dospcot.sweeps.report import write_report
 
     paths = write_report(args.sweep_dir, args.out)
     print(paths[0].read_text())
@@ -174,10 +172,10 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
 
     from dospcot.config.errors import ConfigError
     from dospcot.config.presets import PAPER_PRESETS
-    from dospcot.lab.report import write_report
-    from dospcot.lab.sweep import run_sweep
-    from dospcot.lab.sweep_spec import SweepError, SweepSpec
     from dospcot.run.run_folder import new_run_dir
+    from dospcot.sweeps.report import write_report
+    from dospcot.sweeps.sweep import run_sweep
+    from dospcot.sweeps.sweep_spec import SweepError, SweepSpec
 
     for option, key in (("--label-fraction", "label_fraction"), ("--episodes", "episodes_per_round")):
         given = [o for o in args.overrides if o.partition("=")[0].strip() == f"tabular.{key}"]
@@ -211,56 +209,13 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
     return 0
 
 
-def _study(args: argparse.Namespace, command: str) -> int:
-    from dospcot.config.errors import ConfigError
-    from dospcot.lab.studies import get_study, header_command, run_study, sweep_spec
-    from dospcot.run.sizes import check_sizes
-
-    try:
-        study = get_study(args.study)
-    except ValueError as err:
-        raise ConfigError(str(err)) from None
-    if not args.render_only:  # its sweeps' cells over its seeds, weighed before any sweep starts
-        cells = [cfg for sweep in study.sweeps for cfg in sweep_spec(sweep, 1, args.overrides).cell_configs()]
-        seeds = args.seeds or study.seeds
-        warn("study", check_sizes(cells, seeds, args.workers, min(args.batch_seeds or 1, max(seeds, 1))))
-    options = shlex.split(command)[3:]  # what follows "dospcot study STUDY"
-    run_study(args, header_command(("dospcot", "study"), args.study, options), prog="dospcot study: error")
-    return 0
-
-
 RUN_COMMANDS = {
     "train": _train,
     "evaluate": _evaluate,
     "sweep": _sweep,
     "report": _report,
     "reproduce-paper": _reproduce_paper,
-    "study": _study,
     "config": _config,
     "rate": lambda args, command: rate_command(args, command, train=_train),  # --then-train: _train resumes
 }
 """Commands whose bad configs and folders end in one line on stderr and exit status 2."""
-
-
-def bench(args: argparse.Namespace, command: str) -> int:
-    """``dospcot bench``: every benchmark, or those of ``--only``, written to ``--out``."""
-    from dospcot.lab.bench import run_benchmarks
-
-    if args.out is None:
-        args.out = QUICK_BENCH_OUT if args.quick else Path("BENCHMARKS.md")
-    elif args.quick and args.out.name == "BENCHMARKS.md":
-        print(
-            "dospcot bench: error: --quick figures are a smoke test and never go into BENCHMARKS.md; "
-            f"leave out --out (they go to {QUICK_BENCH_OUT}) or name another file",
-            file=sys.stderr,
-        )
-        return 2
-    try:
-        rows = run_benchmarks(args.out, args.quick, args.repeats, command, args.only, args.device)
-    except ValueError as err:
-        print(f"dospcot bench: error: {err}", file=sys.stderr)
-        return 2
-    for row in rows:
-        print(f"{row.name}: ratio {row.ratio:.3f} (target {row.target}, {'met' if row.met else 'not met'})")
-    print(f"wrote {args.out}")
-    return 0

@@ -11,9 +11,6 @@ from typing import Any, NoReturn
 from dospcot.rating import add_rate_parser  # torch-free: rate imports its server when it runs
 from dospcot.run.cores import usable_cores
 
-QUICK_BENCH_OUT = Path("runs/bench-quick.md")
-"""Where ``dospcot bench --quick`` writes its smoke-test figures."""
-
 
 def parse_seeds(text: str) -> Sequence[int]:
     """``"10"`` -> seeds 0..9 (a ``range``: a huge count is refused by its size check, not built);
@@ -91,13 +88,20 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
+DESCRIPTION = (
+    "Train reinforcement-learning agents on mostly hidden rewards: agents with different views "
+    "co-train on the labelled rewards and on the pseudo-rewards their reward classifiers agree on. "
+    "Start with `dospcot train tiny`; `dospcot COMMAND --help` explains each command."
+)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The parser of every command; building it imports neither torch nor stable-baselines3, so that
     ``--help`` and usage errors answer at once."""
     from dospcot import __version__
     from dospcot.config.presets import PAPER_PRESETS
 
-    parser = OneLineParser(prog="dospcot", description=__doc__)
+    parser = OneLineParser(prog="dospcot", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"dospcot {__version__}")
     commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
     train = commands.add_parser(
@@ -226,55 +230,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="where the sweep folder goes (default runs/paper)",
     )
     paper.add_argument("--no-progress", action="store_true", help="hide the progress bar")
-    bench = commands.add_parser(
-        "bench",
-        help="measure performance claims against their peers and write BENCHMARKS.md",
-        description="Run every benchmark (ours and a peer in the same run) and write BENCHMARKS.md.",
-    )
-    bench.add_argument("--quick", action="store_true", help="short runs: a smoke test, not a measurement")
-    bench.add_argument("--repeats", type=positive_int, default=3, help="repetitions per figure (default 3)")
-    bench.add_argument(
-        "--only",
-        action="append",
-        default=[],
-        metavar="NAME",
-        help="run this benchmark alone (repeatable) and replace its row in --out, which a full run "
-        "wrote; a line above the table says when",
-    )
-    bench.add_argument(
-        "--out",
-        type=Path,
-        help=f"output file (default BENCHMARKS.md; with --quick {QUICK_BENCH_OUT}, never BENCHMARKS.md)",
-    )
-    bench.add_argument(
-        "--device",
-        choices=("cpu", "cuda"),
-        default="cpu",
-        help="cuda: measure the rows that have a GPU form on the GPU, into the GPU column of --out's "
-        "table (default cpu)",
-    )
-    study = commands.add_parser(
-        "study",
-        description="Run a study's sweeps (only the trials not yet finished), then print its tables from "
-        "every finished run; with --docs also write docs/results/<study>.md and its row of the results "
-        "at a glance.",
-        help="one of the published studies: its sweeps, then its tables (with --docs, its docs page)",
-    )
-    add_overrides(study, "override a key in every trial (repeatable; the study then writes its own sweeps)")
-    # No choices: the studies' names live with their declarations, which import torch.
-    study.add_argument("study", metavar="STUDY", help="the study, e.g. grid16 (a wrong name lists them)")
-    study.add_argument("--seeds", type=int, help="seeds 0..N-1 (default: the study's)")
-    add_workers(study, "trials at once")
-    study.add_argument(
-        "--batch-seeds",
-        type=positive_int,
-        metavar="K",
-        help="as dospcot sweep's (default: each sweep's own, 1 for a new one)",
-    )
-    study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
-    study.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"), help="default runs/sweeps")
-    study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
-    study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
     add_rate_parser(commands)
     config = commands.add_parser(
         "config",

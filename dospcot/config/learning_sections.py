@@ -382,8 +382,7 @@ class CoTrainingConfig(AddedKeys):
     :param refit_new_classes: when a run's labels show a reward class for the first time after round
         1, each view's classifier first learns the labels alone again, as in round 1, before the round
         selects: a class's output had never been trained, so its scores were those of its random
-        initial parameters, and the consensus could give it to most of the pool (off: the runs the
-        record holds before issue 58's seventh exploration).
+        initial parameters, and the consensus could give it to most of the pool.
     """
 
     consensus_weight: float = 0.3

@@ -47,7 +47,7 @@ NUMERICS: dict[int, Numerics] = {
     2: Numerics(torch.float32, True),
 }
 """The numerics versions (``cotraining.numerics``). 1: float64 fits over the whole pool (the paper
-protocol's co-trainer keeps it). 2 (issue 59): float32 fits that read only the samples that carry
+protocol's co-trainer keeps it). 2: float32 fits that read only the samples that carry
 weight (the others add exactly 0 to the loss, so they move nothing but rounding). Both take
 ``classifier.epochs`` full-batch Adam steps from the last fit's parameters; what version 2 saves is
 measured in docs/guide/profile.md."""

@@ -3,9 +3,9 @@ buffer that the batched engine (:mod:`dospcot.core.batched_runs`) reads or write
 many agents in lock step exactly as each agent's own ``learn()`` would.
 
 SB3 has no public API for stepping an agent one env step at a time; its ``collect_rollouts`` does it
-through these attributes. ``pyproject.toml`` pins SB3 to the tested range, and
-``tests/test_sb3_engine.py`` fails naming the attribute when a new SB3 moves one
-(:data:`PRIVATE_ATTRIBUTES`).
+through these attributes. They are listed, with every other private SB3 member the project touches,
+in :data:`dospcot.policies.sb3_private.SB3_PRIVATE_MEMBERS`, which ``tests/test_sb3_engine.py``
+checks against the installed SB3.
 """
 
 from __future__ import annotations
@@ -16,21 +16,6 @@ import numpy as np
 from stable_baselines3 import DQN
 from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.type_aliases import ReplayBufferSamples
-
-PRIVATE_ATTRIBUTES: dict[str, tuple[str, ...]] = {
-    "DQN": (
-        "_setup_learn",
-        "_last_obs",
-        "_update_info_buffer",
-        "_store_transition",
-        "_n_calls",
-        "_episode_num",
-        "_current_progress_remaining",
-        "_n_updates",
-    ),
-    "ReplayBuffer": ("_get_samples",),
-}
-"""What this module reads or writes of SB3's, by class."""
 
 LOG_INTERVAL = 4
 """Episodes between SB3's ``rollout/`` dumps, as ``DQN.learn``'s default ``log_interval``."""

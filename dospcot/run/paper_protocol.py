@@ -1,6 +1,6 @@
 """The seed paper's CliffWalking protocol with real reward masking: its runs, and how a paper config
 trains in its run folders (:class:`PaperProtocolRunner`); its tables are the lab's
-(:mod:`dospcot.lab.paper_tables`).
+(:mod:`dospcot.sweeps.paper_tables`).
 
 Table 1: each agent alone; Tables 2 and 3: homogeneous pairs at gamma 0.3, 0.5, 0.8 after 1 and 5
 rounds; Table 4: Expected SARSA paired with Expected SARSA, SARSA and Q at gamma 0.3. Beside every

@@ -1,32 +1,32 @@
 """Every published study, each one command: its sweeps (``dospcot sweep``), their reports
 (``dospcot report``) and its tables.
 
-    dospcot study label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~2.5 h)
-    dospcot study grid16 --docs           # 6 grid16 presets x seeds 0-9
-    dospcot study grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
-    dospcot study grid32 --docs           # 4 grid32 presets x seeds 0-4
-    dospcot study grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
-    dospcot study fasthighway --docs      # 4 fasthighway presets x seeds 0-4
-    dospcot study minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
-    dospcot study highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
-    dospcot study paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
-    dospcot study paper-published-code --docs   # the same with its published code's settings
-    dospcot study demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
-    dospcot study equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
-    dospcot study equal-effort-highway --docs  # the same on the fast highway, 5 seeds
-    dospcot study third-view-doorkey --docs    # DoorKey: m = 3 vs m = 2 at 100 labels, seeds 0-9
-    dospcot study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
-    dospcot study second-view-highway --docs   # its highway monitor setting x seeds 0-4
-    dospcot study budget-explore --docs   # label budgets, schedules and peers on MiniGrid, seeds 0-2
-    dospcot study budget-explore-doorkey --docs   # its DoorKey arms on seeds 0-9, own draws, numerics 2
-    dospcot study budget-explore-admit --docs     # all of U in round 1: DoorKey, grid16, fast highway
-    dospcot study budget-explore-peers --docs     # the peers at 100 labels on DoorKey and LavaGap
-    dospcot study budget-explore-decay --docs     # a decaying schedule on DoorKey and LavaGap
-    dospcot study budget-explore-grid-highway --docs  # those settings on grid16 and the fast highway
-    dospcot study budget --docs           # docs/preregistration-budget.md: B1-B4, seeds 100-109
-    dospcot study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
+    dospcot-lab study label-fraction --docs   # 4 presets x 6 label fractions x seeds 0-4 (~2.5 h)
+    dospcot-lab study grid16 --docs           # 6 grid16 presets x seeds 0-9
+    dospcot-lab study grid16-layouts --docs   # 3 grid16 presets x 3 unseen layouts x seeds 0-4
+    dospcot-lab study grid32 --docs           # 4 grid32 presets x seeds 0-4
+    dospcot-lab study grid16-tabular --docs   # the same with tabular agents (agent = "tabular")
+    dospcot-lab study fasthighway --docs      # 4 fasthighway presets x seeds 0-4
+    dospcot-lab study minigrid --docs         # 4 presets x LavaGapS7, DoorKey-5x5 x seeds 0-4
+    dospcot-lab study highway --docs          # 4 highway presets (highway-fast-v0) x seeds 0-2
+    dospcot-lab study paper-text --docs       # the seed paper's protocol x seeds 0-9 (~2 min)
+    dospcot-lab study paper-published-code --docs   # the same with its published code's settings
+    dospcot-lab study demo-labels --docs      # grid16-dospcot: 10 demonstrations + 1% vs 5% labels
+    dospcot-lab study equal-effort --docs     # grid16-dospcot: per-step labels, segments, demos
+    dospcot-lab study equal-effort-highway --docs  # the same on the fast highway, 5 seeds
+    dospcot-lab study third-view-doorkey --docs    # DoorKey: m = 3 vs m = 2 at 100 labels, seeds 0-9
+    dospcot-lab study second-view --docs      # docs/preregistration.md's grid settings x seeds 0-9
+    dospcot-lab study second-view-highway --docs   # its highway monitor setting x seeds 0-4
+    dospcot-lab study budget-explore --docs   # label budgets, schedules and peers on MiniGrid, seeds 0-2
+    dospcot-lab study budget-explore-doorkey --docs   # its DoorKey arms on seeds 0-9, own draws, numerics 2
+    dospcot-lab study budget-explore-admit --docs     # all of U in round 1: DoorKey, grid16, fast highway
+    dospcot-lab study budget-explore-peers --docs     # the peers at 100 labels on DoorKey and LavaGap
+    dospcot-lab study budget-explore-decay --docs     # a decaying schedule on DoorKey and LavaGap
+    dospcot-lab study budget-explore-grid-highway --docs  # those settings on grid16 and the fast highway
+    dospcot-lab study budget --docs           # docs/preregistration-budget.md: B1-B4, seeds 100-109
+    dospcot-lab study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
 
-(``python scripts/study.py`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
+(``dospcot-lab study`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
 finished run folder (``--render-only`` trains nothing). The grid tables lead with success (the share
 of seeds x agents whose greedy policy reaches the goal from the map's start) and optimal-action
@@ -46,7 +46,7 @@ hand.
 # highway, minigrid, label_sources, second_view, paper), with its page's prose in pages/<study>.md;
 # declaration.py says what a study is, tables.py and provenance.py hold what their tables share,
 # pages.py makes a page and a row of the results at a glance, readme.py where --docs writes. This
-# module gathers them into STUDIES and runs one (``main``, behind scripts/study.py).
+# module gathers them into STUDIES and runs one (:func:`run_study`, behind ``dospcot-lab study``).
 
 from __future__ import annotations
 
@@ -60,8 +60,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from dospcot.config.presets import did_you_mean
-from dospcot.lab.report import TrialRun, load_runs, write_report
-from dospcot.lab.studies import (
+from dospcot.run.interrupts import Interrupted
+from dospcot.sweeps.report import TrialRun, load_runs, write_report
+from dospcot.sweeps.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
+from dospcot_lab.repository import Repository
+from dospcot_lab.studies import (
     batched_seeds,
     budget_classes,
     budget_confirm,
@@ -75,13 +78,10 @@ from dospcot.lab.studies import (
     queries,
     second_view,
 )
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.pages import GLANCE, glance_cells, page, page_prose, write_glance
-from dospcot.lab.studies.provenance import header
-from dospcot.lab.studies.readme import README, RESULTS, read_block, replace_block
-from dospcot.lab.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
-from dospcot.run.cores import usable_cores
-from dospcot.run.interrupts import Interrupted, stop_on_signals
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.pages import GLANCE, glance_cells, is_published, page, page_prose, write_glance
+from dospcot_lab.studies.provenance import header
+from dospcot_lab.studies.readme import read_block, replace_block
 
 __all__ = [
     "STUDIES",
@@ -93,7 +93,6 @@ __all__ = [
     "get_study",
     "header",
     "header_command",
-    "main",
     "render_study",
     "run_study",
     "study_runs",
@@ -212,23 +211,28 @@ def render_study(name: str, runs_dir: Path, command: str, suffix: str = "") -> R
     return Rendered(table, page(name, study, table), glance_cells(study, runs), readme)
 
 
-def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") -> None:
+def run_study(args: argparse.Namespace, command: str, repo: Repository | None, prog: str) -> None:
     """Run the study ``args.study`` (its unfinished trials; none with ``args.render_only``), then print
     its tables and, with ``args.docs``, write its page, plot, row of the results at a glance and README
-    block (docs/results/, README.md). ``command`` is the header's command line
+    block into ``repo`` (its docs/results/ and README.md). ``command`` is the header's command line
     (:func:`header_command`); ``prog`` starts each one-line error, on which it exits with status 1.
-    ``args`` holds what :func:`main` parses: study, seeds, workers, backend, overrides, runs_dir, docs
-    and render_only. With ``--render-only --docs`` a study whose record holds no run gets a page that
-    says so."""
+    ``args`` holds what the lab's ``study`` command parses: study, seeds, workers, backend, overrides,
+    runs_dir, docs and render_only.
+
+    Without ``--docs`` nothing is written outside ``args.runs_dir``. With it, a study whose runs folder
+    holds no run of it keeps its published page: ``--docs`` then writes a page that says the study is
+    unpublished only where the repository has no published page of it either."""
     study = get_study(args.study)
     block = f"{args.study}-table"
     if args.docs:
+        if repo is None:
+            sys.exit(f"{prog}: --docs writes into a checkout of the repository: run from one, or give --repo")
         try:  # before hours of training, not after
             page_prose(args.study)
-            read_block(README, GLANCE)
-            read_block(RESULTS / "index.md", GLANCE)
+            read_block(repo.readme, GLANCE)
+            read_block(repo.results / "index.md", GLANCE)
             if study.readme is not None:
-                read_block(README, block)
+                read_block(repo.readme, block)
         except ValueError as err:
             sys.exit(f"{prog}: {err}")
     args.seeds = args.seeds or study.seeds
@@ -263,54 +267,26 @@ def run_study(args: argparse.Namespace, command: str, prog: str = "study.py") ->
     if rendered.table is None and not (args.docs and args.render_only and default):
         sys.exit(f"{prog}: no finished run of this study under {args.runs_dir}; run it without --render-only")
     if rendered.table is None:
+        assert repo is not None  # --docs
+        if is_published(repo.results / f"{args.study}.md"):
+            sys.exit(
+                f"{prog}: no finished run of {args.study} under {args.runs_dir}, and "
+                f"{repo.results / f'{args.study}.md'} publishes its tables: --docs keeps a published "
+                "page; render from the runs folder that holds the study's runs (--runs-dir)"
+            )
         print(f"no finished run of {args.study} under {args.runs_dir}: its page says it is unpublished")
     else:
         print(rendered.table)
     if args.docs:
-        (RESULTS / f"{args.study}.md").write_text(rendered.page)
+        assert repo is not None
+        (repo.results / f"{args.study}.md").write_text(rendered.page)
         plot = next((p for p in written if study.plot and p.name == study.plot[0]), None)
         if plot is not None:
-            shutil.copyfile(plot, RESULTS / study.plot[1])
+            shutil.copyfile(plot, repo.results / study.plot[1])
         if study.figure is not None and rendered.table is not None:
-            study.figure(study_runs(study, args.runs_dir, suffix)[0], RESULTS / f"{args.study}.png")
-        write_glance(args.study, rendered.glance, list(STUDIES))
+            study.figure(study_runs(study, args.runs_dir, suffix)[0], repo.results / f"{args.study}.png")
+        write_glance(repo, args.study, rendered.glance, list(STUDIES))
         if rendered.readme is not None:
-            replace_block(README, block, rendered.readme)
+            replace_block(repo.readme, block, rendered.readme)
 
 
-def main(argv: Sequence[str] | None = None) -> None:
-    """``python scripts/study.py STUDY [options]``: parse ``argv`` (by default ``sys.argv[1:]``) and
-    run the study; its header names the command as ``python scripts/study.py`` with these options."""
-    argv = list(sys.argv[1:] if argv is None else argv)
-    parser = argparse.ArgumentParser(
-        description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
-    )
-    parser.add_argument("study", choices=list(STUDIES))
-    parser.add_argument(
-        "--seeds", type=int, help="seeds 0..N-1 (default: the study's, 5; highway 3, paper 10)"
-    )
-    cores = usable_cores()
-    parser.add_argument(
-        "--workers",
-        type=int,
-        default=cores,
-        help=f"trials at once (default: the cores this process may use, {cores} here)",
-    )
-    parser.add_argument("--batch-seeds", type=int, default=1, help="seeds per batch (default 1)")
-    parser.add_argument("--backend", choices=["local", "ray"], default="local")
-    parser.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    parser.add_argument("--runs-dir", type=Path, default=Path("runs/sweeps"))
-    parser.add_argument(
-        "--docs", action="store_true", help="also write docs/results/<study>.md and its README.md rows"
-    )
-    parser.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
-    args = parser.parse_args(argv)
-    try:
-        with stop_on_signals():
-            run_study(args, header_command(("python", "scripts/study.py"), args.study, argv[1:]))
-    except Interrupted as stop:  # as `dospcot study` says it: what was kept, and how to go on
-        print(f"study.py: interrupted; kept {stop}", file=sys.stderr)
-        raise SystemExit(130) from None
-    except KeyboardInterrupt:
-        print("study.py: interrupted", file=sys.stderr)
-        raise SystemExit(130) from None

@@ -3,9 +3,10 @@ at a time and as batches (docs/batched_seeds.md), to show that the batch gives t
 
 from __future__ import annotations
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import (
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.tables import (
     LABELS_COLUMN,
     LABELS_EXPLAINED,
     cpu_per_run,
@@ -14,12 +15,11 @@ from dospcot.lab.studies.tables import (
     over_seeds,
     paired,
 )
-from dospcot.metrics import SeedSummary
 
 PRESETS = ("grid16-dospcot", "grid16-oracle")
 METRICS = ("success", "agreement")
 HALF_WIDTH = 0.1
-"""The widest 95% interval of a difference that counts as measured (issue 48's bound)."""
+"""The widest 95% interval of a difference that counts as measured."""
 ALONE, BATCHED = "batched-seeds-alone", "batched-seeds-batched"
 
 

@@ -1,6 +1,6 @@
-"""Labels that pay (issue 58): a label budget counted in answers, spread over the rounds, against the
+"""Labels that pay: a label budget counted in answers, spread over the rounds, against the
 reward-model peer, with label-efficiency curves. ``budget-explore`` is the exploration (seeds 0-2,
-recorded as exploratory; its studies are declared in :mod:`~dospcot.lab.studies.budget_explore`); it
+recorded as exploratory; its studies are declared in :mod:`~dospcot_lab.studies.budget_explore`); it
 chooses the settings a confirmatory study registers before its runs.
 
 Its tables split a shortfall against the oracle into its parts: the labels each arm bought, its
@@ -17,13 +17,13 @@ from pathlib import Path
 
 import numpy as np
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.grid import LAYOUT
-from dospcot.lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
-from dospcot.metrics import SeedSummary
 from dospcot.run.plots import Band, plot_bands
 from dospcot.run.run_folder import METRICS_FILE, PSEUDO_REWARDS_FILE
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.grid import LAYOUT
+from dospcot_lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
 
 STRATEGY = "training.label_strategy"
 BUDGET = "training.label_budget"

@@ -1,4 +1,4 @@
-"""The label-budget explorations (issue 58) of reward classes that go missing, declared. In the sixth,
+"""The label-budget explorations of reward classes that go missing, declared. In the sixth,
 DOSPCoT's MiniGrid settings (half the queries on episode ends, half by the views' disagreement, on
 the decaying schedule) reached grid16's goal on none of five seeds.
 
@@ -15,14 +15,14 @@ the decaying schedule) reached grid16's goal on none of five seeds.
   keys alone, as the MiniGrid presets' ``[gym]`` key of that name does; and it runs the refit on
   LavaGap and the fast highway.
 
-Their tables are :mod:`~dospcot.lab.studies.budget`'s; every arm without the new setting and the
+Their tables are :mod:`~dospcot_lab.studies.budget`'s; every arm without the new setting and the
 oracles are the earlier explorations' runs, reused."""
 
 from __future__ import annotations
 
 from dataclasses import replace
 
-from dospcot.lab.studies.budget import (
+from dospcot_lab.studies.budget import (
     ENDS_ON,
     FLOOR,
     QUOTA,
@@ -34,7 +34,7 @@ from dospcot.lab.studies.budget import (
     goal_on_ends,
     spend,
 )
-from dospcot.lab.studies.budget_explore import (
+from dospcot_lab.studies.budget_explore import (
     DECAY,
     DECAY_SWEEPS,
     DOORKEY,
@@ -48,7 +48,7 @@ from dospcot.lab.studies.budget_explore import (
     glance_of,
     minigrid_sweep,
 )
-from dospcot.lab.studies.declaration import Study, Sweep
+from dospcot_lab.studies.declaration import Study, Sweep
 
 FLOORS = {FLOOR: ("0.5",)}
 """Half of a round's chosen queries spread over the reward classes the views predict, from round 2, the

@@ -1,7 +1,7 @@
-"""The label-budget study (issue 58), confirmatory: the settings the nine explorations chose, on seeds
+"""The label-budget study, confirmatory: the settings the nine explorations chose, on seeds
 100-109, grid16 layouts no study had used, both MiniGrid tasks, the fast highway and MiniGrid's
 Unlock, which no one here had trained on, with the hypotheses B1-B4 of
-docs/preregistration-budget.md. Its tables are :mod:`~dospcot.lab.studies.budget`'s, each task's
+docs/preregistration-budget.md. Its tables are :mod:`~dospcot_lab.studies.budget`'s, each task's
 ending with the hypotheses it bears on."""
 
 from __future__ import annotations
@@ -10,8 +10,9 @@ from collections.abc import Callable
 
 import numpy as np
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.budget import (
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.budget import (
     BUDGET,
     ENDS_ON,
     ORACLE_SHARE,
@@ -27,10 +28,9 @@ from dospcot.lab.studies.budget import (
     spend,
     task_tables,
 )
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.grid import LAYOUT
-from dospcot.lab.studies.tables import labels_cell, labels_used
-from dospcot.metrics import SeedSummary
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.grid import LAYOUT
+from dospcot_lab.studies.tables import labels_cell, labels_used
 
 FIRST_SEED, SEEDS = 100, 10
 GRID_LAYOUTS = ("404", "505", "606")
@@ -118,7 +118,7 @@ SWEEPS = (
     _sweep("unlock", "dospcot", "minigrid-doorkey-dospcot", {**UNLOCK, **spend(OUTCOMES, SCHEDULE)}),
 )
 """Every arm explores by the share of rounds done, draws from its agents' own generators and trains
-under numerics 2 (:func:`~dospcot.lab.studies.budget.budget_sweep`)."""
+under numerics 2 (:func:`~dospcot_lab.studies.budget.budget_sweep`)."""
 
 
 def _is_unlock(run: TrialRun) -> bool:

@@ -1,19 +1,19 @@
-"""The label-budget explorations (issue 58), declared: ``budget-explore`` (MiniGrid, seeds 0-2, the
+"""The label-budget explorations, declared: ``budget-explore`` (MiniGrid, seeds 0-2, the
 first), ``budget-explore-doorkey`` (DoorKey's most promising arms on seeds 0-9, each agent drawing
 from its own generators, numerics 2) and ``budget-explore-admit`` (admitting all of U in round 1, on
 DoorKey, a grid16 layout no study used and the fast highway) and ``budget-explore-peers`` (the arms
 the hypotheses compare, at 100 labels on both MiniGrid tasks), ``budget-explore-decay`` (a decaying
 schedule on both) and ``budget-explore-grid-highway`` (those settings on grid16 and the fast
-highway); the seventh is :mod:`~dospcot.lab.studies.budget_classes`'s. Their tables are
-:mod:`~dospcot.lab.studies.budget`'s."""
+highway); the seventh is :mod:`~dospcot_lab.studies.budget_classes`'s. Their tables are
+:mod:`~dospcot_lab.studies.budget`'s."""
 
 from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import replace
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.budget import (
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.budget import (
     ADMIT,
     BUDGET,
     EXPLORATION,
@@ -29,9 +29,9 @@ from dospcot.lab.studies.budget import (
     paired_difference,
     spend,
 )
-from dospcot.lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
-from dospcot.lab.studies.grid import LAYOUT
-from dospcot.lab.studies.tables import FRACTION
+from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
+from dospcot_lab.studies.grid import LAYOUT
+from dospcot_lab.studies.tables import FRACTION
 
 DESCRIPTIVE = (
     ("dospcot uniform " + ROUNDS_ARM, "dospcot uniform", "exploration by rounds against the pace, 10% mask"),

@@ -7,7 +7,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from dospcot.lab.report import TrialRun
+from dospcot.sweeps.report import TrialRun
 
 
 @dataclass(frozen=True)

@@ -6,10 +6,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from functools import partial
 
-from dospcot.lab.report import TrialRun, cells
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.provenance import score_floor
-from dospcot.lab.studies.tables import (
+from dospcot.sweeps.report import TrialRun, cells
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.provenance import score_floor
+from dospcot_lab.studies.tables import (
     COLUMNS,
     FRACTION,
     GRID16_PRESETS,

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 from functools import partial
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Study, Sweep
-from dospcot.lab.studies.tables import (
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot.tasks import load_run_config
+from dospcot_lab.studies.declaration import Study, Sweep
+from dospcot_lab.studies.tables import (
     LABELS_COLUMN,
     LABELS_EXPLAINED,
     METHODS,
@@ -19,8 +21,6 @@ from dospcot.lab.studies.tables import (
     per_view_rows,
     with_headline,
 )
-from dospcot.metrics import SeedSummary
-from dospcot.tasks import load_run_config
 
 BASELINES = ("oracle", "masked-zero", "self-training")
 HIGHWAY_COLUMNS = {

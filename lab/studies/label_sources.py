@@ -10,9 +10,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from functools import partial
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import (
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.tables import (
     COLUMNS,
     FRACTION,
     LABELS_COLUMN,
@@ -22,7 +23,6 @@ from dospcot.lab.studies.tables import (
     paired,
     verdict,
 )
-from dospcot.metrics import SeedSummary
 
 # A first comparison of label sources: expert demonstrations with 1% per-step labels against 5% per-step
 # labels, on grid16-dospcot, seeds 0-9. Each arm is a set of overrides of the preset, one sweep each.

@@ -4,9 +4,12 @@ from __future__ import annotations
 
 import json
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import (
+from dospcot.run.run_folder import REWARD_CLASSES_FILE
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot.tasks import load_run_config
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.tables import (
     LABELS_COLUMN,
     LABELS_EXPLAINED,
     METHODS,
@@ -20,9 +23,6 @@ from dospcot.lab.studies.tables import (
     versus,
     with_headline,
 )
-from dospcot.metrics import SeedSummary
-from dospcot.run.run_folder import REWARD_CLASSES_FILE
-from dospcot.tasks import load_run_config
 
 MINIGRID_COLUMNS = dict(
     success="success",

@@ -1,19 +1,19 @@
 """The numerics study: numerics 2 (the reward classifiers fit in float32, on the samples that carry
 weight) against numerics 1 (float64, the whole pool), paired by seed on ``grid16-dospcot`` and
-``minigrid-doorkey-dospcot``, to show that the cheaper fits give the same science (issue 59)."""
+``minigrid-doorkey-dospcot``, to show that the cheaper fits give the same science."""
 
 from __future__ import annotations
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.batched_seeds import ALONE
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.tables import cpu_per_run, held_lines, numerics_of, over_seeds, paired
-from dospcot.metrics import SeedSummary
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.batched_seeds import ALONE
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.tables import cpu_per_run, held_lines, numerics_of, over_seeds, paired
 
 PRESETS = ("grid16-dospcot", "minigrid-doorkey-dospcot")
 METRICS = ("success", "pseudo_accuracy")
 HALF_WIDTH = 0.1
-"""How far from 0 either end of a difference's 95% interval may lie for the same science (issue 59)."""
+"""How far from 0 either end of a difference's 95% interval may lie for the same science."""
 VERSIONS = (1, 2)
 
 

@@ -7,9 +7,10 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import EXPLORATORY, Study
-from dospcot.lab.studies.readme import README, RESULTS, read_block, replace_block
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.repository import Repository
+from dospcot_lab.studies.declaration import EXPLORATORY, Study
+from dospcot_lab.studies.readme import read_block, replace_block
 
 PAGES = Path(__file__).resolve().parent / "pages"
 """The prose of each study's page, ``<study>.md``: what it runs above the table, its reading and
@@ -34,10 +35,19 @@ def page_prose(name: str) -> str:
 
 def page(name: str, study: Study, table: str | None) -> str:
     """Study ``name``'s page: its title, then its prose with ``table`` (the study's tables, as
-    :func:`dospcot.lab.studies.run_study` prints them) in place, or, where the record holds no
+    :func:`dospcot_lab.studies.run_study` prints them) in place, or, where the record holds no
     run of the study (``None``), a notice that says so and how to produce it."""
     body = unpublished(name, study) if table is None else table.replace("](docs/results/", "](")
     return f"# {study.title}\n\n" + page_prose(name).replace(TABLE, body.rstrip("\n"))
+
+
+UNPUBLISHED = "**Unpublished: the record holds no runs of this study**"
+"""How a page that the record cannot rebuild begins its notice."""
+
+
+def is_published(path: Path) -> bool:
+    """Whether the study page at ``path`` exists and publishes tables (it is no unpublished notice)."""
+    return path.is_file() and UNPUBLISHED not in path.read_text()
 
 
 def unpublished(name: str, study: Study) -> str:
@@ -45,9 +55,9 @@ def unpublished(name: str, study: Study) -> str:
     sweeps = ", ".join(f"`{sweep.name}`" for sweep in study.sweeps)
     seeds = f"{study.first_seed}-{study.first_seed + study.seeds - 1}"
     return (
-        "**Unpublished: the record holds no runs of this study**, so this page shows no table and no "
+        f"{UNPUBLISHED}, so this page shows no table and no "
         "figure of it (a table is published only where `--render-only` rebuilds it from the runs in "
-        f"`runs/sweeps/`). `dospcot study {name} --docs` trains it into `runs/sweeps/` "
+        f"`runs/sweeps/`). `dospcot-lab study {name} --docs` trains it into `runs/sweeps/` "
         f"({len(study.sweeps)} sweep(s), seeds {seeds}: {sweeps}; several CPU-hours on 2 "
         "cores) and writes this page with its tables."
     )
@@ -71,7 +81,7 @@ def glance_table(rows: dict[str, list[str]], order: list[str], link: str, brief:
     lines = list(GLANCE_HEAD)
     left_out = []
     for name in order:
-        cells = rows.get(name) or ["", "not rendered yet", "", f"`dospcot study {name} --render-only --docs`"]
+        cells = rows.get(name) or ["", "not rendered yet", "", f"`dospcot-lab study {name} --render-only --docs`"]
         if brief and cells[3] == EXPLORATORY:
             left_out.append(name)
             continue
@@ -98,10 +108,11 @@ def glance_rows(text: str) -> dict[str, list[str]]:
     return rows
 
 
-def write_glance(name: str, cells: list[str], order: list[str]) -> None:
-    """Replace study ``name``'s row of the results at a glance in docs/results/index.md and README.md
-    (without the exploratory rows), keeping the other studies' rows as their last render wrote them."""
-    rows = glance_rows(read_block(RESULTS / "index.md", GLANCE))
+def write_glance(repo: Repository, name: str, cells: list[str], order: list[str]) -> None:
+    """Replace study ``name``'s row of the results at a glance in ``repo``'s docs/results/index.md and
+    README.md (without the exploratory rows), keeping the other studies' rows as their last render
+    wrote them."""
+    rows = glance_rows(read_block(repo.results / "index.md", GLANCE))
     rows[name] = cells
-    replace_block(README, GLANCE, glance_table(rows, order, "docs/results/", brief=True))
-    replace_block(RESULTS / "index.md", GLANCE, glance_table(rows, order, ""))
+    replace_block(repo.readme, GLANCE, glance_table(rows, order, "docs/results/", brief=True))
+    replace_block(repo.results / "index.md", GLANCE, glance_table(rows, order, ""))

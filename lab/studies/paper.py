@@ -6,12 +6,13 @@ from __future__ import annotations
 from functools import partial
 
 from dospcot.config.presets import PAPER_PRESETS
-from dospcot.lab import paper_tables as protocol
-from dospcot.lab.report import TrialRun, paper_report_tables
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.metrics import SeedSummary, published_paper_tables
+from dospcot.metrics import published_paper_tables
 from dospcot.run.run_folder import CONFIG_FILE
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps import paper_tables as protocol
+from dospcot.sweeps.report import TrialRun, paper_report_tables
 from dospcot.tasks import load_run_config
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
 
 
 def _with_agreement_plot(plot: str, runs: list[TrialRun]) -> list[str]:
@@ -31,7 +32,7 @@ def paper_headline(table: str) -> str:
 
 def paper_glance(runs: list[TrialRun]) -> Glance:
     """The protocol's target: ESARSA-ESARSA DOSPCoT's optimal-action agreement against the oracle's,
-    as the study's target line computes it (:func:`dospcot.lab.paper_tables.target_check`)."""
+    as the study's target line computes it (:func:`dospcot.sweeps.paper_tables.target_check`)."""
     cfg = load_run_config(runs[0].run_dir / CONFIG_FILE)
     rows = protocol.build_tables(
         [row for run in runs for row in run.curves], published_paper_tables(), cfg.tabular.rounds

@@ -10,7 +10,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from dospcot.lab.report import TrialRun
+from dospcot.sweeps.report import TrialRun
 from dospcot.tasks import load_run_config
 
 

@@ -7,12 +7,12 @@ import csv
 import json
 from collections.abc import Callable
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.grid import LAYOUT, UNSEEN_LAYOUTS
-from dospcot.lab.studies.tables import FRACTION, MINIGRID_TASKS, labels_cell, over_seeds
-from dospcot.metrics import SeedSummary
 from dospcot.run.run_folder import METRICS_FILE, QUERIES_FILE, REWARD_CLASSES_FILE
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.grid import LAYOUT, UNSEEN_LAYOUTS
+from dospcot_lab.studies.tables import FRACTION, MINIGRID_TASKS, labels_cell, over_seeds
 
 STRATEGY = "training.label_strategy"
 SELF_TRAINING = ("uniform", "random", "uncertainty")

@@ -1,15 +1,9 @@
-"""Where ``--docs`` writes: the checkout's ``docs/results/`` and the generated blocks of README.md and
-of ``docs/results/index.md``, each the text between a start and an end marker."""
+"""The generated blocks that ``--docs`` writes into README.md and ``docs/results/index.md``: each the
+text between a start and an end marker line."""
 
 from __future__ import annotations
 
 from pathlib import Path
-
-ROOT = Path(__file__).resolve().parents[2]
-"""The checkout this package sits in (an editable install): ``--docs`` writes its docs/ and README.md."""
-README = ROOT / "README.md"
-RESULTS = ROOT / "docs" / "results"
-"""The study pages, one per study, and ``index.md``, the results at a glance."""
 
 
 def markers(name: str) -> tuple[str, str]:

@@ -11,10 +11,11 @@ from functools import partial
 
 import numpy as np
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies.declaration import Glance, Study, Sweep
-from dospcot.lab.studies.highway import HIGHWAY_COLUMNS
-from dospcot.lab.studies.tables import (
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.highway import HIGHWAY_COLUMNS
+from dospcot_lab.studies.tables import (
     COLUMNS,
     FRACTION,
     GRID16_PRESETS,
@@ -25,7 +26,6 @@ from dospcot.lab.studies.tables import (
     paired,
     run_value,
 )
-from dospcot.metrics import SeedSummary
 
 # The second-view study (docs/preregistration.md, committed before any of its runs): its settings,
 # seeds, metrics, test and smallest effects are that file's; nothing here may differ from it.

@@ -8,9 +8,9 @@ import math
 from collections.abc import Callable
 from typing import Any
 
-from dospcot.lab.report import TrialRun, cells
-from dospcot.lab.studies.declaration import Glance
-from dospcot.metrics import SeedSummary
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun, cells
+from dospcot_lab.studies.declaration import Glance
 
 GRID_METHODS = {
     "oracle": "oracle (all rewards)",

@@ -1,4 +1,4 @@
-"""What a sweep is (:mod:`dospcot.lab.sweep` runs it): its spec (configs, a grid of values,
+"""What a sweep is (:mod:`dospcot.sweeps.sweep` runs it): its spec (configs, a grid of values,
 seeds, overrides) stored in ``sweep.json``, its trials and their folders, and the checks that a folder
 still matches its spec."""
 
@@ -81,7 +81,7 @@ class SweepSpec:
         fields, and once per combination of grid values its task's check step (files, imports, the env).
 
         :param check_task: run the task's check step. Off where the trials are only compared with a
-            record (:func:`~dospcot.lab.studies.check_record`): a fresh clone's record lacks the files
+            record (:func:`~dospcot_lab.studies.check_record`): a fresh clone's record lacks the files
             a run read, such as the saved expert agent that recorded its demonstrations.
         :raises ConfigError: a combination the config rejects (naming the key).
         """

@@ -46,7 +46,10 @@ from typing import Any
 
 from tqdm.auto import tqdm
 
-from dospcot.lab.sweep_spec import (
+from dospcot.run.interrupts import Interrupted, leave_interrupts_to_the_parent
+from dospcot.run.run_folder import CONFIG_FILE, SUMMARY_FILE, batch_members, run_lock, write_json
+from dospcot.run.runners import seeds_trainer
+from dospcot.sweeps.sweep_spec import (
     SWEEP_FILE,
     TRIAL_FILE,
     Backend,
@@ -60,9 +63,6 @@ from dospcot.lab.sweep_spec import (
     stored_batch_seeds,
     trial_dir,
 )
-from dospcot.run.interrupts import Interrupted, leave_interrupts_to_the_parent
-from dospcot.run.run_folder import CONFIG_FILE, SUMMARY_FILE, batch_members, run_lock, write_json
-from dospcot.run.runners import seeds_trainer
 from dospcot.tasks import load_config
 
 

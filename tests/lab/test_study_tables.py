@@ -1,4 +1,4 @@
-"""The study tables of dospcot.lab.studies (the pre-registered second-view tables first): paired
+"""The study tables of dospcot_lab.studies (the pre-registered second-view tables first): paired
 differences and verdicts by hand."""
 
 import json
@@ -9,11 +9,13 @@ from pathlib import Path
 
 import pytest
 
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies import STUDIES
-from dospcot.lab.studies.grid import grid16_tables, label_fraction_tables
-from dospcot.lab.studies.highway import cost_bound
-from dospcot.lab.studies.label_sources import (
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot.sweeps.sweep import Trial
+from dospcot_lab.studies import STUDIES
+from dospcot_lab.studies.grid import grid16_tables, label_fraction_tables
+from dospcot_lab.studies.highway import cost_bound
+from dospcot_lab.studies.label_sources import (
     DEMO_ARMS,
     EFFORT_ARMS,
     EFFORT_HIGHWAY_ARMS,
@@ -24,14 +26,11 @@ from dospcot.lab.studies.label_sources import (
     effort_tables,
     third_view_tables,
 )
-from dospcot.lab.studies.minigrid import minigrid_tables
-from dospcot.lab.studies.provenance import header
-from dospcot.lab.studies.second_view import second_view_tables
-from dospcot.lab.sweep import Trial
-from dospcot.metrics import SeedSummary
+from dospcot_lab.studies.minigrid import minigrid_tables
+from dospcot_lab.studies.provenance import header
+from dospcot_lab.studies.second_view import second_view_tables
 
-STUDY_SCRIPT = Path(__file__).resolve().parent.parent / "scripts" / "study.py"
-"""The command the docs name, a shim of :func:`dospcot.lab.studies.main`."""
+"""The command the docs name, a shim of :func:`dospcot_lab.studies.main`."""
 
 INDEPENDENT = {"env.blind_spot_rate": "0.5", "env.blind_spots": "independent", "agent": "dqn"}
 IDENTICAL = {**INDEPENDENT, "env.blind_spots": "identical"}
@@ -325,8 +324,18 @@ def test_the_highway_equal_effort_table_reads_returns_and_shows_the_experts_orac
 
 
 def _render_only(name: str, runs_dir: Path) -> subprocess.CompletedProcess:
-    """``study.py <name> --render-only`` on the sweeps under ``runs_dir``, in a process of its own."""
-    command = [sys.executable, str(STUDY_SCRIPT), name, "--render-only", "--runs-dir", str(runs_dir)]
+    """``dospcot-lab study <name> --render-only`` on the sweeps under ``runs_dir``, in a process of its
+    own."""
+    command = [
+        sys.executable,
+        "-m",
+        "dospcot_lab",
+        "study",
+        name,
+        "--render-only",
+        "--runs-dir",
+        str(runs_dir),
+    ]
     return subprocess.run(command, capture_output=True, text=True)
 
 
@@ -334,7 +343,8 @@ def test_render_only_with_no_finished_run_stops_with_one_line(tmp_path):
     empty = _render_only("equal-effort", tmp_path)
     assert empty.returncode == 1
     assert empty.stderr.strip() == (
-        f"study.py: no finished run of this study under {tmp_path}; run it without --render-only"
+        f"dospcot-lab study: error: no finished run of this study under {tmp_path}; run it without "
+        "--render-only"
     )
 
 
@@ -348,7 +358,7 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
         run_dir.mkdir()
         (run_dir / "run_info.json").write_text(json.dumps({"wall_time_s": 48.0, **info}))
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
-    line = header(runs, "python scripts/study.py x", [tmp_path])[0]
+    line = header(runs, "dospcot-lab study x", [tmp_path])[0]
     assert line.endswith(
         "; 4 minutes of training, the runs' wall times summed (one torch thread per run); source commits "
         "aaaaaaa (2), "
@@ -357,7 +367,7 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
     for run in runs:  # every run with its CPU time: the header counts that, not the wall time
         info = json.loads((run.run_dir / "run_info.json").read_text())
         (run.run_dir / "run_info.json").write_text(json.dumps({**info, "cpu_time_s": 36.0}))
-    line = header(runs, "python scripts/study.py x", [tmp_path])[0]
+    line = header(runs, "dospcot-lab study x", [tmp_path])[0]
     assert "; 3 CPU-minutes of training (one torch thread per run); " in line
 
 
@@ -371,7 +381,7 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
         info = {"wall_time_s": 60.0, "commit": "a" * 40} | ({"cpu": cpu} if cpu else {})
         (run_dir / "run_info.json").write_text(json.dumps(info))
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
-    line = header(runs, "python scripts/study.py x", [tmp_path])[0]
+    line = header(runs, "dospcot-lab study x", [tmp_path])[0]
     assert line.endswith(
         "source commit aaaaaaa (3); torch CPU kernels AVX2 (1), AVX512 (1), not recorded (1)."
     )
@@ -379,9 +389,9 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
 
 def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path, capfd):
     """A table rebuilt from a record must not count a run under a preset that has changed since."""
-    from dospcot.lab.studies import main
     from dospcot.run.run_folder import write_toml
     from dospcot.tasks import load_config
+    from dospcot_lab.cli import main
 
     trial = "grid16-masked-zero/training.label_fraction=0.01__seed=0"
     stored = tmp_path / "label-fraction/trials" / trial / "config.toml"
@@ -389,14 +399,14 @@ def test_render_only_refuses_a_trial_trained_under_another_config(tmp_path, capf
     current = load_config("grid16-masked-zero", ["training.label_fraction=0.01", "seed=0"])
     write_toml(stored, current.to_dict())
     stored.write_text(stored.read_text().replace("steps_per_round = 8000", "steps_per_round = 7000"))
-    # The script's main in this process (test_render_only_with_no_finished_run_stops_with_one_line runs
-    # the script): its exit, a message, is what the process prints on stderr with exit status 1.
+    # The command's main in this process (test_render_only_with_no_finished_run_stops_with_one_line runs
+    # it in its own): its exit, a message, is what the process prints on stderr with exit status 1.
     with pytest.raises(SystemExit) as stale:
-        main(["label-fraction", "--render-only", "--runs-dir", str(tmp_path)])
+        main(["study", "label-fraction", "--render-only", "--runs-dir", str(tmp_path)])
     assert stale.value.code == (
-        f"study.py: 1 trial(s) in {tmp_path / 'label-fraction'} were trained with another config than "
-        f"their preset and overrides give now (e.g. {trial}: training.steps_per_round was 7000, is "
-        "8000); move the sweep folder away, or delete those trials' folders, to run them again"
+        f"dospcot-lab study: error: 1 trial(s) in {tmp_path / 'label-fraction'} were trained with another "
+        f"config than their preset and overrides give now (e.g. {trial}: training.steps_per_round was "
+        "7000, is 8000); move the sweep folder away, or delete those trials' folders, to run them again"
     )
     assert capfd.readouterr().err == ""
 

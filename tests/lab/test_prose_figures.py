@@ -4,14 +4,14 @@
 README.md, the CHANGELOG's newest entry, runs/README.md and the hand-written pages of the docs
 restate figures of the record (``runs/sweeps/``) and of BENCHMARKS.md. Each such figure is either
 written by a generator, and a test fails while the generated text is stale (the study pages, the
-results at a glance and the README's study blocks: ``tests/test_docs.py``; runs/README.md's size:
-:mod:`dospcot.lab.record`, below), or it is listed in :data:`FIGURES`: the file, a regex that finds
+results at a glance and the README's study blocks: ``tests/lab/test_docs.py``; runs/README.md's size:
+:mod:`dospcot_lab.record`, below), or it is listed in :data:`FIGURES`: the file, a regex that finds
 its sentence, one that reads the figure(s) in that sentence, and a function that computes the true
 value(s). A figure that no longer matches fails, naming the file, the figure found and the true value.
 
-The true values come from the record read directly (:class:`dospcot.lab.record.Record`: runs,
+The true values come from the record read directly (:class:`dospcot_lab.record.Record`: runs,
 sweeps, seeds, CPU time, labels bought), from BENCHMARKS.md's table, or, for a figure of a study's
-table, from the study's generated page, which ``tests/test_docs.py`` rebuilds from the record (so a
+table, from the study's generated page, which ``tests/lab/test_docs.py`` rebuilds from the record (so a
 page's figure is the record's). A figure is equal where it is the true value rounded to the digits
 the prose gives.
 
@@ -38,10 +38,10 @@ from statistics import mean
 
 import pytest
 
-from dospcot.lab.bench_measure import NOT_RECORDED, Provenance
-from dospcot.lab.record import SIZE_BLOCK, Record, read_block
+from dospcot_lab.bench_measure import NOT_RECORDED, Provenance
+from dospcot_lab.record import SIZE_BLOCK, Record, read_block
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 NUMBER_WORDS = {w: i for i, w in enumerate("zero one two three four five six seven eight nine ten".split())}
 
 
@@ -849,9 +849,9 @@ def test_each_check_fails_on_a_changed_figure(figure, sources):
 
 
 def test_runs_readme_size_is_the_records():
-    """runs/README.md's size paragraph is what ``python -m dospcot.lab.record --write`` writes now."""
+    """runs/README.md's size paragraph is what ``dospcot-lab record --write`` writes now."""
     block = read_block((ROOT / "runs" / "README.md").read_text(), SIZE_BLOCK)
-    assert block == Record(ROOT).size_paragraph(), "stale: run `python -m dospcot.lab.record --write`"
+    assert block == Record(ROOT).size_paragraph(), "stale: run `dospcot-lab record --write`"
 
 
 def test_every_benchmark_row_says_how_it_was_made():
@@ -900,15 +900,15 @@ def headline_problems(rows: dict[str, str], page: Callable[[str], str]) -> list[
 STALE_BENCHMARKS = """\
 # Benchmarks
 
-Written by `dospcot bench` on 2026-11-24 03:49 UTC.  
+Written by `dospcot-lab bench` on 2026-11-24 03:49 UTC.  
 Machine: x86_64, torch threads: 1, Python 3.11.7, torch 2.13.0+cpu; no GPU.  
 Each figure: median of 3 repetitions [min, max]; ours and the peer alternate in the same run.
 
-Rerun alone by `dospcot bench --only esarsa_dqn --only esarsa_dqn_wide --only esarsa_dqn_online_wide --only esarsa_dqn_q_target --repeats 5` on 2026-11-24 15:56 UTC: esarsa_dqn; esarsa_dqn_wide; esarsa_dqn_online_wide; esarsa_dqn_q_target.
+Rerun alone by `dospcot-lab bench --only esarsa_dqn --only esarsa_dqn_wide --only esarsa_dqn_online_wide --only esarsa_dqn_q_target --repeats 5` on 2026-11-24 15:56 UTC: esarsa_dqn; esarsa_dqn_wide; esarsa_dqn_online_wide; esarsa_dqn_q_target.
 
-Rerun alone by `dospcot bench --only minigrid_wrappers` on 2026-11-25 04:57 UTC: minigrid_wrappers.
+Rerun alone by `dospcot-lab bench --only minigrid_wrappers` on 2026-11-25 04:57 UTC: minigrid_wrappers.
 
-Rerun alone by `dospcot bench --only batched_seeds --only batched_seeds_fasthighway --only batched_wall --only batched_memory --repeats 1` on 2026-11-26 08:31 UTC: batched_seeds; batched_seeds_fasthighway; batched_wall; batched_memory.
+Rerun alone by `dospcot-lab bench --only batched_seeds --only batched_seeds_fasthighway --only batched_wall --only batched_memory --repeats 1` on 2026-11-26 08:31 UTC: batched_seeds; batched_seeds_fasthighway; batched_wall; batched_memory.
 """  # noqa: W291 (the header's lines end in two spaces, Markdown's line break, as the file wrote them)
 
 STALE = [
@@ -928,7 +928,7 @@ seed than runs of their own in `BENCHMARKS.md`, short of its 4x aim).""",
   stacked per view (`dospcot.policies.stacked_esarsa`), one Adam with a step count per member, each
   member's draws from its own streams; any member's folder resumes the batch. The update equals
   `ExpectedSarsaDQN.train` to 1e-5 for one member; members are independent bit for bit; a batch
-  killed with SIGKILL resumes to the same files. `dospcot sweep` and `dospcot study` take
+  killed with SIGKILL resumes to the same files. `dospcot sweep` and `dospcot-lab study` take
   `--batch-seeds K`. The batched-seeds study (20 seeds of `grid16-dospcot` and `grid16-oracle`,
   alone and batched) finds the same science; the saving is 1.5x-1.9x CPU, short of the 4x aimed at
   (docs/batched_seeds.md). Not yet: batched envs and classifiers.

@@ -16,7 +16,7 @@ the interquartile mean (IQM, as rliable). It writes into the sweep folder (or ``
   fraction study), one line per config and remaining grid values.
 
 A sweep of paper-protocol runs (``task = "paper"``, as ``dospcot reproduce-paper`` makes) gets the seed
-paper's tables instead (:mod:`dospcot.lab.paper_tables`), per cell: ``report.md`` (the target line,
+paper's tables instead (:mod:`dospcot.sweeps.paper_tables`), per cell: ``report.md`` (the target line,
 Tables 1-4 for paper accuracy, optimal-action agreement and greedy return, pseudo-reward accuracy and
 coverage),
 ``report.csv`` (long format: one row per table, row, gamma column and metric) and
@@ -37,12 +37,12 @@ import numpy as np
 
 from dospcot import metrics
 from dospcot.config.run_configs import PaperConfig, TrainConfig
-from dospcot.lab import paper_tables as paper
-from dospcot.lab.sweep_spec import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
-from dospcot.metrics import SeedSummary
 from dospcot.run import paper_protocol as protocol
 from dospcot.run.plots import Band, plot_bands
 from dospcot.run.run_folder import CONFIG_FILE, METRICS_FILE, SUMMARY_FILE, write_csv, write_text
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps import paper_tables as paper
+from dospcot.sweeps.sweep_spec import TRIAL_FILE, SweepError, SweepSpec, Trial, open_sweep
 from dospcot.tasks import load_run_config
 
 REPORT_METRICS = {

@@ -1,4 +1,4 @@
-"""The cost rows of ``dospcot bench`` (lab/bench_cost.py): how a run is launched and read, and how the
+"""The cost rows of ``dospcot-lab bench`` (lab/bench_cost.py): how a run is launched and read, and how the
 rows compare the runs."""
 
 from __future__ import annotations
@@ -8,7 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from dospcot.lab import bench_cost
+from dospcot_lab import bench_cost
+
+ROOT = Path(__file__).resolve().parents[2]
 
 FAKE_MAIN = """
 import json, os, sys
@@ -41,7 +43,7 @@ def test_a_release_runs_from_its_own_install_with_the_seed_and_length(fake_relea
     assert called["file"].startswith(str(fake_release / "site"))
     assert called["argv"][:2] == ["train", "grid16-dospcot"]
     assert called["argv"][-4:] == ["--set", "seed=3", "--set", "training.rounds=2"]
-    assert not Path(called["cwd"]).is_relative_to(bench_cost.ROOT)  # no checkout shadows the install
+    assert not Path(called["cwd"]).is_relative_to(ROOT)  # no checkout shadows the install
     assert cpu > 0 and peak >= 64  # MiB: the fake's buffer
 
 

@@ -10,11 +10,11 @@ import pytest
 
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.config.loading import renamed_to_now
-from dospcot.lab.report import TrialRun
-from dospcot.lab.studies import STUDIES, Sweep, sweep_spec
-from dospcot.lab.studies.numerics import glance, tables
-from dospcot.lab.studies.tables import numerics_of, paired
-from dospcot.lab.sweep import Trial
+from dospcot.sweeps.report import TrialRun
+from dospcot.sweeps.sweep import Trial
+from dospcot_lab.studies import STUDIES, Sweep, sweep_spec
+from dospcot_lab.studies.numerics import glance, tables
+from dospcot_lab.studies.tables import numerics_of, paired
 
 
 def _run(

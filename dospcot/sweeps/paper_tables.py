@@ -14,7 +14,6 @@ from dataclasses import asdict
 from typing import Any
 
 from dospcot.config.run_configs import PaperConfig
-from dospcot.metrics import SeedSummary
 from dospcot.run.paper_protocol import (
     BASELINES,
     GAMMAS,
@@ -24,6 +23,7 @@ from dospcot.run.paper_protocol import (
     PAIR_VIEWS,
     per_seed,
 )
+from dospcot.statistics import SeedSummary
 
 
 def cell_summary(values: Sequence[float]) -> SeedSummary:
