@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 from tqdm.auto import tqdm
 
+from dospcot.lab.bench_agents import bench_ego_gradient_step
 from dospcot.lab.bench_batched import (
     bench_batched_memory,
     bench_batched_seeds,
@@ -74,6 +75,7 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     **{f"cost_{task}": partial(bench_cost, task) for task in COST_TASKS},
     **{f"release_{task}": partial(bench_release, task) for task in COST_TASKS},
     "release_memory": partial(bench_release, "lavagap", memory=True),
+    "ego_gradient_step": bench_ego_gradient_step,
 }
 
 GPU_BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {

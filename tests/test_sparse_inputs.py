@@ -22,12 +22,14 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _inputs(rows: int, width: int, seed: int, binary: bool = True) -> th.Tensor:
-    """(rows, width) float64, about a tenth of it nonzero, one row all 0."""
+    """(rows, width) float64, about a tenth of it nonzero, one row and the last third of the inputs
+    all 0 (as the inputs off the map in an egocentric view)."""
     gen = th.Generator().manual_seed(seed)
     on = th.rand(rows, width, generator=gen) < 0.1
     values = th.ones(rows, width) if binary else th.randn(rows, width, generator=gen)
     x = (on * values).double()
     x[1] = 0.0
+    x[:, width - width // 3 :] = 0.0
     return x
 
 
@@ -46,6 +48,8 @@ def test_the_sparse_layer_gives_the_dense_layers_values_and_gradients_in_float64
     assert th.allclose(dense.weight.grad, sparse.weight_t.grad.t(), rtol=0, atol=1e-13)
     assert th.allclose(dense.bias.grad, sparse.bias.grad, rtol=0, atol=1e-13)
     assert sparse.bias is dense.bias
+    nothing = th.zeros(3, 50, dtype=th.float64)
+    assert th.equal(sparse(nothing), dense.bias.detach().expand(3, 7))
 
 
 def test_adam_takes_the_same_steps_on_the_sparse_layer_as_on_the_dense_one() -> None:
