@@ -15,6 +15,10 @@ import torch as th
 from stable_baselines3 import DQN
 from torch import nn
 
+from dospcot.config.learning_sections import ClassifierConfig, CoTrainingConfig
+from dospcot.core.classifier import BatchedRewardClassifier
+from dospcot.core.cotrainer import SelfPacedCoTrainer
+from dospcot.core.reward_model import RewardModelTrainer
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn.sparse_inputs import SparseInputLinear, sparsify_first_layer
 
@@ -167,3 +171,32 @@ def test_stock_sb3_loads_the_agent_where_dospcot_cannot_be_imported(tmp_path: Pa
         [sys.executable, "-I", "-c", script], cwd=tmp_path, capture_output=True, text=True, check=False
     )
     assert out.returncode == 0 and out.stdout.strip() == "ok", out.stderr
+
+
+@pytest.mark.parametrize("model", ["mlp", "linear"])
+def test_a_classifier_with_sparse_inputs_and_fused_adam_fits_as_the_dense_one_in_float64(model: str) -> None:
+    config = ClassifierConfig(model=model, loss="cross_entropy" if model == "mlp" else "hinge", hidden=8)
+    gen = th.Generator().manual_seed(0)
+    x = _inputs(2 * 30, 40, seed=5).view(2, 30, 40)
+    y = th.randint(0, 3, (2, 30), generator=gen)
+    weight = th.rand(2, 30, generator=gen, dtype=th.float64)
+    mask = th.ones(2, 3, dtype=th.bool)
+    dense = BatchedRewardClassifier(2, 40, 3, config, seeds=[1, 2]).double()
+    sparse = BatchedRewardClassifier(2, 40, 3, config, [1, 2], sparse_inputs=True, fused_adam=True).double()
+    assert th.allclose(dense(x, mask), sparse(x, mask), rtol=0, atol=1e-13)
+    losses = dense.fit(x, y, weight, mask), sparse.fit(x, y, weight, mask)
+    assert th.allclose(*losses, rtol=0, atol=1e-10)
+    for a, b in zip(dense.parameters(), sparse.parameters(), strict=True):
+        assert th.allclose(a, b, rtol=0, atol=1e-10)
+
+
+def test_numerics_3_gives_the_classifiers_and_agents_the_sparse_layer_and_fused_adam() -> None:
+    config = CoTrainingConfig(numerics=3)
+    trainer = SelfPacedCoTrainer([12, 5], 1, config, [0], 2)
+    assert all(clf.sparse_inputs and clf.fused_adam for clf in trainer.classifiers)
+    assert all(p.dtype == th.float32 for clf in trainer.classifiers for p in clf.parameters())
+    models = RewardModelTrainer([12], config, 0, 2)
+    assert all(clf.sparse_inputs and clf.fused_adam for clf in models.classifiers)
+    for numerics in (1, 2):
+        plain = SelfPacedCoTrainer([12], 1, CoTrainingConfig(numerics=numerics), [0], 2)
+        assert not plain.classifiers[0].sparse_inputs and not plain.classifiers[0].fused_adam

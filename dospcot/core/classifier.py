@@ -37,12 +37,27 @@ class BatchedRewardClassifier(nn.Module):
     :param n_classes: maximum number of reward classes K.
     :param config: hyperparameters.
     :param seeds: one seed per model for its initial parameters.
+    :param sparse_inputs: the first layer multiplies only the inputs that are nonzero in some sample
+        (the same sums, in another order: for views of 0s and 1s, most of whose inputs are 0 in every
+        sample); its weight's gradient stays dense.
+    :param fused_adam: :meth:`fit` steps Adam in one fused kernel (the same update, up to rounding).
     """
 
+    sparse_inputs = False
+    fused_adam = False
+
     def __init__(
-        self, n_models: int, n_features: int, n_classes: int, config: ClassifierConfig, seeds: list[int]
+        self,
+        n_models: int,
+        n_features: int,
+        n_classes: int,
+        config: ClassifierConfig,
+        seeds: list[int],
+        sparse_inputs: bool = False,
+        fused_adam: bool = False,
     ) -> None:
         super().__init__()
+        self.sparse_inputs, self.fused_adam = sparse_inputs, fused_adam
         if len(seeds) != n_models:
             raise ValueError(f"need one seed per model: {n_models} models, {len(seeds)} seeds")
         self.config = config
@@ -68,6 +83,10 @@ class BatchedRewardClassifier(nn.Module):
         """
         h = x
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
+            if i == 0 and self.sparse_inputs and not x.requires_grad:
+                # Inputs 0 in every sample add exactly 0: leave their columns and weight rows out.
+                cols = x.abs().amax(dim=(0, 1)).nonzero().view(-1)
+                h, w = h.index_select(2, cols), w.index_select(1, cols)
             h = torch.baddbmm(b, h, w)
             if i < len(self.weights) - 1:
                 h = torch.relu(h)
@@ -102,7 +121,7 @@ class BatchedRewardClassifier(nn.Module):
         :param class_mask: bool (n_models, K) or (n_models, N, K), as in :meth:`forward`.
         :return: the final weighted loss of each model, shape (n_models,).
         """
-        optimiser = torch.optim.Adam(self.parameters(), lr=self.config.lr)
+        optimiser = torch.optim.Adam(self.parameters(), lr=self.config.lr, fused=self.fused_adam or None)
         y = y.clamp(min=0)[..., None]
         total = weight.sum(-1).clamp(min=1e-12)
         n = (weight > 0).sum(-1).clamp(min=1)
