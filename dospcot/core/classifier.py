@@ -81,13 +81,22 @@ class BatchedRewardClassifier(nn.Module):
         :param class_mask: bool (n_models, K), the classes each model may predict, or (n_models, N, K),
             those each sample may take.
         """
+        cols = self._nonzero_inputs(x)
+        return self._outputs(x if cols is None else x.index_select(2, cols), class_mask, cols)
+
+    def _nonzero_inputs(self, x: torch.Tensor) -> torch.Tensor | None:
+        """(n,) the inputs nonzero in some sample of ``x`` (n_models, N, n_features), under
+        ``sparse_inputs``; None: every input."""
+        if not self.sparse_inputs or x.requires_grad:
+            return None
+        return x.abs().amax(dim=(0, 1)).nonzero().view(-1)
+
+    def _outputs(self, x: torch.Tensor, class_mask: torch.Tensor, cols: torch.Tensor | None) -> torch.Tensor:
+        """:meth:`forward` of ``x`` (n_models, N, n) holding only the inputs ``cols`` (None: all): the
+        first layer reads their weight rows alone (the others would multiply inputs that are 0)."""
         h = x
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            if i == 0 and self.sparse_inputs and not x.requires_grad:
-                # Inputs 0 in every sample add exactly 0: leave their columns and weight rows out.
-                cols = x.abs().amax(dim=(0, 1)).nonzero().view(-1)
-                h, w = h.index_select(2, cols), w.index_select(1, cols)
-            h = torch.baddbmm(b, h, w)
+            h = torch.baddbmm(b, h, w if i > 0 or cols is None else w.index_select(1, cols))
             if i < len(self.weights) - 1:
                 h = torch.relu(h)
         return h.masked_fill(~_per_sample(class_mask), _MASKED)
@@ -125,9 +134,13 @@ class BatchedRewardClassifier(nn.Module):
         y = y.clamp(min=0)[..., None]
         total = weight.sum(-1).clamp(min=1e-12)
         n = (weight > 0).sum(-1).clamp(min=1)
+        cols = self._nonzero_inputs(x)
+        if cols is not None:  # once for every epoch
+            x = x.index_select(2, cols)
         for _ in range(self.config.epochs):
             optimiser.zero_grad()
-            per_sample = self.class_losses(self(x, class_mask), class_mask).gather(-1, y)[..., 0]
+            outputs = self._outputs(x, class_mask, cols)
+            per_sample = self.class_losses(outputs, class_mask).gather(-1, y)[..., 0]
             data = (torch.where(weight > 0, per_sample, 0.0) * weight).sum(-1) / total
             penalty = sum((w**2).sum(dim=(1, 2)) for w in self.weights)
             loss = data + 0.5 * self.config.l2 * penalty / n
