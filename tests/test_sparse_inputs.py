@@ -22,6 +22,7 @@ from dospcot.core.reward_model import RewardModelTrainer
 from dospcot.lab.bench_agents import ego_agent
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn.sparse_inputs import SparseInputLinear, sparsify_first_layer
+from dospcot.policies.stacked_esarsa.stacked_q_network import StackedQNetwork
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -138,6 +139,8 @@ def test_the_saved_agent_loads_back_and_into_stock_dqn_which_can_train_on(tmp_pa
     for p, q in zip(agent.q_net.parameters(), loaded.q_net.parameters(), strict=True):
         assert all(th.equal(ours[p][k], theirs[q][k]) for k in ("exp_avg", "exp_avg_sq"))
     loaded.learn(40)
+    with pytest.raises(ValueError, match="sparse first layer"):
+        StackedQNetwork.from_q_networks([agent.q_net])
     stock = DQN.load(tmp_path / "agent.zip", env=OneHotBits())
     first = stock.q_net.q_net[0]
     assert type(first) is nn.Linear and th.equal(first.weight, agent.q_net.q_net[0].weight)
