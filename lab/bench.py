@@ -21,6 +21,7 @@ from tqdm.auto import tqdm
 
 from dospcot.run.interrupts import Interrupted
 from dospcot.run.run_folder import cpu_description
+from dospcot_lab.bench_agents import bench_ego_gradient_step
 from dospcot_lab.bench_batched import (
     bench_batched_memory,
     bench_batched_seeds,
@@ -74,6 +75,7 @@ BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
     **{f"cost_{task}": partial(bench_cost, task) for task in COST_TASKS},
     **{f"release_{task}": partial(bench_release, task) for task in COST_TASKS},
     "release_memory": partial(bench_release, "lavagap", memory=True),
+    "ego_gradient_step": bench_ego_gradient_step,
 }
 
 GPU_BENCHMARKS: dict[str, Callable[[bool, int], Row]] = {
@@ -127,9 +129,9 @@ NOTES = [
     "- The batched-seeds CPU-time rows train the same seeds of a shortened preset (two rounds) as one "
     "batch (`dospcot.core.batched_runs.BatchedRuns`, one process) and as runs of their own one after "
     "another (the same process), counting the process's CPU time per seed, run set-up included. The "
-    "targets (4x for grid16 and the fast highway, 2.5x for grid32) are the batched-seeds aims; the batch shares the "
-    "networks' arithmetic, not the classifiers' fits or the envs' steps, which docs/batched_seeds.md "
-    "measures as what limits the ratio.",
+    "targets (4x for grid16 and the fast highway, 2.5x for grid32) are the batched-seeds aims; the batch "
+    "shares the networks' arithmetic, not the classifiers' fits or the envs' steps, which "
+    "docs/batched_seeds.md measures as what limits the ratio.",
     "- The batched wall-time row runs `dospcot sweep --workers 2` over the same cell twice in fresh "
     "folders: once with `--batch-seeds K` (two processes, a batch of K seeds each) and once with every "
     "run alone, process start-up included; it needs both cores to itself.",
@@ -270,7 +272,8 @@ def run_benchmarks(
     table = text if any(h in text for h in (TABLE_HEADER, WITHOUT_PROVENANCE, WITHOUT_GPU)) else None
     if (only or device != "cpu") and table is None:
         raise ValueError(
-            f"--only and --device update the table of a file a full `dospcot-lab bench` wrote; {out} holds none"
+            f"--only and --device update the table of a file a full `dospcot-lab bench` wrote; {out} holds "
+            "none"
         )
     try:  # before the rows, which take most of an hour, not after
         out.parent.mkdir(parents=True, exist_ok=True)

@@ -290,24 +290,29 @@ def test_numerics_2_fits_in_float32_and_a_config_pickled_before_the_key_reads_as
     assert loaded.numerics == 1 and loaded.dtype == torch.float64
     loaded.step(pool)
     assert RunCoTrainer([3], config, 0, 2).numerics == 1  # the default until the same-science check
-    with pytest.raises(ValueError, match="numerics must be one of 1, 2, got 7"):
+    with pytest.raises(ValueError, match="numerics must be one of 1, 2, 3, got 7"):
         CoTrainingConfig(numerics=7)
 
 
-def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path):
+@pytest.mark.parametrize("numerics", [2, 3])
+def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path, numerics):
     import json
 
     from dospcot.run.cotraining import build_run
     from dospcot.run.run_session import RunSession
     from dospcot.tasks import load_config
 
-    cfg = load_config("tiny", ["training.rounds=1", "training.steps_per_round=200", "cotraining.numerics=2"])
-    assert build_run(cfg).trainer.numerics == 2
+    cfg = load_config(
+        "tiny", ["training.rounds=1", "training.steps_per_round=200", f"cotraining.numerics={numerics}"]
+    )
+    run = build_run(cfg)
+    assert run.trainer.numerics == numerics
+    assert [agent.fused_adam for agent in run.agents] == [numerics == 3] * len(run.agents)
     (tmp_path / "config.toml").write_text("")
     session = RunSession(tmp_path, cfg, None, "dospcot train tiny")
     session.run.run(on_round=lambda run, rows: session.after_round(rows))
     session.finish()
-    assert json.loads((tmp_path / "run_info.json").read_text())["numerics"] == 2
+    assert json.loads((tmp_path / "run_info.json").read_text())["numerics"] == numerics
 
 
 def _late_class_pool(late_class: bool) -> tuple[Pool, np.ndarray]:

@@ -35,7 +35,7 @@ QUERY_SCHEDULES: tuple[str, ...] = get_args(QuerySchedule)
 CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")
 """The strategies that read the views' reward classifiers to choose their queries (a combination
 reads them when one of its parts does)."""
-NUMERICS_VERSIONS: tuple[int, ...] = (1, 2)
+NUMERICS_VERSIONS: tuple[int, ...] = (1, 2, 3)
 """The numerics versions of the reward classifiers' fits (:data:`dospcot.core.cotrainer.NUMERICS`)."""
 MODEL_KINDS: tuple[str, ...] = get_args(ModelKind)
 LOSS_KINDS: tuple[str, ...] = get_args(LossKind)

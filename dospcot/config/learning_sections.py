@@ -374,7 +374,9 @@ class CoTrainingConfig(AddedKeys):
     :param numerics: how the reward classifiers fit (:data:`dospcot.core.cotrainer.NUMERICS`): 1, in
         float64 over the whole pool; 2, in float32 over the samples that carry weight, several times
         cheaper on large pools (docs/guide/profile.md), but not the same science as 1 within the
-        numerics study's bound (docs/results/numerics.md), so not the default. Every run names it in
+        numerics study's bound (docs/results/numerics.md), so not the default; 3, 2's fits and agents
+        whose Q-networks read a view of 0s and 1s through a sparse first layer, with a fused Adam (the
+        same arithmetic as 2 in another order: equal up to float32 rounding). Every run names it in
         ``run_info.json``; a run folder or checkpoint written before the key existed reads as 1
         (``added_keys``), and a study compares the two only where its grid varies it.
     :param ensemble_size: the reward-model peer's (``method = "reward-model"``) classifiers per view,

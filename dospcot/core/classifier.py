@@ -37,12 +37,27 @@ class BatchedRewardClassifier(nn.Module):
     :param n_classes: maximum number of reward classes K.
     :param config: hyperparameters.
     :param seeds: one seed per model for its initial parameters.
+    :param sparse_inputs: the first layer multiplies only the inputs that are nonzero in some sample
+        (the same sums, in another order: for views of 0s and 1s, most of whose inputs are 0 in every
+        sample); its weight's gradient stays dense.
+    :param fused_adam: :meth:`fit` steps Adam in one fused kernel (the same update, up to rounding).
     """
 
+    sparse_inputs = False
+    fused_adam = False
+
     def __init__(
-        self, n_models: int, n_features: int, n_classes: int, config: ClassifierConfig, seeds: list[int]
+        self,
+        n_models: int,
+        n_features: int,
+        n_classes: int,
+        config: ClassifierConfig,
+        seeds: list[int],
+        sparse_inputs: bool = False,
+        fused_adam: bool = False,
     ) -> None:
         super().__init__()
+        self.sparse_inputs, self.fused_adam = sparse_inputs, fused_adam
         if len(seeds) != n_models:
             raise ValueError(f"need one seed per model: {n_models} models, {len(seeds)} seeds")
         self.config = config
@@ -66,9 +81,22 @@ class BatchedRewardClassifier(nn.Module):
         :param class_mask: bool (n_models, K), the classes each model may predict, or (n_models, N, K),
             those each sample may take.
         """
+        cols = self._nonzero_inputs(x)
+        return self._outputs(x if cols is None else x.index_select(2, cols), class_mask, cols)
+
+    def _nonzero_inputs(self, x: torch.Tensor) -> torch.Tensor | None:
+        """(n,) the inputs nonzero in some sample of ``x`` (n_models, N, n_features), under
+        ``sparse_inputs``; None: every input."""
+        if not self.sparse_inputs or x.requires_grad:
+            return None
+        return x.abs().amax(dim=(0, 1)).nonzero().view(-1)
+
+    def _outputs(self, x: torch.Tensor, class_mask: torch.Tensor, cols: torch.Tensor | None) -> torch.Tensor:
+        """:meth:`forward` of ``x`` (n_models, N, n) holding only the inputs ``cols`` (None: all): the
+        first layer reads their weight rows alone (the others would multiply inputs that are 0)."""
         h = x
         for i, (w, b) in enumerate(zip(self.weights, self.biases, strict=True)):
-            h = torch.baddbmm(b, h, w)
+            h = torch.baddbmm(b, h, w if i > 0 or cols is None else w.index_select(1, cols))
             if i < len(self.weights) - 1:
                 h = torch.relu(h)
         return h.masked_fill(~_per_sample(class_mask), _MASKED)
@@ -102,13 +130,17 @@ class BatchedRewardClassifier(nn.Module):
         :param class_mask: bool (n_models, K) or (n_models, N, K), as in :meth:`forward`.
         :return: the final weighted loss of each model, shape (n_models,).
         """
-        optimiser = torch.optim.Adam(self.parameters(), lr=self.config.lr)
+        optimiser = torch.optim.Adam(self.parameters(), lr=self.config.lr, fused=self.fused_adam or None)
         y = y.clamp(min=0)[..., None]
         total = weight.sum(-1).clamp(min=1e-12)
         n = (weight > 0).sum(-1).clamp(min=1)
+        cols = self._nonzero_inputs(x)
+        if cols is not None:  # once for every epoch
+            x = x.index_select(2, cols)
         for _ in range(self.config.epochs):
             optimiser.zero_grad()
-            per_sample = self.class_losses(self(x, class_mask), class_mask).gather(-1, y)[..., 0]
+            outputs = self._outputs(x, class_mask, cols)
+            per_sample = self.class_losses(outputs, class_mask).gather(-1, y)[..., 0]
             data = (torch.where(weight > 0, per_sample, 0.0) * weight).sum(-1) / total
             penalty = sum((w**2).sum(dim=(1, 2)) for w in self.weights)
             loss = data + 0.5 * self.config.l2 * penalty / n

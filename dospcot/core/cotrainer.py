@@ -26,15 +26,22 @@ from dospcot.seeding import classifier_seed
 
 @dataclass(frozen=True)
 class Numerics:
-    """How a co-trainer's reward classifiers are fitted: a version of a run's numbers.
+    """How a run's reward classifiers are fitted and its agents' networks computed: a version of a
+    run's numbers.
 
     :param dtype: the classifiers' parameters and inputs.
     :param weighted_only: a one-run fit reads only the samples whose weight is above 0 (the others
         add nothing to its loss).
+    :param sparse_inputs: the agents' Q-networks on a view of 0s and 1s and the classifiers compute
+        their first layer over the inputs that are on (``ExpectedSarsaDQN(sparse_inputs=True)``,
+        ``BatchedRewardClassifier(sparse_inputs=True)``).
+    :param fused_adam: the agents' and the classifiers' Adam steps in one fused kernel.
     """
 
     dtype: torch.dtype
     weighted_only: bool
+    sparse_inputs: bool = False
+    fused_adam: bool = False
 
     @property
     def np_dtype(self) -> type:
@@ -45,12 +52,16 @@ class Numerics:
 NUMERICS: dict[int, Numerics] = {
     1: Numerics(torch.float64, False),
     2: Numerics(torch.float32, True),
+    3: Numerics(torch.float32, True, sparse_inputs=True, fused_adam=True),
 }
 """The numerics versions (``cotraining.numerics``). 1: float64 fits over the whole pool (the paper
 protocol's co-trainer keeps it). 2: float32 fits that read only the samples that carry
 weight (the others add exactly 0 to the loss, so they move nothing but rounding). Both take
 ``classifier.epochs`` full-batch Adam steps from the last fit's parameters; what version 2 saves is
-measured in docs/guide/profile.md."""
+measured in docs/guide/profile.md. 3: version 2's fits, and classifiers and agents' Q-networks (on a
+view of 0s and 1s, as MiniGrid's egocentric map) that compute their first layer over the inputs that
+are on and step a fused Adam: the same sums and updates as 2's, in another order, so equal up to float32
+rounding."""
 
 
 class FitsUnderNumerics:
@@ -204,7 +215,13 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
             raise ValueError("co-training needs at least one view")
         self.classifiers = [
             BatchedRewardClassifier(
-                n_runs, dim, n_classes, config.classifier, [classifier_seed(s, j) for s in seeds]
+                n_runs,
+                dim,
+                n_classes,
+                config.classifier,
+                [classifier_seed(s, j) for s in seeds],
+                NUMERICS[self.numerics].sparse_inputs,
+                NUMERICS[self.numerics].fused_adam,
             ).to(self.dtype)
             for j, dim in enumerate(view_dims)
         ]

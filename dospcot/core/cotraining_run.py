@@ -58,7 +58,7 @@ import numpy as np
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
-from dospcot.core.cotrainer import RunCoTrainer, RunPool
+from dospcot.core.cotrainer import NUMERICS, RunCoTrainer, RunPool
 from dospcot.core.queries import QueriedTask, Rater, RewardQueries
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
@@ -164,6 +164,7 @@ def make_agent(
         agent = TabularExpectedSarsa("MlpPolicy", env, observations, **common, **kwargs)
     else:
         kwargs = {**cfg.dqn.sb3_kwargs(), "buffer_size": cfg.buffer_size}
+        numerics = NUMERICS[cfg.cotraining.numerics]
         demos = cfg.demonstrations
         agent = ExpectedSarsaDQN(
             "MlpPolicy",
@@ -172,6 +173,8 @@ def make_agent(
             **kwargs,
             demo_margin=demos.margin,
             demo_loss_weight=demos.margin_loss_weight,
+            sparse_inputs=numerics.sparse_inputs,
+            fused_adam=numerics.fused_adam,
         )
     agent.learning_starts = max(agent.learning_starts, training.collect_only_steps)
     agent.set_pace(0.0)

@@ -20,7 +20,7 @@ import torch
 
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.core.classifier import BatchedRewardClassifier
-from dospcot.core.cotrainer import FitsUnderNumerics, RunPool, RunRound
+from dospcot.core.cotrainer import NUMERICS, FitsUnderNumerics, RunPool, RunRound
 from dospcot.seeding import bootstrap_seed, ensemble_seed
 
 
@@ -44,6 +44,8 @@ class RewardModelTrainer(FitsUnderNumerics):
                 n_classes,
                 config.classifier,
                 [ensemble_seed(seed, j, e) for e in range(members)],
+                NUMERICS[self.numerics].sparse_inputs,
+                NUMERICS[self.numerics].fused_adam,
             ).to(self.dtype)
             for j, dim in enumerate(view_dims)
         ]

@@ -81,7 +81,8 @@ def glance_table(rows: dict[str, list[str]], order: list[str], link: str, brief:
     lines = list(GLANCE_HEAD)
     left_out = []
     for name in order:
-        cells = rows.get(name) or ["", "not rendered yet", "", f"`dospcot-lab study {name} --render-only --docs`"]
+        render = f"`dospcot-lab study {name} --render-only --docs`"
+        cells = rows.get(name) or ["", "not rendered yet", "", render]
         if brief and cells[3] == EXPLORATORY:
             left_out.append(name)
             continue

@@ -32,8 +32,16 @@ gradient step adds ``demo_loss_weight`` times DQfD's large-margin loss (:func:`l
 on a minibatch of demonstrated (state, action) pairs, which pulls the demonstrated action's value
 above every other action's by a margin.
 
+With ``sparse_inputs`` on an observation space of 0s and 1s (a ``Box(0, 1)`` of uint8: one-hot and
+indicator views), the Q-networks' first layer sums the weight rows of the inputs that are on
+(:class:`~dospcot.policies.esarsa_dqn.sparse_inputs.SparseInputLinear`), the same values and dense
+gradients as the stock layer's product over every input, up to float rounding. ``fused_adam`` steps
+Adam in one fused kernel (``torch.optim.Adam(fused=True)``): the same update, up to rounding, in one
+pass over each parameter instead of one per operation.
+
 The saved zip holds the stock ``DQNPolicy`` and nothing of dospcot, so
-``stable_baselines3.DQN.load`` reads it in a process that never imported dospcot.
+``stable_baselines3.DQN.load`` reads it in a process that never imported dospcot: a sparse first
+layer saves its weight, and Adam's moments of it, in ``nn.Linear``'s layout.
 """
 
 from __future__ import annotations
@@ -46,9 +54,15 @@ import torch.nn.functional as F
 from gymnasium import spaces
 from stable_baselines3 import DQN
 from stable_baselines3.common.policies import BasePolicy
+from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.common.utils import polyak_update
 
-from dospcot.policies.esarsa_dqn.buffers import RelabellingReplayBuffer
+from dospcot.policies.esarsa_dqn.buffers import RelabellingReplayBuffer, _binary
+from dospcot.policies.esarsa_dqn.sparse_inputs import (
+    own_optimizer_state,
+    sparsify_first_layer,
+    stock_optimizer_state,
+)
 
 Target = Literal["expected_sarsa", "q"]
 TARGETS: tuple[str, ...] = ("expected_sarsa", "q")
@@ -120,6 +134,10 @@ class ExpectedSarsaDQN(DQN):
     :param demo_margin: the large-margin loss's margin (DQfD's 0.8), in reward units.
     :param demo_loss_weight: lambda of the large-margin loss in every gradient step's loss, once
         demonstrations are set (:meth:`set_demonstrations`).
+    :param sparse_inputs: on an observation space of 0s and 1s with ``"MlpPolicy"``, the Q-networks'
+        first layer sums the weight rows of the inputs that are on (see the module docstring);
+        elsewhere it has no effect.
+    :param fused_adam: Adam (the policy's default optimiser) steps in one fused kernel.
     :param kwargs: every other argument of ``stable_baselines3.DQN``. ``replay_buffer_class``
         defaults to :class:`RelabellingReplayBuffer`.
     """
@@ -133,6 +151,10 @@ class ExpectedSarsaDQN(DQN):
     """(N, d) the demonstrated states, as this agent observes them (:meth:`set_demonstrations`)."""
     _demo_actions: th.Tensor | None = None
     """(N,) the demonstrated actions."""
+    sparse_inputs: bool = False
+    fused_adam: bool = False
+    _sparse_weights: tuple[th.nn.Parameter, ...] = ()
+    """The online Q-network's sparse first-layer weight, when it has one (the optimiser's)."""
 
     def __init__(
         self,
@@ -145,6 +167,8 @@ class ExpectedSarsaDQN(DQN):
         exploration_horizon: int | None = None,
         demo_margin: float = 0.8,
         demo_loss_weight: float = 1.0,
+        sparse_inputs: bool = False,
+        fused_adam: bool = False,
         **kwargs: Any,
     ) -> None:
         if target not in TARGETS:
@@ -170,6 +194,8 @@ class ExpectedSarsaDQN(DQN):
         self.greedy = greedy
         self.cut_windows = cut_windows
         self.exploration_horizon = exploration_horizon
+        self.sparse_inputs = bool(sparse_inputs)
+        self.fused_adam = bool(fused_adam)
         self.pace: float | None = None
         super().__init__(policy, env, **kwargs)
 
@@ -240,8 +266,44 @@ class ExpectedSarsaDQN(DQN):
             self.n_steps = 1
         super()._setup_model()
         self.n_steps = n_steps
+        self._setup_fast_paths()
         # DQN's _on_step reads eps from this schedule, which would restart at every learn().
         self.exploration_schedule = self._exploration_schedule
+
+    def _setup_fast_paths(self) -> None:
+        """Give both Q-networks a sparse first layer (``sparse_inputs``, on a space of 0s and 1s under
+        SB3's MLP) and build the optimiser again over the online network, fused if ``fused_adam``."""
+        policy = self.policy
+        self._sparse_weights = ()
+        mlp = isinstance(policy.q_net.features_extractor, FlattenExtractor)
+        if self.sparse_inputs and mlp and _binary(self.observation_space):
+            online = sparsify_first_layer(policy.q_net.q_net)
+            sparsify_first_layer(policy.q_net_target.q_net)
+            self._sparse_weights = () if online is None else (online.weight_t,)
+        if not self._sparse_weights and not self.fused_adam:
+            return
+        kwargs = dict(policy.optimizer_kwargs)
+        if self.fused_adam:
+            if policy.optimizer_class not in (th.optim.Adam, th.optim.AdamW):
+                raise ValueError(f"fused_adam needs Adam or AdamW, got {policy.optimizer_class.__name__}")
+            kwargs["fused"] = True
+        # SB3's DQNPolicy._build makes its optimiser the same way, before the layer changed.
+        policy.optimizer = policy.optimizer_class(policy.q_net.parameters(), lr=self.lr_schedule(1), **kwargs)
+
+    def get_parameters(self) -> dict[str, dict]:
+        """SB3's parameters to save; a sparse first layer's Adam moments in ``nn.Linear``'s layout, as
+        its weight is (stock SB3 loads both)."""
+        params = super().get_parameters()
+        if self._sparse_weights:
+            optimizer, weights = self.policy.optimizer, list(self._sparse_weights)
+            params["policy.optimizer"] = stock_optimizer_state(optimizer, weights)
+        return params
+
+    def set_parameters(self, load_path_or_dict: Any, exact_match: bool = True, device: Any = "auto") -> None:
+        """SB3's ``set_parameters``; a sparse first layer's Adam moments back into its own layout."""
+        super().set_parameters(load_path_or_dict, exact_match, device)
+        if self._sparse_weights:
+            own_optimizer_state(self.policy.optimizer, list(self._sparse_weights))
 
     def _exploration_schedule(self, _progress_remaining: float) -> float:
         return self._scheduled_eps()
@@ -384,4 +446,5 @@ class ExpectedSarsaDQN(DQN):
             "_greedy",
             "_demo_obs",
             "_demo_actions",
+            "_sparse_weights",
         ]

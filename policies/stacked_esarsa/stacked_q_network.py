@@ -79,6 +79,11 @@ def linear_layers(q_net: QNetwork) -> list[nn.Linear]:
             f"a stacked network flattens its input; got {type(q_net.features_extractor).__name__}"
         )
     modules = list(q_net.q_net)
+    if any(type(m).__name__ == "SparseInputLinear" for m in modules):
+        raise ValueError(
+            "a stacked network has dense layers only; this one has a sparse first layer "
+            "(cotraining.numerics = 3 on a view of 0s and 1s): train its seeds one run at a time"
+        )
     linear = [m for m in modules if isinstance(m, nn.Linear)]
     others = {type(m).__name__ for m in modules if not isinstance(m, nn.Linear)}
     if others - {"ReLU"}:
