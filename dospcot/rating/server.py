@@ -46,6 +46,8 @@ def waiting_round(run_dir: Path) -> Path:
     :raises RaterError: no such file.
     """
     folder = run_dir / QUERIES_FOLDER
+    if (run_dir / "config.toml").exists() and not (run_dir / "config.toml").is_file():
+        raise RaterError(f"{run_dir / 'config.toml'} is not a file (a folder?): give a run folder")
     if not (run_dir / "config.toml").is_file():
         raise RaterError(f"{run_dir} is not a run folder (it has no config.toml)")
     paths = sorted(folder.glob("round_*.csv"), key=lambda p: (len(p.name), p.name))
