@@ -238,7 +238,8 @@ def test_a_sweep_whose_ray_does_not_start_leaves_nothing_and_the_next_answers_th
     pytest.importorskip("ray")
     argv = ["sweep", "tiny", "--backend", "ray", "--ray-address", "x", "--runs-dir", str(tmp_path / "s")]
     line = (
-        "dospcot sweep: error: Ray did not start at --ray-address x (ValueError: Invalid address format: x)"
+        "dospcot sweep: error: --ray-address x: expected HOST:PORT (e.g. 10.0.0.1:6379), ray://HOST:PORT "
+        "or auto"
     )
     for _ in range(2):
         assert _one_line(capsys, [*argv, "--no-progress"]) == line

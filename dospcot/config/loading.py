@@ -40,26 +40,67 @@ LEADING_DOT = re.compile(r"[+-]?\.[0-9]+(?:[eE][+-]?[0-9]+)?")
 """A number written without its leading zero (``.5``, ``-.25``), which TOML refuses: read as ``0.5``."""
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
+def parse_override(text: str, option: str = "--set") -> tuple[list[str], Any]:
     """``"training.rounds=3"`` -> (["training", "rounds"], 3); values are TOML, bare words strings.
 
+    :param option: the option that gave ``text``, as an error names it (``--grid`` gives one value).
     :raises ConfigError: the value is neither TOML nor a bare word (an unclosed quote or table).
     """
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
-        raise ConfigError(f"--set takes key=value, got {text!r}")
+        raise ConfigError(f"{option} takes key=value, got {text!r}")
     if LEADING_DOT.fullmatch(raw.strip()):  # ".5": a number, as the shell and most languages read it
         raw = raw.strip().replace(".", "0.", 1)
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
+        opened = {"[": raw.count("[") - raw.count("]"), "{": raw.count("{") - raw.count("}")}
+        unclosed = [bracket for bracket, count in opened.items() if count]
+        if unclosed:
+            closing = {"[": "]", "{": "}"}[unclosed[0]]
+            raise ConfigError(
+                f"{option} {text}: {raw!r} opens and closes a different number of {unclosed[0]} and "
+                f"{closing}; a list is [1, 2], a table {{key = 1}}"
+            ) from None
         if not BARE_WORD.fullmatch(raw.strip()):
             raise ConfigError(
-                f"--set {text}: {raw!r} is not a TOML value; a string needs its quotes past the shell, "
-                f"e.g. --set '{key.strip()}=\"text\"'"
+                f"{option} {text}: {raw!r} is not a TOML value; a string needs its quotes past the shell, "
+                f"e.g. {option} '{key.strip()}=\"text\"'"
             ) from None
         value = raw.strip()
     return key.strip().split("."), value
+
+
+def check_overrides(
+    overrides: Sequence[str], grid: Sequence[str] = (), seeds_option: str | None = None
+) -> None:
+    """Refuse ``--set`` overrides that would lose to something else without a word: a key set twice
+    (or a key and its section), a key a ``--grid`` also sets, or ``seed`` where a ``--seeds``
+    option (``seeds_option``, e.g. ``"--seeds"``) gives the seeds.
+
+    :raises ConfigError: one line naming the key and what to give instead.
+    """
+    seen: dict[str, str] = {}
+    for override in overrides:
+        path, _ = parse_override(override)
+        key = ".".join(path)
+        if seeds_option is not None and key == "seed":
+            raise ConfigError(
+                f"--set {override}: {seeds_option} gives the seeds here and would replace it; give the "
+                f"seed as {seeds_option} {override.partition('=')[2].strip()} instead"
+            )
+        for other, text in seen.items():
+            if key == other or key.startswith(f"{other}.") or other.startswith(f"{key}."):
+                raise ConfigError(
+                    f"--set {override} and --set {text} both set {min(key, other, key=len)}: give it once"
+                )
+        for name in grid:
+            if key == name or name.startswith(f"{key}.") or key.startswith(f"{name}."):
+                raise ConfigError(
+                    f"--set {override}: --grid {name} sets {min(key, name, key=len)} in every trial, "
+                    "which would replace it; give it in one of the two"
+                )
+        seen[key] = override
 
 
 def read_config_data(config: str, _seen: tuple[str, ...] = ()) -> dict[str, Any]:

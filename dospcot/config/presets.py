@@ -81,7 +81,7 @@ def read_config_text(config: str) -> tuple[str, str]:
         text = data.decode("utf-8")
     except UnicodeDecodeError as err:
         raise ConfigError(
-            f"{config} is not UTF-8 text (byte {err.start}: {data[err.start:err.start + 1]!r}); a TOML "
+            f"{config} is not UTF-8 text (byte {err.start}: {data[err.start : err.start + 1]!r}); a TOML "
             "config is UTF-8: save it as UTF-8"
         ) from None
     return text.removeprefix(BOM), str(path)

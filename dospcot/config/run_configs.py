@@ -176,7 +176,7 @@ class TrainConfig:
         named = sorted(k for k in given if k in unread or any(k.startswith(f"{u}.") for u in unread))
         if named:
             raise ConfigError(
-                f"{', '.join(named)}: method = \"{self.method}\" never reads "
+                f'{", ".join(named)}: method = "{self.method}" never reads '
                 f"{'it' if len(named) == 1 else 'them'}; remove {'it' if len(named) == 1 else 'them'} "
                 "or choose a method that does"
             )
@@ -246,10 +246,32 @@ class PaperConfig:
         return plain(dataclasses.asdict(self))
 
 
+NAME_MAX_BYTES = 255
+"""The longest file name, in bytes, that Linux's and macOS's file systems take."""
+
+
+def folder_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot be the name of one folder inside another (a run's or a sweep's), or None:
+    every name a person gives a folder passes this one rule, so none escapes its parent (``..``,
+    ``/``), nests (``a/b``), hides (``.x``) or is refused by the file system."""
+    if not name.strip():
+        return "an empty name"
+    if "/" in name or "\\" in name:
+        return "a path, not one folder's name (no / or \\)"
+    if name.startswith("."):
+        return "a name starting with '.' (hidden, or . and .. themselves)"
+    if "\0" in name or any(ord(char) < 32 for char in name):
+        return "a name holding a control character"
+    if len(name.encode("utf-8", "surrogatepass")) > NAME_MAX_BYTES:
+        return f"a name longer than a file system takes ({NAME_MAX_BYTES} bytes)"
+    return None
+
+
 def check_name_and_seed(name: str, seed: int) -> None:
     """The checks every config's ``name`` and ``seed`` pass."""
-    if not name or "/" in name or name.startswith("."):
-        raise ConfigError(f"name: must be a plain folder name, got {name!r}")
+    problem = folder_name_problem(name)
+    if problem is not None:
+        raise ConfigError(f"name: must be a plain folder name, got {name!r}: {problem}")
     if seed < 0:
         raise ConfigError(f"seed: must be >= 0, got {seed}")
 
