@@ -222,7 +222,7 @@ def test_set_merges_a_table_key_by_key_and_refuses_what_is_not_toml():
             ConfigError, match="is not a TOML value; a string needs its quotes past the shell"
         ):
             load_config("tiny", [override])
-    with pytest.raises(ConfigError, match="opens and closes a different number of { and }"):
+    with pytest.raises(ConfigError, match=r"opens and closes a different number of \{ and \}"):
         load_config("tiny", ["training={rounds=1"])
 
 

@@ -157,13 +157,15 @@ def config_table(config: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
 
 def given_keys(config: str, overrides: Sequence[str] = ()) -> tuple[set[str], set[str]]:
     """The dotted keys a person wrote for this config: those of its ``--set`` overrides, and, where
-    ``config`` is a file rather than a shipped preset, those of that file itself (not of what it
-    extends). A table value names each of its keys (``--set 'training={rounds=1}'``:
+    ``config`` is a file rather than a shipped preset that ``extends`` another, those of that file
+    itself (what it changes; a whole config written out, a run folder's ``config.toml``, holds every
+    key and extends nothing). A table value names each of its keys (``--set 'training={rounds=1}'``:
     ``training.rounds``)."""
     in_file: set[str] = set()
     if not is_preset(config):
         text, _ = read_config_text(config)
-        in_file = _dotted(tomllib.loads(text)) - {"extends"}
+        own = tomllib.loads(text)
+        in_file = _dotted(own) - {"extends"} if "extends" in own else set()
     set_here: set[str] = set()
     for override in overrides:
         path, value = parse_override(override)

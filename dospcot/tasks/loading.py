@@ -21,8 +21,8 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
     :class:`~dospcot.config.run_configs.PaperConfig` for ``"paper"``, else a
     :class:`~dospcot.config.run_configs.TrainConfig`.
 
-    A key that the config's method never reads, set by ``--set`` or away from its default in the file
-    itself, is refused
+    A key that the config's method never reads, set by ``--set`` or by the file itself where it extends
+    another (:func:`~dospcot.config.loading.given_keys`), is refused
     (:meth:`~dospcot.config.run_configs.TrainConfig.check_read`).
 
     :raises ConfigError: one line naming the first bad key and what is allowed.
@@ -30,21 +30,8 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
     cfg = config_from_table(config_table(config, overrides))
     if isinstance(cfg, TrainConfig):
         in_file, set_here = given_keys(config, overrides)
-        # A whole config written out (a run folder's config.toml, dospcot config's output) holds every
-        # key: of a file's keys, those at their defaults say nothing.
-        defaults, values = _flat(TrainConfig().to_dict()), _flat(cfg.to_dict())
-        cfg.check_read(set_here | {key for key in in_file if values.get(key) != defaults.get(key)})
+        cfg.check_read(in_file | set_here)
     return cfg
-
-
-def _flat(table: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
-    flat: dict[str, Any] = {}
-    for key, value in table.items():
-        if isinstance(value, Mapping):
-            flat |= _flat(value, f"{prefix}{key}.")
-        else:
-            flat[f"{prefix}{key}"] = value
-    return flat
 
 
 def config_from_table(data: Mapping[str, Any]) -> RunConfig:

@@ -1,0 +1,282 @@
+"""What a new user types that is wrong ends in one line (no traceback), exit status 2 and no folder; what
+would hang or run for ever is refused at once; what would be silently ignored is named."""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from dospcot.cli import main
+from dospcot.config.errors import ConfigError
+from dospcot.tasks import load_config
+
+SHORT = ["training.rounds=1", "training.steps_per_round=60", "dqn.learning_starts=20"]
+
+
+def _refused(argv: list[str], where: Path) -> str:
+    """Run ``dospcot ARGV`` in this process; assert exit status 2, one line on stderr and nothing in
+    ``where``; return the line."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            status = main(argv)
+        except SystemExit as stop:  # argparse's own errors
+            status = stop.code
+    line = err.getvalue()
+    assert status == 2, (argv, line, out.getvalue())
+    assert line.count("\n") == 1 and "Traceback" not in line, line
+    assert not where.exists() or list(where.iterdir()) == [], f"{argv} left {list(where.iterdir())}"
+    return line.strip()
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        # Names and folders: one rule, and nothing outside --runs-dir.
+        (["sweep", "tiny", "--name", "../../escaped"], "expected one folder's name, got '../../escaped'"),
+        (["sweep", "tiny", "--name", "a/b"], "a path, not one folder's name"),
+        (["sweep", "tiny", "--name", ".."], "a name starting with '.'"),
+        (["sweep", "tiny", "--name", ""], "an empty name"),
+        (["train", "tiny", "--set", 'name="../x"'], "name: must be a plain folder name"),
+        (["train", "tiny", "--runs-dir", ""], "expected a folder, got an empty path"),
+        (["sweep", "tiny", "--runs-dir", " "], "expected a folder, got an empty path"),
+        (["reproduce-paper", "--out", ""], "expected a folder, got an empty path"),
+        # A --set that something else would replace.
+        (["train", "tiny", "--seeds", "2", "--set", "seed=5"], "--seeds gives the seeds here"),
+        (["sweep", "tiny", "--set", "seed=5"], "--seeds gives the seeds here"),
+        (
+            ["sweep", "tiny", "--grid", "training.rounds=1,2", "--set", "training.rounds=3"],
+            "--grid training.rounds sets training.rounds in every trial",
+        ),
+        (
+            ["sweep", "tiny", "--grid", "training.rounds=1,2", "--set", "training={rounds=3}"],
+            "--grid training.rounds sets training",
+        ),
+        (
+            ["train", "tiny", "--set", "training.rounds=1", "--set", "training.rounds=2"],
+            "both set training.rounds: give it once",
+        ),
+        # Integers TOML cannot hold.
+        (["train", "tiny", "--set", "seed=99999999999999999999"], "seed: 99999999999999999999 is beyond"),
+        (["train", "tiny", "--set", "dqn.net_arch=[32, 99999999999999999999]"], "dqn.net_arch: 9999"),
+        (["train", "tiny", "--set", "env.layout_seed=-99999999999999999999"], "is beyond a 64-bit"),
+        # Keys the method never reads, and settings it cannot use.
+        (["train", "tiny", "--set", "cotraining.ensemble_size=5"], 'method = "cotrain" never reads it'),
+        (
+            ["train", "grid16-reward-model", "--set", "cotraining.consensus_weight=0.5"],
+            'cotraining.consensus_weight: method = "reward-model" never reads it',
+        ),
+        (
+            ["train", "tiny", "--set", "method=oracle", "--set", "cotraining.classifier.epochs=5"],
+            'method = "oracle" never reads it',
+        ),
+        (
+            ["train", "grid16-reward-model", "--set", "cotraining.ensemble_size=1"],
+            "raise ensemble_size to 2 or more",
+        ),
+        (
+            [
+                "train",
+                "tiny",
+                "--set",
+                "training.label_strategy=random",
+                "--set",
+                "training.label_budget=1000000000000",
+            ],
+            "1,000,000,000,000 answers cannot be spent: the run meets at most 144 samples",
+        ),
+        # What would have been a traceback.
+        (["train", "tiny", "--threads", "100000"], "expected a thread count from 1 to this machine's"),
+        (["rate", "x", "--port", "99999"], "expected a port from 1 to 65535"),
+        (["rate", "x", "--port", "-1"], "expected a port from 1 to 65535"),
+        (
+            ["train", "tiny", "--set", "cotraining.max_classes=1000000000"],
+            "the reward classifiers would need at least",
+        ),
+        # What would have run for ever.
+        (["study", "grid16", "--seeds", "0"], "expected a positive integer, got 0"),
+        (
+            ["train", "tiny", "--set", "method=reward-model", "--set", "cotraining.ensemble_size=100000"],
+            "lower cotraining.max_classes, cotraining.classifier.hidden or cotraining.ensemble_size",
+        ),
+        (
+            ["train", "tiny", "--set", "cotraining.classifier.epochs=1000000000"],
+            "lower cotraining.classifier.epochs",
+        ),
+        (
+            ["train", "tiny", "--set", "training.update_steps=1000000000000"],
+            "lower dqn.gradient_steps, training.update_steps",
+        ),
+        (
+            ["train", "tiny", "--set", "dqn.gradient_steps=1000000000"],
+            "or allow more: DOSPCOT_MAX_RUN_CPU_DAYS",
+        ),
+        (
+            [
+                "train",
+                "tiny",
+                "--set",
+                "agent=tabular",
+                "--set",
+                "tabular_agent.gradient_steps=1000000000000",
+            ],
+            "lower tabular_agent.gradient_steps",
+        ),
+        (
+            ["train", "paper-text", "--set", "tabular.replay_sweeps=1000000000000"],
+            "lower tabular.replay_sweeps",
+        ),
+        (
+            ["train", "tiny", "--set", "dqn.net_arch=[1000000, 1000000]"],
+            "the Q-networks of dqn.net_arch",
+        ),
+        # Misleading answers, now the right ones.
+        (["train", "/dev/zero"], "/dev/zero is not a regular file"),
+        (["train", "TINY"], "no preset 'TINY'; did you mean 'tiny'?"),
+        (["trian", "tiny"], "invalid choice: 'trian'; did you mean 'train'?"),
+        (["train", "tiny", "--set", "task=paper"], 'task = "paper" makes this a paper-protocol config'),
+        (
+            ["sweep", "tiny", "--grid", "training.rounds=[1,2"],
+            "--grid training.rounds=[1,2: '[1,2' opens and closes a different number of [ and ]",
+        ),
+        (
+            ["study", "grid16", "--set", "training.nokey=1", "--render-only"],
+            "unknown key 'training.nokey'",
+        ),
+    ],
+)
+def test_a_rough_input_is_one_line_exit_2_and_no_folder(argv, message, tmp_path):
+    where = tmp_path / "runs"
+    options = {
+        "train": ["--runs-dir", str(where)],
+        "sweep": ["--runs-dir", str(where)],
+        "study": ["--runs-dir", str(where)],
+        "reproduce-paper": [],
+    }
+    extra = [] if "--runs-dir" in argv or "--out" in argv else options.get(argv[0], [])
+    line = _refused([*argv, *extra], where)
+    assert message in line, line
+
+
+def test_the_hangs_answer_at_once_in_a_process_of_their_own(tmp_path):
+    """Ray's retries and the costs no machine finishes: a fresh process answers long before a hang
+    would (Ray retried for 86 s), and writes nothing."""
+    cases = [
+        ["sweep", "tiny", "--backend", "ray", "--ray-address", "127.0.0.1:1", "--runs-dir", str(tmp_path)],
+        ["train", "tiny", "--set", "cotraining.classifier.epochs=1000000000", "--runs-dir", str(tmp_path)],
+        ["study", "grid16", "--seeds", "0", "--runs-dir", str(tmp_path)],
+    ]
+    for argv in cases:
+        done = subprocess.run(
+            [sys.executable, "-m", "dospcot.cli", *argv], capture_output=True, text=True, timeout=60
+        )
+        assert done.returncode == 2 and done.stderr.count("\n") == 1, done.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_the_run_bound_can_be_raised_from_the_environment(monkeypatch):
+    from dospcot.run.sizes import RUN_LIMIT_VARIABLE, check_sizes
+
+    cfg = load_config("tiny", ["cotraining.classifier.epochs=1000000000"])
+    with pytest.raises(ConfigError, match=f"more than the 3.0 CPU-days a run may; .*{RUN_LIMIT_VARIABLE}"):
+        check_sizes([cfg])
+    monkeypatch.setenv(RUN_LIMIT_VARIABLE, "1000")
+    assert check_sizes([cfg]) == []
+    monkeypatch.setenv(RUN_LIMIT_VARIABLE, "lots")
+    with pytest.raises(ConfigError, match="give the most CPU-days one seed may take"):
+        check_sizes([cfg])
+
+
+@pytest.mark.parametrize(
+    ("content", "message"),
+    [
+        ("ﾃｿﾃｾ".encode(), None),  # UTF-8, not TOML: the TOML error
+        ('name = "x"\n'.encode("utf-16"), "is not UTF-8 text"),
+        (bytes(range(256)), "is not UTF-8 text"),
+        (b"x" * (2 << 20), "more than a config's"),
+    ],
+)
+def test_a_config_file_that_is_not_utf8_toml_is_one_line(tmp_path, content, message):
+    path = tmp_path / "c.toml"
+    path.write_bytes(content)
+    line = _refused(["train", str(path), "--runs-dir", str(tmp_path / "runs")], tmp_path / "runs")
+    assert (message or "is not valid TOML") in line
+
+
+def test_a_bom_is_read_past_and_extends_is_read_from_the_configs_own_folder(tmp_path, monkeypatch):
+    folder = tmp_path / "configs"
+    folder.mkdir()
+    (folder / "good.toml").write_text('extends = "tiny"\n[training]\nrounds = 1\n')
+    (folder / "mine.toml").write_bytes('\ufeffextends = "good.toml"\nname = "mine"\n'.encode())
+    monkeypatch.chdir(tmp_path)  # not the configs' folder
+    cfg = load_config(str(folder / "mine.toml"))
+    assert (cfg.name, cfg.training.rounds, cfg.env.size) == ("mine", 1, 6)
+    # A key the file states, under a method that never reads it, is named.
+    (folder / "rm.toml").write_text('extends = "tiny"\nmethod = "reward-model"\n[cotraining]\ntol = 0.1\n')
+    with pytest.raises(ConfigError, match=r'cotraining\.tol: method = "reward-model" never reads it'):
+        load_config(str(folder / "rm.toml"))
+
+
+def test_a_section_inside_another_is_named_as_a_section(tmp_path):
+    path = tmp_path / "c.toml"
+    path.write_text('extends = "tiny"\n[env.training]\nrounds = 1\n')
+    with pytest.raises(ConfigError, match=r"\[training\] is a section of its own, not one of \[env\]"):
+        load_config(str(path))
+
+
+def test_a_config_toml_that_is_a_folder_is_named(tmp_path):
+    run = tmp_path / "run"
+    (run / "config.toml").mkdir(parents=True)
+    line = _refused(["train", "--resume", str(run)], tmp_path / "none")
+    assert f"{run / 'config.toml'} is not a file" in line
+    line = _refused(["train", str(run)], tmp_path / "none")
+    assert "holds a config.toml that is not a file" in line
+
+
+def test_every_shipped_preset_still_loads_and_prints():
+    from dospcot.config.presets import preset_names
+
+    for name in preset_names():
+        load_config(name)
+        with contextlib.redirect_stdout(io.StringIO()):
+            assert main(["config", name]) == 0, name
+
+
+def test_a_run_folders_whole_config_trains_again(tmp_path):
+    """A whole config written out holds every key, the method's unread ones at their defaults: it is
+    no setting of them, and trains again."""
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["config", "grid16-reward-model"]) == 0
+    (tmp_path / "c.toml").write_text(out.getvalue())
+    assert load_config(str(tmp_path / "c.toml")) == load_config("grid16-reward-model")
+
+
+def test_report_names_and_leaves_out_a_trial_it_cannot_read(tmp_path, capsys):
+    sets = [a for s in SHORT for a in ("--set", s)]
+    argv = ["sweep", "tiny", "--seeds", "2", "--workers", "1", "--runs-dir", str(tmp_path), "--name", "s"]
+    assert main([*argv, *sets, "--no-progress"]) == 0
+    summaries = sorted((tmp_path / "s").glob("trials/*/*/summary.json"))
+    assert len(summaries) == 2
+    summaries[0].write_text("{not json")
+    capsys.readouterr()
+    assert main(["report", str(tmp_path / "s")]) == 0
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert err.startswith(f"dospcot report: warning: left out trial {summaries[0].parent}: cannot be read")
+    assert (tmp_path / "s" / "report.md").is_file()
+    for summary in summaries:
+        summary.write_text("[]")
+    assert main(["report", str(tmp_path / "s")]) == 2
+    assert "has no finished trial yet" in capsys.readouterr().err.splitlines()[-1]
+
+
+def test_integers_at_int64s_bounds_load():
+    assert load_config("tiny", [f"env.layout_seed={2**63 - 1}"]).env.layout_seed == 2**63 - 1
+    with pytest.raises(ConfigError, match="is beyond a 64-bit integer"):
+        load_config("tiny", [f"env.layout_seed={2**63}"])
