@@ -112,15 +112,18 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
         warn("sweep", _sweep_sizes(spec, seeds, args.workers, args.batch_seeds or 1))
         spec = replace(spec, seeds=tuple(seeds))
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
-    result = run_sweep(
-        sweep_dir,
-        spec,
-        backend=args.backend,
-        workers=args.workers,
-        ray_address=args.ray_address,
-        show_progress=not args.no_progress,
-        batch_seeds=args.batch_seeds,
-    )
+    try:
+        result = run_sweep(
+            sweep_dir,
+            spec,
+            backend=args.backend,
+            workers=args.workers,
+            ray_address=args.ray_address,
+            show_progress=not args.no_progress,
+            batch_seeds=args.batch_seeds,
+        )
+    except KeyboardInterrupt:  # before any trial ran (a stop while they run says what they kept)
+        raise _stopped_before_trials(sweep_dir, command) from None
     print(
         f"{sweep_dir}: {len(result.trials)} trials; {len(result.skipped)} already finished, "
         f"{len(result.ran) - len(result.failed)} run now, {len(result.failed)} failed "
@@ -131,6 +134,18 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
     if not result.failed:
         print(f"next: dospcot report {sweep_dir}")
     return 1 if result.failed else 0
+
+
+def _stopped_before_trials(sweep_dir: Path, command: str) -> Exception:
+    """The stop of a sweep before its trials ran: what it kept, and the command that goes on."""
+    from dospcot.lab.sweep_spec import SWEEP_FILE
+    from dospcot.run.interrupts import Interrupted
+
+    if (sweep_dir / SWEEP_FILE).is_file():
+        return Interrupted(
+            f"the sweep in {sweep_dir}, no trial run yet", f"dospcot sweep --resume {sweep_dir}"
+        )
+    return Interrupted("nothing written yet", command)
 
 
 RAY_CONNECT_SECONDS = 3.0
