@@ -78,15 +78,20 @@ def rate_command(
     args: argparse.Namespace, command: str, train: Callable[[argparse.Namespace, str], int]
 ) -> int:
     """The handler of ``dospcot rate``: serve the page (:func:`dospcot.rating.server.rate`) and, where
-    ``--then-train`` was given and the page asked to resume, resume the run.
+    ``--then-train`` was given and the page asked to resume, resume the run; when the run stops again for
+    its next round's queries, serve those, until the run finishes or the page is left (Ctrl-C).
 
     :param train: the CLI's ``train`` handler, which resumes the run as ``dospcot train --resume`` does.
     """
+    from dospcot.core.raters import QueriesPending
     from dospcot.rating.server import rate  # the web server, imported only when the command runs
 
-    if rate(args) and args.then_train:  # every query answered, and the page asked to resume
-        options = {"config": None, "overrides": [], "seeds": None, "threads": 1}
-        return train(
-            argparse.Namespace(resume=args.run_dir, no_progress=args.no_progress, **options), command
-        )
+    options = {"config": None, "overrides": [], "seeds": None, "threads": 1}
+    while rate(args) and args.then_train:  # every query answered, and the page asked to resume
+        try:
+            return train(
+                argparse.Namespace(resume=args.run_dir, no_progress=args.no_progress, **options), command
+            )
+        except QueriesPending as pending:  # the next round asks: served as this one was, not an exit
+            print(f"{args.run_dir}: the run stopped for {pending.count} new reward queries ({pending.path})")
     return 0
