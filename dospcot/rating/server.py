@@ -114,8 +114,9 @@ class RoundAnswers:
         return fields, numbered, comma
 
     def _known(self, rows: list[dict[str, str]], comma: bool) -> list[float]:
-        """The values a person may give at one keystroke: the earlier rounds' and this round's confirmed,
-        in the order they became known (:attr:`order`, which a value new here joins at its end)."""
+        """The values a person may give at one keystroke: the earlier rounds', this round's confirmed and
+        those confirmed on this page since it started (an answer changed since keeps its value's key), in
+        the order they became known (:attr:`order`, which a value new here joins at its end)."""
         known = set(self.seen)
         for row in rows:
             try:
@@ -125,7 +126,7 @@ class RoundAnswers:
             if value in known or confirmed(row):
                 known.add(value)
         self.order += [value for value in sorted(known) if value not in self.order]
-        return [value for value in self.order if value in known]
+        return list(self.order)
 
     def state(self, token: str) -> dict[str, Any]:
         """The round as the page shows it."""
