@@ -4,15 +4,20 @@ would hang or run for ever is refused at once; what would be silently ignored is
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import io
 import subprocess
 import sys
+import typing
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
+from dospcot.config.run_configs import PaperConfig, TrainConfig
 from dospcot.tasks import load_config
 
 SHORT = ["training.rounds=1", "training.steps_per_round=60", "dqn.learning_starts=20"]
@@ -280,3 +285,94 @@ def test_integers_at_int64s_bounds_load():
     assert load_config("tiny", [f"env.layout_seed={2**63 - 1}"]).env.layout_seed == 2**63 - 1
     with pytest.raises(ConfigError, match="is beyond a 64-bit integer"):
         load_config("tiny", [f"env.layout_seed={2**63}"])
+
+
+# --- Property tests: any --set value and any TOML file of config keys ---------------------------------
+
+
+def _keys_of(cls: type, prefix: str = "") -> list[str]:
+    keys = []
+    hints = typing.get_type_hints(cls)
+    for field in dataclasses.fields(cls):
+        hint = hints[field.name]
+        if dataclasses.is_dataclass(hint):
+            keys += _keys_of(hint, f"{prefix}{field.name}.")
+        else:
+            keys.append(f"{prefix}{field.name}")
+    return keys
+
+
+TRAIN_KEYS = _keys_of(TrainConfig)
+PAPER_KEYS = _keys_of(PaperConfig)
+SCALARS = st.one_of(
+    st.integers(),
+    st.integers(-(2**70), 2**70),
+    st.floats(allow_nan=True, allow_infinity=True),
+    st.booleans(),
+    st.text(max_size=12),
+    st.sampled_from(["cotrain", "reward-model", "oracle", "grid", "paper", "gym", "disagreement", "random"]),
+)
+VALUES = st.recursive(
+    SCALARS,
+    lambda inner: st.one_of(
+        st.lists(inner, max_size=3), st.dictionaries(st.text(min_size=1, max_size=6), inner, max_size=3)
+    ),
+    max_leaves=6,
+)
+
+
+def _one_line_or_config(load: typing.Callable[[], typing.Any]) -> None:
+    """``load()`` returns a config that the size checks take or refuse in one line, or raises one
+    ConfigError line; nothing else."""
+    from dospcot.run.sizes import check_sizes
+
+    try:
+        cfg = load()
+        check_sizes([cfg])
+    except ConfigError as err:
+        assert str(err) and "\n" not in str(err), str(err)
+
+
+@settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(key=st.sampled_from(TRAIN_KEYS), value=VALUES, raw=st.text(max_size=20))
+def test_any_set_value_of_any_key_loads_or_is_one_config_error(key, value, raw):
+    from dospcot.config.reference import toml_value
+
+    try:
+        text = toml_value(value)
+    except (TypeError, ValueError):
+        text = raw
+    for override in (f"{key}={text}", f"{key}={raw}"):
+        _one_line_or_config(lambda override=override: load_config("tiny", [override]))
+
+
+@settings(max_examples=200, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(
+    paper=st.booleans(),
+    table=st.dictionaries(st.integers(0, 10**6), VALUES, max_size=6),
+    extends=st.sampled_from([None, "tiny", "paper-text", "grid16-reward-model"]),
+    prefix=st.sampled_from([b"", b"\xef\xbb\xbf", b"\xff\xfe", b"\x00"]),
+)
+def test_any_toml_file_of_config_keys_loads_or_is_one_config_error(
+    paper, table, extends, prefix, tmp_path_factory
+):
+    """TOML files that set any keys (of either kind of config) to any values, from any preset or none,
+    some starting with a byte-order mark or bytes no UTF-8 text holds."""
+    from dospcot.config.reference import toml_value
+
+    keys = PAPER_KEYS if paper else TRAIN_KEYS
+    sections: dict[str, list[str]] = {}
+    for index, value in table.items():
+        key = keys[index % len(keys)]
+        section, _, name = key.rpartition(".")
+        try:
+            sections.setdefault(section, []).append(f"{name} = {toml_value(value)}")
+        except (TypeError, ValueError):
+            continue
+    lines = [f'extends = "{extends}"'] if extends else []
+    lines += sections.pop("", [])
+    for section, items in sections.items():
+        lines += [f"[{section}]", *items]
+    path = tmp_path_factory.mktemp("toml") / "c.toml"
+    path.write_bytes(prefix + "\n".join(lines).encode("utf-8", "surrogatepass"))
+    _one_line_or_config(lambda: load_config(str(path)))

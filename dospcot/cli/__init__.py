@@ -76,7 +76,7 @@ def _main(argv: Sequence[str] | None) -> int:
 def _run(args: argparse.Namespace, command: str) -> int:
     """Run the parsed command; its bad inputs end in one line on stderr and exit status 2."""
     if args.command in RUN_COMMANDS:  # torch and the training stack: only past --help and usage errors
-        from dospcot.config.errors import ConfigError
+        from dospcot.config.errors import ConfigError, one_line
         from dospcot.core.raters import QueriesPending, RaterError
         from dospcot.envs import EnvRaisedError, NonFiniteError
         from dospcot.lab.sweep_spec import SweepError
@@ -92,7 +92,7 @@ def _run(args: argparse.Namespace, command: str) -> int:
             )
             return 0
         except (ConfigError, RunFolderError, SweepError, RaterError) as err:
-            print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+            print(f"dospcot {args.command}: error: {one_line(str(err))}", file=sys.stderr)
             return 2
         except MemoryError as err:  # a buffer the size checks' lower bound let through (run/sizes.py)
             reason = str(err).strip() or "no detail"
