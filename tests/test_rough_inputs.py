@@ -51,6 +51,9 @@ def _refused(argv: list[str], where: Path) -> str:
         (["train", "tiny", "--runs-dir", ""], "expected a folder, got an empty path"),
         (["sweep", "tiny", "--runs-dir", " "], "expected a folder, got an empty path"),
         (["reproduce-paper", "--out", ""], "expected a folder, got an empty path"),
+        (["bench", "--quick", "--out", ""], "expected a file, got an empty path"),
+        (["train", "tiny", "--seeds", "99999999999999999999,1"], "--seeds takes seeds up to"),
+        (["sweep", "tiny", "--seeds", "1,99999999999999999999"], "--seeds takes seeds up to"),
         # A --set that something else would replace.
         (["train", "tiny", "--seeds", "2", "--set", "seed=5"], "--seeds gives the seeds here"),
         (["sweep", "tiny", "--set", "seed=5"], "--seeds gives the seeds here"),

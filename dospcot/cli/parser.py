@@ -13,6 +13,8 @@ from typing import Any, NoReturn
 from dospcot.rating import add_rate_parser  # torch-free: rate imports its server when it runs
 from dospcot.run.cores import usable_cores
 
+SEED_MAX = 2**63 - 1
+"""The largest seed: a config holds 64-bit integers (TOML's)."""
 QUICK_BENCH_OUT = Path("runs/bench-quick.md")
 """Where ``dospcot bench --quick`` writes its smoke-test figures."""
 
@@ -40,6 +42,8 @@ def parse_seeds(text: str) -> Sequence[int]:
         )
     if isinstance(seeds, list) and (any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds)):
         raise argparse.ArgumentTypeError(f"--seeds takes distinct seeds >= 0, got {text!r}")
+    if isinstance(seeds, list) and max(seeds) > SEED_MAX:  # a config's seed is a 64-bit integer
+        raise argparse.ArgumentTypeError(f"--seeds takes seeds up to {SEED_MAX:,}, got {max(seeds)}")
     return seeds
 
 
@@ -71,6 +75,13 @@ def folder_path(text: str) -> Path:
     no one means by typing nothing)."""
     if not text.strip():
         raise argparse.ArgumentTypeError("expected a folder, got an empty path (write . for this folder)")
+    return Path(text)
+
+
+def file_path(text: str) -> Path:
+    """An output file option's path; an empty one is refused (it names no file)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a file, got an empty path")
     return Path(text)
 
 
@@ -286,7 +297,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--out",
-        type=Path,
+        type=file_path,
         help=f"output file (default BENCHMARKS.md; with --quick {QUICK_BENCH_OUT}, never BENCHMARKS.md)",
     )
     bench.add_argument(
