@@ -501,7 +501,13 @@ def test_then_train_serves_the_next_rounds_queries_instead_of_exiting(tmp_path, 
     from dospcot.rating import server
 
     served, trained = [], []
-    monkeypatch.setattr(server, "rate", lambda args: served.append(args.run_dir) or True)
+
+    def rate(args):
+        served.append((args.port, getattr(args, "token", None)))
+        args.port, args.token = 8765, "kept"  # what the first server listened on, as _serve keeps it
+        return True
+
+    monkeypatch.setattr(server, "rate", rate)
 
     def train(args, command):
         trained.append(args.resume)
@@ -514,5 +520,19 @@ def test_then_train_serves_the_next_rounds_queries_instead_of_exiting(tmp_path, 
 
     args = build_parser().parse_args(argv)
     assert rating.rate_command(args, "dospcot rate", train) == 0
-    assert served == [tmp_path, tmp_path] and trained == [tmp_path, tmp_path]
+    # The next round is served at the first one's address: the open page goes on with it.
+    assert served == [(0, None), (8765, "kept")] and trained == [tmp_path, tmp_path]
     assert "stopped for 3 new reward queries" in capsys.readouterr().out
+
+
+def test_the_next_round_is_served_at_the_first_rounds_address(tmp_path, monkeypatch, capsys):
+    from dospcot.cli.parser import build_parser
+    from dospcot.rating import server
+
+    monkeypatch.setattr(uvicorn.Server, "run", lambda self, sockets: sockets[0].close())
+    args = build_parser().parse_args(["rate", str(_fake_run(tmp_path))])
+    server.rate(args)
+    first = capsys.readouterr().out
+    assert args.port and f":{args.port}/?token={args.token} " in first
+    server.rate(args)
+    assert capsys.readouterr().out == first

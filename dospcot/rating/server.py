@@ -362,7 +362,8 @@ def _serve(args: argparse.Namespace, answers: RoundAnswers, path: Path) -> bool:
     """Serve ``answers`` until Ctrl-C or until the page asks to resume; return whether it asked."""
     import uvicorn
 
-    token = secrets.token_urlsafe(24)
+    # The next round (--then-train) is served at the same address: the open page goes on with it.
+    token = getattr(args, "token", None) or secrets.token_urlsafe(24)
     if not _is_local(args.host):
         print(
             f"dospcot rate: warning: --host {args.host} serves the page to other machines too; the token in "
@@ -374,6 +375,7 @@ def _serve(args: argparse.Namespace, answers: RoundAnswers, path: Path) -> bool:
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off"))
     app.state.server = server
     host, port = sock.getsockname()[:2]
+    args.token, args.port = token, port
     shown = f"[{host}]" if ":" in host else host
     left = sum(1 for q in answers.state(token)["queries"] if not q["reward"])
     print(
