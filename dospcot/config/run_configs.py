@@ -152,14 +152,6 @@ class TrainConfig:
                 "and the run has one view with cotraining.ensemble_size = 1; raise ensemble_size to 2 or "
                 'more, or use "uncertainty"'
             )
-        samples = self.most_samples
-        if self.training.label_budget > samples:
-            bound = "rounds x steps_per_round x views" + (", or the map's keys" * (self.task == "grid"))
-            raise ConfigError(
-                f"training.label_budget: {self.training.label_budget:,} answers cannot be spent: the run "
-                f"meets at most {samples:,} samples to ask about ({bound}); give at most {samples:,}, or 0 "
-                "for the share label_fraction"
-            )
         if self.training.segment_length > 1:
             raise ConfigError(
                 "training.label_strategy: queries reveal single rewards, segment labels none; "
@@ -186,13 +178,6 @@ class TrainConfig:
         """Whether the run fits reward classifiers that reward the unlabelled samples: co-training
         (``cotrain``) or the reward-model peer (``reward-model``)."""
         return self.method in ("cotrain", "reward-model")
-
-    @property
-    def most_samples(self) -> int:
-        """An upper bound on the samples a run's pool can hold, which bounds the queries it can ask:
-        every step of every agent, and on the grid at most its map's (state, action) keys."""
-        steps = self.training.total_steps * len(self.views)
-        return min(steps, self.env.size**2 * 4) if self.task == "grid" else steps
 
     @property
     def agent_kinds(self) -> tuple[str, ...]:

@@ -125,43 +125,50 @@ def _cotraining_costs(cfg: TrainConfig) -> list[Cost]:
                 f"{epochs:,} classifier epochs",
             )
         )
-    section = _sensor_section(cfg)
-    if section is not None:  # evaluation episodes of a sensor task, every round, every agent
-        eval_steps = training.rounds * agents * section.eval_episodes * section.episode_steps
-        costs.append(
-            Cost(
-                eval_steps / DQN_STEPS_PER_CPU_SECOND,
-                f"{cfg.task}.eval_episodes or {cfg.task}.episode_steps",
-                f"{eval_steps:,} evaluation steps",
-            )
+    section, name = _task_section(cfg)
+    # Evaluation episodes every round and agent (one greedy episode where the section sets no number),
+    # and the demonstrations' episodes, each at most the section's episode length.
+    eval_steps = training.rounds * agents * getattr(section, "eval_episodes", 1) * section.episode_steps
+    costs.append(
+        Cost(
+            eval_steps / DQN_STEPS_PER_CPU_SECOND,
+            f"{name}.eval_episodes or {name}.episode_steps",
+            f"{eval_steps:,} evaluation steps",
         )
-        demo_steps = cfg.demonstrations.episodes * section.episode_steps
-        costs.append(
-            Cost(
-                demo_steps / DQN_STEPS_PER_CPU_SECOND,
-                "demonstrations.episodes",
-                f"{demo_steps:,} demonstration steps",
-            )
+    )
+    demo_steps = cfg.demonstrations.episodes * section.episode_steps
+    costs.append(
+        Cost(
+            demo_steps / DQN_STEPS_PER_CPU_SECOND,
+            "demonstrations.episodes",
+            f"{demo_steps:,} demonstration steps",
         )
+    )
     return costs
 
 
-def _sensor_section(cfg: TrainConfig) -> Any:
-    """The ``[highway]`` or ``[gym]`` section a sensor task reads, else None."""
-    return {"highway": cfg.highway, "gym": cfg.gym}.get(cfg.task)
+def _task_section(cfg: TrainConfig) -> tuple[Any, str]:
+    """The section that sets up the run's task (``[env]``, ``[highway]``, ``[gym]``) and its name."""
+    from dospcot.tasks import get_task
+
+    name = get_task(cfg.task).section
+    return getattr(cfg, name), name
 
 
 def _classes(cfg: TrainConfig) -> int:
-    """K, the reward classes a run's classifiers output."""
-    section = _sensor_section(cfg)
-    return cfg.cotraining.max_classes if section is None else section.reward_classes
+    """K, the reward classes a run's classifiers output: the task section's ``reward_classes`` where it
+    sets them (quantile bins of a continuous reward), else ``cotraining.max_classes``."""
+    return getattr(_task_section(cfg)[0], "reward_classes", cfg.cotraining.max_classes)
 
 
 def _pool_samples(cfg: TrainConfig) -> int:
-    """A lower bound on a classifier's samples after round 1: one round's steps of one agent or, on
-    the grid, its (state, action) keys, whichever is fewer."""
+    """A lower bound on a classifier's samples after round 1: one round's steps of one agent, or the
+    task's keys where fewer (:meth:`~dospcot.tasks.registry.Task.pool_keys`)."""
+    from dospcot.tasks import get_task
+
+    keys = get_task(cfg.task).pool_keys(cfg)
     samples = cfg.training.steps_per_round
-    return min(samples, cfg.env.size**2 * 4) if cfg.task == "grid" else samples
+    return samples if keys is None else min(samples, keys)
 
 
 def _classifier_multiply_adds(cfg: TrainConfig) -> int:
