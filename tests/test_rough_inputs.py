@@ -69,6 +69,10 @@ def _refused(argv: list[str], where: Path) -> str:
             ["train", "tiny", "--set", "training.rounds=1", "--set", "training.rounds=2"],
             "both set training.rounds: give it once",
         ),
+        (
+            ["study", "grid16-layouts", "--set", "env.layout_seed=3"],
+            "env.layout_seed sets env.layout_seed in every trial, which would replace it",
+        ),
         # Integers TOML cannot hold.
         (["train", "tiny", "--set", "seed=99999999999999999999"], "seed: 99999999999999999999 is beyond"),
         (["train", "tiny", "--set", "dqn.net_arch=[32, 99999999999999999999]"], "dqn.net_arch: 9999"),

@@ -283,10 +283,12 @@ def _study(args: argparse.Namespace, command: str) -> int:
         study = get_study(args.study)
     except ValueError as err:
         raise ConfigError(str(err)) from None
-    check_overrides(args.overrides, seeds_option="--seeds")
+    specs = [sweep_spec(sweep, 1, args.overrides) for sweep in study.sweeps]
+    for spec in specs:  # a --set of a key a sweep's grid varies would lose to it
+        check_overrides(args.overrides, list(spec.grid), "--seeds", f"the study's grid of {spec.configs[0]}:")
     # Its sweeps' cells, read with the overrides (a bad key is named, --render-only or not), then
     # weighed over its seeds before any sweep starts.
-    cells = [cfg for sweep in study.sweeps for cfg in sweep_spec(sweep, 1, args.overrides).cell_configs()]
+    cells = [cfg for spec in specs for cfg in spec.cell_configs()]
     if not args.render_only:
         seeds = args.seeds or study.seeds
         warn("study", check_sizes(cells, seeds, args.workers, min(args.batch_seeds or 1, max(seeds, 1))))

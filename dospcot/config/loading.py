@@ -72,11 +72,15 @@ def parse_override(text: str, option: str = "--set") -> tuple[list[str], Any]:
 
 
 def check_overrides(
-    overrides: Sequence[str], grid: Sequence[str] = (), seeds_option: str | None = None
+    overrides: Sequence[str],
+    grid: Sequence[str] = (),
+    seeds_option: str | None = None,
+    grid_name: str = "--grid",
 ) -> None:
     """Refuse ``--set`` overrides that would lose to something else without a word: a key set twice
     (or a key and its section), a key a ``--grid`` also sets, or ``seed`` where a ``--seeds``
-    option (``seeds_option``, e.g. ``"--seeds"``) gives the seeds.
+    option (``seeds_option``, e.g. ``"--seeds"``) gives the seeds. ``grid_name`` names the grid in the
+    error (a study's sweeps vary keys of their own).
 
     :raises ConfigError: one line naming the key and what to give instead.
     """
@@ -97,7 +101,7 @@ def check_overrides(
         for name in grid:
             if key == name or name.startswith(f"{key}.") or key.startswith(f"{name}."):
                 raise ConfigError(
-                    f"--set {override}: --grid {name} sets {min(key, name, key=len)} in every trial, "
+                    f"--set {override}: {grid_name} {name} sets {min(key, name, key=len)} in every trial, "
                     "which would replace it; give it in one of the two"
                 )
         seen[key] = override
