@@ -1,4 +1,4 @@
-"""The agents' rows of ``dospcot bench``: one gradient step of the agent on MiniGrid's egocentric map
+"""The agents' rows of ``dospcot-lab bench``: one gradient step of the agent on MiniGrid's egocentric map
 (2,535 inputs of 0 and 1, 98 of them on in LavaGapS7), with the sparse first layer and fused Adam of
 numerics 3 against the dense layer and Adam of numerics 1 and 2, in one run.
 

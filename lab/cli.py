@@ -11,7 +11,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from dospcot.cli.parser import OneLineParser, add_overrides, add_workers, positive_int
+from dospcot.cli.parser import OneLineParser, add_overrides, add_workers, file_path, folder_path, positive_int
 from dospcot_lab.repository import NotARepository, Repository, find_repository, repository_at
 
 QUICK_BENCH_OUT = Path("runs/bench-quick.md")
@@ -28,7 +28,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = OneLineParser(prog="dospcot-lab", description=DESCRIPTION)
     parser.add_argument(
         "--repo",
-        type=Path,
+        type=folder_path,
         metavar="DIR",
         help="the checkout to read and write (default: the one holding the working folder)",
     )
@@ -52,7 +52,9 @@ def build_parser() -> argparse.ArgumentParser:
     )
     study.add_argument("--backend", choices=["local", "ray"], default="local", help="default local")
     study.add_argument(
-        "--runs-dir", type=Path, help="where the study's sweeps are (default: the checkout's runs/sweeps)"
+        "--runs-dir",
+        type=folder_path,
+        help="where the study's sweeps are (default: the checkout's runs/sweeps)",
     )
     study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
     study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
@@ -74,7 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     bench.add_argument(
         "--out",
-        type=Path,
+        type=file_path,
         help="output file (default: the checkout's BENCHMARKS.md; with --quick "
         f"{QUICK_BENCH_OUT}, never BENCHMARKS.md)",
     )
@@ -109,6 +111,7 @@ def _repository(args: argparse.Namespace, needed: bool) -> Repository | None:
 
 def _study(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from dospcot.config.errors import ConfigError
+    from dospcot.config.loading import check_overrides
     from dospcot.run.sizes import check_sizes
     from dospcot_lab.studies import get_study, header_command, run_study, sweep_spec
 
@@ -119,8 +122,13 @@ def _study(args: argparse.Namespace, argv: Sequence[str]) -> int:
         raise ConfigError(str(err)) from None
     if args.runs_dir is None:  # relative, as the pages' headers name it
         args.runs_dir = Path(os.path.relpath(repo.root / "runs" / "sweeps")) if repo else Path("runs/sweeps")
-    if not args.render_only:  # its sweeps' cells over its seeds, weighed before any sweep starts
-        cells = [cfg for sweep in study.sweeps for cfg in sweep_spec(sweep, 1, args.overrides).cell_configs()]
+    specs = [sweep_spec(sweep, 1, args.overrides) for sweep in study.sweeps]
+    for spec in specs:  # a --set of a key a sweep's grid varies would lose to it
+        check_overrides(args.overrides, list(spec.grid), "--seeds", f"the study's grid of {spec.configs[0]}:")
+    # Its sweeps' cells, read with the overrides (a bad key is named, --render-only or not), then
+    # weighed over its seeds before any sweep starts.
+    cells = [cfg for spec in specs for cfg in spec.cell_configs()]
+    if not args.render_only:
         seeds = args.seeds or study.seeds
         for line in check_sizes(cells, seeds, args.workers, min(args.batch_seeds or 1, max(seeds, 1))):
             print(f"dospcot-lab study: warning: {line}", file=sys.stderr)

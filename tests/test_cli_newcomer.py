@@ -246,7 +246,8 @@ def test_a_sweep_whose_ray_does_not_start_leaves_nothing_and_the_next_answers_th
     pytest.importorskip("ray")
     argv = ["sweep", "tiny", "--backend", "ray", "--ray-address", "x", "--runs-dir", str(tmp_path / "s")]
     line = (
-        "dospcot sweep: error: Ray did not start at --ray-address x (ValueError: Invalid address format: x)"
+        "dospcot sweep: error: --ray-address x: expected HOST:PORT (e.g. 10.0.0.1:6379), ray://HOST:PORT "
+        "or auto"
     )
     for _ in range(2):
         assert _one_line(capsys, [*argv, "--no-progress"]) == line
@@ -280,15 +281,17 @@ def test_a_hundred_million_seeds_are_refused_with_the_estimate_and_no_folder(cap
     [
         (
             "training.steps_per_round=1000000000000",
-            "dospcot train: error: tiny: one seed would take about 50.7 CPU-years (an estimate: "
-            "4,000,000,000,000 agent steps at about 2,500/CPU-s); lower training.rounds or "
-            "training.steps_per_round",
+            "dospcot train: error: tiny: one seed would take about 57.1 CPU-years (an estimate: "
+            "4,000,000,000,000 agent steps at about 2,500/CPU-s), more than the 3.0 CPU-days a run may; "
+            "lower training.rounds or training.steps_per_round, or allow more: "
+            "DOSPCOT_MAX_RUN_CPU_DAYS=<CPU-days> in the environment",
         ),
         (
-            "training.rounds=100000000000000000000",
-            "dospcot train: error: tiny: one seed would take about 761,035,007,610 CPU-years (an estimate: "
-            "60,000,000,000,000,000,000,000 agent steps at about 2,500/CPU-s); lower training.rounds or "
-            "training.steps_per_round",
+            "training.rounds=100000000000",
+            "dospcot train: error: tiny: one seed would take about 1,043 CPU-years (an estimate: "
+            "60,000,000,000,000 agent steps at about 2,500/CPU-s), more than the 3.0 CPU-days a run may; "
+            "lower training.rounds or training.steps_per_round, or allow more: "
+            "DOSPCOT_MAX_RUN_CPU_DAYS=<CPU-days> in the environment",
         ),
     ],
 )

@@ -39,8 +39,12 @@ def test_paper_presets_hold_the_papers_hyperparameters():
     for cfg in (text, code):
         assert (cfg.rounds, cfg.episodes_per_round, cfg.eps_start, cfg.eps_end) == (5, 500, 0.1, 0.1)
         assert cfg.label_fraction == 0.1
-    with pytest.raises(ConfigError, match="unknown key 'views'; allowed: name, seed, task, tabular"):
+    with pytest.raises(
+        ConfigError, match="paper-protocol config, which has no 'views' \\(a key of a dospcot train"
+    ):
         load_config("paper-text", ['views=["patch"]'])
+    with pytest.raises(ConfigError, match="unknown key 'nokey'; allowed: name, seed, task, tabular"):
+        load_config("paper-text", ["nokey=1"])
     with pytest.raises(ConfigError, match=r"tabular: label_fraction must lie in \(0, 1\]"):
         load_config("paper-text", ["tabular.label_fraction=0"])
 

@@ -435,3 +435,104 @@ def test_a_minigrid_run_answered_in_chromium_equals_the_simulated_run(tmp_path):
     assert screenshot.read_bytes().startswith(b"\x89PNG")
     if os.environ.get("DOSPCOT_WRITE_SCREENSHOT"):  # the guide's picture: docs/guide/rating.md
         shutil.copy(screenshot, Path(__file__).parents[1] / "docs" / "guide" / "rating-page.png")
+
+
+# --- One server per run, whole sample numbers, keys that keep their values -----------------------------
+
+
+def test_a_fractional_or_boolean_sample_is_refused_and_nothing_is_written(tmp_path):
+    path = _fake_run(tmp_path) / "queries" / "round_2.csv"
+    before = path.read_bytes()
+    with _serve(path) as url:
+        for sample in (5.5, True, "5.0", None, [5]):
+            status, body = _request(f"{url}/api/answer", {"sample": sample, "reward": "-1"})
+            assert status == 400 and "is not a sample number" in body["error"], sample
+        assert _request(f"{url}/api/answer", {"sample": "5", "reward": "-1"})[0] == 200
+    assert path.read_bytes() != before and _rewards(path)[5] == "-1"
+
+
+def test_a_new_value_takes_the_next_key_and_no_key_changes_its_value(tmp_path):
+    path = _fake_run(tmp_path) / "queries" / "round_2.csv"
+    with _serve(path) as url:
+        _, state = _request(f"{url}/api/round")
+        assert [s["value"] for s in state["seen"]] == [-1.0, 0.0]  # round 1's, as first answered
+        for value in ("-100", "7"):  # below and above the known ones
+            assert _request(f"{url}/api/answer", {"sample": 5, "reward": value, "confirm": True})[0] == 200
+            _, state = _request(f"{url}/api/round")
+        # -100 is no longer given, and keeps its key: 7 takes the next one, and -100 needs no confirming.
+        assert [s["value"] for s in state["seen"]] == [-1.0, 0.0, -100.0, 7.0]
+        assert _request(f"{url}/api/answer", {"sample": 9, "reward": "-100"})[0] == 200
+        assert _request(f"{url}/api/answer", {"sample": 12, "reward": "-7", "confirm": True})[0] == 200
+        _, state = _request(f"{url}/api/round")
+        assert [s["value"] for s in state["seen"]] == [-1.0, 0.0, -100.0, 7.0, -7.0]
+
+
+def test_a_second_server_on_the_same_run_is_refused_and_an_empty_answer_file_is_named(tmp_path, capsys):
+    run_dir = _fake_run(tmp_path)
+    lock = run_dir / "queries" / ".lock"
+    lock.write_text(str(os.getpid()))  # a live dospcot process serves it
+    assert main(["rate", str(run_dir)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{run_dir / 'queries'} is being rated by process {os.getpid()}" in err
+    lock.unlink()
+    (run_dir / "queries" / "round_2.csv").write_text("")
+    assert main(["rate", str(run_dir)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds no query (the run writes a row for each)" in err
+
+
+def test_a_host_other_machines_reach_is_warned_of(tmp_path, monkeypatch, capsys):
+    from dospcot.rating import server
+
+    monkeypatch.setattr(
+        server, "_listen", lambda host, port: (_ for _ in ()).throw(server.RaterError("stop"))
+    )
+    run_dir = _fake_run(tmp_path)
+    for host, warned in (("0.0.0.0", True), ("127.0.0.1", False), ("::1", False), ("localhost", False)):
+        assert main(["rate", str(run_dir), "--host", host]) == 2
+        err = capsys.readouterr().err
+        assert ("warning: --host 0.0.0.0 serves the page to other machines" in err) == warned, host
+    assert not (run_dir / "queries" / ".lock").exists()  # let go when the server did not start
+
+
+def test_then_train_serves_the_next_rounds_queries_instead_of_exiting(tmp_path, monkeypatch, capsys):
+    from dospcot import rating
+    from dospcot.core.raters import QueriesPending
+    from dospcot.rating import server
+
+    served, trained = [], []
+
+    def rate(args):
+        served.append((args.port, getattr(args, "token", None)))
+        args.port, args.token = 8765, "kept"  # what the first server listened on, as _serve keeps it
+        return True
+
+    monkeypatch.setattr(server, "rate", rate)
+
+    def train(args, command):
+        trained.append(args.resume)
+        if len(trained) == 1:  # round 2 asks in turn
+            raise QueriesPending(3, args.resume / "queries" / "round_3.csv")
+        return 0
+
+    argv = ["rate", str(tmp_path), "--then-train"]
+    from dospcot.cli.parser import build_parser
+
+    args = build_parser().parse_args(argv)
+    assert rating.rate_command(args, "dospcot rate", train) == 0
+    # The next round is served at the first one's address: the open page goes on with it.
+    assert served == [(0, None), (8765, "kept")] and trained == [tmp_path, tmp_path]
+    assert "stopped for 3 new reward queries" in capsys.readouterr().out
+
+
+def test_the_next_round_is_served_at_the_first_rounds_address(tmp_path, monkeypatch, capsys):
+    from dospcot.cli.parser import build_parser
+    from dospcot.rating import server
+
+    monkeypatch.setattr(uvicorn.Server, "run", lambda self, sockets: sockets[0].close())
+    args = build_parser().parse_args(["rate", str(_fake_run(tmp_path))])
+    server.rate(args)
+    first = capsys.readouterr().out
+    assert args.port and f":{args.port}/?token={args.token} " in first
+    server.rate(args)
+    assert capsys.readouterr().out == first

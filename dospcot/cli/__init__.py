@@ -17,11 +17,23 @@ PIPE_CLOSED = 141
 shell's for a writer a closed pipe stopped (128 + SIGPIPE), without a word."""
 
 
+INTERRUPTED = 130
+"""The exit status of a command stopped by Ctrl-C or SIGTERM (128 + SIGINT)."""
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run ``dospcot`` with ``argv`` (default: the process's arguments); return the exit status."""
+    """Run ``dospcot`` with ``argv`` (default: the process's arguments); return the exit status.
+
+    Run as the program itself (``argv`` None), a stopped command ends the process at once once it has
+    said what it kept: its children are stopped and its files closed, and unloading torch and the rest
+    would take longer than the stop itself (over a second on a busy machine).
+    """
     try:
         status = _main(argv)
         sys.stdout.flush()  # a closed pipe shows here at the latest, not as Python exits
+        if argv is None and status == INTERRUPTED:
+            sys.stderr.flush()
+            os._exit(status)
     except BrokenPipeError:
         # The standard recipe: what is still buffered goes nowhere, and the process ends quietly.
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
@@ -65,16 +77,18 @@ def _main(argv: Sequence[str] | None) -> int:
             return _run(args, command)
     except Interrupted as stop:  # Ctrl-C or SIGTERM: what was kept, and how to go on
         print(f"dospcot {args.command}: interrupted; kept {stop}", file=sys.stderr)
-        return 130
-    except KeyboardInterrupt:
-        print(f"dospcot {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return INTERRUPTED
+    except KeyboardInterrupt:  # before the command knew what it kept
+        # A sweep goes on from its folder when the same command runs again.
+        resume = f"; kept nothing new; resume with: {command}" if args.command == "sweep" else ""
+        print(f"dospcot {args.command}: interrupted{resume}", file=sys.stderr)
+        return INTERRUPTED
 
 
 def _run(args: argparse.Namespace, command: str) -> int:
     """Run the parsed command; its bad inputs end in one line on stderr and exit status 2. Torch and the
     training stack load here only: past ``--help`` and usage errors."""
-    from dospcot.config.errors import ConfigError
+    from dospcot.config.errors import ConfigError, one_line
     from dospcot.core.raters import QueriesPending, RaterError
     from dospcot.envs import EnvRaisedError, NonFiniteError
     from dospcot.run.run_folder import RunFolderError
@@ -90,7 +104,7 @@ def _run(args: argparse.Namespace, command: str) -> int:
         )
         return 0
     except (ConfigError, RunFolderError, SweepError, RaterError) as err:
-        print(f"dospcot {args.command}: error: {err}", file=sys.stderr)
+        print(f"dospcot {args.command}: error: {one_line(str(err))}", file=sys.stderr)
         return 2
     except MemoryError as err:  # a buffer the size checks' lower bound let through (run/sizes.py)
         reason = str(err).strip() or "no detail"

@@ -7,6 +7,7 @@ import argparse
 import shlex
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 from dospcot.rating import rate_command
@@ -19,6 +20,7 @@ def _train(args: argparse.Namespace, command: str) -> int:
     import torch
 
     from dospcot.config.errors import ConfigError
+    from dospcot.config.loading import check_overrides
     from dospcot.config.presets import preset_names
     from dospcot.run.run_folder import batch_members
     from dospcot.run.sizes import check_sizes
@@ -40,6 +42,7 @@ def _train(args: argparse.Namespace, command: str) -> int:
     else:
         if not args.config:
             raise ConfigError(f"give a CONFIG: a preset ({', '.join(preset_names())}) or a path to a .toml")
+        check_overrides(args.overrides, seeds_option="--seeds" if args.seeds is not None else None)
         cfg = load_config(args.config, args.overrides)
         seeds = len(args.seeds) if args.seeds is not None else 1
         warn("train", check_sizes([cfg], seeds, batch=seeds))
@@ -82,6 +85,8 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
 
     if args.ray_address and args.backend != "ray":
         raise ConfigError("--ray-address names a Ray cluster: it needs --backend ray")
+    if args.ray_address:
+        check_ray_address(args.ray_address)
     if args.resume is not None:
         if args.configs or args.grid or args.overrides or args.name:
             raise ConfigError(
@@ -96,22 +101,28 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
     else:
         if not args.configs:
             raise ConfigError("give at least one CONFIG: a preset (see dospcot train --list) or a .toml path")
+        from dospcot.config.loading import check_overrides
         from dospcot.sweeps.sweep_spec import parse_grid
 
         seeds = args.seeds or (0,)
-        spec = SweepSpec(tuple(args.configs), parse_grid(args.grid), (0,), tuple(args.overrides))
+        grid = parse_grid(args.grid)
+        check_overrides(args.overrides, list(grid), seeds_option="--seeds")
+        spec = SweepSpec(tuple(args.configs), grid, (0,), tuple(args.overrides))
         warn("sweep", _sweep_sizes(spec, seeds, args.workers, args.batch_seeds or 1))
         spec = replace(spec, seeds=tuple(seeds))
         sweep_dir = args.runs_dir / args.name if args.name else default_sweep_dir(args.configs, args.runs_dir)
-    result = run_sweep(
-        sweep_dir,
-        spec,
-        backend=args.backend,
-        workers=args.workers,
-        ray_address=args.ray_address,
-        show_progress=not args.no_progress,
-        batch_seeds=args.batch_seeds,
-    )
+    try:
+        result = run_sweep(
+            sweep_dir,
+            spec,
+            backend=args.backend,
+            workers=args.workers,
+            ray_address=args.ray_address,
+            show_progress=not args.no_progress,
+            batch_seeds=args.batch_seeds,
+        )
+    except KeyboardInterrupt:  # before any trial ran (a stop while they run says what they kept)
+        raise _stopped_before_trials(sweep_dir, command) from None
     print(
         f"{sweep_dir}: {len(result.trials)} trials; {len(result.skipped)} already finished, "
         f"{len(result.ran) - len(result.failed)} run now, {len(result.failed)} failed "
@@ -122,6 +133,54 @@ def _sweep(args: argparse.Namespace, command: str) -> int:
     if not result.failed:
         print(f"next: dospcot report {sweep_dir}")
     return 1 if result.failed else 0
+
+
+def _stopped_before_trials(sweep_dir: Path, command: str) -> Exception:
+    """The stop of a sweep before its trials ran: what it kept, and the command that goes on."""
+    from dospcot.run.interrupts import Interrupted
+    from dospcot.sweeps.sweep_spec import SWEEP_FILE
+
+    if (sweep_dir / SWEEP_FILE).is_file():
+        return Interrupted(
+            f"the sweep in {sweep_dir}, no trial run yet", f"dospcot sweep --resume {sweep_dir}"
+        )
+    return Interrupted("nothing written yet", command)
+
+
+RAY_CONNECT_SECONDS = 3.0
+"""How long ``--ray-address`` may take to answer before the sweep is refused (Ray itself retries for
+more than a minute)."""
+
+
+def check_ray_address(address: str) -> None:
+    """Refuse a ``--ray-address`` that nothing answers at, before any folder is written.
+
+    ``auto`` and ``local`` are Ray's own words and are left to it; ``host:port`` and
+    ``ray://host:port`` must accept a TCP connection within :data:`RAY_CONNECT_SECONDS`.
+
+    :raises ConfigError: one line naming the address and why.
+    """
+    import socket
+
+    from dospcot.config.errors import ConfigError
+
+    if address in ("auto", "local"):
+        return
+    where = address.removeprefix("ray://")
+    host, sep, port_text = where.rpartition(":")
+    host = host.strip("[]")
+    if not sep or not host or not port_text.isdigit() or not 0 < int(port_text) < 65_536:
+        raise ConfigError(
+            f"--ray-address {address}: expected HOST:PORT (e.g. 10.0.0.1:6379), ray://HOST:PORT or auto"
+        )
+    try:
+        socket.create_connection((host, int(port_text)), timeout=RAY_CONNECT_SECONDS).close()
+    except OSError as err:
+        reason = err.strerror or str(err) or type(err).__name__
+        raise ConfigError(
+            f"--ray-address {address}: nothing answers there ({reason}); start the cluster (ray start "
+            "--head) or give its address"
+        ) from None
 
 
 def _sweep_sizes(spec: SweepSpec, seeds: Sequence[int], workers: int, batch: int) -> list[str]:
@@ -160,7 +219,9 @@ def _config(args: argparse.Namespace, command: str) -> int:
 def _report(args: argparse.Namespace, command: str) -> int:
     from dospcot.sweeps.report import write_report
 
-    paths = write_report(args.sweep_dir, args.out)
+    skipped: list[str] = []
+    paths = write_report(args.sweep_dir, args.out, skipped)
+    warn("report", [f"left out trial {line}" for line in skipped])
     print(paths[0].read_text())
     print("wrote " + ", ".join(str(p) for p in paths))
     return 0
@@ -171,6 +232,7 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
     from dataclasses import replace
 
     from dospcot.config.errors import ConfigError
+    from dospcot.config.loading import check_overrides
     from dospcot.config.presets import PAPER_PRESETS
     from dospcot.run.run_folder import new_run_dir
     from dospcot.sweeps.report import write_report
@@ -181,6 +243,7 @@ def _reproduce_paper(args: argparse.Namespace, command: str) -> int:
         given = [o for o in args.overrides if o.partition("=")[0].strip() == f"tabular.{key}"]
         if given and getattr(args, option[2:].replace("-", "_")) is not None:
             raise ConfigError(f"{option} and --set {given[0]} both set tabular.{key}: give it once")
+    check_overrides(args.overrides, seeds_option="--seeds")
     if len(args.seeds) < 2:
         raise ConfigError(
             f"--seeds gives one seed ({args.seeds[0]}): the protocol's verdicts are intervals over seeds, "

@@ -4,12 +4,17 @@ that ``--help`` and usage errors answer at once."""
 from __future__ import annotations
 
 import argparse
+import os
+import re
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
 from dospcot.rating import add_rate_parser  # torch-free: rate imports its server when it runs
 from dospcot.run.cores import usable_cores
+
+SEED_MAX = 2**63 - 1
+"""The largest seed: a config holds 64-bit integers (TOML's)."""
 
 
 def parse_seeds(text: str) -> Sequence[int]:
@@ -35,6 +40,8 @@ def parse_seeds(text: str) -> Sequence[int]:
         )
     if isinstance(seeds, list) and (any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds)):
         raise argparse.ArgumentTypeError(f"--seeds takes distinct seeds >= 0, got {text!r}")
+    if isinstance(seeds, list) and max(seeds) > SEED_MAX:  # a config's seed is a 64-bit integer
+        raise argparse.ArgumentTypeError(f"--seeds takes seeds up to {SEED_MAX:,}, got {max(seeds)}")
     return seeds
 
 
@@ -61,6 +68,40 @@ def positive_int(text: str) -> int:
     return _number(text, int, lambda v: v >= 1, wanted, wanted)
 
 
+def folder_path(text: str) -> Path:
+    """A folder option's path; an empty one is refused (``Path("")`` is the current folder, which
+    no one means by typing nothing)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a folder, got an empty path (write . for this folder)")
+    return Path(text)
+
+
+def file_path(text: str) -> Path:
+    """An output file option's path; an empty one is refused (it names no file)."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError("expected a file, got an empty path")
+    return Path(text)
+
+
+def folder_name(text: str) -> str:
+    """A name of one folder inside ``--runs-dir``: the rule every run's and sweep's name follows
+    (:func:`~dospcot.config.run_configs.folder_name_problem`)."""
+    from dospcot.config.run_configs import folder_name_problem
+
+    problem = folder_name_problem(text)
+    if problem is not None:
+        raise argparse.ArgumentTypeError(f"expected one folder's name, got {text!r}: {problem}")
+    return text
+
+
+def thread_count(text: str) -> int:
+    """``--threads``: from 1 to the machine's CPUs (torch fails to start more threads than it can map,
+    and more than the CPUs only take turns)."""
+    cpus = os.cpu_count() or 1
+    wanted = f"expected a thread count from 1 to this machine's {cpus} CPUs, got {{text}}"
+    return _number(text, int, lambda v: 1 <= v <= cpus, wanted, wanted)
+
+
 def add_overrides(parser: argparse.ArgumentParser, help: str) -> None:
     """The ``--set KEY=VALUE`` option (repeatable) of a command that reads configs."""
     parser.add_argument(
@@ -85,6 +126,13 @@ class OneLineParser(argparse.ArgumentParser):
     error of the CLI."""
 
     def error(self, message: str) -> NoReturn:
+        wrong = re.match(r"argument (\S+): invalid choice: '([^']*)' \(choose from (.*)\)$", message)
+        if wrong:  # a misspelt command or choice: the name meant, not the whole list
+            from dospcot.config.presets import did_you_mean
+
+            choices = re.findall(r"'([^']*)'", wrong.group(3))
+            hint = did_you_mean(wrong.group(2), choices, "choose from", shown=None)
+            message = f"argument {wrong.group(1)}: invalid choice: {wrong.group(2)!r}{hint}"
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
@@ -113,9 +161,11 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("config", nargs="?", help="a preset name (see --list) or a path to a .toml")
     add_overrides(train, "override a config key, e.g. --set training.rounds=3 --set seed=2 (repeatable)")
     train.add_argument(
-        "--resume", type=Path, metavar="RUN_DIR", help="continue a killed run from its checkpoint"
+        "--resume", type=folder_path, metavar="RUN_DIR", help="continue a killed run from its checkpoint"
     )
-    train.add_argument("--runs-dir", type=Path, default=Path("runs"), help="where runs write (default runs)")
+    train.add_argument(
+        "--runs-dir", type=folder_path, default=Path("runs"), help="where runs write (default runs)"
+    )
     train.add_argument(
         "--seeds",
         type=parse_seeds,
@@ -125,7 +175,7 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument("--list", action="store_true", help="list the shipped presets and exit")
     train.add_argument(
         "--threads",
-        type=positive_int,
+        type=thread_count,
         default=1,
         help="torch threads (default 1: small networks run fastest on one, and parallel runs do not "
         "oversubscribe the cores)",
@@ -137,7 +187,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Load agent_<view>.zip with plain stable_baselines3.DQN.load and evaluate them "
         "greedily on the run's task; writes evaluation.json.",
     )
-    evaluate.add_argument("run_dir", type=Path, help="a run folder, runs/<name>/<stamp>")
+    evaluate.add_argument("run_dir", type=folder_path, help="a run folder, runs/<name>/<stamp>")
     sweep = commands.add_parser(
         "sweep",
         help="train every combination of a grid of config values over seeds, each as its own run",
@@ -175,13 +225,18 @@ def build_parser() -> argparse.ArgumentParser:
         "--ray-address", metavar="ADDRESS", help="an existing Ray cluster (default: start a local instance)"
     )
     sweep.add_argument(
-        "--name", help="the sweep folder's name under --runs-dir (default: from the first config's name)"
+        "--name",
+        type=folder_name,
+        help="the sweep folder's name under --runs-dir (default: from the first config's name)",
     )
     sweep.add_argument(
-        "--runs-dir", type=Path, default=Path("runs/sweeps"), help="where sweeps write (default runs/sweeps)"
+        "--runs-dir",
+        type=folder_path,
+        default=Path("runs/sweeps"),
+        help="where sweeps write (default runs/sweeps)",
     )
     sweep.add_argument(
-        "--resume", type=Path, metavar="SWEEP_DIR", help="run the unfinished trials of a sweep"
+        "--resume", type=folder_path, metavar="SWEEP_DIR", help="run the unfinished trials of a sweep"
     )
     sweep.add_argument("--no-progress", action="store_true", help="hide the progress bar")
     report = commands.add_parser(
@@ -189,8 +244,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="aggregate a sweep's runs: tables (mean, 95%% bootstrap interval, IQM) and plots",
         description="Write report.md, report.csv and PNG plots from the finished trials of a sweep.",
     )
-    report.add_argument("sweep_dir", type=Path, help="a sweep folder, runs/sweeps/<name>")
-    report.add_argument("--out", type=Path, help="output folder (default: the sweep folder)")
+    report.add_argument("sweep_dir", type=folder_path, help="a sweep folder, runs/sweeps/<name>")
+    report.add_argument("--out", type=folder_path, help="output folder (default: the sweep folder)")
     paper = commands.add_parser(
         "reproduce-paper",
         help="the seed paper's CliffWalking protocol (Tables 1-4) with real reward masking",
@@ -225,7 +280,7 @@ def build_parser() -> argparse.ArgumentParser:
     add_workers(paper, "processes")
     paper.add_argument(
         "--out",
-        type=Path,
+        type=folder_path,
         default=Path("runs/paper"),
         help="where the sweep folder goes (default runs/paper)",
     )

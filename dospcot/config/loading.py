@@ -29,34 +29,82 @@ from pathlib import Path
 from typing import Any, Literal
 
 from dospcot.config.errors import ConfigError
-from dospcot.config.presets import read_config_text
+from dospcot.config.presets import is_preset, read_config_text
 
 BARE_WORD = re.compile(r"[A-Za-z_][A-Za-z0-9_.:/-]*")
 """A value ``--set`` takes as a string without TOML's quotes: a name, a dotted path or a file path."""
+INT64 = (-(2**63), 2**63 - 1)
+"""The integers a config holds: TOML 1.0's, so that every reader of a run folder's ``config.toml`` and
+``summary.json`` reads them back."""
 LEADING_DOT = re.compile(r"[+-]?\.[0-9]+(?:[eE][+-]?[0-9]+)?")
 """A number written without its leading zero (``.5``, ``-.25``), which TOML refuses: read as ``0.5``."""
 
 
-def parse_override(text: str) -> tuple[list[str], Any]:
+def parse_override(text: str, option: str = "--set") -> tuple[list[str], Any]:
     """``"training.rounds=3"`` -> (["training", "rounds"], 3); values are TOML, bare words strings.
 
+    :param option: the option that gave ``text``, as an error names it (``--grid`` gives one value).
     :raises ConfigError: the value is neither TOML nor a bare word (an unclosed quote or table).
     """
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
-        raise ConfigError(f"--set takes key=value, got {text!r}")
+        raise ConfigError(f"{option} takes key=value, got {text!r}")
     if LEADING_DOT.fullmatch(raw.strip()):  # ".5": a number, as the shell and most languages read it
         raw = raw.strip().replace(".", "0.", 1)
     try:
         value = tomllib.loads(f"v = {raw}")["v"]
     except tomllib.TOMLDecodeError:
+        opened = {"[": raw.count("[") - raw.count("]"), "{": raw.count("{") - raw.count("}")}
+        unclosed = [bracket for bracket, count in opened.items() if count]
+        if unclosed:
+            closing = {"[": "]", "{": "}"}[unclosed[0]]
+            raise ConfigError(
+                f"{option} {text}: {raw!r} opens and closes a different number of {unclosed[0]} and "
+                f"{closing}; a list is [1, 2], a table {{key = 1}}"
+            ) from None
         if not BARE_WORD.fullmatch(raw.strip()):
             raise ConfigError(
-                f"--set {text}: {raw!r} is not a TOML value; a string needs its quotes past the shell, "
-                f"e.g. --set '{key.strip()}=\"text\"'"
+                f"{option} {text}: {raw!r} is not a TOML value; a string needs its quotes past the shell, "
+                f"e.g. {option} '{key.strip()}=\"text\"'"
             ) from None
         value = raw.strip()
     return key.strip().split("."), value
+
+
+def check_overrides(
+    overrides: Sequence[str],
+    grid: Sequence[str] = (),
+    seeds_option: str | None = None,
+    grid_name: str = "--grid",
+) -> None:
+    """Refuse ``--set`` overrides that would lose to something else without a word: a key set twice
+    (or a key and its section), a key a ``--grid`` also sets, or ``seed`` where a ``--seeds``
+    option (``seeds_option``, e.g. ``"--seeds"``) gives the seeds. ``grid_name`` names the grid in the
+    error (a study's sweeps vary keys of their own).
+
+    :raises ConfigError: one line naming the key and what to give instead.
+    """
+    seen: dict[str, str] = {}
+    for override in overrides:
+        path, _ = parse_override(override)
+        key = ".".join(path)
+        if seeds_option is not None and key == "seed":
+            raise ConfigError(
+                f"--set {override}: {seeds_option} gives the seeds here and would replace it; give the "
+                f"seed as {seeds_option} {override.partition('=')[2].strip()} instead"
+            )
+        for other, text in seen.items():
+            if key == other or key.startswith(f"{other}.") or other.startswith(f"{key}."):
+                raise ConfigError(
+                    f"--set {override} and --set {text} both set {min(key, other, key=len)}: give it once"
+                )
+        for name in grid:
+            if key == name or name.startswith(f"{key}.") or key.startswith(f"{name}."):
+                raise ConfigError(
+                    f"--set {override}: {grid_name} {name} sets {min(key, name, key=len)} in every trial, "
+                    "which would replace it; give it in one of the two"
+                )
+        seen[key] = override
 
 
 def read_config_data(config: str, _seen: tuple[str, ...] = ()) -> dict[str, Any]:
@@ -75,9 +123,15 @@ def read_config_data(config: str, _seen: tuple[str, ...] = ()) -> dict[str, Any]
         return data
     if not isinstance(base, str):
         raise ConfigError(f"extends: expected a preset name or a path, got {base!r}")
-    if "/" in base and not Path(base).is_absolute() and "/" in config:
-        base = str(Path(config).parent / base)
-    return _merge(read_config_data(base, (*_seen, config)), data)
+    return _merge(read_config_data(extends_target(config, base), (*_seen, config)), data)
+
+
+def extends_target(config: str, base: str) -> str:
+    """What ``extends = base`` in ``config`` names: a preset, or a path read from the folder of the
+    file that holds it (as an ``#include`` is), not from the current folder."""
+    if is_preset(base) or Path(base).is_absolute() or is_preset(config):
+        return base
+    return str(Path(config).parent / base)
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -103,6 +157,36 @@ def config_table(config: str, overrides: Sequence[str] = ()) -> dict[str, Any]:
             )
         set_key(data, path, value, f"--set {override}")
     return data
+
+
+def given_keys(config: str, overrides: Sequence[str] = ()) -> tuple[set[str], set[str]]:
+    """The dotted keys a person wrote for this config: those of its ``--set`` overrides, and, where
+    ``config`` is a file rather than a shipped preset that ``extends`` another, those of that file
+    itself (what it changes; a whole config written out, a run folder's ``config.toml``, holds every
+    key and extends nothing). A table value names each of its keys (``--set 'training={rounds=1}'``:
+    ``training.rounds``)."""
+    in_file: set[str] = set()
+    if not is_preset(config):
+        text, _ = read_config_text(config)
+        own = tomllib.loads(text)
+        in_file = _dotted(own) - {"extends"} if "extends" in own else set()
+    set_here: set[str] = set()
+    for override in overrides:
+        path, value = parse_override(override)
+        table: dict[str, Any] = {}
+        set_key(table, path, value, f"--set {override}")
+        set_here |= _dotted(table)
+    return in_file, set_here
+
+
+def _dotted(table: Mapping[str, Any], prefix: str = "") -> set[str]:
+    keys: set[str] = set()
+    for key, value in table.items():
+        if isinstance(value, Mapping):
+            keys |= _dotted(value, f"{prefix}{key}.")
+        else:
+            keys.add(f"{prefix}{key}")
+    return keys
 
 
 def renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
@@ -148,6 +232,11 @@ def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
         if key in set_elsewhere:
             raise ConfigError(f"{prefix}{key}: not a config key here; it is set by {set_elsewhere[key]}")
         if key not in fields:
+            if prefix and key in ROOT_SECTIONS:  # [env.training]: a section written inside another
+                raise ConfigError(
+                    f"unknown key '{prefix}{key}': [{key}] is a section of its own, not one of "
+                    f"[{prefix.rstrip('.')}]; write it as [{key}] (or --set {key}.KEY=VALUE)"
+                )
             close = difflib.get_close_matches(key, fields, n=3, cutoff=0.6)
             if close:
                 raise ConfigError(
@@ -179,6 +268,31 @@ SCALARS: dict[type, tuple[type | tuple[type, ...], str]] = {
 """The scalar field types of a config: the TOML values each takes, and its name in an error."""
 
 
+ROOT_SECTIONS = frozenset(
+    {"env", "highway", "gym", "training", "dqn", "tabular_agent", "cotraining", "demonstrations", "tabular"}
+)
+"""The sections of a config's top level, which a key inside another section cannot name."""
+
+
+def check_integers(value: Any, key: str) -> None:
+    """Refuse any integer in ``value`` (a scalar, or lists and tables of them) outside :data:`INT64`.
+
+    :raises ConfigError: one line naming the key and the bounds.
+    """
+    if isinstance(value, bool):
+        return
+    if isinstance(value, int) and not INT64[0] <= value <= INT64[1]:
+        raise ConfigError(
+            f"{key}: {value} is beyond a 64-bit integer (TOML's, from {INT64[0]:,} to {INT64[1]:,})"
+        )
+    if isinstance(value, Mapping):
+        for name, item in value.items():
+            check_integers(item, f"{key}.{name}")
+    elif isinstance(value, list | tuple):
+        for item in value:
+            check_integers(item, key)
+
+
 def _convert(hint: Any, value: Any, key: str, may_be_infinite: bool = False) -> Any:
     origin, args = typing.get_origin(hint), typing.get_args(hint)
     if dataclasses.is_dataclass(hint):
@@ -194,6 +308,7 @@ def _convert(hint: Any, value: Any, key: str, may_be_infinite: bool = False) -> 
     if origin is dict:
         if not isinstance(value, Mapping):
             raise ConfigError(f"{key}: expected a table, got {value!r}")
+        check_integers(value, key)
         return dict(value)
     if hint in SCALARS:
         accepted, what = SCALARS[hint]
@@ -201,6 +316,7 @@ def _convert(hint: Any, value: Any, key: str, may_be_infinite: bool = False) -> 
         if not isinstance(value, accepted) or (isinstance(value, bool) and hint is not bool):
             raise ConfigError(f"{key}: expected {what}, got {value!r}")
         # NaN compares false with every bound, and an infinite value with most: neither is a setting.
+        check_integers(value, key)
         if hint is float and (math.isnan(value) or (math.isinf(value) and not may_be_infinite)):
             raise ConfigError(f"{key}: expected a finite number, got {value!r}")
         return hint(value)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from typing import Any, Literal
+from typing import Any, ClassVar, Literal
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import (
@@ -23,6 +23,24 @@ from dospcot.config.learning_sections import (
 from dospcot.config.task_sections import DemonstrationsConfig, EnvConfig, GymConfig, HighwayConfig
 
 RUN_AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
+SELF_PACED_KEYS: frozenset[str] = frozenset(
+    f"cotraining.{key}"
+    for key in (
+        "consensus_weight",
+        "weighting",
+        "add_fraction_start",
+        "add_fraction_step",
+        "quota",
+        "tol",
+        "stop_when_fully_admitted",
+        "refit_new_classes",
+    )
+)
+"""The ``[cotraining]`` keys of the self-paced schedule, which only co-training reads."""
+REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {"cotraining.ensemble_size", "cotraining.classifier"}
+"""The ``[cotraining]`` keys read by a method that learns rewards alone (``cotraining.classifier``: its
+section), which the baselines never read. ``numerics`` is not among them: every run names it in its
+``run_info.json``, so a study pins it for every arm."""
 
 
 @dataclass(frozen=True)
@@ -59,6 +77,16 @@ class TrainConfig:
     tabular_agent: TabularAgentConfig = field(default_factory=TabularAgentConfig)
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
     demonstrations: DemonstrationsConfig = field(default_factory=DemonstrationsConfig)
+
+    unread_keys: ClassVar[dict[str, frozenset[str]]] = {
+        "cotrain": frozenset({"cotraining.ensemble_size"}),
+        "reward-model": SELF_PACED_KEYS,
+        "oracle": REWARD_LEARNER_KEYS,
+        "masked-zero": REWARD_LEARNER_KEYS,
+        "labels-only": REWARD_LEARNER_KEYS,
+    }
+    """The keys (or sections) each ``method`` never reads: a config that sets one is refused, since the
+    setting would change nothing (:func:`dospcot.tasks.load_config`)."""
 
     def __post_init__(self) -> None:
         check_name_and_seed(self.name, self.seed)
@@ -114,10 +142,35 @@ class TrainConfig:
                 'training.label_strategy: "disagreement" asks where two views\' classifiers disagree, and '
                 f'the run has one view ({self.views[0]}); use "uncertainty" for one view'
             )
+        if (
+            "disagreement" in strategy.split("+")
+            and self.method == "reward-model"
+            and len(self.views) * self.cotraining.ensemble_size < 2
+        ):
+            raise ConfigError(
+                'training.label_strategy: "disagreement" asks where the reward model\'s members disagree, '
+                "and the run has one view with cotraining.ensemble_size = 1; raise ensemble_size to 2 or "
+                'more, or use "uncertainty"'
+            )
         if self.training.segment_length > 1:
             raise ConfigError(
                 "training.label_strategy: queries reveal single rewards, segment labels none; "
                 f'set label_strategy = "uniform" with segment_length = {self.training.segment_length}'
+            )
+
+    def check_read(self, given: set[str]) -> None:
+        """Refuse the keys of ``given`` (dotted names a person wrote) that this config's ``method``
+        never reads.
+
+        :raises ConfigError: one line naming them and the method.
+        """
+        unread = self.unread_keys.get(self.method, frozenset())
+        named = sorted(k for k in given if k in unread or any(k.startswith(f"{u}.") for u in unread))
+        if named:
+            raise ConfigError(
+                f'{", ".join(named)}: method = "{self.method}" never reads '
+                f"{'it' if len(named) == 1 else 'them'}; remove {'it' if len(named) == 1 else 'them'} "
+                "or choose a method that does"
             )
 
     @property
@@ -178,10 +231,32 @@ class PaperConfig:
         return plain(dataclasses.asdict(self))
 
 
+NAME_MAX_BYTES = 255
+"""The longest file name, in bytes, that Linux's and macOS's file systems take."""
+
+
+def folder_name_problem(name: str) -> str | None:
+    """Why ``name`` cannot be the name of one folder inside another (a run's or a sweep's), or None:
+    every name a person gives a folder passes this one rule, so none escapes its parent (``..``,
+    ``/``), nests (``a/b``), hides (``.x``) or is refused by the file system."""
+    if not name.strip():
+        return "an empty name"
+    if "/" in name or "\\" in name:
+        return "a path, not one folder's name (no / or \\)"
+    if name.startswith("."):
+        return "a name starting with '.' (hidden, or . and .. themselves)"
+    if "\0" in name or any(ord(char) < 32 for char in name):
+        return "a name holding a control character"
+    if len(name.encode("utf-8", "surrogatepass")) > NAME_MAX_BYTES:
+        return f"a name longer than a file system takes ({NAME_MAX_BYTES} bytes)"
+    return None
+
+
 def check_name_and_seed(name: str, seed: int) -> None:
     """The checks every config's ``name`` and ``seed`` pass."""
-    if not name or "/" in name or name.startswith("."):
-        raise ConfigError(f"name: must be a plain folder name, got {name!r}")
+    problem = folder_name_problem(name)
+    if problem is not None:
+        raise ConfigError(f"name: must be a plain folder name, got {name!r}: {problem}")
     if seed < 0:
         raise ConfigError(f"seed: must be >= 0, got {seed}")
 

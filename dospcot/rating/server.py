@@ -13,14 +13,17 @@ from __future__ import annotations
 
 import argparse
 import csv
+import ipaddress
 import secrets
 import socket
+import sys
 import threading
 from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
 from dospcot.core.answer_files import (
+    ROUND_FILE,
     RaterError,
     accept_values,
     confirmed,
@@ -32,7 +35,7 @@ from dospcot.core.answer_files import (
     show,
     write_rows,
 )
-from dospcot.run.run_folder import QUERIES_FILE
+from dospcot.run.run_folder import QUERIES_FILE, run_lock
 from dospcot.run.run_session import QUERIES_FOLDER
 
 ANSWERED_LOG = QUERIES_FILE
@@ -46,6 +49,8 @@ def waiting_round(run_dir: Path) -> Path:
     :raises RaterError: no such file.
     """
     folder = run_dir / QUERIES_FOLDER
+    if (run_dir / "config.toml").exists() and not (run_dir / "config.toml").is_file():
+        raise RaterError(f"{run_dir / 'config.toml'} is not a file (a folder?): give a run folder")
     if not (run_dir / "config.toml").is_file():
         raise RaterError(f"{run_dir} is not a run folder (it has no config.toml)")
     paths = sorted(folder.glob("round_*.csv"), key=lambda p: (len(p.name), p.name))
@@ -77,10 +82,19 @@ class RoundAnswers:
         self.seen = rewards_seen(self.folder, self.round)
         """The rewards of the earlier rounds' answers: the values that need no confirmation."""
         self.lock = threading.Lock()
-        fields, rows, _ = self._rows()
+        fields, rows, comma = self._rows()
         self.samples = [sample for sample, _ in rows]
         """The round's queries in the file's order; no other sample is answered."""
+        if not self.samples:
+            raise RaterError(
+                f"{path} holds no query (the run writes a row for each): it was emptied since; restore "
+                f"it, or delete it and resume the run to ask again: dospcot train --resume {self.run_dir}"
+            )
         self.views = [f.removesuffix("_predicts") for f in fields if f.endswith("_predicts")]
+        self.order: list[float] = _first_answered(self.folder, self.round)
+        """Every known value in the order it became known (earlier rounds first): the page's number keys
+        follow it, so a new value takes the next key and no key ever changes its value."""
+        self._known([row for _, row in rows], comma)
 
     def _rows(self) -> tuple[list[str], list[tuple[int, dict[str, str]]], bool]:
         """The file's columns, its rows with their sample numbers, and whether it is ``;`` separated.
@@ -100,7 +114,9 @@ class RoundAnswers:
         return fields, numbered, comma
 
     def _known(self, rows: list[dict[str, str]], comma: bool) -> list[float]:
-        """The values a person may give at one keystroke: the earlier rounds' and this round's confirmed."""
+        """The values a person may give at one keystroke: the earlier rounds', this round's confirmed and
+        those confirmed on this page since it started (an answer changed since keeps its value's key), in
+        the order they became known (:attr:`order`, which a value new here joins at its end)."""
         known = set(self.seen)
         for row in rows:
             try:
@@ -109,7 +125,8 @@ class RoundAnswers:
                 continue
             if value in known or confirmed(row):
                 known.add(value)
-        return sorted(known)
+        self.order += [value for value in sorted(known) if value not in self.order]
+        return list(self.order)
 
     def state(self, token: str) -> dict[str, Any]:
         """The round as the page shows it."""
@@ -158,10 +175,10 @@ class RoundAnswers:
         :raises RaterError: a sample outside the round, or a reward that is no finite number.
         :raises NewReward: a value not seen before, unless ``confirm``.
         """
-        try:
+        if isinstance(sample, str) and sample.strip().isdigit():
             sample = int(sample)
-        except (TypeError, ValueError):
-            raise RaterError(f"{sample!r} is not a sample number") from None
+        if isinstance(sample, bool) or not isinstance(sample, int):  # 98.5 is no sample, nor is true
+            raise RaterError(f"{sample!r} is not a sample number (a whole number from the round's file)")
         if sample not in self.samples:
             raise RaterError(
                 f"sample {sample} is not one of round {self.round}'s {len(self.samples)} queries"
@@ -180,6 +197,8 @@ class RoundAnswers:
             if sample not in [s for s, _ in rows]:
                 raise RaterError(f"sample {sample} is no longer in {self.path}: restore its row")
             known = self._known(rows_, comma)
+            if value not in known and confirm:
+                self.order.append(value)  # the next free key, before the file's order could say otherwise
             if value not in known and not confirm:
                 listed = ", ".join(show(v) for v in known) or "none yet"
                 raise NewReward(f"{show(value)} is a new reward value (seen so far: {listed})")
@@ -195,6 +214,23 @@ class RoundAnswers:
                     row["confirm_new"] = "yes"
             write_rows(self.path, list(dict.fromkeys([*fields, "confirm_new"])), rows_, comma)
         return {"sample": sample, "reward": text}
+
+
+def _first_answered(folder: Path, round_: int) -> list[float]:
+    """The distinct rewards answered in the rounds before ``round_``, in the order they were first
+    given (round by round, row by row)."""
+    order: list[float] = []
+    paths = [p for p in folder.glob("round_*.csv") if ROUND_FILE.fullmatch(p.name) and round_of(p) < round_]
+    for path in sorted(paths, key=round_of):
+        _, rows, comma = read_rows(path)
+        for _, row in rows:
+            try:
+                value = parse_reward(row.get("reward") or "", comma)
+            except ValueError:
+                continue
+            if value not in order:
+                order.append(value)
+    return order
 
 
 class NewReward(RaterError):
@@ -313,16 +349,33 @@ def rate(args: argparse.Namespace) -> bool:
         print(f"{path}: confirmed {', '.join(show(v) for v in args.accept)} as new rewards on {count} rows")
         return False
     try:
-        import uvicorn
+        import uvicorn  # noqa: F401 - the rate extra, checked before anything is served
     except ImportError:
         raise RaterError("dospcot rate needs the rate extra: pip install 'dospcot[rate]'") from None
     answers = RoundAnswers(path)
-    token = secrets.token_urlsafe(24)
+    # One server per run: two would both write the round's file, each over the other's answers.
+    with run_lock(answers.folder, "rated", RaterError):
+        return _serve(args, answers, path)
+
+
+def _serve(args: argparse.Namespace, answers: RoundAnswers, path: Path) -> bool:
+    """Serve ``answers`` until Ctrl-C or until the page asks to resume; return whether it asked."""
+    import uvicorn
+
+    # The next round (--then-train) is served at the same address: the open page goes on with it.
+    token = getattr(args, "token", None) or secrets.token_urlsafe(24)
+    if not _is_local(args.host):
+        print(
+            f"dospcot rate: warning: --host {args.host} serves the page to other machines too; the token in "
+            "its address is all that keeps them out (use 127.0.0.1 unless a rater works elsewhere)",
+            file=sys.stderr,
+        )
     sock = _listen(args.host, args.port)
     app = make_app(answers, token, args.then_train)
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning", access_log=False, lifespan="off"))
     app.state.server = server
     host, port = sock.getsockname()[:2]
+    args.token, args.port = token, port
     shown = f"[{host}]" if ":" in host else host
     left = sum(1 for q in answers.state(token)["queries"] if not q["reward"])
     print(
@@ -332,3 +385,13 @@ def rate(args: argparse.Namespace) -> bool:
     )
     server.run(sockets=[sock])
     return bool(app.state.resume)
+
+
+def _is_local(host: str) -> bool:
+    """Whether ``host`` is this machine's loopback address, which no other machine reaches."""
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False

@@ -8,8 +8,10 @@ that knows what it kept raises :class:`Interrupted` with it, which the command l
 from __future__ import annotations
 
 import signal
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
+from multiprocessing.context import BaseContext, SpawnContext, SpawnProcess
 from types import FrameType
 
 
@@ -37,6 +39,32 @@ def stop_on_signals() -> Iterator[None]:
         yield
     finally:
         signal.signal(signal.SIGTERM, previous)
+
+
+class _DeafToCtrlC(SpawnProcess):
+    """A spawned process that starts with SIGINT ignored: the one disposition a new program inherits,
+    and one Python keeps at start-up, so that a Ctrl-C while the child is still importing prints no
+    ``KeyboardInterrupt`` traceback there (:func:`leave_interrupts_to_the_parent` comes too late)."""
+
+    def start(self) -> None:
+        if threading.current_thread() is not threading.main_thread():  # signal() is the main thread's
+            super().start()
+            return
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # for the instant of fork and exec
+        try:
+            super().start()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+
+
+class _DeafSpawnContext(SpawnContext):
+    Process = _DeafToCtrlC
+
+
+def worker_context() -> BaseContext:
+    """The ``spawn`` context of processes that leave Ctrl-C to their parent from their first
+    instruction (spawn, not fork: a forked child inherits torch's thread pools and locks)."""
+    return _DeafSpawnContext()
 
 
 def leave_interrupts_to_the_parent() -> None:

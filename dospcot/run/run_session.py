@@ -150,13 +150,25 @@ class RunSession:
         write_checkpoint(self.run_dir, self.checkpoint_state())
 
     def after_round(self, rows: list[dict], checkpoint: bool = True) -> None:
-        """Log the round just finished, write its files and (unless its batch checkpoints every member
-        at once) checkpoint it."""
-        self.records.extend(rows)
-        self._log_round(rows)
-        self._write_round_files()
+        """Checkpoint the round just finished (unless its batch checkpoints every member at once:
+        :meth:`add_round` and :meth:`write_round` then), then log it and write its files.
+
+        The checkpoint comes first: a process killed while it writes the round's files (a sweep's stop
+        ends its workers at once) leaves a folder that resumes from this round, never round files
+        ahead of the checkpoint, which no resume could go on from."""
+        self.add_round(rows)
         if checkpoint:
             self.checkpoint()
+        self.write_round(rows)
+
+    def add_round(self, rows: list[dict]) -> None:
+        """Add the rows of the round just finished to the records a checkpoint holds."""
+        self.records.extend(rows)
+
+    def write_round(self, rows: list[dict]) -> None:
+        """Log the round just finished (TensorBoard) and write its files."""
+        self._log_round(rows)
+        self._write_round_files()
 
     def interrupted(self) -> Interrupted:
         """The one-line stop of a session interrupted by Ctrl-C or SIGTERM: what was kept, how to resume."""

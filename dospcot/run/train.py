@@ -99,6 +99,8 @@ def run_config(run_dir: Path) -> RunConfig:
             if run_dir.name == CONFIG_FILE
             else f"{run_dir} is a file, not a run folder (runs/<name>/<stamp>)"
         )
+    if config_path.exists() and not config_path.is_file():
+        raise RunFolderError(f"{config_path} is not a file (a folder?): a run folder holds it as a file")
     if not config_path.is_file():
         raise RunFolderError(f"{run_dir} is not a run folder: it has no {CONFIG_FILE}")
     return load_run_config(config_path)

@@ -180,9 +180,12 @@ def _train_batch(
     def after_round(rows: list[list[dict]]) -> None:
         for member, (session, member_rows) in enumerate(zip(sessions, rows, strict=True)):
             session.extra = {DRAWS_KEY: batch.draws_of(member)}
-            session.after_round(member_rows, checkpoint=False)
-        # One file for the whole batch, written at once: a kill never leaves members at different rounds.
+            session.add_round(member_rows)
+        # One file for the whole batch, written at once, before any member's round files (as
+        # RunSession.after_round): a kill never leaves members at different rounds, nor files ahead of it.
         write_checkpoint(run_dirs[0], {BATCH_STATES: [session.checkpoint_state() for session in sessions]})
+        for session, member_rows in zip(sessions, rows, strict=True):
+            session.write_round(member_rows)
 
     member_steps = rounds * cfg.training.steps_per_round * len(cfg.views)
     unreported = [0.0]

@@ -65,9 +65,11 @@ class TrialRun:
     run_dir: Path
 
 
-def load_runs(sweep_dir: Path) -> tuple[SweepSpec, list[TrialRun]]:
+def load_runs(sweep_dir: Path, skipped: list[str] | None = None) -> tuple[SweepSpec, list[TrialRun]]:
     """The sweep's spec and its finished trials, in the sweep's order (config, then grid values).
 
+    :param skipped: where given, a trial whose files cannot be read (a damaged ``summary.json``) is
+        left out and named here with the reason, one line each; else it raises.
     :raises SweepError: ``sweep_dir`` is not a sweep folder, or no trial of it has finished.
     """
     spec = open_sweep(sweep_dir, None)
@@ -75,10 +77,19 @@ def load_runs(sweep_dir: Path) -> tuple[SweepSpec, list[TrialRun]]:
     for trial_path in sweep_dir.glob(f"trials/*/*/{TRIAL_FILE}"):
         if not (trial_path.parent / SUMMARY_FILE).is_file():
             continue
-        trial = Trial.from_dict(json.loads(trial_path.read_text()))
-        curves_path = trial_path.parent / METRICS_FILE
-        curves = _read_csv(curves_path) if curves_path.is_file() else []
-        summary = json.loads((trial_path.parent / SUMMARY_FILE).read_text())
+        try:
+            trial = Trial.from_dict(json.loads(trial_path.read_text()))
+            curves_path = trial_path.parent / METRICS_FILE
+            curves = _read_csv(curves_path) if curves_path.is_file() else []
+            summary = json.loads((trial_path.parent / SUMMARY_FILE).read_text())
+            if not isinstance(summary, dict) or not isinstance(summary.get("mean"), dict):
+                raise ValueError(f"{SUMMARY_FILE} holds no table of means")
+        except (OSError, ValueError, KeyError, TypeError) as err:  # JSON and UTF-8 errors are ValueErrors
+            if skipped is None:
+                raise
+            reason = (str(err).splitlines() or [""])[0]
+            skipped.append(f"{trial_path.parent}: cannot be read ({type(err).__name__}: {reason})")
+            continue
         runs.append(TrialRun(trial, summary, curves, trial_path.parent))
     if not runs:
         raise SweepError(f"{sweep_dir} has no finished trial yet")
@@ -263,10 +274,12 @@ def _band(label: str, points: dict[float, SeedSummary]) -> Band:
     return Band(label, np.array(xs), mean, low, high)
 
 
-def write_report(sweep_dir: Path, out_dir: Path | None = None) -> list[Path]:
+def write_report(
+    sweep_dir: Path, out_dir: Path | None = None, skipped: list[str] | None = None
+) -> list[Path]:
     """Write the sweep's report, the one of its kind of config (:data:`REPORT_WRITERS`); return the
-    files."""
-    spec, runs = load_runs(sweep_dir)
+    files. ``skipped``: as :func:`load_runs`'s."""
+    spec, runs = load_runs(sweep_dir, skipped)
     out_dir = out_dir or sweep_dir
     try:
         out_dir.mkdir(parents=True, exist_ok=True)

@@ -46,7 +46,7 @@ from typing import Any
 
 from tqdm.auto import tqdm
 
-from dospcot.run.interrupts import Interrupted, leave_interrupts_to_the_parent
+from dospcot.run.interrupts import Interrupted, leave_interrupts_to_the_parent, worker_context
 from dospcot.run.run_folder import CONFIG_FILE, SUMMARY_FILE, batch_members, run_lock, write_json
 from dospcot.run.runners import seeds_trainer
 from dospcot.sweeps.sweep_spec import (
@@ -321,22 +321,14 @@ def _run_local(
     failed: dict[str, str] = {}
     if not jobs:
         return failed
-    # spawn, not fork: a forked child inherits torch's thread pools and locks from the parent.
-    context = multiprocessing.get_context("spawn")
+    context = worker_context()  # spawned, and deaf to Ctrl-C from the start
     # Workers stopped by Ctrl-C leave the pool's queue locks to the resource tracker, which would warn of
     # them in lines of its own after the one that says what was kept; they are freed all the same.
     if "ignore::UserWarning:multiprocessing.resource_tracker" not in sys.warnoptions:
         sys.warnoptions.append("ignore::UserWarning:multiprocessing.resource_tracker")
     total = sum(len(job) for job in jobs)
     manager = SyncManager(ctx=context)
-    manager.start(_worker_start, (os.getpid(),))
-    worker_ids = manager.list()  # each worker adds its process id, so a stop can end them
-    pool = ProcessPoolExecutor(
-        min(workers, len(jobs)),
-        mp_context=context,
-        initializer=_worker_start,
-        initargs=(os.getpid(), worker_ids),
-    )
+    pool: ProcessPoolExecutor | None = None
     bar = tqdm(
         total=total,
         unit="trial",
@@ -345,6 +337,10 @@ def _run_local(
         bar_format="{l_bar}{bar}| {n:.1f}/{total} trials [{elapsed}<{remaining}{postfix}]",
     )
     try:
+        manager.start(_worker_start, (os.getpid(),))
+        pool = ProcessPoolExecutor(
+            min(workers, len(jobs)), mp_context=context, initializer=_worker_start, initargs=(os.getpid(),)
+        )
         reports = manager.Queue()  # (job index, share of a trial done) from the workers
         futures = {
             pool.submit(
@@ -369,17 +365,21 @@ def _run_local(
             bar.n = sum(shown)
             bar.set_postfix(failed=len(failed))  # refreshes the bar
     except KeyboardInterrupt:
-        # The workers ignore Ctrl-C (_worker_start): the sweep stops them, and their trials resume from
-        # their last finished rounds.
-        for worker in list(worker_ids):
-            with contextlib.suppress(ProcessLookupError):  # a worker that already ended
-                os.kill(worker, signal.SIGTERM)
-        pool.shutdown(wait=True, cancel_futures=True)
+        # The workers and the manager ignore Ctrl-C (worker_context): the sweep stops every one, those
+        # still starting too (a worker that has not begun would take a job and run it to its end, a
+        # manager would wait to report to a sweep that is gone); their trials resume from their last
+        # finished rounds.
+        for child in multiprocessing.active_children():
+            with contextlib.suppress(ProcessLookupError, TypeError):  # ended, or never started
+                os.kill(child.pid, signal.SIGTERM)
+        if pool is not None:
+            pool.shutdown(wait=True, cancel_futures=True)
         raise _interrupted(sweep_dir, jobs) from None
     finally:
         # A stop as the sweep closes (its trials have ended, or were stopped) still closes the rest.
         stop = False
-        for close in (bar.close, partial(pool.shutdown, wait=True), manager.shutdown):
+        closes = [bar.close, *([partial(pool.shutdown, wait=True)] if pool is not None else [])]
+        for close in [*closes, getattr(manager, "shutdown", lambda: None)]:  # none: never started
             try:
                 close()
             except KeyboardInterrupt:

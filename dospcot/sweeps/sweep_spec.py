@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from dospcot.config.errors import ConfigError
+from dospcot.config.loading import parse_override
 from dospcot.config.run_configs import RunConfig
 from dospcot.run.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
 from dospcot.tasks import get_task, load_config, load_run_config
@@ -172,6 +173,8 @@ def parse_grid(items: Sequence[str]) -> dict[str, tuple[str, ...]]:
             raise ConfigError(
                 f"--grid {name}: " + ("use --seeds for seeds" if name == "seed" else "given twice")
             )
+        for value in values:  # each value is TOML or a bare word, as --set's (named as --grid's)
+            parse_override(f"{name}={value}", "--grid")
         repeated = sorted({v for v in values if values.count(v) > 1})
         if repeated:
             raise ConfigError(f"--grid {name}: {repeated[0]} is given twice; each value once")

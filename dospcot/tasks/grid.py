@@ -9,6 +9,9 @@ from typing import TYPE_CHECKING
 from dospcot.config.errors import ConfigError
 from dospcot.tasks.registry import Task, register
 
+GRID_ACTIONS = 4
+"""The grid world's actions: its four moves (``dospcot.envs.gridworld.MOVES``)."""
+
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
     from dospcot.tasks.adapters.grid import GridAdapter
@@ -43,6 +46,9 @@ class GridWorldTask(Task):
 
     def has_monitor(self, cfg: TrainConfig) -> bool:
         return cfg.env.monitored_columns > 0
+
+    def pool_keys(self, cfg: TrainConfig) -> int:
+        return cfg.env.size**2 * GRID_ACTIONS
 
     def check(self, cfg: TrainConfig) -> None:
         from dospcot.tasks.adapters.grid import grid_world

@@ -4,12 +4,14 @@ Nothing here imports torch, stable-baselines3 or an env, so a config reads at on
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from dospcot.config.loading import config_table, from_mapping, read_config_data, renamed_to_now
-from dospcot.config.run_configs import RunConfig
+from dospcot.config.errors import ConfigError
+from dospcot.config.loading import config_table, from_mapping, given_keys, read_config_data, renamed_to_now
+from dospcot.config.run_configs import PaperConfig, RunConfig, TrainConfig
 from dospcot.tasks.registry import get_task
 
 
@@ -19,17 +21,45 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
     :class:`~dospcot.config.run_configs.PaperConfig` for ``"paper"``, else a
     :class:`~dospcot.config.run_configs.TrainConfig`.
 
+    A key that the config's method never reads, set by ``--set`` or by the file itself where it extends
+    another (:func:`~dospcot.config.loading.given_keys`), is refused
+    (:meth:`~dospcot.config.run_configs.TrainConfig.check_read`).
+
     :raises ConfigError: one line naming the first bad key and what is allowed.
     """
-    return config_from_table(config_table(config, overrides))
+    cfg = config_from_table(config_table(config, overrides))
+    if isinstance(cfg, TrainConfig):
+        in_file, set_here = given_keys(config, overrides)
+        cfg.check_read(in_file | set_here)
+    return cfg
 
 
 def config_from_table(data: Mapping[str, Any]) -> RunConfig:
     """The checked config of a table (as a TOML file holds it): every key and type, then its task."""
     task = get_task(data.get("task", "grid"))
+    _check_kind(task.config_type(), data)
     cfg = from_mapping(task.config_type(), data)
     task.check_config(cfg)
     return cfg
+
+
+def _check_kind(cls: type, data: Mapping[str, Any]) -> None:
+    """Refuse a key of the other kind of config (a training key in a ``task = "paper"`` config, or a
+    paper-protocol key in a training one) by what it is, rather than as an unknown key."""
+    other = TrainConfig if cls is PaperConfig else PaperConfig
+    fields = {f.name for f in dataclasses.fields(cls)}
+    stray = [key for key in data if key not in fields and key in {f.name for f in dataclasses.fields(other)}]
+    if not stray:
+        return
+    if cls is PaperConfig:
+        raise ConfigError(
+            f'task = "paper" makes this a paper-protocol config, which has no {stray[0]!r} (a key of a '
+            'dospcot train config); start a paper config from a paper preset: extends = "paper-text"'
+        )
+    raise ConfigError(
+        f'{stray[0]!r} is a key of a paper-protocol config (task = "paper"), not of a task = '
+        f'"{data.get("task", "grid")}" config'
+    )
 
 
 def load_run_config(path: Path) -> RunConfig:

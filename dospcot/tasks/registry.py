@@ -59,6 +59,18 @@ class Task:
         """Whether a reward monitor reveals rewards beside the label fraction."""
         return False
 
+    def pool_keys(self, cfg: TrainConfig) -> int | None:
+        """The most distinct samples a run's pool can hold whatever its length (a discrete task's
+        (state, action) keys), or None: every step is a sample of its own."""
+        return None
+
+    def most_samples(self, cfg: TrainConfig) -> int:
+        """An upper bound on the samples of a run's pool, which bounds the queries it can ask: every
+        step of every agent, and at most :meth:`pool_keys`."""
+        steps = cfg.training.total_steps * len(cfg.views)
+        keys = self.pool_keys(cfg)
+        return steps if keys is None else min(steps, keys)
+
     def check(self, cfg: RunConfig) -> None:
         """Raise :class:`ConfigError` for what only files, imports or the env can tell (an unknown env
         id, a demonstrations file that does not load); runs before any run folder is made."""
@@ -102,6 +114,16 @@ class Task:
             raise ConfigError(
                 f"demonstrations.agent_view: the {task_name} has no view {demos.agent_view!r}; "
                 f"allowed: {allowed}"
+            )
+        samples = self.most_samples(cfg)
+        if cfg.training.label_budget > samples:
+            bound = "rounds x steps_per_round x views" + (
+                ", or the task's keys" * (self.pool_keys(cfg) is not None)
+            )
+            raise ConfigError(
+                f"training.label_budget: {cfg.training.label_budget:,} answers cannot be spent: the run "
+                f"meets at most {samples:,} samples to ask about ({bound}); give at most {samples:,}, or 0 "
+                "for the share label_fraction"
             )
         if cfg.training.segment_length > 1 and self.has_monitor(cfg):
             raise ConfigError(
