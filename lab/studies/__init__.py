@@ -288,5 +288,3 @@ def run_study(args: argparse.Namespace, command: str, repo: Repository | None, p
         write_glance(repo, args.study, rendered.glance, list(STUDIES))
         if rendered.readme is not None:
             replace_block(repo.readme, block, rendered.readme)
-
-
