@@ -4,7 +4,6 @@ would hang or run for ever is refused at once; what would be silently ignored is
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import io
 import subprocess
 import sys
@@ -14,6 +13,7 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_bad_inputs import _keys
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
@@ -304,20 +304,8 @@ def test_integers_at_int64s_bounds_load():
 # --- Property tests: any --set value and any TOML file of config keys ---------------------------------
 
 
-def _keys_of(cls: type, prefix: str = "") -> list[str]:
-    keys = []
-    hints = typing.get_type_hints(cls)
-    for field in dataclasses.fields(cls):
-        hint = hints[field.name]
-        if dataclasses.is_dataclass(hint):
-            keys += _keys_of(hint, f"{prefix}{field.name}.")
-        else:
-            keys.append(f"{prefix}{field.name}")
-    return keys
-
-
-TRAIN_KEYS = _keys_of(TrainConfig)
-PAPER_KEYS = _keys_of(PaperConfig)
+TRAIN_KEYS = [key for key, _ in _keys(TrainConfig)]
+PAPER_KEYS = [key for key, _ in _keys(PaperConfig)]
 SCALARS = st.one_of(
     st.integers(),
     st.integers(-(2**70), 2**70),
