@@ -26,7 +26,7 @@
     dospcot-lab study budget --docs           # docs/preregistration-budget.md: B1-B4, seeds 100-109
     dospcot-lab study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
 
-(``dospcot-lab study`` is the same command.) A study is one or more sweeps in ``runs/sweeps/``:
+A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
 finished run folder (``--render-only`` trains nothing). The grid tables lead with success (the share
 of seeds x agents whose greedy policy reaches the goal from the map's start) and optimal-action
