@@ -15,7 +15,7 @@ from dospcot.envs.gridworld import (
     view_blind_spots,
 )
 from dospcot.envs.gym_sensors import ObservationSensors, make_gym_env, make_masked_gym
-from dospcot.envs.highway import make_highway, make_masked_highway
+from dospcot.envs.masked_highway import make_highway, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper, StateActionMask, check_label_fraction
 from dospcot.envs.sensors import SensorViewWrapper
 from dospcot.envs.tabular import TabularMDP
@@ -29,14 +29,14 @@ register(id="dospcot/MaskedGridWorld-v0", entry_point="dospcot.envs.gridworld:ma
 register(id="dospcot/FastHighway-v0", entry_point="dospcot.envs.fast_highway:FastHighwayEnv")
 register(
     id="dospcot/MaskedFastHighway-v0",
-    entry_point="dospcot.envs.highway:make_masked_highway",
+    entry_point="dospcot.envs.masked_highway:make_masked_highway",
     kwargs={"env_id": "dospcot/FastHighway-v0"},
 )
 for _env_id in ("highway-fast-v0", "merge-v0", "roundabout-v0"):
     _name = "".join(part.capitalize() for part in _env_id[:-3].split("-"))
     register(
         id=f"dospcot/Masked{_name}-v0",
-        entry_point="dospcot.envs.highway:make_masked_highway",
+        entry_point="dospcot.envs.masked_highway:make_masked_highway",
         kwargs={"env_id": _env_id},
     )
 

@@ -2,7 +2,7 @@
 
 A *sensor env* offers ``observe(name)`` (the view ``name`` of its current state) and
 ``view_space(name)``, either itself (:class:`dospcot.envs.FastHighwayEnv`) or through a wrapper
-(:class:`dospcot.envs.highway.HighwayEnvSensors` around a highway-env env). :class:`SensorViewWrapper`
+(:class:`dospcot.envs.masked_highway.HighwayEnvSensors` around a highway-env env). :class:`SensorViewWrapper`
 makes one view the agent's observation and records every view of the state reached in
 ``info["views"]``, so the co-trainer's store can give each view's reward classifier every step.
 With ``lazy_views`` they are computed when read instead (:class:`StepViews`): a store keyed by

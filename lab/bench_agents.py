@@ -11,7 +11,7 @@ that every gradient step is taken). A measurement is the CPU time (:class:`Clock
 from __future__ import annotations
 
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 from dospcot_lab.bench_measure import Clock, Row, alternating
 

@@ -18,7 +18,7 @@ from dospcot.config.run_configs import TrainConfig
 from dospcot.core.batched_runs import BatchedRuns
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.sweeps.sweep import run_sweep
 from dospcot.sweeps.sweep_spec import SweepSpec
 from dospcot.tasks import load_config

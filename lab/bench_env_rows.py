@@ -11,9 +11,9 @@ import gymnasium as gym
 import numpy as np
 
 from dospcot.config.run_configs import TrainConfig
-from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.envs import StateActionMask
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 from dospcot_lab.bench_measure import Row, alternating
 
@@ -42,7 +42,7 @@ def _fast_highway_steps_per_second(steps: int, n_envs: int, seed: int) -> float:
 
 
 def _highway_env_steps_per_second(steps: int, seed: int) -> float:
-    from dospcot.envs.highway import make_highway
+    from dospcot.envs.masked_highway import make_highway
 
     return _random_steps_per_second(make_highway("highway-fast-v0"), steps, seed)
 
@@ -71,8 +71,8 @@ def bench_minigrid_wrappers(quick: bool, repeats: int) -> Row:
     """Env steps per second with random actions: MiniGrid through what the ``minigrid-lavagap-dospcot``
     preset adds to every training step (the keyed reward mask, the first view observed, the pool
     store, which reads every view on a pair's first visit) against the bare MiniGrid env."""
+    from dospcot.adapters.sensor_store import KeyedStepStore, SensorStoreWrapper
     from dospcot.envs.gym_sensors import make_masked_gym
-    from dospcot.tasks.adapters.sensor_store import KeyedStepStore, SensorStoreWrapper
 
     steps = 2_000 if quick else 20_000
     cfg = load_config("minigrid-lavagap-dospcot")

@@ -16,17 +16,17 @@ from stable_baselines3 import DQN
 
 from dospcot.config.learning_sections import TabularConfig
 from dospcot.config.run_configs import TrainConfig
-from dospcot.core.tabular_cotraining import TabularCoTraining
+from dospcot.core.tabular_runs import TabularCoTraining
 from dospcot.envs import ViewObservationWrapper
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.tabular import TABULAR_KINDS, expected_value
 from dospcot.run import paper_protocol as paper
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.seeding import agent_seed
 from dospcot.sweeps.sweep import run_sweep
 from dospcot.sweeps.sweep_spec import SweepSpec
 from dospcot.tasks import load_config
-from dospcot.tasks.adapters.grid import grid_world
+from dospcot.tasks.grid import grid_world
 from dospcot_lab.bench_measure import Clock, Row, alternating, onehot_cliff
 
 

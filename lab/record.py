@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
+from dospcot.config.choices import method_name
+
 SIZE_BLOCK = "record-size"
 """The generated block of runs/README.md: the record's size."""
 BLOCK = 4096
@@ -64,16 +66,16 @@ class Record:
         return sorted({path for pattern in patterns for path in self.root.glob(pattern)})
 
     def method(self, run: Path) -> str:
-        """A run's ``method`` (``cotrain``, ``oracle``, ...), from its ``config.toml``; ``"paper"`` for a
+        """A run's ``method`` (``dospcot``, ``oracle``, ...), from its ``config.toml``; ``"paper"`` for a
         seed of the paper's protocol, whose config has none."""
         config = tomllib.loads((run / "config.toml").read_text())
-        return config.get("method", "paper")
+        return method_name(config.get("method", "paper"))
 
     @cached_property
     def cotrained(self) -> list[Path]:
-        """The co-trained runs (``method = "cotrain"``: self-training, DOSPCoT and m >= 3 views): those
+        """The co-trained runs (``method = "dospcot"``: self-training, DOSPCoT and m >= 3 views): those
         with reward classifiers, which write ``reward_classes.json``."""
-        return [run for run in self.runs if self.method(run) == "cotrain"]
+        return [run for run in self.runs if self.method(run) == "dospcot"]
 
     def with_file(self, runs: list[Path], name: str) -> list[Path]:
         """The runs of ``runs`` that keep file ``name``."""

@@ -30,9 +30,9 @@ import torch.nn.functional as F
 
 from dospcot.core.batched_runs import BatchedRuns
 from dospcot.core.classifier import BatchedRewardClassifier
-from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.policies import ExpectedSarsaDQN
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 from dospcot_lab.bench_batched import BATCHED_CELLS
 

@@ -83,14 +83,14 @@ class PhaseTimer:
 
 
 def instrument(timer: PhaseTimer) -> None:
-    """Wrap the phases of a co-training run (dospcot.core.cotraining_run) and of its driver."""
-    from dospcot.core import cotrainer
+    """Wrap the phases of a co-training run (dospcot.core.sb3_round) and of its driver."""
+    from dospcot.adapters.grid_adapter import GridAdapter
+    from dospcot.adapters.sensor_adapter import SensorAdapter
+    from dospcot.core import self_paced
     from dospcot.core.classifier import BatchedRewardClassifier
-    from dospcot.core.cotraining_run import CoTrainingRun
+    from dospcot.core.sb3_round import CoTrainingRun
     from dospcot.policies import ExpectedSarsaDQN
     from dospcot.run.run_session import RunSession
-    from dospcot.tasks.adapters.grid import GridAdapter
-    from dospcot.tasks.adapters.sensor import SensorAdapter
 
     view_of: dict[int, str] = {}
 
@@ -105,10 +105,10 @@ def instrument(timer: PhaseTimer) -> None:
         patch(task, "true_class", "pseudo-rewards & round stats")
     patch(BatchedRewardClassifier, "fit", lambda clf, *_: view_of.get(id(clf), "fit, other"))
     patch(BatchedRewardClassifier, "scores", "scoring (scores, class losses)")
-    patch(cotrainer, "_class_losses", "scoring (scores, class losses)")
-    patch(cotrainer, "spamco_select", "selection & consensus")
-    patch(cotrainer, "consensus_labels", "selection & consensus")
-    patch(cotrainer.SelfPacedCoTrainer, "step", "co-trainer, other")
+    patch(self_paced, "_class_losses", "scoring (scores, class losses)")
+    patch(self_paced, "spamco_select", "selection & consensus")
+    patch(self_paced, "consensus_labels", "selection & consensus")
+    patch(self_paced.SelfPacedCoTrainer, "step", "co-trainer, other")
     patch(CoTrainingRun, "label_and_cotrain", "pseudo-rewards & round stats")
     patch(CoTrainingRun, "cotrain", "pseudo-rewards & round stats")
     patch(CoTrainingRun, "evaluate_policies", "evaluation")

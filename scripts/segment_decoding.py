@@ -19,7 +19,7 @@ import numpy as np
 
 from dospcot.config.errors import ConfigError
 from dospcot.core.segments import fit_step_rewards
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 

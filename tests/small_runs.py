@@ -5,10 +5,10 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any
 
+from dospcot.adapters.grid_adapter import GridAdapter
 from dospcot.config.run_configs import TrainConfig
-from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.tasks import config_from_table
-from dospcot.tasks.adapters.grid import GridAdapter
 
 SB3_DQN = {"learning_rate": 1e-4, "batch_size": 32, "gamma": 0.99, "target_update_interval": 10_000}
 """stable-baselines3 ``DQN``'s own defaults where ``[dqn]``'s differ: the small-grid tests were tuned
@@ -18,7 +18,7 @@ SB3_TABULAR = {"gamma": 0.99, "train_freq": 4, "learning_starts": 100}
 
 
 def grid_config(
-    method: str = "cotrain",
+    method: str = "dospcot",
     agents: Sequence[str] = ("esarsa_dqn",),
     views: Sequence[str] = ("coords",),
     seed: int = 0,

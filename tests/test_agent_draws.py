@@ -11,7 +11,7 @@ import torch as th
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import TrainingConfig
 from dospcot.config.loading import renamed_to_now
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 SHORT = [

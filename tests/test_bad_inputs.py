@@ -398,16 +398,6 @@ def test_the_commands_refuse_what_they_would_ignore_or_misread(capsys, tmp_path)
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert message in err and err.count("\n") == 1, err
-    from dospcot_lab.cli import main as lab_main
-
-    lab_cases = [
-        (["bench", "--quick", "--out", str(tmp_path / "x" / "BENCHMARKS.md")], "never go into BENCHMARKS.md"),
-        (["bench", "--quick", "--out", "/proc/nope/bench.md"], "cannot make its folder"),
-    ]
-    for argv, message in lab_cases:
-        assert lab_main(argv) == 2, argv
-        err = capsys.readouterr().err
-        assert message in err and err.count("\n") == 1, err
 
 
 def test_a_summary_json_round_trips_finite(tmp_path):
@@ -425,35 +415,6 @@ def test_an_empty_config_and_a_report_folder_that_cannot_be_made_are_one_line(tm
     assert main(["report", "runs/sweeps/grid16", "--out", "/proc/nope/report"]) == 2
     err = capsys.readouterr().err
     assert "--out /proc/nope/report: cannot make the folder" in err and err.count("\n") == 1
-
-
-def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on(
-    tmp_path, capsys, monkeypatch
-):
-    """SIGTERM after one sweep's last trial, before the next sweep starts: one line, not a bare
-    "interrupted", and the study's own command to go on."""
-    from types import SimpleNamespace
-
-    from dospcot_lab import studies
-    from dospcot_lab.cli import main as lab_main
-
-    started = []
-
-    def run_sweep(sweep_dir, spec, **options):
-        started.append(sweep_dir.name)
-        if len(started) == 2:
-            raise KeyboardInterrupt  # what SIGTERM raises (stop_on_signals)
-        return SimpleNamespace(failed={})
-
-    monkeypatch.setattr(studies, "run_sweep", run_sweep)
-    runs = tmp_path / "sweeps"
-    assert lab_main(["study", "minigrid", "--runs-dir", str(runs)]) == 130
-    assert len(started) == 2
-    err = capsys.readouterr().err
-    assert err == (
-        f"dospcot-lab study: interrupted; kept every trial that finished, under {runs}; "
-        f"resume with: dospcot-lab study minigrid --runs-dir {runs}\n"
-    )
 
 
 def test_a_stop_as_a_sweep_closes_counts_what_finished(tmp_path, monkeypatch):

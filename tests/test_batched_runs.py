@@ -18,8 +18,8 @@ from tensorboard.backend.event_processing.event_accumulator import EventAccumula
 
 from dospcot.cli import main
 from dospcot.core.batched_runs import BatchedRuns
-from dospcot.run.cotraining import build_run
 from dospcot.run.run_folder import BATCH_FILE
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 TINY = ["training.rounds=2", "training.steps_per_round=400"]

@@ -19,7 +19,6 @@ from dospcot import __version__
 from dospcot.cli import PIPE_CLOSED, main
 from dospcot.config.errors import ConfigError
 from dospcot.config.loading import parse_override
-from dospcot.config.presets import preset_names
 from dospcot.config.reference import REFERENCE_END, REFERENCE_START
 from dospcot.run import sizes
 from dospcot.run.cores import usable_cores
@@ -122,15 +121,6 @@ def test_the_guides_configuration_reference_is_current():
 )
 def test_a_misspelled_preset_section_or_key_is_answered_with_the_name_meant(capsys, argv, line):
     assert _one_line(capsys, argv) == line
-
-
-def test_a_misspelled_study_is_answered_with_the_name_meant(capsys):
-    from dospcot_lab.cli import main as lab_main
-
-    assert lab_main(["study", "grid61"]) == 2
-    assert capsys.readouterr().err == (
-        "dospcot-lab study: error: no study 'grid61'; did you mean 'grid16' or 'grid32'?\n"
-    )
 
 
 def test_reproduce_paper_takes_the_presets_own_name(capsys):
@@ -330,25 +320,3 @@ def test_replay_buffers_beyond_the_memory_are_refused(monkeypatch, capsys, tmp_p
         "dospcot train: error: out of memory (Unable to allocate 48.4 GiB for an array with shape "
         "(50000000, 1, 260)); lower dqn.buffer_size or train fewer seeds at once"
     )
-
-
-def test_every_preset_and_every_studys_sweeps_pass_the_size_checks():
-    from dospcot_lab.studies import STUDIES, sweep_spec
-
-    for name in preset_names():
-        assert check_sizes([load_config(name)], 10, workers=1) == [], name
-    for study in STUDIES.values():
-        for sweep in study.sweeps:
-            cfgs = sweep_spec(sweep, study.seeds).cell_configs()
-            check_sizes(cfgs, study.seeds, workers=1, batch=1)  # refuses nothing; a warning may say how long
-
-
-def test_a_study_with_too_many_seeds_is_refused_before_any_sweep(capsys, tmp_path):
-    from dospcot_lab.cli import main as lab_main
-
-    assert lab_main(["study", "grid16", "--seeds", "100000", "--runs-dir", str(tmp_path)]) == 2
-    err = capsys.readouterr().err.rstrip("\n")
-    assert "\n" not in err
-    assert err.startswith("dospcot-lab study: error: 100,000 seeds would take about ")
-    assert err.endswith("CPU-days (an estimate) and make a run folder each; give at most 10,000")
-    assert list(tmp_path.iterdir()) == []

@@ -5,13 +5,6 @@ import numpy as np
 import pytest
 
 from dospcot.config.learning_sections import CoTrainingConfig
-from dospcot.core.cotrainer import (
-    Pool,
-    RoundResult,
-    RunCoTrainer,
-    RunPool,
-    SelfPacedCoTrainer,
-)
 from dospcot.core.key_pool import key_features
 from dospcot.core.reward_classes import (
     QuantileRewardClasses,
@@ -20,6 +13,13 @@ from dospcot.core.reward_classes import (
     episode_end_class_mask,
 )
 from dospcot.core.round_records import record_head, round_stats
+from dospcot.core.self_paced import (
+    Pool,
+    RoundResult,
+    RunCoTrainer,
+    RunPool,
+    SelfPacedCoTrainer,
+)
 
 
 def test_reward_classes_keep_the_order_of_first_appearance_and_round_trip():
@@ -106,9 +106,9 @@ def test_round_stats_read_the_run_they_are_given_in_a_batch():
 
 
 def test_record_head_names_the_run_and_the_agent():
-    head = ("cotrain", ("esarsa", "q"), ("coords", "patch"), 0.3, 4)
+    head = ("dospcot", ("esarsa", "q"), ("coords", "patch"), 0.3, 4)
     assert record_head(*head, 2, np.int64(1)) == {
-        "method": "cotrain",
+        "method": "dospcot",
         "agents": "esarsa-q",
         "views": "coords-patch",
         "m": 2,
@@ -253,7 +253,7 @@ def test_a_fit_on_the_weighted_samples_alone_is_the_fit_on_the_whole_pool():
     import torch
 
     from dospcot.core.classifier import BatchedRewardClassifier, ClassifierConfig
-    from dospcot.core.cotrainer import Numerics, _fit
+    from dospcot.core.self_paced import Numerics, _fit
 
     rng = np.random.default_rng(1)
     x = torch.from_numpy(rng.normal(size=(1, 50, 4)))
@@ -298,8 +298,8 @@ def test_numerics_2_fits_in_float32_and_a_config_pickled_before_the_key_reads_as
 def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path, numerics):
     import json
 
-    from dospcot.run.cotraining import build_run
     from dospcot.run.run_session import RunSession
+    from dospcot.run.sb3_runs import build_run
     from dospcot.tasks import load_config
 
     cfg = load_config(

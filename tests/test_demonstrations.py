@@ -21,14 +21,14 @@ from test_neural_cotraining import (  # the small grid of the co-training tests
 )
 
 from dospcot.config.errors import ConfigError
-from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.demonstrations import Demonstrations, expert_demonstrations
 from dospcot.envs import GridWorld, StateActionMask, View, ViewObservationWrapper
-from dospcot.envs.highway import FAST_HIGHWAY_ID, make_masked_highway
+from dospcot.envs.masked_highway import FAST_HIGHWAY_ID, make_masked_highway
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn import large_margin_loss
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 
@@ -121,7 +121,7 @@ def test_expert_episodes_follow_the_optimal_policy_first_from_the_start():
 def _run(labels: bool, weight: float = 1.0, seed: int = 0) -> CoTrainingRun:
     demonstrations = {"episodes": 3, "labels": labels, "margin_loss_weight": weight}
     return grid(
-        config("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed, demonstrations=demonstrations)
+        config("dospcot", ("esarsa_dqn", "dqn"), ("coords", "patch"), seed, demonstrations=demonstrations)
     )
 
 

@@ -10,7 +10,7 @@ import pytest
 
 from dospcot.envs.fast_highway import FastHighwayConfig, FastHighwayEnv, FastHighwayVec
 from dospcot.envs.fast_highway_views import VIEW_NAMES, view_space
-from dospcot.envs.highway import make_masked_highway
+from dospcot.envs.masked_highway import make_masked_highway
 
 IDLE, FASTER = 1, 3
 

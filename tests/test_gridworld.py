@@ -132,15 +132,15 @@ def test_masked_gridworld_has_views_and_hides_rewards():
 
 
 def test_tabular_cotraining_learns_a_masked_grid_with_two_and_three_views():
-    from dospcot.core.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
+    from dospcot.core.tabular_runs import TabularConfig, TabularCoTraining, TabularRunSpec
 
     env = GridWorld(size=8, layout_seed=0)
     mdp = TabularMDP.from_env(env, grid_views(env.layout, patch_size=3), max_episode_steps=64)
     specs = []
     for seed in range(3):
         specs += [
-            TabularRunSpec("cotrain", ("esarsa", "esarsa"), ("coords", "patch"), seed=seed),
-            TabularRunSpec("cotrain", ("esarsa",) * 3, ("coords", "patch", "rays"), seed=seed),
+            TabularRunSpec("dospcot", ("esarsa", "esarsa"), ("coords", "patch"), seed=seed),
+            TabularRunSpec("dospcot", ("esarsa",) * 3, ("coords", "patch", "rays"), seed=seed),
             TabularRunSpec("masked-zero", ("esarsa",), ("coords",), seed=seed),
             TabularRunSpec("labels-only", ("esarsa",), ("coords",), seed=seed),
         ]
@@ -153,7 +153,7 @@ def test_tabular_cotraining_learns_a_masked_grid_with_two_and_three_views():
     for m in (2, 3):
         # The normalised score is no use here: a random walk meets so much lava that merely
         # avoiding it scores near 1. Agreement with the optimal actions and returns tell.
-        assert mean("agreement", "cotrain", m) > mean("agreement", "masked-zero", 1) + 0.2
-        assert mean("agreement", "cotrain", m) > mean("agreement", "labels-only", 1) + 0.2
-        assert mean("success", "cotrain", m) > mean("success", "masked-zero", 1)
-        assert mean("greedy_return", "cotrain", m) > mean("greedy_return", "labels-only", 1)
+        assert mean("agreement", "dospcot", m) > mean("agreement", "masked-zero", 1) + 0.2
+        assert mean("agreement", "dospcot", m) > mean("agreement", "labels-only", 1) + 0.2
+        assert mean("success", "dospcot", m) > mean("success", "masked-zero", 1)
+        assert mean("greedy_return", "dospcot", m) > mean("greedy_return", "labels-only", 1)

@@ -18,9 +18,10 @@ import pytest
 import stable_baselines3
 import torch
 
+from dospcot.adapters.sensor_adapter import SensorAdapter
+from dospcot.adapters.sensor_store import KeyedStepStore, StepStore
 from dospcot.config.errors import ConfigError
-from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.core.raters import QueriesPending
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.demonstrations import Demonstrations
 from dospcot.envs import minigrid_views
 from dospcot.envs.gym_sensors import (
@@ -30,14 +31,13 @@ from dospcot.envs.gym_sensors import (
     make_masked_gym,
 )
 from dospcot.envs.masking import key_is_labelled
+from dospcot.raters.file_rater import QueriesPending
 from dospcot.run.checks import check_config
-from dospcot.run.cotraining import build_run
 from dospcot.run.python_api import gym_config, train_env
 from dospcot.run.run_folder import RunFolderError
+from dospcot.run.sb3_runs import build_run
 from dospcot.run.train import evaluate, resume, train
 from dospcot.tasks import load_config
-from dospcot.tasks.adapters.sensor import SensorAdapter
-from dospcot.tasks.adapters.sensor_store import KeyedStepStore, StepStore
 
 LENGTH = 10
 

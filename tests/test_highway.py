@@ -14,17 +14,17 @@ from PIL import Image
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
+from dospcot.adapters.sensor_adapter import SensorAdapter
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.core.cotraining_run import CoTrainingRun
-from dospcot.core.raters import QueriesPending
 from dospcot.core.reward_classes import QuantileRewardClasses
-from dospcot.envs.highway import make_masked_highway
+from dospcot.core.sb3_round import CoTrainingRun
+from dospcot.envs.masked_highway import make_masked_highway
+from dospcot.raters.file_rater import QueriesPending
 from dospcot.run.checks import check_config
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.run.train import evaluate, train
 from dospcot.tasks import load_config
-from dospcot.tasks.adapters.sensor import SensorAdapter
 
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
 
@@ -175,7 +175,7 @@ def test_short_cotraining_on_the_fast_env_writes_every_run_file_and_evaluates(tm
     classes = json.loads((run_dir / "reward_classes.json").read_text())["rewards"]
     assert 1 <= len(classes) <= 5 and classes == sorted(classes)
     # Evaluating the saved agents builds the task's evaluator, not a training run with fresh agents.
-    monkeypatch.setattr("dospcot.core.cotraining_run.make_agent", _no_new_agents)
+    monkeypatch.setattr("dospcot.core.sb3_round.make_agent", _no_new_agents)
     evaluation = evaluate(run_dir)
     for view in ("kinematics", "occupancy"):
         assert evaluation["per_view"][view]["greedy_return"] == summary["per_view"][view]["greedy_return"]

@@ -1,8 +1,8 @@
 """The packages' layers import downward only (docs/design.md, "Layers"): config -> the parts (envs,
-policies, seeding, metrics, statistics, demonstrations) -> core -> tasks -> run (and the rating page)
--> sweeps -> cli, and above the library the lab, which nothing in the library imports; no import circle
-among the modules; reading a config costs no training stack, and training loads neither the lab nor
-the statistics' SciPy."""
+policies, seeding, metrics, statistics, demonstrations) -> the task specs -> core -> the file rater ->
+the adapters -> run (and the rating page) -> sweeps -> cli, and above the library the lab, which
+nothing in the library imports; no import circle among the modules; reading a config costs no
+training stack, and training loads neither the lab nor the statistics' SciPy."""
 
 from __future__ import annotations
 
@@ -32,8 +32,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
         "dospcot.statistics",
         "dospcot.demonstrations",
     ),
-    ("dospcot.core",),
     ("dospcot.tasks",),
+    ("dospcot.core",),
+    ("dospcot.raters",),
+    ("dospcot.adapters",),
     ("dospcot.run", "dospcot.rating"),
     ("dospcot.sweeps",),
     ("dospcot.cli", "dospcot.__main__"),
@@ -132,10 +134,10 @@ def test_the_checks_find_a_circle_and_an_upward_import():
     assert import_circles({"a": {"b"}, "b": set()}) == []
     assert (
         layer_of("dospcot.config.loading")
-        < layer_of("dospcot.core.cotrainer")
+        < layer_of("dospcot.core.self_paced")
         < layer_of("dospcot.sweeps.sweep")
     )
-    assert layer_of("dospcot.tasks.adapters.grid") == layer_of("dospcot.tasks")
+    assert layer_of("dospcot.tasks.grid") < layer_of("dospcot.core.sb3_round") < layer_of("dospcot.adapters")
     assert "dospcot.tasks.registry" in imports_of("dospcot.tasks.loading")
     assert "dospcot.sweeps.sweep_spec" in imports_of("dospcot.sweeps.sweep")
     assert layer_of("dospcot.cli.commands") < layer_of("dospcot_lab.studies")

@@ -12,9 +12,9 @@ import torch as th
 from small_runs import grid_config, grid_run
 
 from dospcot.config.errors import ConfigError
-from dospcot.core.cotrainer import RunRound
-from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.round_records import round_stats
+from dospcot.core.sb3_round import CoTrainingRun
+from dospcot.core.self_paced import RunRound
 from dospcot.envs import (
     FiniteCheckWrapper,
     GridWorld,
@@ -24,7 +24,7 @@ from dospcot.envs import (
     monitored_states,
     view_blind_spots,
 )
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 LAYOUT = GridWorld(size=6, layout_seed=0).layout
@@ -38,7 +38,7 @@ SECTIONS = {
 }
 
 
-def config(method="cotrain", agents=("esarsa_dqn",), views=("coords",), seed=0, **changes):
+def config(method="dospcot", agents=("esarsa_dqn",), views=("coords",), seed=0, **changes):
     """The tests' small grid run; ``changes`` update keys of a section (``training={"rounds": 1}``)."""
     sections = {
         name: {**SECTIONS.get(name, {}), **values} for name, values in {**SECTIONS, **changes}.items()
@@ -55,7 +55,7 @@ def grid(cfg, make_env=GRID, views=VIEWS, monitored=None) -> CoTrainingRun:
 
 @pytest.mark.parametrize("views", [("coords",), ("coords", "patch"), ("coords", "patch", "rays")])
 def test_cotraining_runs_two_rounds_with_one_two_and_three_views(views):
-    run = grid(config("cotrain", ("esarsa_dqn",) * len(views), views, seed=1))
+    run = grid(config("dospcot", ("esarsa_dqn",) * len(views), views, seed=1))
     records = run.run()
     assert len(records) == 2 * len(views)
     last = [r for r in records if r["round"] == 2]
@@ -111,7 +111,7 @@ def assert_same_learners(a: CoTrainingRun, b: CoTrainingRun) -> None:
 @pytest.mark.parametrize("kinds", [("esarsa_dqn", "dqn"), ("tabular", "tabular")])
 def test_leakage_permuting_hidden_rewards_leaves_agents_bit_identical(kinds):
     assert not np.array_equal(_permuted_grid(3).reward, GridWorld(LAYOUT).reward)
-    cfg = config("cotrain", kinds, ("coords", "patch"), seed=3)
+    cfg = config("dospcot", kinds, ("coords", "patch"), seed=3)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
     a = grid(cfg)
     a.run()
@@ -124,7 +124,7 @@ def test_leakage_under_blind_spots_and_a_monitor_agents_stay_bit_identical():
     monitor = monitored_states(6, 2)
     assert not np.array_equal(_permuted_grid(3, monitor).reward, GridWorld(LAYOUT).reward)
     views = grid_views(LAYOUT, 3, blind_spots=view_blind_spots(LAYOUT, 0.5, 3))
-    cfg = config("cotrain", ("dqn", "dqn"), ("patch", "rays"), seed=3)
+    cfg = config("dospcot", ("dqn", "dqn"), ("patch", "rays"), seed=3)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
     a = grid(cfg, views=views, monitored=monitor)
     a.run()
@@ -157,7 +157,7 @@ def test_episode_end_classes_keep_the_goal_off_keys_that_go_on():
 
 def test_a_mix_of_tabular_and_neural_agents_cotrains_and_resumes_from_its_state():
     build = partial(
-        grid, config("cotrain", ("tabular", "esarsa_dqn", "dqn"), ("coords", "patch", "rays"), seed=2)
+        grid, config("dospcot", ("tabular", "esarsa_dqn", "dqn"), ("coords", "patch", "rays"), seed=2)
     )
     full = build()
     records = full.run()
@@ -178,11 +178,11 @@ def test_a_mix_of_tabular_and_neural_agents_cotrains_and_resumes_from_its_state(
 
 def test_bad_configs_raise():
     with pytest.raises(ConfigError, match="agents: unknown agent kind 'ppo'"):
-        config("cotrain", ("ppo",))
+        config("dospcot", ("ppo",))
     with pytest.raises(ConfigError, match="views: the grid world has no view 'lidar'"):
-        config("cotrain", ("dqn",), ("lidar",))
+        config("dospcot", ("dqn",), ("lidar",))
     with pytest.raises(ValueError, match=r"unknown view\(s\) \['rays'\]"):  # a task of the test's own
-        grid(config("cotrain", ("dqn",), ("rays",)), views={"coords": VIEWS["coords"]})
+        grid(config("dospcot", ("dqn",), ("rays",)), views={"coords": VIEWS["coords"]})
     with pytest.raises(ValueError, match="label_fraction"):
         config(training={"label_fraction": 0.0})
 
@@ -210,7 +210,7 @@ class _NaNRewardAt(GridWorld):
 
 
 def test_a_nan_reward_stops_the_run_naming_the_env_and_the_step():
-    run = grid(config("cotrain", ("esarsa_dqn", "dqn"), ("coords", "patch")), partial(_NaNRewardAt, LAYOUT))
+    run = grid(config("dospcot", ("esarsa_dqn", "dqn"), ("coords", "patch")), partial(_NaNRewardAt, LAYOUT))
     # The mask decides whether the agent sees the NaN as its reward or only as the hidden reward.
     with pytest.raises(
         NonFiniteError,
@@ -257,7 +257,7 @@ def _last_round_q(kind: str, update_steps: int, shift: float) -> tuple[float, in
     the seed's first admitted key happened to be visited once or often."""
     # A fast learner, so that the shifted key's few replayed samples move its value visibly.
     cfg = config(
-        "cotrain", (kind,), training={"rounds": 1, "update_steps": update_steps}, dqn={"learning_rate": 0.01}
+        "dospcot", (kind,), training={"rounds": 1, "update_steps": update_steps}, dqn={"learning_rate": 0.01}
     )
     run = grid(cfg)
     table_set, picked = run.table.set, []
@@ -314,7 +314,7 @@ def test_round_stats_name_the_worst_class_the_mean_accuracy_hides():
 
 def test_agents_take_their_first_gradient_step_in_learn_from_round():
     run = grid(
-        config("cotrain", ("esarsa_dqn", "tabular"), ("coords", "patch"), training={"learn_from_round": 2})
+        config("dospcot", ("esarsa_dqn", "tabular"), ("coords", "patch"), training={"learn_from_round": 2})
     )
     assert [agent.learning_starts for agent in run.agents] == [300, 300]
     run.run_round()

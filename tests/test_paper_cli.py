@@ -105,7 +105,7 @@ def test_report_of_a_paper_sweep_gives_the_hand_computed_figures(tmp_path):
                 r
                 for r in csv.DictReader(f)
                 if (r["method"], r["agents"], r["gamma"], r["round"])
-                == ("cotrain", "esarsa-esarsa", "0.3", "5")
+                == ("dospcot", "esarsa-esarsa", "0.3", "5")
             ]
         assert len(rows) == 2
         per_seed.append(np.mean([float(r["agreement"]) for r in rows]))

@@ -12,23 +12,25 @@ import pytest
 from test_highway import TINY as HIGHWAY_TINY
 from test_neural_cotraining import assert_same_learners
 
+from dospcot.adapters.grid_adapter import GridAdapter
+from dospcot.adapters.sensor_adapter import SensorAdapter
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import (
+    SimulatedRater,
     choose_queries,
     disagreement_order,
     margins,
     outcome_order,
     query_budget,
 )
-from dospcot.core.raters import FileRater, QueriesPending, RaterError, SimulatedRater
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.envs import GridWorld
-from dospcot.envs.highway import make_masked_highway
-from dospcot.run.cotraining import build_run
+from dospcot.envs.masked_highway import make_masked_highway
+from dospcot.raters.file_rater import FileRater, QueriesPending, RaterError
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
-from dospcot.tasks.adapters.grid import GridAdapter, grid_world
-from dospcot.tasks.adapters.sensor import SensorAdapter
+from dospcot.tasks.grid import grid_world
 
 # Two views, four samples, three classes.
 PROBABILITIES = np.array(

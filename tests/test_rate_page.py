@@ -21,7 +21,7 @@ from pathlib import Path
 import pytest
 
 from dospcot.cli import main
-from dospcot.core.answer_files import read_answers, read_rows
+from dospcot.raters.answer_files import read_answers, read_rows
 
 uvicorn = pytest.importorskip(
     "uvicorn", reason="the rate extra (pip install 'dospcot[rate]') is not installed"
@@ -497,7 +497,7 @@ def test_a_host_other_machines_reach_is_warned_of(tmp_path, monkeypatch, capsys)
 
 def test_then_train_serves_the_next_rounds_queries_instead_of_exiting(tmp_path, monkeypatch, capsys):
     from dospcot import rating
-    from dospcot.core.raters import QueriesPending
+    from dospcot.raters.file_rater import QueriesPending
     from dospcot.rating import server
 
     served, trained = [], []

@@ -1,5 +1,5 @@
 """Answer files as people fill them in: each bad one is one line naming the file, the line and the fix
-(dospcot.core.answer_files), and what the file shows a person (views named, actions explained, the
+(dospcot.raters.answer_files), and what the file shows a person (views named, actions explained, the
 rewards seen so far)."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from dospcot.cli import main
-from dospcot.core.answer_files import accept_values, read_rows
-from dospcot.core.raters import FileRater, QueriesPending, RaterError
+from dospcot.raters.answer_files import accept_values, read_rows
+from dospcot.raters.file_rater import FileRater, QueriesPending, RaterError
 
 MAP = "......\n.A..L.\n......\n..L...\n......\n.....G"  # a grid query's text map: six lines
 IDS = np.array([4, 8, 15])

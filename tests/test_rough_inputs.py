@@ -84,7 +84,7 @@ def _refused(argv: list[str], where: Path) -> str:
         (["train", "tiny", "--set", "dqn.net_arch=[32, 99999999999999999999]"], "dqn.net_arch: 9999"),
         (["train", "tiny", "--set", "env.layout_seed=-99999999999999999999"], "is beyond a 64-bit"),
         # Keys the method never reads, and settings it cannot use.
-        (["train", "tiny", "--set", "cotraining.ensemble_size=5"], 'method = "cotrain" never reads it'),
+        (["train", "tiny", "--set", "cotraining.ensemble_size=5"], 'method = "dospcot" never reads it'),
         (
             ["train", "grid16-reward-model", "--set", "cotraining.consensus_weight=0.5"],
             'cotraining.consensus_weight: method = "reward-model" never reads it',
@@ -312,7 +312,7 @@ SCALARS = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True),
     st.booleans(),
     st.text(max_size=12),
-    st.sampled_from(["cotrain", "reward-model", "oracle", "grid", "paper", "gym", "disagreement", "random"]),
+    st.sampled_from(["dospcot", "reward-model", "oracle", "grid", "paper", "gym", "disagreement", "random"]),
 )
 VALUES = st.recursive(
     SCALARS,

@@ -17,7 +17,6 @@ from test_neural_cotraining import LAYOUT, SECTIONS, assert_same_learners, confi
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import ClassifierConfig
-from dospcot.core.cotrainer import RunPool
 from dospcot.core.reward_classes import QuantileRewardClasses
 from dospcot.core.segments import (
     SegmentLabelWrapper,
@@ -26,9 +25,10 @@ from dospcot.core.segments import (
     segment_pool,
     step_rewards,
 )
+from dospcot.core.self_paced import RunPool
 from dospcot.envs import GridWorld, RewardMaskWrapper
-from dospcot.run.cotraining import build_run
 from dospcot.run.python_api import gym_config
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 REWARDS = [1.0, 2.0, 4.0, 8.0, 16.0, 32.0, 64.0]
@@ -194,7 +194,7 @@ def _shifted_grid() -> gym.Env:
 
 def test_leakage_rewards_that_keep_every_segment_sum_leave_the_learners_bit_identical():
     assert SECTIONS["env"]["max_episode_steps"] % K == 0
-    cfg = config("cotrain", ("dqn", "esarsa_dqn"), ("coords", "patch"), seed=3, training=SEGMENTS)
+    cfg = config("dospcot", ("dqn", "esarsa_dqn"), ("coords", "patch"), seed=3, training=SEGMENTS)
     # SB3 seeds the global generators when an agent is built: build and run one run at a time.
     a = grid(cfg)
     a.run()
@@ -207,7 +207,7 @@ def test_leakage_rewards_that_keep_every_segment_sum_leave_the_learners_bit_iden
 
 
 def test_a_run_on_segment_labels_cotrains_on_segments_and_resumes_from_its_state():
-    build = partial(grid, config("cotrain", ("dqn", "dqn"), ("coords", "patch"), seed=1, training=SEGMENTS))
+    build = partial(grid, config("dospcot", ("dqn", "dqn"), ("coords", "patch"), seed=1, training=SEGMENTS))
     full = build()
     records = full.run()
     n = len(full.segments)

@@ -17,9 +17,9 @@ from dospcot.envs import (
     view_blind_spots,
 )
 from dospcot.envs.gridworld import FREE, LAVA, N_TERRAIN, misread
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
-from dospcot.tasks.adapters.grid import grid_world
+from dospcot.tasks.grid import grid_world
 
 # Lava at (0, 2), (1, 1), (2, 0) and (3, 3); start (3, 0), goal (1, 3).
 MAP = """

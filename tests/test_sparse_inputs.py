@@ -17,8 +17,8 @@ from torch import nn
 
 from dospcot.config.learning_sections import ClassifierConfig, CoTrainingConfig
 from dospcot.core.classifier import BatchedRewardClassifier
-from dospcot.core.cotrainer import SelfPacedCoTrainer
 from dospcot.core.reward_model import RewardModelTrainer
+from dospcot.core.self_paced import SelfPacedCoTrainer
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.esarsa_dqn.sparse_inputs import SparseInputLinear, sparsify_first_layer
 from dospcot.policies.stacked_esarsa.stacked_q_network import StackedQNetwork

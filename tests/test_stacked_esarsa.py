@@ -10,7 +10,7 @@ import torch as th
 
 from dospcot.policies.esarsa_dqn import ExpectedSarsaDQN, WeightedReplayBufferSamples
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 UPDATES = 100

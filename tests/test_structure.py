@@ -12,7 +12,8 @@ import pytest
 import tomli_w
 
 from dospcot.config.errors import ConfigError
-from dospcot.run.cotraining import build_run
+from dospcot.run.sb3_runs import build_run
+from dospcot.sweeps.report import _read_csv
 from dospcot.tasks import config_from_table, load_config, load_run_config
 from dospcot.tasks.registry import get_task, tasks
 
@@ -79,6 +80,18 @@ def test_a_run_folder_written_before_a_rename_still_loads_under_the_new_names(tm
     assert load_run_config(path) == load_config("paper-text")
 
 
+def test_the_methods_old_spelling_reads_as_dospcot_from_a_config_a_run_folder_and_a_record_csv(tmp_path):
+    path = tmp_path / "old.toml"
+    path.write_text('extends = "tiny"\nmethod = "cotrain"\n')
+    assert load_config(str(path)) == load_config("tiny") and load_config("tiny").method == "dospcot"
+    assert load_config("tiny", ['method="cotrain"']).method == "dospcot"
+    old = load_config("tiny").to_dict() | {"method": "cotrain"}
+    (tmp_path / "config.toml").write_text(tomli_w.dumps(old))
+    assert load_run_config(tmp_path / "config.toml") == load_config("tiny")
+    (tmp_path / "metrics.csv").write_text("method,round,success\ncotrain,1,0.5\noracle,1,1.0\n")
+    assert [row["method"] for row in _read_csv(tmp_path / "metrics.csv")] == ["dospcot", "oracle"]
+
+
 def test_an_unknown_task_names_the_registered_ones():
     with pytest.raises(ConfigError, match=r"^task: unknown task 'nope'; allowed: grid, gym, highway, paper"):
         load_config("tiny", ["task=nope"])
@@ -133,7 +146,7 @@ def test_only_the_run_drives_its_rounds():
         str(path.relative_to(ROOT))
         for folder in SOURCE_FOLDERS
         for path in folder.rglob("*.py")
-        if ".run_round(" in path.read_text() and path.name not in ("cotraining_run.py", "batched_runs.py")
+        if ".run_round(" in path.read_text() and path.name not in ("sb3_round.py", "batched_runs.py")
     ]
     assert drivers == []
     batch = (PACKAGE / "core" / "batched_runs.py").read_text()
@@ -149,20 +162,3 @@ def test_no_module_of_the_package_is_over_500_lines():
         if (n := len(p.read_text().splitlines())) > 500
     }
     assert long == {}
-
-
-def test_the_studies_are_the_labs_command_and_the_library_says_where_they_are(capsys, tmp_path):
-    from dospcot.cli import main
-    from dospcot_lab.cli import main as lab_main
-
-    for command in ("study", "bench"):
-        assert main([command, "grid16"]) == 2
-        err = capsys.readouterr().err
-        assert err.startswith(f"dospcot {command}: error: the studies and benchmarks are the repository's")
-        assert f"`dospcot-lab {command} ...`" in err and err.count("\n") == 1
-    assert lab_main(["study", "nope"]) == 2
-    err = capsys.readouterr().err
-    assert err.startswith("dospcot-lab study: error: no study 'nope'; the studies: grid16,")
-    assert err.count("\n") == 1
-    with pytest.raises(SystemExit, match="no finished run of this study under"):
-        lab_main(["study", "grid16", "--render-only", "--runs-dir", str(tmp_path)])

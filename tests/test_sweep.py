@@ -15,7 +15,6 @@ import pytest
 import torch
 
 from dospcot.cli import main
-from dospcot.cli.parser import build_parser
 from dospcot.config.errors import ConfigError
 from dospcot.run import run_folder
 from dospcot.run.cores import usable_cores
@@ -108,22 +107,6 @@ def test_local_sweep_runs_every_trial_once_whatever_its_workers_and_reruns_nothi
     for name in ("metrics.csv", "summary.json"):
         alone_file, pool_file = (trial_dir(tmp_path / s, last) / name for s in ("alone", "sweep"))
         assert alone_file.read_bytes() == pool_file.read_bytes(), name
-
-
-@pytest.mark.parametrize(
-    ("command", "what"),
-    [("sweep", "trials at once"), ("study", "trials at once"), ("reproduce-paper", "processes")],
-)
-def test_workers_default_to_the_cores_this_process_may_use(command, what, capsys):
-    from dospcot_lab.cli import build_parser as lab_parser
-
-    cores = usable_cores()
-    parser = lab_parser() if command == "study" else build_parser()
-    assert parser.parse_args([command, *(["grid16"] if command == "study" else [])]).workers == cores
-    with pytest.raises(SystemExit):
-        parser.parse_args([command, "--help"])
-    help_text = " ".join(capsys.readouterr().out.split())
-    assert f"--workers WORKERS {what} (default: the cores this process may use, {cores} here)" in help_text
 
 
 def test_the_cores_are_the_process_affinity_where_the_platform_has_one(monkeypatch):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from dospcot import metrics, statistics
-from dospcot.core.tabular_cotraining import TabularConfig, TabularCoTraining, TabularRunSpec
+from dospcot.core.tabular_runs import TabularConfig, TabularCoTraining, TabularRunSpec
 from dospcot.envs import StateActionMask
 from dospcot.policies.tabular import TabularAgents, epsilon_greedy_probs, expected_value
 from dospcot.run.paper_protocol import cliffwalking_mdp
@@ -73,9 +73,9 @@ def mdp():
 
 SMALL = TabularConfig(rounds=2, episodes_per_round=60)
 ALL_METHODS = [
-    TabularRunSpec("cotrain", ("esarsa", "q"), ("coords", "patch"), seed=5),
-    TabularRunSpec("cotrain", ("sarsa",), ("patch",), seed=5),
-    TabularRunSpec("cotrain", ("esarsa", "esarsa", "q"), ("coords", "patch", "onehot"), seed=5),
+    TabularRunSpec("dospcot", ("esarsa", "q"), ("coords", "patch"), seed=5),
+    TabularRunSpec("dospcot", ("sarsa",), ("patch",), seed=5),
+    TabularRunSpec("dospcot", ("esarsa", "esarsa", "q"), ("coords", "patch", "onehot"), seed=5),
     TabularRunSpec("masked-zero", ("esarsa",), ("coords",), seed=5),
     TabularRunSpec("labels-only", ("q",), ("coords",), seed=5),
 ]
@@ -113,23 +113,10 @@ def test_same_seed_gives_bit_identical_tables_twice(mdp, all_methods):
 
 
 def test_a_run_is_the_same_alone_or_in_a_batch(mdp):
-    batch = [*ALL_METHODS, TabularRunSpec("cotrain", ("esarsa", "q"), ("coords", "patch"), seed=6)]
+    batch = [*ALL_METHODS, TabularRunSpec("dospcot", ("esarsa", "q"), ("coords", "patch"), seed=6)]
     together = TabularCoTraining(mdp, batch, SMALL).run()
     alone = TabularCoTraining(mdp, batch[:1], SMALL).run()
     assert np.array_equal(together.q[:2], alone.q)
-
-
-def test_the_benchmarks_per_step_python_loop_is_the_same_learner(mdp, all_methods):
-    """The tabular benchmark's reference does the vectorised agents' work one step at a time: every
-    kind, every method, the same Q-tables and records bit for bit, and the same step count."""
-    from dospcot_lab.bench_rows import PerStepTabularCoTraining
-
-    ours, a = all_methods
-    loop = PerStepTabularCoTraining(mdp, ALL_METHODS, SMALL)
-    b = loop.run()
-    assert np.array_equal(a.q, b.q)
-    assert json.dumps(a.records) == json.dumps(b.records)
-    assert ours.env_steps == loop.env_steps > 2 * 60 * 8  # 8 agents, 2 rounds of 60 episodes
 
 
 def test_oracle_q_learning_finds_the_optimal_path(mdp):
@@ -141,13 +128,13 @@ def test_oracle_q_learning_finds_the_optimal_path(mdp):
 
 def test_cotraining_learns_the_masked_task_where_masked_zero_fails(mdp):
     seeds = range(4)
-    specs = [TabularRunSpec("cotrain", ("esarsa", "esarsa"), ("coords", "patch"), seed=s) for s in seeds]
+    specs = [TabularRunSpec("dospcot", ("esarsa", "esarsa"), ("coords", "patch"), seed=s) for s in seeds]
     specs += [TabularRunSpec("masked-zero", ("esarsa",), ("coords",), seed=s) for s in seeds]
     result = TabularCoTraining(mdp, specs, TabularConfig(rounds=5, episodes_per_round=200)).run()
     last = [r for r in result.records if r["round"] == 5]
-    cotrain = np.mean([r["agreement"] for r in last if r["method"] == "cotrain"])
+    cotrain = np.mean([r["agreement"] for r in last if r["method"] == "dospcot"])
     zero = np.mean([r["agreement"] for r in last if r["method"] == "masked-zero"])
-    pseudo = np.mean([r["pseudo_accuracy"] for r in last if r["method"] == "cotrain"])
+    pseudo = np.mean([r["pseudo_accuracy"] for r in last if r["method"] == "dospcot"])
     assert cotrain > zero + 0.2
     assert pseudo > 0.9
 
@@ -156,16 +143,16 @@ def test_bad_specs_raise():
     with pytest.raises(ValueError, match="method must be one of"):
         TabularRunSpec("co-train", ("q",), ("coords",))
     with pytest.raises(ValueError, match="one view per agent"):
-        TabularRunSpec("cotrain", ("q", "q"), ("coords",))
+        TabularRunSpec("dospcot", ("q", "q"), ("coords",))
     with pytest.raises(ValueError, match="unknown tabular agent kind 'dqn'"):
-        TabularRunSpec("cotrain", ("dqn",), ("coords",))
+        TabularRunSpec("dospcot", ("dqn",), ("coords",))
     with pytest.raises(ValueError, match="label_fraction"):
         TabularConfig(label_fraction=0.0)
 
 
 def test_unknown_view_in_a_spec_raises(mdp):
     with pytest.raises(ValueError, match=r"unknown view\(s\) \['lidar'\]"):
-        TabularCoTraining(mdp, [TabularRunSpec("cotrain", ("q",), ("lidar",))], SMALL)
+        TabularCoTraining(mdp, [TabularRunSpec("dospcot", ("q",), ("lidar",))], SMALL)
 
 
 def test_metrics_by_hand():
@@ -189,12 +176,12 @@ def test_a_run_whose_pool_is_fully_admitted_stops_and_freezes(mdp):
         cotraining=replace(SMALL.cotraining, add_fraction_start=10.0, stop_when_fully_admitted=True),
     )
     specs = [
-        TabularRunSpec("cotrain", ("esarsa",), ("patch",), seed=1),
+        TabularRunSpec("dospcot", ("esarsa",), ("patch",), seed=1),
         TabularRunSpec("labels-only", ("esarsa",), ("coords",), seed=1),
     ]
     three = TabularCoTraining(mdp, specs, cfg).run()
     one = TabularCoTraining(mdp, specs, replace(cfg, rounds=1)).run()
-    first = [r for r in three.records if r["method"] == "cotrain"]
+    first = [r for r in three.records if r["method"] == "dospcot"]
     assert first[0]["coverage"] == 1.0 and [r["active"] for r in first] == [False, False, False]
     assert np.array_equal(three.q[0], one.q[0])  # no learning after the stop
     assert not np.array_equal(three.q[1], one.q[1])  # the baseline run went on

@@ -34,7 +34,7 @@ from dospcot.run.run_folder import RunFolderError, read_checkpoint, write_csv
 from dospcot.run.run_session import ROUND_SCALARS, SEGMENT_SCALARS
 from dospcot.run.train import evaluate
 from dospcot.tasks import get_task, load_config
-from dospcot.tasks.adapters.grid import grid_world
+from dospcot.tasks.grid import grid_world
 
 ISSUE_PRESETS = [
     "grid16-dospcot",
@@ -84,7 +84,7 @@ def _copy(run_dir: Path, tmp_path: Path) -> Path:
 def test_every_issue_preset_ships_and_validates():
     assert set(ISSUE_PRESETS) <= set(preset_names())
     methods = {name: load_config(name).method for name in ISSUE_PRESETS}
-    assert methods["grid16-oracle"] == "oracle" and methods["grid16-dospcot"] == "cotrain"
+    assert methods["grid16-oracle"] == "oracle" and methods["grid16-dospcot"] == "dospcot"
     assert load_config("grid16-self-training").views == ("patch",)
     assert load_config("grid32-dospcot").env.size == 32
     assert load_config("grid16-dospcot").training.label_fraction == 0.05
@@ -145,7 +145,7 @@ def test_dqn_section_is_sb3_dqns_signature_with_dospcots_defaults_where_named():
             "views: the grid world has no view 'lidar'; allowed: coords, patch, rays",
         ),
         ("views=[]", "views: need at least one view; allowed: coords, patch, rays"),
-        ("method=ppo", "method: 'ppo' is not allowed; allowed: oracle, masked-zero, labels-only, cotrain"),
+        ("method=ppo", "method: 'ppo' is not allowed; allowed: oracle, masked-zero, labels-only, dospcot"),
         ('agents=["a2c", "dqn"]', "agents: unknown agent kind 'a2c'; allowed: esarsa_dqn, dqn, tabular"),
         ("agent=sarsa", "agent: unknown agent kind 'sarsa'; allowed: esarsa_dqn, dqn, tabular"),
         (

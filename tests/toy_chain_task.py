@@ -1,6 +1,6 @@
 """The worked toy task of docs/design.md ("Adding a task"): a corridor of ``env.size`` cells, registered
-as ``task = "chain"``. It is all a new task needs: the env, its views, and a :class:`Task` that builds
-the grid adapter over them."""
+as ``task = "chain"``. It is all a new task needs: the env, its views, and a :class:`Task` that gives
+them to the grid adapter."""
 
 from __future__ import annotations
 
@@ -12,7 +12,6 @@ import numpy as np
 
 from dospcot.config.run_configs import TrainConfig
 from dospcot.envs.views import View
-from dospcot.tasks.adapters.grid import GridAdapter
 from dospcot.tasks.registry import Task, register
 
 
@@ -55,9 +54,10 @@ class ChainTask(Task):
     name = "chain"
     section = "env"
     discrete_states = True
+    adapter = "grid"
 
     def view_names(self, cfg: TrainConfig) -> tuple[str, ...]:
         return ("cell", "progress")
 
-    def build(self, cfg: TrainConfig) -> GridAdapter:
-        return GridAdapter(cfg, partial(Chain, cfg.env.size), chain_views(cfg.env.size))
+    def discrete_world(self, cfg: TrainConfig) -> tuple[Any, dict[str, View], None]:
+        return partial(Chain, cfg.env.size), chain_views(cfg.env.size), None

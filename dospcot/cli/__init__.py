@@ -89,8 +89,8 @@ def _run(args: argparse.Namespace, command: str) -> int:
     """Run the parsed command; its bad inputs end in one line on stderr and exit status 2. Torch and the
     training stack load here only: past ``--help`` and usage errors."""
     from dospcot.config.errors import ConfigError, one_line
-    from dospcot.core.raters import QueriesPending, RaterError
     from dospcot.envs import EnvRaisedError, NonFiniteError
+    from dospcot.raters.file_rater import QueriesPending, RaterError
     from dospcot.run.run_folder import RunFolderError
     from dospcot.sweeps.sweep_spec import SweepError
 

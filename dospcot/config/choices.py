@@ -5,6 +5,18 @@ from __future__ import annotations
 
 from typing import Literal, get_args
 
+Method = Literal["oracle", "masked-zero", "labels-only", "dospcot", "reward-model"]
+"""What rewards a run's agents learn from (:class:`~dospcot.config.run_configs.TrainConfig`'s ``method``)."""
+OLD_METHOD_NAMES: dict[str, str] = {"cotrain": "dospcot"}
+"""Earlier spellings of a method, still read from older configs and run files."""
+
+
+def method_name(spelling: str) -> str:
+    """``spelling`` as today's code names the method: an earlier spelling (:data:`OLD_METHOD_NAMES`),
+    as an older config or a record's ``metrics.csv`` holds it, under its present name."""
+    return OLD_METHOD_NAMES.get(spelling, spelling)
+
+
 Weighting = Literal["hard", "soft"]
 """Self-paced weights: 1 when admitted (SPaMCo's default), or a ramp over the threshold."""
 Quota = Literal["label-share", "candidates"]
@@ -36,6 +48,6 @@ CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")
 """The strategies that read the views' reward classifiers to choose their queries (a combination
 reads them when one of its parts does)."""
 NUMERICS_VERSIONS: tuple[int, ...] = (1, 2, 3)
-"""The numerics versions of the reward classifiers' fits (:data:`dospcot.core.cotrainer.NUMERICS`)."""
+"""The numerics versions of the reward classifiers' fits (:data:`dospcot.core.self_paced.NUMERICS`)."""
 MODEL_KINDS: tuple[str, ...] = get_args(ModelKind)
 LOSS_KINDS: tuple[str, ...] = get_args(LossKind)

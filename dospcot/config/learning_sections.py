@@ -371,7 +371,7 @@ class CoTrainingConfig(AddedKeys):
     :param stop_when_fully_admitted: stop once every unlabelled sample is admitted.
     :param max_classes: the most distinct reward values a run may see.
     :param classifier: the reward classifiers' hyperparameters.
-    :param numerics: how the reward classifiers fit (:data:`dospcot.core.cotrainer.NUMERICS`): 1, in
+    :param numerics: how the reward classifiers fit (:data:`dospcot.core.self_paced.NUMERICS`): 1, in
         float64 over the whole pool; 2, in float32 over the samples that carry weight, several times
         cheaper on large pools (docs/guide/profile.md), but not the same science as 1 within the
         numerics study's bound (docs/results/numerics.md), so not the default; 3, 2's fits and agents

@@ -12,6 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
+from dospcot.config.choices import OLD_METHOD_NAMES, Method
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import (
     CoTrainingConfig,
@@ -49,7 +50,7 @@ class TrainConfig:
 
     :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
     :param seed: seeds the mask, the agents and the classifiers.
-    :param method: ``oracle``, ``masked-zero``, ``labels-only``, ``cotrain`` (DOSPCoT; one view is
+    :param method: ``oracle``, ``masked-zero``, ``labels-only``, ``dospcot`` (DOSPCoT; one view is
         self-training) or ``reward-model`` (the peer without co-training: an ensemble of reward
         classifiers per view fitted on the labels alone rewards every unlabelled sample).
     :param views: one view per agent, from the task's views (the grid's ``coords``, ``patch``, ``rays``).
@@ -64,7 +65,7 @@ class TrainConfig:
 
     name: str = "run"
     seed: int = 0
-    method: Literal["oracle", "masked-zero", "labels-only", "cotrain", "reward-model"] = "cotrain"
+    method: Method = "dospcot"
     views: tuple[str, ...] = ("coords", "patch")
     agents: tuple[str, ...] = ()
     agent: str = "esarsa_dqn"
@@ -78,8 +79,12 @@ class TrainConfig:
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
     demonstrations: DemonstrationsConfig = field(default_factory=DemonstrationsConfig)
 
+    renamed_values: ClassVar[dict[str, dict[str, str]]] = {"method": OLD_METHOD_NAMES}
+    """Values read under a newer spelling, by key: an older config's ``method = "cotrain"`` is today's
+    ``"dospcot"``."""
+
     unread_keys: ClassVar[dict[str, frozenset[str]]] = {
-        "cotrain": frozenset({"cotraining.ensemble_size"}),
+        "dospcot": frozenset({"cotraining.ensemble_size"}),
         "reward-model": SELF_PACED_KEYS,
         "oracle": REWARD_LEARNER_KEYS,
         "masked-zero": REWARD_LEARNER_KEYS,
@@ -116,9 +121,9 @@ class TrainConfig:
     def _check_segments(self) -> None:
         if self.training.segment_length == 1:
             return
-        if self.method != "cotrain":  # the reward-model peer too: its ensembles learn single rewards
+        if self.method != "dospcot":  # the reward-model peer too: its ensembles learn single rewards
             raise ConfigError(
-                f'training.segment_length: segment labels need co-training (method = "cotrain"; one '
+                f'training.segment_length: segment labels need co-training (method = "dospcot"; one '
                 f'view is self-training), got method = "{self.method}"'
             )
         if self.demonstrations.labels and (self.demonstrations.episodes or self.demonstrations.file):
@@ -134,10 +139,10 @@ class TrainConfig:
         if not self.learns_rewards:
             raise ConfigError(
                 f'training.label_strategy: "{strategy}" queries the rewards co-training needs (method = '
-                f'"cotrain"; one view is self-training; or "reward-model"), got method = "{self.method}"; '
+                f'"dospcot"; one view is self-training; or "reward-model"), got method = "{self.method}"; '
                 'use "uniform"'
             )
-        if "disagreement" in strategy.split("+") and len(self.views) < 2 and self.method == "cotrain":
+        if "disagreement" in strategy.split("+") and len(self.views) < 2 and self.method == "dospcot":
             raise ConfigError(
                 'training.label_strategy: "disagreement" asks where two views\' classifiers disagree, and '
                 f'the run has one view ({self.views[0]}); use "uncertainty" for one view'
@@ -176,8 +181,8 @@ class TrainConfig:
     @property
     def learns_rewards(self) -> bool:
         """Whether the run fits reward classifiers that reward the unlabelled samples: co-training
-        (``cotrain``) or the reward-model peer (``reward-model``)."""
-        return self.method in ("cotrain", "reward-model")
+        (``dospcot``) or the reward-model peer (``reward-model``)."""
+        return self.method in ("dospcot", "reward-model")
 
     @property
     def agent_kinds(self) -> tuple[str, ...]:

@@ -1,6 +1,6 @@
 """S seeds of one config trained in lock step in one process (docs/batched_seeds.md).
 
-Each member is an ordinary :class:`~dospcot.core.cotraining_run.CoTrainingRun` of its own seed: its
+Each member is an ordinary :class:`~dospcot.core.sb3_round.CoTrainingRun` of its own seed: its
 task, store, reward table, co-trainer and plain SB3 agents. What the batch shares is the arithmetic of
 the agents' networks: per view, one :class:`~dospcot.policies.stacked_esarsa.StackedExpectedSarsa`
 holds every member's online and target networks and Adam state, so that one forward pass picks every
@@ -17,10 +17,10 @@ One round of the batch, top to bottom (:meth:`BatchedRuns.run_round`):
    member's relabelling buffer through the agent's own ``_store_transition``; a gradient step every
    ``train_freq`` steps; the target networks synced every ``target_update_interval`` steps).
 2. **Label and co-train**, member by member (the run's own
-   :meth:`~dospcot.core.cotraining_run.CoTrainingRun.label_and_cotrain`).
+   :meth:`~dospcot.core.sb3_round.CoTrainingRun.label_and_cotrain`).
 3. **Policy update**: ``update_steps`` stacked gradient steps per view, the targets synced as
    ``ExpectedSarsaDQN.update`` syncs them.
-4. **Age and record**, member by member (:meth:`~dospcot.core.cotraining_run.CoTrainingRun.close_round`).
+4. **Age and record**, member by member (:meth:`~dospcot.core.sb3_round.CoTrainingRun.close_round`).
 
 After each phase that trains, every member's weights and Adam state are written back into its SB3
 agent, so that evaluation, ``agent.save`` and checkpoints see plain SB3 agents, and each member's part
@@ -43,7 +43,7 @@ import numpy as np
 import torch as th
 
 from dospcot.core import sb3_engine as sb3
-from dospcot.core.cotraining_run import CoTrainingRun
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
 from dospcot.policies.stacked_esarsa.stacked_q_network import linear_layers

@@ -15,7 +15,7 @@ is a share of the samples met: at most ``ceil(label_fraction x samples met so fa
 
 **Which.** The choice reads what an agent may read (the samples met, their episode ends, the reward
 classifiers' outputs), never a hidden reward; the rater alone reads the hidden reward of the samples
-it is asked about (:mod:`dospcot.core.raters`).
+it is asked about (:class:`SimulatedRater`, or a person: :mod:`dospcot.raters.file_rater`).
 
 - ``"random"``: the budget spent at random over the samples met (the active strategies' direct control);
 - ``"outcomes"``: the queries first cover the kinds of step an agent sees without a reward: steps that
@@ -56,10 +56,26 @@ LOG_COLUMNS: tuple[str, ...] = ("round", "sample", "strategy", "answer")
 
 
 class Rater(Protocol):
-    """Answers reward queries (:mod:`dospcot.core.raters`)."""
+    """Answers reward queries: :class:`SimulatedRater`, or a person through
+    :class:`dospcot.raters.file_rater.FileRater`."""
 
     def answer(self, round_: int, ids: np.ndarray, described: Sequence[dict[str, Any]]) -> np.ndarray:
         """(n,) the rewards of samples ``ids``."""
+
+
+class SimulatedRater:
+    """Answers each query with the sample's hidden reward.
+
+    :param hidden_reward: the hidden rewards of given sample ids (the task's store): the one reader of a
+        hidden reward outside the metrics, and only of the samples it is asked about.
+    """
+
+    def __init__(self, hidden_reward: Callable[[np.ndarray], np.ndarray]) -> None:
+        self.hidden_reward = hidden_reward
+
+    def answer(self, round_: int, ids: np.ndarray, described: Sequence[dict[str, object]]) -> np.ndarray:
+        """(n,) the rewards of samples ``ids`` (``described`` is what a person would be shown)."""
+        return np.asarray(self.hidden_reward(ids), dtype=np.float64)
 
 
 class QueriedTask(Protocol):
@@ -301,7 +317,7 @@ class RewardQueries:
 
     :param training: the run's ``[training]`` section: its ``label_strategy`` (not ``"uniform"``), the
         budget (``label_budget`` with its schedule, or ``label_fraction``) and the ``query_*`` keys.
-    :param rater: answers the queries (:mod:`dospcot.core.raters`).
+    :param rater: answers the queries (:class:`Rater`).
     """
 
     def __init__(self, training: TrainingConfig, rater: Rater) -> None:

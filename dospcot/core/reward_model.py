@@ -9,8 +9,8 @@ rewards every unlabelled sample, with weight 1, as the learnt reward of PEBBLE (
 B-Pref rewards every transition. Queries by ``"disagreement"`` go where the members disagree
 (:meth:`RewardModelTrainer.probabilities` hands every member to the queries as a view of its own).
 
-It answers :class:`~dospcot.core.cotraining_run.CoTrainingRun` as the co-trainer does: ``step`` on a
-:class:`~dospcot.core.cotrainer.RunPool` returns a :class:`~dospcot.core.cotrainer.RunRound`.
+It answers :class:`~dospcot.core.sb3_round.CoTrainingRun` as the co-trainer does: ``step`` on a
+:class:`~dospcot.core.self_paced.RunPool` returns a :class:`~dospcot.core.self_paced.RunRound`.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ import torch
 
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.core.classifier import BatchedRewardClassifier
-from dospcot.core.cotrainer import NUMERICS, FitsUnderNumerics, RunPool, RunRound
+from dospcot.core.self_paced import NUMERICS, FitsUnderNumerics, RunPool, RunRound
 from dospcot.seeding import bootstrap_seed, ensemble_seed
 
 

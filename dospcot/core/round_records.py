@@ -1,5 +1,5 @@
 """What a co-training round reports, for every kind of run (the SB3 runs of
-:mod:`dospcot.core.cotraining_run` and the batched tabular runs of :mod:`dospcot.core.tabular_cotraining`):
+:mod:`dospcot.core.sb3_round` and the batched tabular runs of :mod:`dospcot.core.tabular_runs`):
 the co-trainer's figures for the round and the head that names each record (one row of
 ``metrics.csv`` per run, round and agent).
 
@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 
-from dospcot.core.cotrainer import RunRound
+from dospcot.core.self_paced import RunRound
 
 VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
 """The per-view figures of :func:`round_stats`, under the names a record gives them."""

@@ -27,8 +27,8 @@ import torch
 
 from dospcot.config.learning_sections import ClassifierConfig
 from dospcot.core.classifier import BatchedRewardClassifier
-from dospcot.core.cotrainer import RunPool
 from dospcot.core.reward_classes import QuantileRewardClasses
+from dospcot.core.self_paced import RunPool
 from dospcot.policies.in_place_state import InPlaceState
 
 

@@ -83,7 +83,7 @@ def rate_command(
 
     :param train: the CLI's ``train`` handler, which resumes the run as ``dospcot train --resume`` does.
     """
-    from dospcot.core.raters import QueriesPending
+    from dospcot.raters.file_rater import QueriesPending
     from dospcot.rating.server import rate  # the web server, imported only when the command runs
 
     options = {"config": None, "overrides": [], "seeds": None, "threads": 1}

@@ -6,7 +6,7 @@ It stays a local tool: it listens on 127.0.0.1 unless told otherwise; every requ
 token printed with the address, whatever the host; it serves only the files under the run's
 ``queries/`` folder; and an answer for a sample outside the round, or a reward that is not a finite
 number a float32 holds, is refused with one line. A reward not seen in an earlier round is kept only
-once the person confirms it, as in the CSV (:mod:`dospcot.core.answer_files`).
+once the person confirms it, as in the CSV (:mod:`dospcot.raters.answer_files`).
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from importlib.resources import files
 from pathlib import Path
 from typing import Any
 
-from dospcot.core.answer_files import (
+from dospcot.raters.answer_files import (
     ROUND_FILE,
     RaterError,
     accept_values,

@@ -31,7 +31,7 @@ from tqdm.auto import tqdm
 
 from dospcot import metrics
 from dospcot.config.run_configs import PaperConfig
-from dospcot.core.tabular_cotraining import TabularCoTraining, TabularRunSpec
+from dospcot.core.tabular_runs import TabularCoTraining, TabularRunSpec
 from dospcot.envs import CLIFF_VIEWS, TabularMDP, make_masked_cliffwalking
 from dospcot.run.interrupts import Interrupted
 from dospcot.run.run_folder import (
@@ -54,8 +54,8 @@ BASELINES: tuple[tuple[str, str, str], ...] = (
     ("oracle", "oracle", "coords"),
     ("masked-zero", "masked-zero", "coords"),
     ("labels-only", "labels-only", "coords"),
-    ("self-training (coords)", "cotrain", "coords"),
-    ("self-training (patch)", "cotrain", "patch"),
+    ("self-training (coords)", "dospcot", "coords"),
+    ("self-training (patch)", "dospcot", "patch"),
 )
 """(row label, method, view) of the single-agent rows."""
 
@@ -68,9 +68,9 @@ def protocol_specs(seeds: Sequence[int]) -> list[TabularRunSpec]:
             for _, method, view in BASELINES:
                 specs.append(TabularRunSpec(method, (kind,), (view,), seed=seed))
             for gamma in GAMMAS:
-                specs.append(TabularRunSpec("cotrain", (kind, kind), PAIR_VIEWS, gamma=gamma, seed=seed))
+                specs.append(TabularRunSpec("dospcot", (kind, kind), PAIR_VIEWS, gamma=gamma, seed=seed))
         for pair in HETERO_PAIRS[1:]:
-            specs.append(TabularRunSpec("cotrain", pair, PAIR_VIEWS, gamma=0.3, seed=seed))
+            specs.append(TabularRunSpec("dospcot", pair, PAIR_VIEWS, gamma=0.3, seed=seed))
     return specs
 
 
@@ -132,7 +132,7 @@ def seed_summary(records: Sequence[Mapping[str, Any]], rounds: int) -> dict[str,
     round, ``rounds``; every run has a record every round) for this seed alone."""
     agreement = per_seed(records, "agreement")
     target = {
-        "dospcot_agreement": ("cotrain", "esarsa-esarsa", "-".join(PAIR_VIEWS), 0.3),
+        "dospcot_agreement": ("dospcot", "esarsa-esarsa", "-".join(PAIR_VIEWS), 0.3),
         "oracle_agreement": ("oracle", "esarsa", "coords", 0.3),
         "masked_zero_agreement": ("masked-zero", "esarsa", "coords", 0.3),
         "labels_only_agreement": ("labels-only", "esarsa", "coords", 0.3),

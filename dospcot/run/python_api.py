@@ -42,7 +42,7 @@ def gym_config(
     env: str | Callable[..., gym.Env],
     views: Mapping[str, ViewSpec],
     *,
-    method: str = "cotrain",
+    method: str = "dospcot",
     agent: str = "dqn",
     seed: int = 0,
     label_fraction: float = 0.1,
@@ -54,7 +54,7 @@ def gym_config(
 
     :param env: a registered gymnasium id, or a module-level function that returns the env.
     :param views: each agent's view by name; every view gets one agent.
-    :param method: ``cotrain`` (DOSPCoT), ``oracle``, ``masked-zero``, ``labels-only`` or
+    :param method: ``dospcot`` (DOSPCoT), ``oracle``, ``masked-zero``, ``labels-only`` or
         ``reward-model`` (the peer: ensembles fitted on the labels alone).
     :param agent: every agent's kind: ``dqn`` or ``esarsa_dqn``.
     :param seed: the run's seed.

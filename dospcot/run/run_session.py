@@ -14,12 +14,13 @@ import numpy as np
 from stable_baselines3.common.logger import configure
 from torch.utils.tensorboard import SummaryWriter
 
+from dospcot.adapters import build_adapter
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.classifier import save_classifier
-from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import LOG_COLUMNS, Rater
-from dospcot.core.raters import FileRater, action_names
 from dospcot.core.round_records import CLASS_COLUMNS
+from dospcot.core.sb3_round import CoTrainingRun
+from dospcot.raters.file_rater import FileRater, action_names
 from dospcot.run.interrupts import Interrupted
 from dospcot.run.plots import plot_learning_curves
 from dospcot.run.run_folder import (
@@ -37,7 +38,6 @@ from dospcot.run.run_folder import (
     write_json,
     write_run_info,
 )
-from dospcot.tasks import get_task
 
 ROUND_SCALARS = (
     "pace",
@@ -76,12 +76,13 @@ SUMMARY_METRICS = (
 
 
 def new_run(cfg: TrainConfig, rater: Rater | None = None) -> CoTrainingRun:
-    """The co-training run of a config, before its first round: its task's adapter (``Task.build``)
-    driven by :class:`~dospcot.core.cotraining_run.CoTrainingRun`; the one place that builds it.
+    """The co-training run of a config, before its first round: its task's adapter
+    (:func:`~dospcot.adapters.build_adapter`) driven by :class:`~dospcot.core.sb3_round.CoTrainingRun`;
+    the one place that builds it.
 
     :param rater: answers an active label strategy's queries; None: the simulated rater.
     """
-    return CoTrainingRun(get_task(cfg.task).build(cfg), cfg, rater)
+    return CoTrainingRun(build_adapter(cfg), cfg, rater)
 
 
 class RunSession:

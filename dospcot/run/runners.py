@@ -2,7 +2,7 @@
 task spec never says how its runs train.
 
 - a :class:`~dospcot.config.run_configs.TrainConfig` (every task but the paper's): a co-training run
-  of SB3 agents, checkpointed every round (:mod:`dospcot.run.cotraining`);
+  of SB3 agents, checkpointed every round (:mod:`dospcot.run.sb3_runs`);
 - a :class:`~dospcot.config.run_configs.PaperConfig`: one seed of the seed paper's tabular protocol,
   several seeds of which a sweep trains together in one process (:mod:`dospcot.run.paper_protocol`).
 """
@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any, Protocol
 
 from dospcot.config.run_configs import PaperConfig, RunConfig, TrainConfig
-from dospcot.run.cotraining import CoTrainingRunner
 from dospcot.run.paper_protocol import PaperProtocolRunner
+from dospcot.run.sb3_runs import CoTrainingRunner
 
 
 class Runner(Protocol):

@@ -1,6 +1,6 @@
 """``dospcot train`` and ``dospcot evaluate``: one run of any config, with its run folder. How the
 config trains in it is its runner's, chosen by the config's type (:mod:`dospcot.run.runners`); what a
-co-training run's folder holds (every task's but the paper protocol's) is :mod:`dospcot.run.cotraining`'s.
+co-training run's folder holds (every task's but the paper protocol's) is :mod:`dospcot.run.sb3_runs`'s.
 """
 
 from __future__ import annotations

@@ -71,7 +71,7 @@ def build_tables(records: Sequence[Mapping[str, Any]], paper: dict, last_round: 
             gamma,
             rnd,
             metric,
-            ("cotrain", f"{a}-{b}", "-".join(PAIR_VIEWS), gamma, rnd),
+            ("dospcot", f"{a}-{b}", "-".join(PAIR_VIEWS), gamma, rnd),
             ref,
         )
 

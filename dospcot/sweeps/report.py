@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from dospcot import metrics
+from dospcot.config.choices import method_name
 from dospcot.config.run_configs import PaperConfig, TrainConfig
 from dospcot.run import paper_protocol as protocol
 from dospcot.run.plots import Band, plot_bands
@@ -84,6 +85,8 @@ def load_runs(sweep_dir: Path, skipped: list[str] | None = None) -> tuple[SweepS
             summary = json.loads((trial_path.parent / SUMMARY_FILE).read_text())
             if not isinstance(summary, dict) or not isinstance(summary.get("mean"), dict):
                 raise ValueError(f"{SUMMARY_FILE} holds no table of means")
+            if isinstance(summary.get("method"), str):
+                summary["method"] = method_name(summary["method"])
         except (OSError, ValueError, KeyError, TypeError) as err:  # JSON and UTF-8 errors are ValueErrors
             if skipped is None:
                 raise
@@ -98,8 +101,13 @@ def load_runs(sweep_dir: Path, skipped: list[str] | None = None) -> tuple[SweepS
 
 
 def _read_csv(path: Path) -> list[dict[str, float]]:
+    """The rows of a ``metrics.csv``, numbers as floats and the method by today's name (a record's
+    older run spells co-training ``cotrain``)."""
     with path.open(newline="") as handle:
-        return [{k: _number(v) for k, v in row.items()} for row in csv.DictReader(handle)]
+        return [
+            {k: method_name(v) if k == "method" else _number(v) for k, v in row.items()}
+            for row in csv.DictReader(handle)
+        ]
 
 
 def _number(text: str) -> Any:
@@ -407,7 +415,7 @@ def _plot_paper_agreement(records: list[dict[str, Any]], title: str, path: Path)
     panels: dict[str, list[Band]] = {}
     for kind in protocol.KINDS:
         lines = {label: (method, kind, view, 0.3) for label, method, view in protocol.BASELINES}
-        lines["DOSPCoT (γ 0.3)"] = ("cotrain", f"{kind}-{kind}", "-".join(protocol.PAIR_VIEWS), 0.3)
+        lines["DOSPCoT (γ 0.3)"] = ("dospcot", f"{kind}-{kind}", "-".join(protocol.PAIR_VIEWS), 0.3)
         panels[f"{title}: {protocol.KIND_NAMES[kind]}"] = [
             _band(label, {r: SeedSummary.of(values[(*key, r)]) for r in rounds})
             for label, key in lines.items()

@@ -1,9 +1,11 @@
 """The grid task (``task = "grid"``, the ``[env]`` section): DOSPCoT on the masked grid world of
-:class:`dospcot.envs.GridWorld`. The adapter it builds (:mod:`dospcot.tasks.adapters.grid`) serves any
-deterministic discrete task (a toy-text env with ``P`` and ``s``)."""
+:class:`dospcot.envs.GridWorld`. Its runs are served by the grid adapter
+(:mod:`dospcot.adapters.grid_adapter`), which serves any deterministic discrete task (a toy-text env
+with ``P`` and ``s``)."""
 
 from __future__ import annotations
 
+from functools import partial
 from typing import TYPE_CHECKING
 
 from dospcot.config.errors import ConfigError
@@ -13,8 +15,13 @@ GRID_ACTIONS = 4
 """The grid world's actions: its four moves (``dospcot.envs.gridworld.MOVES``)."""
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    import numpy as np
+
     from dospcot.config.run_configs import TrainConfig
-    from dospcot.tasks.adapters.grid import GridAdapter
+    from dospcot.envs import GridLayout, GridWorld
+    from dospcot.envs.views import View
 
 GRID_VIEWS: tuple[str, ...] = ("coords", "patch", "rays")
 
@@ -28,6 +35,7 @@ class GridWorldTask(Task):
     name = "grid"
     section = "env"
     discrete_states = True
+    adapter = "grid"
 
     def title(self, cfg: TrainConfig) -> str:
         return "grid world"
@@ -50,18 +58,39 @@ class GridWorldTask(Task):
     def pool_keys(self, cfg: TrainConfig) -> int:
         return cfg.env.size**2 * GRID_ACTIONS
 
-    def check(self, cfg: TrainConfig) -> None:
-        from dospcot.tasks.adapters.grid import grid_world
+    def discrete_world(
+        self, cfg: TrainConfig
+    ) -> tuple[Callable[[], GridWorld], dict[str, View], np.ndarray | None]:
+        from dospcot.envs import monitored_states
 
+        make_env, views, layout = grid_world(cfg)
+        columns = cfg.env.monitored_columns
+        return make_env, views, monitored_states(layout.size, columns) if columns else None
+
+    def check(self, cfg: TrainConfig) -> None:
         try:  # a map the densities cannot make solvable fails after its draws, not in round 1
             grid_world(cfg)
         except (ValueError, RuntimeError) as err:
             raise ConfigError(f"env: {err}") from None
 
-    def build(self, cfg: TrainConfig) -> GridAdapter:
-        from dospcot.envs import monitored_states
-        from dospcot.tasks.adapters.grid import GridAdapter, grid_world
 
-        make_env, views, layout = grid_world(cfg)
-        columns = cfg.env.monitored_columns
-        return GridAdapter(cfg, make_env, views, monitored_states(layout.size, columns) if columns else None)
+def grid_world(cfg: TrainConfig) -> tuple[Callable[[], GridWorld], dict[str, View], GridLayout]:
+    """The env factory, the views (with the run's blind spots, if any) and the map of a grid config."""
+    from dospcot.envs import GridLayout, GridWorld, grid_views, view_blind_spots
+
+    env = cfg.env
+    layout = GridLayout.random(env.size, env.layout_seed, env.lava_density, env.wall_density)
+    make_env = partial(
+        GridWorld,
+        layout,
+        step_cost=env.step_cost,
+        lava_penalty=env.lava_penalty,
+        goal_reward=env.goal_reward,
+        exploring_starts=env.exploring_starts,
+    )
+    blind = (
+        view_blind_spots(layout, env.blind_spot_rate, cfg.seed, identical=env.blind_spots == "identical")
+        if env.blind_spot_rate > 0
+        else None
+    )
+    return make_env, grid_views(layout, env.patch_size, env.compass, blind, env.ray_encoding), layout

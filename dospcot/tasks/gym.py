@@ -1,7 +1,7 @@
 """The gym task (``task = "gym"``, the ``[gym]`` section): any gymnasium env with discrete actions,
 its views computed from its observation (:mod:`dospcot.envs.gym_sensors`; docs/your_env.md). Every step
 is one pool sample, or with ``gym.state_key`` every (state key, action) pair; the sensor adapter
-(:mod:`dospcot.tasks.adapters.sensor`) pools them."""
+(:mod:`dospcot.adapters.sensor_adapter`) pools them."""
 
 from __future__ import annotations
 
@@ -10,11 +10,10 @@ from typing import TYPE_CHECKING
 
 from dospcot.config.errors import ConfigError
 from dospcot.tasks.registry import register
-from dospcot.tasks.sensor import SensorTask
+from dospcot.tasks.sensor_tasks import MakeEnv, SensorTask
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
-    from dospcot.tasks.adapters.sensor import SensorAdapter
 
 
 @register
@@ -56,9 +55,8 @@ class GymTask(SensorTask):
             raise ConfigError(str(err)) from err.__cause__
         super().check(cfg)
 
-    def build(self, cfg: TrainConfig) -> SensorAdapter:
+    def env_factories(self, cfg: TrainConfig) -> tuple[MakeEnv, MakeEnv]:
         from dospcot.envs.gym_sensors import make_masked_gym
-        from dospcot.tasks.adapters.sensor import SensorAdapter
 
         gym = cfg.gym
         make_eval_env = partial(
@@ -71,4 +69,4 @@ class GymTask(SensorTask):
         )
         queried, frames = cfg.training.queries, cfg.training.rater == "file"
         make_env = partial(make_eval_env, train_wrappers=gym.train_wrappers, queried=queried, frames=frames)
-        return SensorAdapter(cfg, gym, make_env, make_eval_env)
+        return make_env, make_eval_env

@@ -1,6 +1,6 @@
 """The highway task (``task = "highway"``, the ``[highway]`` section): highway-env's driving tasks
 (the ``highway`` extra) or the project's fast numpy highway, with sensor views and rewards revealed per
-step; the sensor adapter (:mod:`dospcot.tasks.adapters.sensor`) pools every step."""
+step; the sensor adapter (:mod:`dospcot.adapters.sensor_adapter`) pools every step."""
 
 from __future__ import annotations
 
@@ -10,11 +10,10 @@ from typing import TYPE_CHECKING
 from dospcot.config.errors import ConfigError
 from dospcot.config.task_sections import FAST_HIGHWAY_ID, HIGHWAY_ENV_IDS
 from dospcot.tasks.registry import register
-from dospcot.tasks.sensor import SensorTask
+from dospcot.tasks.sensor_tasks import MakeEnv, SensorTask
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
-    from dospcot.tasks.adapters.sensor import SensorAdapter
 
 
 @register
@@ -38,7 +37,7 @@ class HighwayTask(SensorTask):
 
     def check(self, cfg: TrainConfig) -> None:
         from dospcot.envs.fast_highway import FastHighwayEnv
-        from dospcot.envs.highway import try_highway_config
+        from dospcot.envs.masked_highway import try_highway_config
 
         highway = cfg.highway
         if highway.env_id == FAST_HIGHWAY_ID:
@@ -51,9 +50,8 @@ class HighwayTask(SensorTask):
             raise ConfigError(f"highway.config: {err}") from None
         super().check(cfg)
 
-    def build(self, cfg: TrainConfig) -> SensorAdapter:
-        from dospcot.envs.highway import make_masked_highway
-        from dospcot.tasks.adapters.sensor import SensorAdapter
+    def env_factories(self, cfg: TrainConfig) -> tuple[MakeEnv, MakeEnv]:
+        from dospcot.envs.masked_highway import make_masked_highway
 
         highway = cfg.highway
         make_eval_env = partial(
@@ -65,4 +63,4 @@ class HighwayTask(SensorTask):
         )
         # A file rater's queries show frames: the training envs draw them, the evaluation envs need not.
         make_env = partial(make_eval_env, frames=cfg.training.rater == "file")
-        return SensorAdapter(cfg, highway, make_env, make_eval_env)
+        return make_env, make_eval_env

@@ -2,10 +2,10 @@
 :mod:`dospcot.tasks` that subclasses :class:`Task` and registers it with :func:`register`.
 
 A task is a spec: it says what its config allows (its views, what its section may hold together),
-checks what needs files, imports or an env before anything trains, and builds the adapter a
-:class:`~dospcot.core.cotraining_run.CoTrainingRun` drives (its env, views, pool and evaluation;
-:mod:`dospcot.tasks.adapters`). A spec module imports neither torch nor an env at import time, so
-reading a config costs no training stack. How a run of a task trains is not the spec's to say: the
+checks what needs files, imports or an env before anything trains, and names the adapter that serves
+its runs (:attr:`Task.adapter`; the adapters, a layer above the core, are :mod:`dospcot.adapters`). A
+spec module imports neither torch nor an env at import time, so reading a config costs no training
+stack, and it never imports the core or an adapter. How a run of a task trains is not the spec's to say: the
 run layer chooses by the type of its config (:mod:`dospcot.run.runners`). Nothing outside this
 package branches on a task's name: adding a task is one new module here and its presets
 (docs/design.md, "Adding a task").
@@ -18,13 +18,11 @@ from __future__ import annotations
 
 import importlib
 import pkgutil
-from typing import TYPE_CHECKING, Any, ClassVar
+from collections.abc import Callable
+from typing import Any, ClassVar
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.run_configs import RUN_AGENT_KINDS, RunConfig, TrainConfig
-
-if TYPE_CHECKING:
-    from dospcot.core.cotraining_run import TaskAdapter
 
 _TASKS: dict[str, Task] = {}
 
@@ -39,6 +37,11 @@ class Task:
     """The config section that sets the task up."""
     discrete_states: ClassVar[bool] = False
     """Whether every state and its views are known in advance, as ``tabular`` agents need."""
+    adapter: ClassVar[str | None] = None
+    """The adapter that serves the task's co-training runs (:func:`dospcot.adapters.build_adapter`):
+    ``"grid"`` (a deterministic discrete task, from :meth:`discrete_world`), ``"sensor"`` (from
+    :meth:`~dospcot.tasks.sensor_tasks.SensorTask.env_factories`), or None for a task whose runs
+    train without one (the paper protocol)."""
 
     def config_type(self) -> type:
         """The root dataclass of the task's configs."""
@@ -75,8 +78,11 @@ class Task:
         """Raise :class:`ConfigError` for what only files, imports or the env can tell (an unknown env
         id, a demonstrations file that does not load); runs before any run folder is made."""
 
-    def build(self, cfg: TrainConfig) -> TaskAdapter:
-        """The adapter of one run (:class:`~dospcot.core.cotraining_run.TaskAdapter`)."""
+    def discrete_world(self, cfg: TrainConfig) -> tuple[Callable[[], Any], dict[str, Any], Any]:
+        """What the grid adapter serves (``adapter = "grid"``): a factory of the task's env (a
+        deterministic toy-text env with ``P`` and ``s``), its views by name
+        (:class:`~dospcot.envs.views.View`), and bool (S,) the states whose every reward a monitor
+        reveals, or None."""
         raise NotImplementedError
 
     def check_config(self, cfg: RunConfig) -> None:

@@ -69,8 +69,8 @@ from dospcot_lab.studies import (
     budget_classes,
     budget_confirm,
     budget_explore,
-    grid,
-    highway,
+    grid_studies,
+    highway_studies,
     label_sources,
     minigrid,
     numerics,
@@ -101,8 +101,8 @@ __all__ = [
 ]
 
 STUDIES: dict[str, Study] = {
-    **grid.STUDIES,
-    **highway.STUDIES,
+    **grid_studies.STUDIES,
+    **highway_studies.STUDIES,
     **minigrid.STUDIES,
     **label_sources.STUDIES,
     **second_view.STUDIES,

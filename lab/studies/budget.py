@@ -22,7 +22,7 @@ from dospcot.run.run_folder import METRICS_FILE, PSEUDO_REWARDS_FILE
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
-from dospcot_lab.studies.grid import LAYOUT
+from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
 
 STRATEGY = "training.label_strategy"

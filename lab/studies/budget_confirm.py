@@ -29,7 +29,7 @@ from dospcot_lab.studies.budget import (
     task_tables,
 )
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
-from dospcot_lab.studies.grid import LAYOUT
+from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.tables import labels_cell, labels_used
 
 FIRST_SEED, SEEDS = 100, 10

@@ -30,7 +30,7 @@ from dospcot_lab.studies.budget import (
     spend,
 )
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
-from dospcot_lab.studies.grid import LAYOUT
+from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.tables import FRACTION
 
 DESCRIPTIVE = (

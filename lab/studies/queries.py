@@ -11,7 +11,7 @@ from dospcot.run.run_folder import METRICS_FILE, QUERIES_FILE, REWARD_CLASSES_FI
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
-from dospcot_lab.studies.grid import LAYOUT, UNSEEN_LAYOUTS
+from dospcot_lab.studies.grid_studies import LAYOUT, UNSEEN_LAYOUTS
 from dospcot_lab.studies.tables import FRACTION, MINIGRID_TASKS, labels_cell, over_seeds
 
 STRATEGY = "training.label_strategy"

@@ -11,10 +11,11 @@ from functools import partial
 
 import numpy as np
 
+from dospcot.config.choices import method_name
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
-from dospcot_lab.studies.highway import HIGHWAY_COLUMNS
+from dospcot_lab.studies.highway_studies import HIGHWAY_COLUMNS
 from dospcot_lab.studies.tables import (
     COLUMNS,
     FRACTION,
@@ -63,7 +64,7 @@ def _setting(run: TrialRun) -> str:
 
 def _method(run: TrialRun) -> str:
     """A run's method in the second-view tables; self-training and single-view baselines name their view."""
-    name = run.trial.params.get("method") or run.trial.name.split("-", 1)[1]
+    name = method_name(run.trial.params.get("method") or run.trial.name.split("-", 1)[1])
     views = json.loads(run.trial.params["views"]) if "views" in run.trial.params else None
     return f"{name} ({views[0]})" if views else name
 

@@ -546,7 +546,7 @@ FIGURES = [
         r"[\d,]+ of the record's [\d,]+ co-trained runs have it \(.*?\)",
         r"([\d,]+) of the record's ([\d,]+) co-trained runs have it \(the (.*?) runs predate it\)",
         reward_classes,
-        "record (co-trained runs: method cotrain; those with reward_classes.json)",
+        "record (co-trained runs: method dospcot; those with reward_classes.json)",
     ),
     Figure(
         "kept file names",

@@ -13,8 +13,8 @@ from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES
-from dospcot_lab.studies.grid import grid16_tables, label_fraction_tables
-from dospcot_lab.studies.highway import cost_bound
+from dospcot_lab.studies.grid_studies import grid16_tables, label_fraction_tables
+from dospcot_lab.studies.highway_studies import cost_bound
 from dospcot_lab.studies.label_sources import (
     DEMO_ARMS,
     EFFORT_ARMS,

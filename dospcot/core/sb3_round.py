@@ -10,9 +10,9 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
    time, so what earlier rounds admitted drives this round's updates.
    **Queries** (an active ``training.label_strategy``, :mod:`dospcot.core.queries`): a rater labels
    the samples the strategy chooses, within the budget the uniform mask would spend.
-2. **Co-train** (method ``"cotrain"``): the task turns its store into a
-   :class:`~dospcot.core.cotrainer.RunPool` (labelled samples and the unlabelled pool U, each view's
-   classifier inputs), which goes to the run's :class:`~dospcot.core.cotrainer.RunCoTrainer` (select,
+2. **Co-train** (method ``"dospcot"``): the task turns its store into a
+   :class:`~dospcot.core.self_paced.RunPool` (labelled samples and the unlabelled pool U, each view's
+   classifier inputs), which goes to the run's :class:`~dospcot.core.self_paced.RunCoTrainer` (select,
    fit, score per view; Eq. 9).
 3. **Pseudo-reward**: each admitted sample's consensus reward and weight go into the reward table,
    whose ids are the pool's samples, so every stored step of a sample reads them.
@@ -32,7 +32,7 @@ folder, TensorBoard and checkpoints) hangs on its ``on_round`` hook. The run rea
 What a task supplies (:class:`TaskAdapter`, built by the task registry, :mod:`dospcot.tasks`):
 each agent's env (masked, writing the store), its reward classes, the pool, each sample's true class
 (metrics only) and the evaluator. The grid adapter (:mod:`dospcot.tasks.grid`) pools (s, a) keys and
-measures against the exact optimum; the sensor adapter (:mod:`dospcot.tasks.sensor`) pools every step
+measures against the exact optimum; the sensor adapter (:mod:`dospcot.tasks.sensor_tasks`) pools every step
 and runs evaluation episodes.
 
 Agents (``cfg.agent_kinds``): ExpectedSarsaDQN with its Expected-SARSA target (``esarsa_dqn``) or DQN's max
@@ -58,13 +58,12 @@ import numpy as np
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
-from dospcot.core.cotrainer import NUMERICS, RunCoTrainer, RunPool
-from dospcot.core.queries import QueriedTask, Rater, RewardQueries
-from dospcot.core.raters import SimulatedRater
+from dospcot.core.queries import QueriedTask, Rater, RewardQueries, SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
 from dospcot.core.reward_model import RewardModelTrainer
 from dospcot.core.round_records import VIEW_STATS, class_rows, record_head, round_stats
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
+from dospcot.core.self_paced import NUMERICS, RunCoTrainer, RunPool
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.seeding import agent_seed, classifier_seed, query_seed, round_reset_seed
@@ -124,7 +123,7 @@ def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
     """The relabelling replay buffer's arguments for a method: co-training and the reward-model peer
     read the reward table, masked-zero counts masked rewards as 0, the rest weigh masked steps 0."""
     return {
-        "reward_table": table if method in ("cotrain", "reward-model") else None,
+        "reward_table": table if method in ("dospcot", "reward-model") else None,
         "masked_reward": "zero" if method == "masked-zero" else "ignore",
     }
 
@@ -184,7 +183,7 @@ def make_agent(
 class CoTrainingRun:
     """One run of SB3 agents on a masked task, round by round.
 
-    :param task: the task adapter (store, pool, evaluator), e.g. ``get_task(cfg.task).build(cfg)``.
+    :param task: the task adapter (store, pool, evaluator), e.g. ``dospcot.adapters.build_adapter(cfg)``.
     :param cfg: the run's config, read directly: its method, views and agent kinds, seed, ``[training]``,
         ``[dqn]``, ``[tabular_agent]``, ``[cotraining]`` and ``[demonstrations]``.
     :param rater: who answers the reward queries of an active ``training.label_strategy``; None: the
@@ -221,7 +220,7 @@ class CoTrainingRun:
         for k in range(len(self.agents)):
             self._give_demonstrations(k)
         self.trainer: RunCoTrainer | RewardModelTrainer | None = None
-        if cfg.method == "cotrain":
+        if cfg.method == "dospcot":
             # A segment's input is the sum of its steps' (dospcot.core.segments.segment_pool).
             self.trainer = RunCoTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
         elif cfg.method == "reward-model":

@@ -1,12 +1,10 @@
-"""Raters: who answers a run's reward queries (docs/queries.md).
+"""The file rater: a person answers a run's reward queries (docs/queries.md). The simulated rater,
+which answers from the hidden reward, is :class:`dospcot.core.queries.SimulatedRater`.
 
-- :class:`SimulatedRater` answers from the hidden reward, as the mask would have revealed it (studies,
-  tests). It is the one reader of a hidden reward outside the metrics, and it reads only the samples
-  it is asked about.
-- :class:`FileRater` asks a person: it writes each round's queries to ``queries/round_<r>.csv`` in the
-  run folder and stops the run (:class:`QueriesPending`); ``dospcot train --resume`` reads the answers
-  from the ``reward`` column of that file. A query's frames (PNG images, :func:`encode_png`) go beside
-  it, in ``queries/round_<r>/``, its row naming them.
+:class:`FileRater` writes each round's queries to ``queries/round_<r>.csv`` in the run folder and stops
+the run (:class:`QueriesPending`); ``dospcot train --resume`` reads the answers from the ``reward``
+column of that file (:mod:`dospcot.raters.answer_files`). A query's frames (PNG images,
+:func:`encode_png`) go beside it, in ``queries/round_<r>/``, its row naming them.
 """
 
 from __future__ import annotations
@@ -14,16 +12,23 @@ from __future__ import annotations
 import io
 import json
 import re
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from PIL import Image
 
-from dospcot.core.answer_files import QUERY_COLUMNS, RaterError, read_answers, rewards_seen, show, write_rows
+from dospcot.raters.answer_files import (
+    QUERY_COLUMNS,
+    RaterError,
+    read_answers,
+    rewards_seen,
+    show,
+    write_rows,
+)
 
-__all__ = ["FileRater", "QueriesPending", "RaterError", "SimulatedRater", "action_names", "encode_png"]
+__all__ = ["FileRater", "QueriesPending", "RaterError", "action_names", "encode_png"]
 
 ACTION_NAMES = {
     "GridWorld": ("up", "right", "down", "left"),
@@ -47,20 +52,6 @@ class QueriesPending(Exception):
         self.count, self.path = count, path
 
 
-class SimulatedRater:
-    """Answers each query with the sample's hidden reward.
-
-    :param hidden_reward: the hidden rewards of given sample ids (the task's store, metrics only but here).
-    """
-
-    def __init__(self, hidden_reward: Callable[[np.ndarray], np.ndarray]) -> None:
-        self.hidden_reward = hidden_reward
-
-    def answer(self, round_: int, ids: np.ndarray, described: Sequence[dict[str, object]]) -> np.ndarray:
-        """(n,) the rewards of samples ``ids`` (``described`` is what a person would be shown)."""
-        return np.asarray(self.hidden_reward(ids), dtype=np.float64)
-
-
 class FileRater:
     """Writes each round's queries for a person and reads the answers back.
 
@@ -82,7 +73,7 @@ class FileRater:
         :class:`QueriesPending`.
 
         :raises RaterError: the file does not answer every query with a finite number, or gives a
-            reward not seen in an earlier round without its confirmation (:mod:`dospcot.core.answer_files`).
+            reward not seen in an earlier round without its confirmation (:mod:`dospcot.raters.answer_files`).
         """
         path = self.path(round_)
         seen = rewards_seen(self.folder, round_)

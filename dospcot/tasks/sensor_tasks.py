@@ -1,10 +1,11 @@
 """What the sensor tasks share (``task = "highway"`` and ``task = "gym"``): a spec base whose runs the
-sensor adapter (:mod:`dospcot.tasks.adapters.sensor`) serves, named in messages by its section's env
+sensor adapter (:mod:`dospcot.adapters.sensor_adapter`) serves, named in messages by its section's env
 id, its demonstrations from a file or a saved agent, checked before anything trains."""
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 from dospcot.config.errors import ConfigError
 from dospcot.tasks.registry import Task
@@ -12,9 +13,15 @@ from dospcot.tasks.registry import Task
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
 
+MakeEnv = Callable[..., Any]
+"""``make_env(view, views, label_fraction, mask_seed)``: a masked sensor env of one agent's view
+(:class:`~dospcot.adapters.sensor_adapter.SensorAdapter`)."""
+
 
 class SensorTask(Task):
-    """A task the sensor adapter serves."""
+    """A task the sensor adapter serves, from the env factories it gives (:meth:`env_factories`)."""
+
+    adapter = "sensor"
 
     def title(self, cfg: TrainConfig) -> str:
         return getattr(cfg, self.section).env_id
@@ -42,3 +49,7 @@ class SensorTask(Task):
                 load_agent(demos.agent, demos.agent_algorithm)
         except ValueError as err:
             raise ConfigError(f"demonstrations.{err}") from None
+
+    def env_factories(self, cfg: TrainConfig) -> tuple[MakeEnv, MakeEnv]:
+        """The factories of a run's training envs and of its evaluation envs (one per view)."""
+        raise NotImplementedError

@@ -3,7 +3,7 @@
 This file holds steps 2 (select, fit, score per view, serially), 3 (the Eq. 9 pseudo-reward) and 5
 (ageing and stopping) for any number of views m and any agent kind: it sees only a pool of samples
 (features per view, labels, the unlabelled set), never an agent or the hidden rewards. The drivers
-that own the agents (the tabular one in :mod:`dospcot.core.tabular_cotraining`) collect the pool and
+that own the agents (the tabular one in :mod:`dospcot.core.tabular_runs`) collect the pool and
 apply steps 1 and 4.
 
 Everything is batched over B independent runs; each run has its own classifiers, labels, pool and
@@ -322,7 +322,7 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
 
 
 class RunCoTrainer:
-    """The co-trainer of one run (the SB3 runs of :mod:`dospcot.core.cotraining_run`): a
+    """The co-trainer of one run (the SB3 runs of :mod:`dospcot.core.sb3_round`): a
     :class:`SelfPacedCoTrainer` whose pools and results hold one run, so its callers never index a
     batch.
 

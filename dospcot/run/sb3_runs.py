@@ -34,10 +34,11 @@ import stable_baselines3
 from stable_baselines3.common.callbacks import BaseCallback
 from tqdm.auto import tqdm
 
+from dospcot.adapters import build_adapter
 from dospcot.config.run_configs import TrainConfig
-from dospcot.core.cotraining_run import CoTrainingRun
 from dospcot.core.queries import Rater
-from dospcot.core.raters import QueriesPending
+from dospcot.core.sb3_round import CoTrainingRun
+from dospcot.raters.file_rater import QueriesPending
 from dospcot.run.checks import check_config
 from dospcot.run.migrations import upgrade_run_state
 from dospcot.run.run_folder import (
@@ -155,7 +156,7 @@ def evaluate_cotraining_run(run_dir: Path, cfg: TrainConfig) -> dict[str, Any]:
         (a later resume would leave the file stale).
     """
     agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
-    policy = get_task(cfg.task).build(cfg).evaluate(agents)
+    policy = build_adapter(cfg).evaluate(agents)
     per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
     finished = (run_dir / SUMMARY_FILE).is_file()
     result = {

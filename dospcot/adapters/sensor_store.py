@@ -1,4 +1,4 @@
-"""The sensor adapter's stores (:mod:`dospcot.tasks.sensor`): every step the agents of a run took, with
+"""The sensor adapter's stores (:mod:`dospcot.tasks.sensor_tasks`): every step the agents of a run took, with
 every view of s and s' (:class:`StepStore`), or each (state key, action) pair once
 (:class:`KeyedStepStore`), and the wrapper that writes an agent's steps into one
 (:class:`SensorStoreWrapper`)."""
@@ -11,8 +11,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from dospcot.core.raters import encode_png
 from dospcot.policies.in_place_state import InPlaceState
+from dospcot.raters.file_rater import encode_png
 
 
 class StepStore(InPlaceState):

@@ -1,7 +1,7 @@
 """The grid adapter: what one co-training run on the masked grid world (``task = "grid"``,
 :mod:`dospcot.tasks.grid`) needs, for any deterministic discrete task (a toy-text env with ``P`` and ``s``).
 
-The round itself is :class:`~dospcot.core.cotraining_run.CoTrainingRun`'s; this adapter supplies what
+The round itself is :class:`~dospcot.core.sb3_round.CoTrainingRun`'s; this adapter supplies what
 a discrete task does differently (docs/design.md section 3):
 
 - **the store** pools (s, a) keys: a key's id is ``s * A + a``, so the reward table is indexed by
@@ -16,19 +16,17 @@ a discrete task does differently (docs/design.md section 3):
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from functools import partial
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 
 from dospcot import metrics
-from dospcot.core.cotrainer import RunPool
 from dospcot.core.key_pool import key_features
 from dospcot.core.queries import StoreQueries
 from dospcot.core.reward_classes import RunRewardClasses, episode_end_class_mask
+from dospcot.core.self_paced import RunPool
 from dospcot.demonstrations import expert_demonstrations
-from dospcot.envs import GridLayout, GridWorld, grid_views, view_blind_spots
 from dospcot.envs.masking import RewardMaskWrapper
 from dospcot.envs.tabular import TabularMDP
 from dospcot.envs.views import View, ViewObservationWrapper
@@ -126,7 +124,7 @@ MakeEnv = Callable[[], gym.Env]
 
 
 class GridAdapter(StoreQueries):
-    """The grid adapter of a run (:class:`~dospcot.core.cotraining_run.TaskAdapter`).
+    """The grid adapter of a run (:class:`~dospcot.core.sb3_round.TaskAdapter`).
 
     :param cfg: the run's config: its views, method, seed, label fraction, episode lengths
         (``env.episode_steps``, ``env.train_episode_steps``), reward classes and demonstrations.
@@ -268,24 +266,4 @@ class GridAdapter(StoreQueries):
         return None if self.demos is None else (self.demos.observations[view], self.demos.actions)
 
 
-def grid_world(cfg: TrainConfig) -> tuple[Callable[[], GridWorld], dict[str, View], GridLayout]:
-    """The env factory, the views (with the run's blind spots, if any) and the map of a grid config."""
-    env = cfg.env
-    layout = GridLayout.random(env.size, env.layout_seed, env.lava_density, env.wall_density)
-    make_env = partial(
-        GridWorld,
-        layout,
-        step_cost=env.step_cost,
-        lava_penalty=env.lava_penalty,
-        goal_reward=env.goal_reward,
-        exploring_starts=env.exploring_starts,
-    )
-    blind = (
-        view_blind_spots(layout, env.blind_spot_rate, cfg.seed, identical=env.blind_spots == "identical")
-        if env.blind_spot_rate > 0
-        else None
-    )
-    return make_env, grid_views(layout, env.patch_size, env.compass, blind, env.ray_encoding), layout
-
-
-__all__ = ["GridAdapter", "KeyStore", "StoreWrapper", "grid_world"]
+__all__ = ["GridAdapter", "KeyStore", "StoreWrapper"]

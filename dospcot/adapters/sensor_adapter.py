@@ -1,7 +1,7 @@
 """The sensor adapter: DOSPCoT on a sensor task (highway driving, or any gymnasium env with discrete
 actions: docs/your_env.md), m sensor views.
 
-The round itself is :class:`~dospcot.core.cotraining_run.CoTrainingRun`'s; this adapter supplies what
+The round itself is :class:`~dospcot.core.sb3_round.CoTrainingRun`'s; this adapter supplies what
 a continuous task does differently (docs/design.md section 3):
 
 - **the store**: a state is a sensor reading that never repeats exactly, so every stored step is one
@@ -35,16 +35,16 @@ from stable_baselines3.common.evaluation import evaluate_policy
 from stable_baselines3.common.monitor import Monitor
 from stable_baselines3.common.vec_env import DummyVecEnv
 
+from dospcot.adapters.sensor_store import KeyedStepStore, SensorStoreWrapper, StepStore
 from dospcot.config.errors import ConfigError
 from dospcot.config.task_sections import DemonstrationsConfig, GymConfig, HighwayConfig
-from dospcot.core.cotrainer import RunPool
 from dospcot.core.queries import StoreQueries
 from dospcot.core.reward_classes import QuantileRewardClasses, episode_end_class_mask
+from dospcot.core.self_paced import RunPool
 from dospcot.demonstrations import Demonstrations, load_agent, record_demonstrations
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.seeding import EVAL_SEED, agent_seed, demonstration_seed
-from dospcot.tasks.adapters.sensor_store import KeyedStepStore, SensorStoreWrapper, StepStore
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
@@ -68,13 +68,13 @@ class _RandomPolicy:
 
 
 class SensorAdapter(StoreQueries):
-    """The sensor adapter of a run (:class:`~dospcot.core.cotraining_run.TaskAdapter`).
+    """The sensor adapter of a run (:class:`~dospcot.core.sb3_round.TaskAdapter`).
 
     :param cfg: the run's config: its views, method, seed, label fraction and demonstrations.
     :param section: the task's section (:data:`SensorSection`); its ``episode_steps`` bound evaluation
         episodes and are ``R_max`` of the normalised score where ``max_return`` is None.
     :param make_env: ``make_env(view, views, label_fraction, mask_seed)`` builds a masked sensor env
-        observing ``view`` and recording ``views`` (:func:`dospcot.envs.highway.make_masked_highway`).
+        observing ``view`` and recording ``views`` (:func:`dospcot.envs.masked_highway.make_masked_highway`).
     :param make_eval_env: builds the evaluation envs, with ``make_env``'s arguments; None:
         ``make_env`` (they differ where training episodes have their own wrappers, e.g. exploring
         starts).

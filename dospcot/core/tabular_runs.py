@@ -11,15 +11,15 @@ One round, top to bottom (docs/design.md section 2), in :meth:`TabularCoTraining
    where the step was labelled (revealed by the mask), the pseudo-reward and its self-paced weight
    where admitted, weight 0 elsewhere. Every transition enters the run's store, deduplicated by
    (s, a) key.
-2. **Co-train** (method ``"cotrain"``): the store's labelled keys and unlabelled pool U go to the
-   :class:`~dospcot.core.cotrainer.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
+2. **Co-train** (method ``"dospcot"``): the store's labelled keys and unlabelled pool U go to the
+   :class:`~dospcot.core.self_paced.SelfPacedCoTrainer` (select, fit, score per view; Eq. 9).
 3. **Pseudo-reward**: the consensus classes become the run's reward table.
 4. **Policy update**: ``replay_sweeps`` synchronous weighted TD sweeps over the stored transitions.
 5. **Age**: the pace (admitted share of U) sets the next round's exploration rate.
 
 Baselines run the same loop with a fixed table: ``oracle`` (every key labelled), ``masked-zero``
 (masked rewards read as 0, weight 1) and ``labels-only`` (masked keys weight 0). Self-training is
-``cotrain`` with one view.
+``dospcot`` with one view.
 
 The hidden reward of a masked key reaches only :mod:`dospcot.metrics`.
 """
@@ -34,18 +34,18 @@ import numpy as np
 
 from dospcot import metrics
 from dospcot.config.learning_sections import TabularConfig
-from dospcot.core.cotrainer import Pool, SelfPacedCoTrainer
 from dospcot.core.key_pool import key_features
 from dospcot.core.reward_classes import RewardClasses
 from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
+from dospcot.core.self_paced import Pool, SelfPacedCoTrainer
 from dospcot.envs.masking import StateActionMask
 from dospcot.envs.tabular import TabularMDP
 from dospcot.policies.tabular import TabularAgents, check_agent_kind
 from dospcot.seeding import agent_seed
 
-METHODS: tuple[str, ...] = ("oracle", "masked-zero", "labels-only", "cotrain")
+METHODS: tuple[str, ...] = ("oracle", "masked-zero", "labels-only", "dospcot")
 """``oracle``: every key labelled; ``masked-zero``: masked rewards read as 0; ``labels-only``: masked
-steps drive no update; ``cotrain``: DOSPCoT with the run's views (m = 1 is self-training)."""
+steps drive no update; ``dospcot``: DOSPCoT with the run's views (m = 1 is self-training)."""
 
 
 @dataclass(frozen=True)
@@ -146,7 +146,7 @@ class TabularCoTraining:
 
     def _make_groups(self) -> list[tuple[list[int], SelfPacedCoTrainer, RewardClasses]]:
         """One co-trainer per (views, gamma): runs that share them are batched in one classifier."""
-        cotrain = [r for r, s in enumerate(self.specs) if s.method == "cotrain"]
+        cotrain = [r for r, s in enumerate(self.specs) if s.method == "dospcot"]
 
         def signature(r: int) -> tuple:
             return self.specs[r].views, self.specs[r].gamma
