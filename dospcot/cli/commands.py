@@ -200,10 +200,17 @@ def warn(command: str, warnings: list[str]) -> None:
 
 def _config(args: argparse.Namespace, command: str) -> int:
     """``dospcot config``: the resolved config as TOML, each key with its default and meaning."""
+    from dospcot.config.loading import config_table
     from dospcot.config.reference import annotated_toml, config_rows, sb3_dqn_docs
+    from dospcot.config.run_configs import TrainConfig
+    from dospcot.config.versions import moved_keys, versions_text
     from dospcot.tasks import get_task, load_config
 
     cfg = load_config(args.config, args.overrides)
+    given = config_table(args.config, args.overrides)
+    moved = (
+        {key: value for key, (value, _) in moved_keys(given).items()} if isinstance(cfg, TrainConfig) else {}
+    )
     table = get_task(cfg.task).config_table(cfg)
     rows = config_rows(type(cfg))
     if any(row.section == "dqn" and not row.meaning for row in rows.values()):  # SB3's words (imports torch)
@@ -211,8 +218,11 @@ def _config(args: argparse.Namespace, command: str) -> int:
     heading = shlex.join(
         ["dospcot", "config", args.config, *(a for o in args.overrides for a in ("--set", o))]
     )
-    heading += ": the resolved config; each comment gives the key's default and meaning"
-    print(annotated_toml(type(cfg), table, rows, heading), end="")
+    heading += (
+        f": the resolved config under version {cfg.defaults} of the defaults ({versions_text()}); "
+        "each comment gives the key's default and meaning"
+    )
+    print(annotated_toml(type(cfg), table, rows, heading, moved), end="")
     return 0
 
 

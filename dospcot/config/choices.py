@@ -7,6 +7,8 @@ from typing import Literal, get_args
 
 Method = Literal["oracle", "masked-zero", "labels-only", "dospcot", "reward-model"]
 """What rewards a run's agents learn from (:class:`~dospcot.config.run_configs.TrainConfig`'s ``method``)."""
+DEFAULT_VIEWS: tuple[str, ...] = ("coords", "patch")
+"""A run's views where its config names none (the grid's)."""
 OLD_METHOD_NAMES: dict[str, str] = {"cotrain": "dospcot"}
 """Earlier spellings of a method, still read from older configs and run files."""
 

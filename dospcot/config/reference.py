@@ -197,17 +197,33 @@ def config_reference(dqn_docs: Mapping[str, str] | None = None) -> str:
     return "\n".join(lines)
 
 
-def annotated_toml(cls: type, table: Mapping[str, Any], rows: Mapping[str, KeyRow], heading: str = "") -> str:
+def annotated_toml(
+    cls: type,
+    table: Mapping[str, Any],
+    rows: Mapping[str, KeyRow],
+    heading: str = "",
+    moved: Mapping[str, Any] | None = None,
+) -> str:
     """``table`` (a checked config of the root ``cls``, as its run folder's ``config.toml`` holds it)
     as TOML, each key followed by a comment with its default and its meaning from ``rows``
-    (:func:`config_rows`); sections ``table`` leaves out are left out."""
+    (:func:`config_rows`); sections ``table`` leaves out are left out.
+
+    :param moved: dotted key -> the default the config's version of the defaults gives it, for each key
+        whose default that version moved (:func:`dospcot.config.versions.moved_keys`); its comment
+        names the version's default and the first version's.
+    """
     lines = [f"# {heading}"] if heading else []
-    _annotate(cls, table, rows, "", lines)
+    _annotate(cls, table, rows, "", lines, moved or {})
     return "\n".join(lines) + "\n"
 
 
 def _annotate(
-    cls: type, table: Mapping[str, Any], rows: Mapping[str, KeyRow], section: str, lines: list[str]
+    cls: type,
+    table: Mapping[str, Any],
+    rows: Mapping[str, KeyRow],
+    section: str,
+    lines: list[str],
+    moved: Mapping[str, Any],
 ) -> None:
     nested = []
     if section:
@@ -221,7 +237,10 @@ def _annotate(
             continue
         row = rows.get(dotted)
         value = toml_value(table[field.name])
-        note = f"  # default {row.default}" + (f": {row.meaning}" if row.meaning else "") if row else ""
+        default = row.default if row else ""
+        if dotted in moved:
+            default = f"{toml_value(moved[dotted])} (defaults = 1: {row.default if row else '?'})"
+        note = f"  # default {default}" + (f": {row.meaning}" if row.meaning else "") if row else ""
         lines.append(f"{field.name} = {value}{note}")
     for nested_cls, nested_section in nested:
-        _annotate(nested_cls, table[nested_section.rsplit(".", 1)[-1]], rows, nested_section, lines)
+        _annotate(nested_cls, table[nested_section.rsplit(".", 1)[-1]], rows, nested_section, lines, moved)

@@ -12,7 +12,7 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
-from dospcot.config.choices import OLD_METHOD_NAMES, Method
+from dospcot.config.choices import DEFAULT_VIEWS, OLD_METHOD_NAMES, Method
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import (
     CoTrainingConfig,
@@ -22,6 +22,7 @@ from dospcot.config.learning_sections import (
     TrainingConfig,
 )
 from dospcot.config.task_sections import DemonstrationsConfig, EnvConfig, GymConfig, HighwayConfig
+from dospcot.config.versions import ADOPTED, FIRST
 
 RUN_AGENT_KINDS: tuple[str, ...] = ("esarsa_dqn", "dqn", "tabular")
 SELF_PACED_KEYS: frozenset[str] = frozenset(
@@ -50,6 +51,8 @@ class TrainConfig:
 
     :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
     :param seed: seeds the mask, the agents and the classifiers.
+    :param defaults: the version of the defaults the config was written against
+        (:mod:`dospcot.config.versions`); a key the config does not set takes that version's default.
     :param method: ``oracle``, ``masked-zero``, ``labels-only``, ``dospcot`` (DOSPCoT; one view is
         self-training) or ``reward-model`` (the peer without co-training: an ensemble of reward
         classifiers per view fitted on the labels alone rewards every unlabelled sample).
@@ -65,8 +68,9 @@ class TrainConfig:
 
     name: str = "run"
     seed: int = 0
+    defaults: int = ADOPTED
     method: Method = "dospcot"
-    views: tuple[str, ...] = ("coords", "patch")
+    views: tuple[str, ...] = DEFAULT_VIEWS
     agents: tuple[str, ...] = ()
     agent: str = "esarsa_dqn"
     task: str = "grid"
@@ -79,6 +83,8 @@ class TrainConfig:
     cotraining: CoTrainingConfig = field(default_factory=CoTrainingConfig)
     demonstrations: DemonstrationsConfig = field(default_factory=DemonstrationsConfig)
 
+    added_keys: ClassVar[dict[str, Any]] = {"defaults": FIRST}
+    """A run folder written before versions of the defaults existed was written against the first."""
     renamed_values: ClassVar[dict[str, dict[str, str]]] = {"method": OLD_METHOD_NAMES}
     """Values read under a newer spelling, by key: an older config's ``method = "cotrain"`` is today's
     ``"dospcot"``."""
@@ -220,13 +226,19 @@ class PaperConfig:
 
     :param name: the run's name: it writes under ``runs/<name>/<stamp>/``.
     :param seed: draws the labelled keys, the exploration streams and the classifiers.
+    :param defaults: the version of the defaults the config was written against
+        (:mod:`dospcot.config.versions`); no version moves a paper-protocol key.
     :param tabular: the hyperparameters every run of the protocol shares.
     """
 
     name: str = "paper"
     seed: int = 0
+    defaults: int = ADOPTED
     task: Literal["paper"] = "paper"
     tabular: TabularConfig = field(default_factory=TabularConfig)
+
+    added_keys: ClassVar[dict[str, Any]] = {"defaults": FIRST}
+    """A run folder written before versions of the defaults existed was written against the first."""
 
     def __post_init__(self) -> None:
         check_name_and_seed(self.name, self.seed)

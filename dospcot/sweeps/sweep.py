@@ -63,7 +63,6 @@ from dospcot.sweeps.sweep_spec import (
     stored_batch_seeds,
     trial_dir,
 )
-from dospcot.tasks import load_config
 
 
 def _command(trial: Trial) -> str:
@@ -91,7 +90,7 @@ def run_trial(sweep_dir: Path, trial: Trial) -> dict[str, Any]:
         if (run_dir / CONFIG_FILE).is_file():
             resume(run_dir, show_progress=False, command=_command(trial))
         else:
-            cfg = load_config(trial.config, trial.overrides())
+            cfg = trial.load_config()
             train_at(_fresh_trial_dir(sweep_dir, trial), cfg, show_progress=False, command=_command(trial))
     return json.loads((run_dir / SUMMARY_FILE).read_text())
 
@@ -113,7 +112,7 @@ def plan_jobs(
     batches: dict[tuple[str, tuple[tuple[str, str], ...]], list[Trial]] = {}
     started: dict[tuple[str, ...], list[Trial]] = {}
     for trial in trials:
-        cfg = load_config(trial.config, trial.overrides())
+        cfg = trial.load_config()
         cell = (trial.config, tuple(trial.params.items()))
         how = None if sweep_dir is None else started_as(sweep_dir, trial)
         if seeds_trainer(cfg) is not None:
@@ -164,7 +163,7 @@ def run_job(
     :param batch_seeds: as :func:`plan_jobs`'s: above 1, a train cell's job that has not started is a
         batch even of one seed, so that no seed's result depends on how the cell's seeds were grouped.
     """
-    cfg = load_config(trials[0].config, trials[0].overrides())
+    cfg = trials[0].load_config()
     how = started_as(sweep_dir, trials[0])
     if how is None:
         batched = batch_seeds > 1 and _can_batch(cfg)
@@ -200,7 +199,7 @@ def _run_batch(sweep_dir: Path, trials: list[Trial], progress: Callable[[float],
     if batch_members(run_dirs[0]) == [d.resolve() for d in run_dirs]:
         resume_batch(run_dirs[0], show_progress=False, commands=commands, progress=progress)
         return
-    cfgs = [load_config(trial.config, trial.overrides()) for trial in trials]
+    cfgs = [trial.load_config() for trial in trials]
     fresh = [_fresh_trial_dir(sweep_dir, trial) for trial in trials]
     train_batch_at(fresh, cfgs, commands=commands, progress=progress)
 
@@ -303,7 +302,7 @@ def _batch_seeds(sweep_dir: Path, given: int | None, trials: list[Trial], todo: 
     if given is None or given == stored or not todo:
         return stored
     started = sum(started_as(sweep_dir, trial) is not None for trial in trials)
-    if started and not any(_can_batch(load_config(t.config, t.overrides())) for t in trials):
+    if started and not any(_can_batch(t.load_config()) for t in trials):
         return stored  # no trial of it can batch (a paper sweep's run their cells' seeds together)
     if started:
         raise SweepError(

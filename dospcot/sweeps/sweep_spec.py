@@ -16,6 +16,7 @@ from typing import Any, Literal
 from dospcot.config.errors import ConfigError
 from dospcot.config.loading import parse_override
 from dospcot.config.run_configs import RunConfig
+from dospcot.config.versions import ADOPTED, FIRST
 from dospcot.run.run_folder import CONFIG_FILE, SUMMARY_FILE, write_json
 from dospcot.tasks import get_task, load_config, load_run_config
 
@@ -39,12 +40,16 @@ class SweepSpec:
     :param grid: config key -> the values it takes, as text (each read as TOML, else as a string).
     :param seeds: the seeds every combination runs with.
     :param overrides: ``key=value`` settings applied to every trial before the grid's.
+    :param defaults: the version of the defaults its trials resolve under where a config names none
+        (:mod:`dospcot.config.versions`): the adopted version when the sweep was made, so a sweep
+        means what it meant after the adopted version moves.
     """
 
     configs: tuple[str, ...]
     grid: dict[str, tuple[str, ...]] = field(default_factory=dict)
     seeds: tuple[int, ...] = (0,)
     overrides: tuple[str, ...] = ()
+    defaults: int = ADOPTED
 
     def to_dict(self) -> dict[str, Any]:
         """The spec as ``sweep.json`` holds it, with its format number."""
@@ -60,6 +65,7 @@ class SweepSpec:
             {k: tuple(v) for k, v in data["grid"].items()},
             tuple(data["seeds"]),
             tuple(data["overrides"]),
+            data.get("defaults", FIRST),
         )
 
     def cell_configs(self) -> list[RunConfig]:
@@ -67,12 +73,9 @@ class SweepSpec:
         task's check step: what the size checks (:func:`dospcot.run.sizes.check_sizes`) weigh."""
         seed = self.seeds[0] if self.seeds else 0
         return [
-            load_config(
-                config,
-                Trial(
-                    config, "", dict(zip(self.grid, values, strict=True)), seed, self.overrides
-                ).overrides(),
-            )
+            Trial(
+                config, "", dict(zip(self.grid, values, strict=True)), seed, self.overrides, self.defaults
+            ).load_config()
             for config in self.configs
             for values in product(*self.grid.values())
         ]
@@ -92,8 +95,8 @@ class SweepSpec:
             for values in product(*self.grid.values()):
                 params = dict(zip(keys, values, strict=True))
                 for index, seed in enumerate(self.seeds):
-                    trial = Trial(config, "", params, seed, self.overrides)
-                    cfg = load_config(config, trial.overrides())
+                    trial = Trial(config, "", params, seed, self.overrides, self.defaults)
+                    cfg = trial.load_config()
                     if index == 0 and check_task:  # the seed changes nothing the check step reads
                         get_task(cfg.task).check(cfg)
                     trials.append(replace(trial, name=cfg.name))
@@ -118,6 +121,7 @@ class Trial:
     params: dict[str, str]
     seed: int
     base_overrides: tuple[str, ...] = ()
+    defaults: int = ADOPTED
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> Trial:
@@ -128,7 +132,12 @@ class Trial:
             dict(data["params"]),
             int(data["seed"]),
             tuple(data["base_overrides"]),
+            data.get("defaults", FIRST),
         )
+
+    def load_config(self) -> RunConfig:
+        """The trial's checked config, under its sweep's version of the defaults."""
+        return load_config(self.config, self.overrides(), self.defaults)
 
     def overrides(self) -> list[str]:
         """The ``--set`` list of this trial: the sweep's overrides, the grid values, the seed."""
@@ -298,7 +307,7 @@ def stale_trials(sweep_dir: Path, trials: Sequence[Trial]) -> list[tuple[str, st
         path = trial_dir(sweep_dir, trial) / CONFIG_FILE
         if not path.is_file():
             continue
-        stored, current = load_run_config(path), load_config(trial.config, trial.overrides())
+        stored, current = load_run_config(path), trial.load_config()
         if stored != current:
             old, new = _flat(stored.to_dict()), _flat(current.to_dict())
             key = next(k for k in sorted(old.keys() | new.keys()) if old.get(k) != new.get(k))

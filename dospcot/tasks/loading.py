@@ -12,10 +12,11 @@ from typing import Any
 from dospcot.config.errors import ConfigError
 from dospcot.config.loading import config_table, from_mapping, given_keys, read_config_data, renamed_to_now
 from dospcot.config.run_configs import PaperConfig, RunConfig, TrainConfig
+from dospcot.config.versions import fit_budget, version_of, with_version_defaults
 from dospcot.tasks.registry import get_task
 
 
-def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
+def load_config(config: str, overrides: Sequence[str] = (), defaults: int | None = None) -> RunConfig:
     """Read a preset or a TOML file, apply ``--set`` overrides and check the result (no I/O beyond the
     file): the root dataclass of its task (``task``, default ``"grid"``), a
     :class:`~dospcot.config.run_configs.PaperConfig` for ``"paper"``, else a
@@ -25,9 +26,15 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
     another (:func:`~dospcot.config.loading.given_keys`), is refused
     (:meth:`~dospcot.config.run_configs.TrainConfig.check_read`).
 
+    :param defaults: the version of the defaults (:mod:`dospcot.config.versions`) where neither the file
+        nor ``overrides`` names one (a sweep's trials resolve under the sweep's version); None: the
+        adopted version.
     :raises ConfigError: one line naming the first bad key and what is allowed.
     """
-    cfg = config_from_table(config_table(config, overrides))
+    table = config_table(config, overrides)
+    if defaults is not None:
+        table.setdefault("defaults", defaults)
+    cfg = config_from_table(table)
     if isinstance(cfg, TrainConfig):
         in_file, set_here = given_keys(config, overrides)
         cfg.check_read(in_file | set_here)
@@ -35,10 +42,18 @@ def load_config(config: str, overrides: Sequence[str] = ()) -> RunConfig:
 
 
 def config_from_table(data: Mapping[str, Any]) -> RunConfig:
-    """The checked config of a table (as a TOML file holds it): every key and type, then its task."""
+    """The checked config of a table (as a TOML file holds it): the defaults of its version
+    (:mod:`dospcot.config.versions`) where it sets nothing, every key and type, then its task."""
     task = get_task(data.get("task", "grid"))
-    _check_kind(task.config_type(), data)
-    cfg = from_mapping(task.config_type(), data)
+    cls = task.config_type()
+    _check_kind(cls, data)
+    version_of(data)  # an unknown version, before any key it would have moved
+    if cls is not TrainConfig:  # no version moves a paper-protocol key
+        cfg = from_mapping(cls, data)
+    else:
+        cfg = from_mapping(cls, with_version_defaults(data))
+        if (fitted := fit_budget(data, task.most_samples(cfg))) is not None:
+            cfg = from_mapping(cls, with_version_defaults(fitted))
     task.check_config(cfg)
     return cfg
 

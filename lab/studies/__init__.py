@@ -69,6 +69,7 @@ from dospcot_lab.studies import (
     budget_classes,
     budget_confirm,
     budget_explore,
+    defaults,
     grid_studies,
     highway_studies,
     label_sources,
@@ -113,6 +114,7 @@ STUDIES: dict[str, Study] = {
     **budget_classes.STUDIES,
     **budget_confirm.STUDIES,
     **numerics.STUDIES,
+    **defaults.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 
@@ -175,6 +177,7 @@ def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = (), first_se
         sweep.grid,
         tuple(range(first_seed, first_seed + (sweep.seeds or seeds))),
         (*sweep.overrides(), *overrides),
+        sweep.defaults,
     )
 
 

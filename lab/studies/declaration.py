@@ -7,23 +7,27 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from dospcot.config.versions import FIRST
 from dospcot.sweeps.report import TrialRun
 
 
 @dataclass(frozen=True)
 class Sweep:
     """One sweep of a study: its folder's name under --runs-dir, its configs and its grid; how many
-    seeds train per batch (docs/batched_seeds.md), where the study fixes it (None: the command's
-    ``--batch-seeds``); and the numerics version its runs train under (``cotraining.numerics``, set
-    for every trial, so the sweep keeps it when the default moves; None: the sweep's grid varies it,
-    or its configs have no co-training key, as the paper protocol's). The record's earlier studies
-    keep 1, the version their runs were trained under; the future-work studies pin 2."""
+        seeds train per batch (docs/batched_seeds.md), where the study fixes it (None: the command's
+        ``--batch-seeds``); and the numerics version its runs train under (``cotraining.numerics``, set
+        for every trial, so the sweep keeps it when the default moves; None: the sweep's grid varies it,
+        or its configs have no co-training key, as the paper protocol's). The record's earlier studies
+        keep 1, the version their runs were trained under; the future-work studies pin 2. Likewise the version
+    of the defaults its trials resolve under (``defaults``, :mod:`dospcot.config.versions`): every study
+    of the record was declared under the first."""
 
     name: str
     configs: tuple[str, ...]
     grid: dict[str, tuple[str, ...]]
     batch_seeds: int | None = None
     numerics: int | None = 1
+    defaults: int = FIRST
     seeds: int | None = None
     """Its own seed count, where it is another study's sweep reused with more seeds than this study
     runs (None: the study's)."""

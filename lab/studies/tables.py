@@ -191,6 +191,17 @@ def held_lines(
     ]
 
 
+NON_INFERIORITY_MARGIN = 0.05
+"""How far below 0 the lower end of a paired difference's 95% interval (new minus old) may lie for a
+new default to replace an old one: non-inferiority, not equivalence, since a change may improve."""
+
+
+def non_inferior(diff: SeedSummary, margin: float = NON_INFERIORITY_MARGIN) -> bool:
+    """Whether the paired difference new minus old shows the new no worse than ``margin``: the lower
+    end of its 95% interval lies above ``-margin``."""
+    return diff.n > 0 and diff.low > -margin
+
+
 def verdict(diff: SeedSummary, ours: str = "DOSPCoT", theirs: str = "self-training") -> str:
     """What a paired difference ``ours`` minus ``theirs`` shows: one above the other where its 95%
     interval excludes 0, else no difference."""

@@ -57,7 +57,7 @@ def test_the_results_at_a_glance_and_the_readme_blocks_come_from_the_same_record
             assert read_block(README, f"{name}-table") == result.readme
 
 
-REGISTERED_BEFORE_RUNS = {"budget"}
+REGISTERED_BEFORE_RUNS = {"budget", "defaults"}
 """Studies committed with their pre-registration before their first run: the only ones whose record
 may hold no run."""
 

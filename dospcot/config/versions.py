@@ -1,0 +1,174 @@
+"""Versions of the defaults: a config names the version of the defaults it was written against
+(``defaults = N``), so a default can move without restating what an older config, run folder or sweep
+meant.
+
+A config without the key gets :data:`ADOPTED`. Each version after 1 lists the keys whose default it
+moves (:class:`MovedDefault`); a key the config sets itself keeps its value whatever the version. A
+version's rule may depend on the config's method and views (a strategy that asks where two views
+disagree needs two views), and a rule that returns None leaves the key at the earlier default.
+
+Version 2 is a **candidate**: the settings under which the label-budget study's DOSPCoT reached 90% of
+the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on. It becomes
+the version a config without the key gets only when the non-inferiority study of the record decides
+for it (docs/guide/defaults.md); until then ``defaults = 2`` opts in. Nothing here imports torch.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from dospcot.config.choices import DEFAULT_VIEWS, method_name
+from dospcot.config.errors import ConfigError
+from dospcot.config.learning_sections import CoTrainingConfig
+
+ADOPTED = 1
+"""The version of the defaults a config without ``defaults`` gets."""
+
+FIRST = 1
+"""The version every config, run folder and sweep written before versions existed was written against."""
+
+REWARD_LEARNERS = ("dospcot", "reward-model")
+"""The methods whose classifiers reward unlabelled samples, and so may query a rater."""
+
+BUDGET = 100
+"""Version 2's label budget: the answers a run may buy, whatever its length (lowered to the samples a
+short run meets, :func:`fit_budget`)."""
+
+
+@dataclass(frozen=True)
+class MovedDefault:
+    """One key whose default a version moves.
+
+    :param key: the dotted key (``training.exploration``).
+    :param value: the version's default for a config table (its method, views, task), or None where the
+        key keeps the earlier version's default for that config.
+    :param why: the study of the record that supports the move, in a few words.
+    """
+
+    key: str
+    value: Callable[[Mapping[str, Any]], Any]
+    why: str
+
+
+def _method(table: Mapping[str, Any]) -> str:
+    return method_name(str(table.get("method", "dospcot")))
+
+
+def _learns_rewards(table: Mapping[str, Any]) -> bool:
+    return _method(table) in REWARD_LEARNERS
+
+
+def _strategy(table: Mapping[str, Any]) -> str | None:
+    """Episode ends first, then where the views (or the reward model's members) disagree; a run with one
+    classifier asks where it is least sure instead."""
+    if not _learns_rewards(table):
+        return None
+    classifiers = len(table.get("views", DEFAULT_VIEWS))
+    if _method(table) == "reward-model":
+        classifiers *= int(table.get("cotraining", {}).get("ensemble_size", CoTrainingConfig.ensemble_size))
+    return "outcomes+disagreement" if classifiers >= 2 else "outcomes+uncertainty"
+
+
+def _when_learning(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    return lambda table: value if _learns_rewards(table) else None
+
+
+def _grid_only(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    return lambda table: value if table.get("task", "grid") == "grid" and _learns_rewards(table) else None
+
+
+VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
+    1: (),
+    2: (
+        MovedDefault(
+            "training.exploration",
+            lambda table: "rounds",
+            "budget study: exploration by rounds, not by the pace of pseudo-rewards",
+        ),
+        MovedDefault("training.agent_draws", lambda table: "own", "budget study: each agent its own draws"),
+        MovedDefault("training.label_strategy", _strategy, "budget study: outcomes+disagreement"),
+        MovedDefault("training.query_schedule", _when_learning("decay"), "budget study: a decaying schedule"),
+        MovedDefault("training.label_budget", _when_learning(BUDGET), "budget study: 100 labels"),
+        MovedDefault(
+            "cotraining.refit_new_classes", _when_learning(True), "budget study: the refit on a new class"
+        ),
+        MovedDefault(
+            "env.episode_end_classes", _grid_only(True), "budget study: grid16's episode-end classes"
+        ),
+    ),
+}
+"""Each version's moved defaults, on top of the version before it."""
+
+CANDIDATES = frozenset({2})
+"""Versions a config may opt into that no study has adopted yet."""
+
+
+def version_of(table: Mapping[str, Any]) -> int:
+    """The version of the defaults ``table`` was written against: its ``defaults``, else :data:`ADOPTED`.
+
+    :raises ConfigError: an unknown version.
+    """
+    version = table.get("defaults", ADOPTED)
+    if isinstance(version, bool) or not isinstance(version, int) or version not in VERSIONS:
+        raise ConfigError(f"defaults: unknown version {version!r}; {versions_text()}")
+    return version
+
+
+def versions_text() -> str:
+    """The versions in words, for messages and ``dospcot config``."""
+    words = []
+    for version in VERSIONS:
+        state = " (adopted)" if version == ADOPTED else " (candidate)" if version in CANDIDATES else ""
+        words.append(f"{version}{state}")
+    return "the versions: " + ", ".join(words)
+
+
+def moved_keys(table: Mapping[str, Any]) -> dict[str, tuple[Any, str]]:
+    """The keys ``table``'s version moves for it and that it does not set itself: dotted key -> (the
+    version's value, why)."""
+    version = version_of(table)
+    moved: dict[str, tuple[Any, str]] = {}
+    for number in range(FIRST + 1, version + 1):
+        for rule in VERSIONS[number]:
+            value = rule.value(table)
+            if value is not None and not _has(table, rule.key):
+                moved[rule.key] = (value, rule.why)
+    return moved
+
+
+def with_version_defaults(table: Mapping[str, Any]) -> dict[str, Any]:
+    """``table`` with the defaults its version moves filled in where it sets nothing itself."""
+    out = _copy(table)
+    for key, (value, _) in moved_keys(table).items():
+        *sections, name = key.split(".")
+        part = out
+        for section in sections:
+            part = part.setdefault(section, {})
+        part[name] = value
+    return out
+
+
+def fit_budget(table: Mapping[str, Any], most_samples: int) -> dict[str, Any] | None:
+    """``table`` with the version's label budget lowered to ``most_samples`` (a run too short to meet
+    :data:`BUDGET` samples), or None where the budget is the config's own or fits."""
+    moved = moved_keys(table)
+    if "training.label_budget" not in moved or moved["training.label_budget"][0] <= most_samples:
+        return None
+    out = _copy(table)
+    out.setdefault("training", {})["label_budget"] = most_samples
+    return out
+
+
+def _has(table: Mapping[str, Any], key: str) -> bool:
+    part: Any = table
+    for name in key.split("."):
+        if not isinstance(part, Mapping) or name not in part:
+            return False
+        part = part[name]
+    return True
+
+
+def _copy(table: Mapping[str, Any]) -> dict[str, Any]:
+    return {k: _copy(v) if isinstance(v, Mapping) else v for k, v in table.items()}

@@ -1,0 +1,98 @@
+"""The defaults study: version 2 of the defaults against version 1, paired by seed on
+``grid16-dospcot`` and ``minigrid-doorkey-dospcot``, each config giving only its preset (so every
+moved default takes its version's value). Version 2 replaces version 1 as the adopted version where,
+on both presets, the lower end of the 95% interval of (version 2 minus version 1) lies above -0.05
+for success and for pseudo-reward accuracy (non-inferiority; docs/guide/defaults.md)."""
+
+from __future__ import annotations
+
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.tables import (
+    NON_INFERIORITY_MARGIN,
+    cpu_per_run,
+    held_lines,
+    non_inferior,
+    over_seeds,
+    paired,
+)
+
+PRESETS = ("grid16-dospcot", "minigrid-doorkey-dospcot")
+METRICS = ("success", "pseudo_accuracy")
+VERSIONS = (1, 2)
+
+
+def _version(run: TrialRun) -> int:
+    return int(run.trial.params.get("defaults", 1))
+
+
+def _by_seed(runs: list[TrialRun], preset: str, version: int) -> dict[int, TrialRun]:
+    return {r.trial.seed: r for r in runs if r.trial.config == preset and _version(r) == version}
+
+
+def _differences(runs: list[TrialRun], preset: str) -> dict[str, SeedSummary]:
+    """Per metric: version 2 minus version 1, paired by seed."""
+    new, old = _by_seed(runs, preset, 2), _by_seed(runs, preset, 1)
+    return {metric: paired(new, old, metric) for metric in METRICS}
+
+
+def tables(runs: list[TrialRun]) -> list[str]:
+    """Per preset and version: success, pseudo-reward accuracy, labels and CPU time per run; then each
+    difference, version 2 minus 1, against the non-inferiority margin."""
+    lines = [
+        "",
+        "| preset | defaults | success | pseudo-reward accuracy | labels | CPU time per run | seeds |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for preset in PRESETS:
+        for version in VERSIONS:
+            members = list(_by_seed(runs, preset, version).values())
+            if members:
+                cells = " | ".join(over_seeds(members, m) for m in (*METRICS, "labelled_steps"))
+                lines.append(
+                    f"| `{preset}` | {version} | {cells} | {cpu_per_run(members)} | {len(members)} |"
+                )
+    bound = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
+    differences = {preset: _differences(runs, preset) for preset in PRESETS}
+    return [
+        *lines,
+        "",
+        "Version 2 minus version 1, paired by seed:",
+        "",
+        *held_lines(differences, non_inferior, bound),
+    ]
+
+
+def glance(runs: list[TrialRun]) -> Glance:
+    """The headline: DoorKey's success, version 2 minus 1 (grid16's until DoorKey is measured); the
+    verdict: adopt version 2 only where every difference on both presets is non-inferior."""
+    differences = {preset: _differences(runs, preset) for preset in PRESETS}
+    measured = [preset for preset in PRESETS if differences[preset]["success"].n]
+    if not measured:
+        return Glance("defaults 2 minus 1: not measured yet", "not measured yet")
+    diffs = [d for by_metric in differences.values() for d in by_metric.values() if d.n]
+    if not all(non_inferior(d) for d in diffs):
+        verdict = "version 2 not shown non-inferior: version 1 stays adopted"
+    elif len(measured) < len(PRESETS):
+        verdict = "not measured yet (a preset lacks one version's runs)"
+    else:
+        verdict = "version 2 non-inferior: adopt it"
+    preset = measured[-1]
+    headline = f"{preset} success, defaults 2 minus 1, paired by seed: {differences[preset]['success']}"
+    return Glance(headline, verdict)
+
+
+STUDIES: dict[str, Study] = {
+    "defaults": Study(
+        (
+            Sweep("defaults-1", PRESETS, {"defaults": ("1",)}, batch_seeds=1),
+            Sweep("defaults-2", PRESETS, {"defaults": ("2",)}, batch_seeds=1),
+        ),
+        tables,
+        "Version 2 of the defaults against version 1",
+        "grid16 (layout 0) and MiniGrid DoorKey-5x5",
+        glance,
+        seeds=20,
+    ),
+}

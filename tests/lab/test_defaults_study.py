@@ -1,0 +1,57 @@
+"""The defaults study (lab/studies/defaults.py) on hand-made runs: version 2 is adopted only where every
+paired difference on both presets is non-inferior, and its sweeps train each preset under both
+versions with nothing else set."""
+
+import json
+from pathlib import Path
+
+from dospcot.sweeps.report import TrialRun
+from dospcot.sweeps.sweep import Trial
+from dospcot_lab.studies import STUDIES, sweep_spec
+from dospcot_lab.studies.defaults import glance, tables
+
+
+def _run(tmp_path: Path, preset: str, seed: int, version: int, success: float) -> TrialRun:
+    run_dir = tmp_path / f"{preset}-{version}-{seed}"
+    run_dir.mkdir()
+    (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0}))
+    summary = {"mean": {"success": success, "pseudo_accuracy": 0.9, "labelled_steps": 100.0 * version}}
+    return TrialRun(Trial(preset, preset, {"defaults": str(version)}, seed), summary, [], run_dir)
+
+
+def test_version_2_is_adopted_only_where_both_presets_are_non_inferior(tmp_path):
+    runs = [
+        _run(tmp_path, preset, seed, version, 0.8 + 0.05 * (version == 2) * (seed % 2))
+        for preset in ("grid16-dospcot", "minigrid-doorkey-dospcot")
+        for seed in range(6)
+        for version in (1, 2)
+    ]
+    text = "\n".join(tables(runs))
+    assert (
+        "| `grid16-dospcot` | 2 | 0.825 [0.808, 0.842] | 0.900 [0.900, 0.900] | 200.0 [200.0, 200.0] |"
+        in text
+    )
+    assert text.count("**held**") == 4
+    assert glance(runs).verdict == "version 2 non-inferior: adopt it"
+    assert glance([r for r in runs if r.trial.config == "grid16-dospcot"]).verdict.startswith(
+        "not measured yet"
+    )
+    # DoorKey's version 2 losing half its successes: the lower end falls far below -0.05
+    worse = [
+        r for r in runs if not (r.trial.config.startswith("minigrid") and r.trial.params["defaults"] == "2")
+    ]
+    (tmp_path / "worse").mkdir()
+    worse += [_run(tmp_path / "worse", "minigrid-doorkey-dospcot", s, 2, 0.8 * (s % 2)) for s in range(6)]
+    assert glance(worse).verdict == "version 2 not shown non-inferior: version 1 stays adopted"
+    assert "**not met**" in "\n".join(tables(worse))
+
+
+def test_the_studys_sweeps_train_each_preset_under_both_versions_and_pin_nothing_else():
+    sweeps = STUDIES["defaults"].sweeps
+    trials = [t for sweep in sweeps for t in sweep_spec(sweep, 20).trials(check_task=False)]
+    assert {(t.config, t.params["defaults"]) for t in trials} == {
+        (preset, version) for preset in ("grid16-dospcot", "minigrid-doorkey-dospcot") for version in "12"
+    }
+    assert sorted({t.seed for t in trials}) == list(range(20))
+    first = {t.load_config().defaults for t in trials}
+    assert first == {1, 2}

@@ -1,0 +1,99 @@
+"""Versions of the defaults (dospcot/config/versions.py): a config without ``defaults`` gets the adopted
+version, a key the config sets keeps its value under any version, a run folder written before versions
+existed reads as version 1, and ``dospcot config`` names each moved default's first value."""
+
+from __future__ import annotations
+
+import pytest
+import tomli_w
+
+from dospcot.cli import main
+from dospcot.config.errors import ConfigError
+from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS
+from dospcot.tasks import load_config, load_run_config
+
+
+def _moved(preset: str, *overrides: str) -> tuple:
+    cfg = load_config(preset, ["defaults=2", *overrides])
+    t = cfg.training
+    return (t.exploration, t.agent_draws, t.label_strategy, t.query_schedule, t.label_budget)
+
+
+def test_a_config_without_the_key_gets_the_adopted_version_and_version_1_is_the_dataclasses():
+    assert ADOPTED == 1 and VERSIONS[1] == ()
+    cfg = load_config("grid16-dospcot")
+    assert cfg.defaults == 1
+    t = cfg.training
+    assert (t.exploration, t.agent_draws, t.label_strategy, t.label_budget) == (
+        "pace",
+        "shared",
+        "uniform",
+        0,
+    )
+    assert not cfg.cotraining.refit_new_classes and not cfg.env.episode_end_classes
+
+
+def test_version_2_moves_what_each_method_and_view_count_can_use():
+    two_views = ("rounds", "own", "outcomes+disagreement", "decay", BUDGET)
+    assert _moved("grid16-dospcot") == two_views
+    assert _moved("grid16-self-training") == ("rounds", "own", "outcomes+uncertainty", "decay", BUDGET)
+    # The oracle asks no rater: only exploration and draws move.
+    assert _moved("grid16-oracle") == ("rounds", "own", "uniform", "asap", 0)
+    # A reward model of one view with three members asks where its members disagree.
+    assert _moved("grid16-dospcot", 'method="reward-model"', 'views=["coords"]')[2] == "outcomes+disagreement"
+    cfg = load_config("grid16-dospcot", ["defaults=2"])
+    assert cfg.cotraining.refit_new_classes and cfg.env.episode_end_classes
+
+
+def test_a_key_the_config_sets_keeps_its_value_under_version_2():
+    assert _moved("grid16-dospcot", 'training.exploration="pace"', "training.label_budget=40")[::4] == (
+        "pace",
+        40,
+    )
+    # A preset that sets its strategy keeps it (the fast highway's reward model asks by disagreement).
+    assert _moved("fasthighway-reward-model")[2] == "disagreement"
+
+
+def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
+    cfg = load_config("tiny", ["defaults=2", "training.rounds=1", "training.steps_per_round=30"])
+    assert cfg.training.label_budget == 60 < BUDGET  # 1 round x 30 steps x 2 views
+    with pytest.raises(ConfigError, match="label_budget: 500 answers cannot be spent"):
+        load_config(
+            "tiny",
+            ["defaults=2", "training.rounds=1", "training.steps_per_round=30", "training.label_budget=500"],
+        )
+
+
+def test_an_unknown_version_is_one_line_naming_the_versions():
+    with pytest.raises(
+        ConfigError, match=r"^defaults: unknown version 3; the versions: 1 \(adopted\), 2 \(candidate\)$"
+    ):
+        load_config("tiny", ["defaults=3"])
+    with pytest.raises(ConfigError, match="unknown version True"):
+        load_config("tiny", ["defaults=true"])
+
+
+def test_no_version_moves_a_paper_protocol_key():
+    assert load_config("paper-text", ["defaults=2"]).tabular == load_config("paper-text").tabular
+
+
+def test_a_run_folder_written_before_versions_reads_as_version_1(tmp_path):
+    for preset in ("tiny", "paper-text"):
+        old = load_config(preset).to_dict()
+        del old["defaults"]
+        (tmp_path / "config.toml").write_text(tomli_w.dumps(old))
+        assert load_run_config(tmp_path / "config.toml").defaults == 1
+    # A folder written under version 2 holds every key: it reads back whatever the adopted version.
+    cfg = load_config("tiny", ["defaults=2"])
+    (tmp_path / "config.toml").write_text(tomli_w.dumps(cfg.to_dict()))
+    assert load_run_config(tmp_path / "config.toml") == cfg
+
+
+def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(capsys):
+    assert main(["config", "tiny", "--set", "defaults=2"]) == 0
+    out = capsys.readouterr().out
+    assert "under version 2 of the defaults (the versions: 1 (adopted), 2 (candidate))" in out.splitlines()[0]
+    assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
+    assert "refit_new_classes = true  # default true (defaults = 1: false)" in out
+    assert main(["config", "tiny"]) == 0
+    assert "(defaults = 1:" not in capsys.readouterr().out
