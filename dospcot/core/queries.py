@@ -20,7 +20,9 @@ it is asked about (:mod:`dospcot.core.raters`).
 - ``"random"``: the budget spent at random over the samples met (the active strategies' direct control);
 - ``"outcomes"``: the queries first cover the kinds of step an agent sees without a reward: steps that
   ended an episode, steps cut by the time limit, and the rest, each kind an equal floor of the round's
-  queries (a kind with fewer candidates gives its remainder to the next);
+  queries (a kind with fewer candidates gives its remainder to the next); the episode ends' floor
+  spreads over the distinct states the ends reached, those no label has shown first, before it asks
+  about one twice (:func:`spread_ends`);
 - ``"uncertainty"``: the smallest margin between the two most likely classes, mean over the views'
   classifiers (uncertainty sampling; one view: self-training's partner);
 - ``"disagreement"`` (co-testing, Muslea et al.): samples whose views' classifiers predict different
@@ -74,6 +76,10 @@ class QueriedTask(Protocol):
     def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
         """(N,) bool each: the samples that ended their episode, and those cut by the time limit."""
 
+    def end_states(self, ids: np.ndarray) -> np.ndarray:
+        """The states samples ``ids`` led to, as :data:`EndStates` describes them (read by
+        ``"outcomes"`` alone)."""
+
     def describe(self, sample: int) -> dict[str, Any]:
         """What a person is shown of a sample: its key or step."""
 
@@ -96,6 +102,10 @@ class StoreQueries:
         """The hidden rewards of samples ``ids``: for the simulated rater alone, never a learner."""
         return self.store.hidden_reward[ids]
 
+
+EndStates = Callable[[np.ndarray], np.ndarray]
+"""Describes the states that samples ``ids`` led to (their s'): (len(ids),) int keys on a pool whose
+states have keys, else (len(ids), d) float features (every view of s', flattened)."""
 
 ProbabilitiesOf = Callable[[], "np.ndarray | None"]
 """Returns the (m, N, K) class probabilities of the task's pool, or None before any classifier was fit."""
@@ -176,19 +186,125 @@ def disagreement_order(probabilities: np.ndarray) -> np.ndarray:
     return np.lexsort((np.arange(disagree.size), secondary, ~disagree))
 
 
+def spread_ends(
+    ends: np.ndarray,
+    n: int,
+    end_states: EndStates,
+    labelled_ends: np.ndarray,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """``n`` of the episode ends ``ends`` (sample ids), spread over the distinct states they reached.
+
+    Where ends are many and alike (a sparse task's failures), a rare end (its goal) is one distinct
+    state among few, so covering the distinct states asks about it early, where a draw at random among
+    the ends would wait for it in proportion to how rare it is.
+
+    Each pick takes a sample of the end state asked about least so far, counting the labelled ends
+    ``labelled_ends`` (earlier rounds' answers, the mask's, demonstrations') as asked: no state is
+    asked twice before every state was asked once, and one no label has shown comes first. Ties go to
+    the state farthest from every state asked (features only: a k-center / farthest-point traversal),
+    then to the state with the fewest candidate ends (the rarer outcome), then at random.
+
+    States are told apart by their key where ``end_states`` gives keys. From features, two ends share a
+    state when their features agree to 6 decimals (float noise of a stored view is not a new state);
+    distances are Euclidean over the features scaled to unit spread (a constant feature to 1), so no
+    view's units outweigh another's; with no labelled end, the first pick is the state farthest from
+    the ends' mean, the most unusual end. Farthest-point is deterministic given its start and costs
+    O(n x states x d), which a round's few hundred ends make cheap, where a clustering (k-means) would
+    need restarts and a chosen k.
+
+    :param ends: (E,) int, the candidate samples that ended their episode.
+    :param n: how many to choose (at most E).
+    :param end_states: describes each sample's end state (:data:`EndStates`).
+    :param labelled_ends: (L,) int, the labelled samples that ended their episode.
+    :param rng: the round's query stream: the order within a state, and the last tie-break.
+    :return: (min(n, E),) int sample ids in the order chosen.
+    """
+    n = min(n, ends.size)
+    if n <= 0:
+        return np.zeros(0, dtype=np.int64)
+    ends = np.sort(ends)  # the choice depends on the seed, not on the order the ends came in
+    described = np.asarray(end_states(np.concatenate([ends, labelled_ends]).astype(np.int64)))
+    keyed = described.ndim == 1
+    if keyed:
+        _, group = np.unique(described, return_inverse=True)
+    else:
+        # + 0.0 turns -0.0 into 0.0, so that rounding never splits one state in two.
+        described = np.round(described.reshape(described.shape[0], -1).astype(np.float64), 6) + 0.0
+        _, first, group = np.unique(described, axis=0, return_index=True, return_inverse=True)
+    group = group.reshape(-1)
+    states = int(group.max()) + 1
+    candidate_state, labelled_state = group[: ends.size], group[ends.size :]
+    size = np.bincount(candidate_state, minlength=states)
+    asked = np.bincount(labelled_state, minlength=states)
+    # Squared distances: the same order as distances, and each update one matrix-vector product.
+    distance = np.zeros(states)
+    if not keyed:
+        spread = described.std(axis=0)
+        scaled = described / np.where(spread > 0, spread, 1.0)
+        points = scaled[first]  # one point per state, in state order
+        norms = np.einsum("ij,ij->i", points, points)
+
+        def squared_from(state: int) -> np.ndarray:
+            return np.maximum(norms + norms[state] - 2.0 * (points @ points[state]), 0.0)
+
+        if labelled_ends.size:
+            distance = np.full(states, np.inf)
+            for seen in np.unique(labelled_state):
+                distance = np.minimum(distance, squared_from(int(seen)))
+        else:
+            distance = ((points - scaled[: ends.size].mean(axis=0)) ** 2).sum(axis=1)
+    rank = rng.permutation(states)
+    # Each state's candidates in a random order: a state asked again gives its next one.
+    order = rng.permutation(ends.size)
+    order = order[np.argsort(candidate_state[order], kind="stable")]
+    start = np.concatenate([[0], np.cumsum(size)[:-1]])
+    taken = np.zeros(states, dtype=np.int64)
+    chosen: list[int] = []
+    for _ in range(n):
+        open_ = np.flatnonzero(taken < size)
+        # Rounded, so that float noise never breaks a tie between equally far states (equidistant
+        # one-hot cells): those go to the fewest candidates.
+        far = np.round(distance[open_], 6)
+        # lexsort sorts by its last key first: least asked, farthest, fewest candidates, at random.
+        best = open_[np.lexsort((rank[open_], size[open_], -far, asked[open_]))[0]]
+        chosen.append(int(ends[order[start[best] + taken[best]]]))
+        taken[best] += 1
+        asked[best] += 1
+        if not keyed and distance[open_].max() > 0:  # once every state was asked, all are 0
+            distance = np.minimum(distance, squared_from(int(best)))
+    return np.asarray(chosen, dtype=np.int64)
+
+
 def outcome_order(
-    candidates: np.ndarray, n: int, terminated: np.ndarray, truncated: np.ndarray, rng: np.random.Generator
+    candidates: np.ndarray,
+    n: int,
+    terminated: np.ndarray,
+    truncated: np.ndarray,
+    rng: np.random.Generator,
+    end_states: EndStates | None = None,
+    labelled: np.ndarray | None = None,
 ) -> np.ndarray:
     """``n`` candidate indices that cover the kinds of step: each kind present (ended its episode, cut
-    by the time limit, the rest) an equal floor ``ceil(n / kinds)``, in that order, at random within a
-    kind; what a kind lacks goes to the next, and what is left at random."""
+    by the time limit, the rest) an equal floor ``ceil(n / kinds)``, in that order; what a kind lacks
+    goes to the next, and what is left at random.
+
+    Within the episode ends, with ``end_states`` the floor spreads over the distinct states the ends
+    reached, those no labelled end (``labelled``: (N,) bool) reached first (:func:`spread_ends`);
+    without it, and within the other kinds, at random."""
     kinds = [terminated, truncated & ~terminated, ~terminated & ~truncated]
     pools = [rng.permutation(np.flatnonzero(candidates & kind)) for kind in kinds]
-    present = [pool for pool in pools if pool.size]
+    present = [i for i, pool in enumerate(pools) if pool.size]
     chosen: list[int] = []
     floor = math.ceil(n / len(present)) if present else 0
-    for pool in present:
-        chosen += pool[: min(floor, n - len(chosen))].tolist()
+    for i in present:
+        want = min(floor, n - len(chosen))
+        if i == 0 and end_states is not None:
+            seen = labelled if labelled is not None else np.zeros_like(terminated)
+            labelled_ends = np.flatnonzero(seen & terminated)
+            chosen += spread_ends(pools[0], want, end_states, labelled_ends, rng).tolist()
+        else:
+            chosen += pools[i][:want].tolist()
     rest = np.setdiff1d(np.flatnonzero(candidates), chosen)
     chosen += rng.permutation(rest)[: n - len(chosen)].tolist()
     return np.asarray(chosen, dtype=np.int64)
@@ -225,12 +341,14 @@ def _part_choice(
     probabilities: np.ndarray | None,
     terminated: np.ndarray | None,
     truncated: np.ndarray | None,
+    end_states: EndStates | None = None,
+    labelled: np.ndarray | None = None,
 ) -> np.ndarray:
     """``n`` of the candidates as one strategy (not ``"random"``, nor a combination) chooses them."""
     if n <= 0:
         return np.zeros(0, dtype=np.int64)
     if part == "outcomes":
-        return outcome_order(candidates, n, terminated, truncated, rng)
+        return outcome_order(candidates, n, terminated, truncated, rng, end_states, labelled)
     if part == "uncertainty":
         order = uncertainty_order(probabilities)
     else:
@@ -250,6 +368,8 @@ def choose_queries(
     truncated: np.ndarray | None = None,
     class_floor: float = 0.0,
     pool_factor: int = 0,
+    end_states: EndStates | None = None,
+    labelled: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The samples to query now and, for each, whether it was drawn at random.
 
@@ -266,6 +386,10 @@ def choose_queries(
         (:func:`class_floors`; needs ``probabilities``).
     :param pool_factor: choose among at most this many times the chosen queries' number of
         candidates, drawn at random (0: among all).
+    :param end_states: describes the states samples led to (``"outcomes"``: its episode ends spread
+        over them, :func:`spread_ends`); None: the episode ends at random.
+    :param labelled: (N,) bool, the samples whose reward is known (``"outcomes"``, with
+        ``end_states``: their end states count as asked).
     :return: (n,) int sample indices in the order chosen, and (n,) bool, True where drawn at random.
     """
     n = min(n, int(candidates.sum()))
@@ -286,7 +410,9 @@ def choose_queries(
         left = pool.copy()
         left[chosen] = False
         want = min((guided - chosen.size) // (len(parts) - i), int(left.sum()))
-        picked = _part_choice(part, left, want, rng, probabilities, terminated, truncated)
+        picked = _part_choice(
+            part, left, want, rng, probabilities, terminated, truncated, end_states, labelled
+        )
         chosen = np.concatenate([chosen, picked]).astype(np.int64)
     rest = candidates.copy()
     rest[chosen] = False
@@ -355,7 +481,8 @@ class RewardQueries:
         self.revealed = np.concatenate([self.revealed, np.zeros(grow, dtype=bool)])
         self.met_round = np.concatenate([self.met_round, np.zeros(grow, dtype=np.int64)])
         self.met_round[met & (self.met_round == 0)] = round_
-        candidates = met & ~task.labelled()
+        labelled = task.labelled()
+        candidates = met & ~labelled
         probs = probabilities() if self.reads_probabilities else None
         if probs is not None and training.query_skip_confidence < 1:  # what the views agree on is known
             predicted = probs.argmax(axis=-1)
@@ -378,6 +505,8 @@ class RewardQueries:
             truncated=truncated,
             class_floor=training.query_class_floor,
             pool_factor=training.query_pool_factor,
+            end_states=task.end_states if "outcomes" in strategy_parts(self.strategy) else None,
+            labelled=labelled & met,
         )
         described = [task.describe(int(i)) for i in ids]
         if probs is not None:
