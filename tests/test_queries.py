@@ -17,12 +17,14 @@ from dospcot.adapters.sensor_adapter import SensorAdapter
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
 from dospcot.core.queries import (
+    RewardQueries,
     SimulatedRater,
     choose_queries,
     disagreement_order,
     margins,
     outcome_order,
     query_budget,
+    spread_ends,
 )
 from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.envs import GridWorld
@@ -94,6 +96,141 @@ def test_outcomes_cover_every_kind_of_step_before_the_rest():
     chosen = outcome_order(candidates, 7, terminated, truncated, np.random.default_rng(1))
     assert chosen[:3].tolist() == [0, *chosen[1:3]] and set(chosen[1:3]) == {4, 5}
     assert len(set(chosen.tolist())) == 7 and set(chosen[3:]) <= {1, 2, 3, 6, 7, 8}
+
+
+NO_LABELS = np.zeros(0, dtype=np.int64)
+
+
+def _sparse_ends(n_ends: int = 200, goal: int = 137) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A sparse task's pool worked by hand: 400 samples, the first ``n_ends`` ended their episode, one
+    of them (``goal``) in a state of its own; the others fell into one of ten holes. Returns
+    terminated, each end's state key, and its state's features (a one-hot cell of a 4 x 4 map)."""
+    terminated = np.arange(400) < n_ends
+    keys = np.where(terminated, np.arange(400) % 10, -1)
+    keys[goal] = 15
+    features = np.zeros((400, 16))
+    features[terminated, keys[terminated]] = 1.0
+    return terminated, keys, features
+
+
+def test_outcomes_ask_about_a_rare_end_state_in_the_first_round_where_chance_would_miss_it():
+    terminated, keys, features = _sparse_ends()
+    candidates, truncated = np.ones(400, bool), np.zeros(400, bool)
+    hits = {"keys": 0, "features": 0, "at random": 0}
+    for seed in range(20):
+        for name, states in (("keys", keys), ("features", features), ("at random", None)):
+            end_states = None if states is None else states.__getitem__
+            # 12 queries, 20% at random: 10 chosen, a floor of ceil(10 / 2) = 5 on the episode ends.
+            ids, drawn = choose_queries(
+                "outcomes",
+                candidates,
+                12,
+                np.random.default_rng(seed),
+                random_share=0.2,
+                terminated=terminated,
+                truncated=truncated,
+                end_states=end_states,
+                labelled=np.zeros(400, bool),
+            )
+            asked_ends = ids[~drawn & terminated[ids]]
+            assert asked_ends.size == 5
+            hits[name] += 137 in asked_ends
+            if states is not None:  # the goal first (the rarest state), then four holes, none twice
+                assert asked_ends[0] == 137 and len(set(keys[asked_ends].tolist())) == 5
+    # Five draws among 200 ends find the goal with probability 1 - C(199, 5) / C(200, 5) = 2.5%.
+    assert hits == {"keys": 20, "features": 20, "at random": hits["at random"]}
+    assert hits["at random"] <= 2
+
+
+def test_spread_ends_is_fixed_by_its_seed_and_not_by_the_order_of_the_ends():
+    _, keys, features = _sparse_ends()
+    ends = np.arange(200)
+    for states in (keys, features):
+        first = spread_ends(ends, 30, states.__getitem__, NO_LABELS, np.random.default_rng(4))
+        again = spread_ends(ends[::-1].copy(), 30, states.__getitem__, NO_LABELS, np.random.default_rng(4))
+        assert first.tolist() == again.tolist() and len(set(first.tolist())) == 30
+    # Keys and features tell the same states apart: the same states, level by level.
+    by_keys = keys[spread_ends(ends, 30, keys.__getitem__, NO_LABELS, np.random.default_rng(4))]
+    by_features = keys[spread_ends(ends, 30, features.__getitem__, NO_LABELS, np.random.default_rng(4))]
+    assert sorted(by_keys[:11].tolist()) == sorted(by_features[:11].tolist()) == [*range(10), 15]
+
+
+def test_fewer_distinct_end_states_than_queries_repeat_a_state_only_after_every_state_was_asked():
+    keys = np.array([7, 7, 7, 7, 7, 3, 3, 3, 9])  # three states: 7 (five ends), 3 (three), 9 (one)
+    chosen = spread_ends(np.arange(9), 9, keys.__getitem__, NO_LABELS, np.random.default_rng(0))
+    asked = keys[chosen].tolist()
+    # Level by level, the fewest candidates first within a level: 9, 3, 7; then 3, 7; then 3, 7; 7, 7.
+    assert asked == [9, 3, 7, 3, 7, 3, 7, 7, 7] and sorted(chosen.tolist()) == list(range(9))
+    # Features that agree to 6 decimals are one state; a farther state comes before a nearer one.
+    points = np.array([[0.0, 0.0], [1e-9, 0.0], [0.0, 0.0], [1.0, 0.0], [5.0, 0.0]])
+    chosen = spread_ends(np.arange(5), 5, points.__getitem__, NO_LABELS, np.random.default_rng(0))
+    # The mean is (1.2, 0): the state at 5 is farthest, then the one at 0 (farther from 5 than 1 is).
+    assert chosen[:3].tolist()[0] == 4 and chosen[1] in (0, 1, 2) and chosen[2] == 3
+
+
+def test_end_states_a_label_has_shown_wait_for_those_no_label_has():
+    keys = np.array([0, 0, 1, 1, 2, 2, 5, 5])
+    # Samples 0 and 2 are labelled (states 0 and 1); the candidates are the rest.
+    chosen = spread_ends(
+        np.array([1, 3, 4, 5, 6, 7]), 6, keys.__getitem__, np.array([0, 2]), np.random.default_rng(0)
+    )
+    assert set(keys[chosen[:2]].tolist()) == {2, 5} and set(keys[chosen[2:4]].tolist()) == {0, 1}
+    # From features, a state near a labelled one waits for one far from every label.
+    points = np.array([[0.0], [0.1], [3.0], [3.1]])
+    chosen = spread_ends(np.array([1, 2, 3]), 3, points.__getitem__, np.array([0]), np.random.default_rng(0))
+    assert chosen[0] in (2, 3) and chosen[1] == 1
+
+
+class _EndsPool:
+    """A queried task over :func:`_sparse_ends`'s pool, every sample met from round 1."""
+
+    def __init__(self) -> None:
+        self.terminated, self.keys, _ = _sparse_ends()
+        self.hidden = np.where(self.keys == 15, 1.0, 0.0)
+        self.labels = np.zeros(400, bool)
+
+    def met(self) -> np.ndarray:
+        return np.ones(400, bool)
+
+    def labelled(self) -> np.ndarray:
+        return self.labels.copy()
+
+    def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.terminated.copy(), np.zeros(400, bool)
+
+    def end_states(self, ids: np.ndarray) -> np.ndarray:
+        return self.keys[ids]
+
+    def describe(self, sample: int) -> dict:
+        return {"sample": sample}
+
+    def reveal(self, ids: np.ndarray, rewards: np.ndarray) -> None:
+        self.labels[ids] = True
+
+
+def test_across_rounds_the_ends_go_to_states_no_earlier_round_asked_about():
+    training = load_config(
+        "tiny",
+        [
+            'training.label_strategy="outcomes"',
+            'training.query_end_states="spread"',
+            "training.label_budget=36",
+            "training.rounds=3",
+            'training.query_schedule="even"',
+        ],
+    ).training
+    pool = _EndsPool()
+    queries = RewardQueries(training, SimulatedRater(lambda ids: pool.hidden[ids]))
+    states: list[list[int]] = []
+    for round_ in (1, 2, 3):
+        queries.buy(round_, pool, lambda: None, np.random.default_rng(round_))
+        rows = [row for row in queries.log if row["round"] == round_ and row["strategy"] == "outcomes"]
+        states.append([int(pool.keys[row["sample"]]) for row in rows if pool.terminated[row["sample"]]])
+    # 12 a round, 10 chosen, 5 on ends: the goal and four holes, then the next five holes (and any
+    # hole a random query had labelled waits), then the states asked least.
+    assert states[0][0] == 15 and len(set(states[0])) == 5
+    assert not set(states[1]) & set(states[0]) and len(set(states[1])) == 5
+    assert queries.answers_of(1).max() == 1.0
 
 
 def test_a_random_share_of_every_active_strategys_queries_is_drawn_at_random():

@@ -43,6 +43,11 @@ def test_version_2_moves_what_each_method_and_view_count_can_use():
     assert _moved("grid16-dospcot", 'method="reward-model"', 'views=["coords"]')[2] == "outcomes+disagreement"
     cfg = load_config("grid16-dospcot", ["defaults=2"])
     assert cfg.cotraining.refit_new_classes and cfg.env.episode_end_classes
+    assert cfg.training.query_end_states == "spread"
+    assert load_config("minigrid-doorkey-dospcot", ["defaults=2"]).gym.episode_end_classes
+    # A highway section has no such key, and demonstrations as labels record no episode end.
+    assert load_config("fasthighway-dospcot", ["defaults=2"]).training.label_budget == BUDGET
+    assert load_config("grid16-dospcot").training.query_end_states == "random"
 
 
 def test_a_key_the_config_sets_keeps_its_value_under_version_2():

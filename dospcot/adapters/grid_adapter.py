@@ -188,6 +188,10 @@ class GridAdapter(StoreQueries):
         """(N,) bool each: the samples that ended their episode, and those the time limit cut."""
         return self.store.terminated.copy(), self.store.truncated.copy()
 
+    def end_states(self, ids: np.ndarray) -> np.ndarray:
+        """(len(ids),) int, the state each key's step led to: its key (the task is deterministic)."""
+        return self.store.next_state[ids].copy()
+
     def describe(self, sample: int) -> dict[str, Any]:
         """What a person is shown of sample ``sample``: its key and, where the env draws itself as text,
         a frame of the state (the agent as ``A``)."""

@@ -123,6 +123,15 @@ class SensorAdapter(StoreQueries):
         n = len(self.store)
         return self.store.terminal[:n].copy(), self.store.truncated[:n].copy()
 
+    def end_states(self, ids: np.ndarray) -> np.ndarray:
+        """(len(ids), d) float, every view of the state each sample's step led to (s'), flattened.
+
+        Features, not keys, even on a keyed pool: the store names a pair by the key of its s alone, and
+        where the views are functions of the state (MiniGrid's), equal states give equal features."""
+        store = self.store
+        rows = store.next_row[ids]
+        return np.concatenate([store.rows[v][rows].astype(np.float64) for v in sorted(store.rows)], axis=1)
+
     def describe(self, sample: int) -> dict[str, Any]:
         """What a person is shown of sample ``sample``: its (state key, action) pair, or its step, and
         where the env draws itself, PNG frames of s (``frame``) and s' (``next_frame``)."""

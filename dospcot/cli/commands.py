@@ -205,12 +205,14 @@ def _config(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.run_configs import TrainConfig
     from dospcot.config.versions import moved_keys, versions_text
     from dospcot.tasks import get_task, load_config
+    from dospcot.tasks.loading import task_section
 
     cfg = load_config(args.config, args.overrides)
     given = config_table(args.config, args.overrides)
-    moved = (
-        {key: value for key, (value, _) in moved_keys(given).items()} if isinstance(cfg, TrainConfig) else {}
-    )
+    moved = {}
+    if isinstance(cfg, TrainConfig):  # no version moves a paper-protocol key
+        section = task_section(get_task(cfg.task).section)
+        moved = {key: value for key, (value, _) in moved_keys(given, section).items()}
     table = get_task(cfg.task).config_table(cfg)
     rows = config_rows(type(cfg))
     if any(row.section == "dqn" and not row.meaning for row in rows.values()):  # SB3's words (imports torch)

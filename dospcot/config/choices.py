@@ -34,6 +34,9 @@ LabelStrategy = Literal[
 ]
 """How labels are chosen: ``"uniform"`` is the paper's fixed random mask, the others query a rater
 (:mod:`dospcot.core.queries`); ``"a+b"`` splits a round's chosen queries equally between a and b."""
+EndStateQueries = Literal["random", "spread"]
+"""How ``"outcomes"`` picks among the episode ends: at random, or spread over their distinct end states
+(:func:`dospcot.core.end_states.spread_ends`)."""
 QuerySchedule = Literal["asap", "even", "decay"]
 """How a label budget (``training.label_budget``) spreads over the rounds (:mod:`dospcot.core.queries`)."""
 AgentDraws = Literal["shared", "own"]

@@ -18,6 +18,7 @@ from dospcot.config.choices import (
     QUOTAS,
     WEIGHTINGS,
     AgentDraws,
+    EndStateQueries,
     LabelStrategy,
     LossKind,
     ModelKind,
@@ -94,6 +95,10 @@ class TrainingConfig(AddedKeys):
     :param query_skip_confidence: a candidate every view predicts the same class for, each with at
         least this probability, is not queried (1: none is skipped; from round 2).
     :param query_random_share: the share of each round's queries an active strategy draws at random.
+    :param query_end_states: how ``"outcomes"`` picks among the steps that ended an episode:
+        ``"random"``, or ``"spread"``: over the distinct states the ends reached, those no label has
+        shown first, before any is asked twice (:func:`dospcot.core.end_states.spread_ends`), so a rare
+        outcome such as a sparse task's goal is asked about early.
     :param query_recent_rounds: prefer the samples first met in the latest this many rounds (0: all).
     :param rater: who answers the queries: ``"simulated"`` (the hidden reward) or ``"file"`` (a person:
         each round's queries go to the run folder's ``queries/round_<r>.csv`` and the run stops until
@@ -123,11 +128,12 @@ class TrainingConfig(AddedKeys):
     query_class_floor: float = 0.0
     query_skip_confidence: float = 1.0
     query_random_share: float = 0.2
+    query_end_states: EndStateQueries = "random"
     query_recent_rounds: int = 0
     rater: Literal["simulated", "file"] = "simulated"
     agent_draws: AgentDraws = "shared"
 
-    added_keys: ClassVar[dict[str, Any]] = {"agent_draws": "shared"}
+    added_keys: ClassVar[dict[str, Any]] = {"agent_draws": "shared", "query_end_states": "random"}
 
     def __post_init__(self) -> None:
         check_at_least(self, 1, "segment_length")

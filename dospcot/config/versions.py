@@ -15,6 +15,7 @@ for it (docs/guide/defaults.md); until then ``defaults = 2`` opts in. Nothing he
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -22,6 +23,9 @@ from typing import Any
 from dospcot.config.choices import DEFAULT_VIEWS, method_name
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import CoTrainingConfig
+
+TaskSection = tuple[str, type]
+"""A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
 
 ADOPTED = 1
 """The version of the defaults a config without ``defaults`` gets."""
@@ -41,7 +45,8 @@ short run meets, :func:`fit_budget`)."""
 class MovedDefault:
     """One key whose default a version moves.
 
-    :param key: the dotted key (``training.exploration``).
+    :param key: the dotted key (``training.exploration``); ``{section}`` stands for the config's task
+        section (``env``, ``gym``, ...), where the task's section has the key.
     :param value: the version's default for a config table (its method, views, task), or None where the
         key keeps the earlier version's default for that config.
     :param why: the study of the record that supports the move, in a few words.
@@ -75,8 +80,16 @@ def _when_learning(value: Any) -> Callable[[Mapping[str, Any]], Any]:
     return lambda table: value if _learns_rewards(table) else None
 
 
-def _grid_only(value: Any) -> Callable[[Mapping[str, Any]], Any]:
-    return lambda table: value if table.get("task", "grid") == "grid" and _learns_rewards(table) else None
+def _without_labelled_demonstrations(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    """``value`` for a run that learns rewards and takes no demonstrations as labels: they do not record
+    which of their steps ended an episode."""
+
+    def rule(table: Mapping[str, Any]) -> Any:
+        demos = table.get("demonstrations", {})
+        labelled = (demos.get("file") or demos.get("agent")) and demos.get("labels", True)
+        return value if _learns_rewards(table) and not labelled else None
+
+    return rule
 
 
 VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
@@ -90,12 +103,17 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
         MovedDefault("training.agent_draws", lambda table: "own", "budget study: each agent its own draws"),
         MovedDefault("training.label_strategy", _strategy, "budget study: outcomes+disagreement"),
         MovedDefault("training.query_schedule", _when_learning("decay"), "budget study: a decaying schedule"),
+        MovedDefault(
+            "training.query_end_states", _when_learning("spread"), "episode ends spread over their end states"
+        ),
         MovedDefault("training.label_budget", _when_learning(BUDGET), "budget study: 100 labels"),
         MovedDefault(
             "cotraining.refit_new_classes", _when_learning(True), "budget study: the refit on a new class"
         ),
         MovedDefault(
-            "env.episode_end_classes", _grid_only(True), "budget study: grid16's episode-end classes"
+            "{section}.episode_end_classes",
+            _without_labelled_demonstrations(True),
+            "budget study: the goal's class kept to episode ends",
         ),
     ),
 }
@@ -125,23 +143,32 @@ def versions_text() -> str:
     return "the versions: " + ", ".join(words)
 
 
-def moved_keys(table: Mapping[str, Any]) -> dict[str, tuple[Any, str]]:
+def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tuple[Any, str]]:
     """The keys ``table``'s version moves for it and that it does not set itself: dotted key -> (the
-    version's value, why)."""
+    version's value, why).
+
+    :param section: the config's task section: its name, and its dataclass, whose fields say which
+        ``{section}`` keys it has.
+    """
     version = version_of(table)
+    name, fields = section[0], {f.name for f in dataclasses.fields(section[1])}
     moved: dict[str, tuple[Any, str]] = {}
     for number in range(FIRST + 1, version + 1):
         for rule in VERSIONS[number]:
+            head, _, key = rule.key.partition(".")
+            if head == "{section}" and key not in fields:
+                continue
+            dotted = f"{name}.{key}" if head == "{section}" else rule.key
             value = rule.value(table)
-            if value is not None and not _has(table, rule.key):
-                moved[rule.key] = (value, rule.why)
+            if value is not None and not _has(table, dotted):
+                moved[dotted] = (value, rule.why)
     return moved
 
 
-def with_version_defaults(table: Mapping[str, Any]) -> dict[str, Any]:
+def with_version_defaults(table: Mapping[str, Any], section: TaskSection) -> dict[str, Any]:
     """``table`` with the defaults its version moves filled in where it sets nothing itself."""
     out = _copy(table)
-    for key, (value, _) in moved_keys(table).items():
+    for key, (value, _) in moved_keys(table, section).items():
         *sections, name = key.split(".")
         part = out
         for section in sections:
@@ -150,10 +177,10 @@ def with_version_defaults(table: Mapping[str, Any]) -> dict[str, Any]:
     return out
 
 
-def fit_budget(table: Mapping[str, Any], most_samples: int) -> dict[str, Any] | None:
+def fit_budget(table: Mapping[str, Any], section: TaskSection, most_samples: int) -> dict[str, Any] | None:
     """``table`` with the version's label budget lowered to ``most_samples`` (a run too short to meet
     :data:`BUDGET` samples), or None where the budget is the config's own or fits."""
-    moved = moved_keys(table)
+    moved = moved_keys(table, section)
     if "training.label_budget" not in moved or moved["training.label_budget"][0] <= most_samples:
         return None
     out = _copy(table)

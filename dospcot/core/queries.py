@@ -20,7 +20,9 @@ it is asked about (:class:`SimulatedRater`, or a person: :mod:`dospcot.raters.fi
 - ``"random"``: the budget spent at random over the samples met (the active strategies' direct control);
 - ``"outcomes"``: the queries first cover the kinds of step an agent sees without a reward: steps that
   ended an episode, steps cut by the time limit, and the rest, each kind an equal floor of the round's
-  queries (a kind with fewer candidates gives its remainder to the next);
+  queries (a kind with fewer candidates gives its remainder to the next); the episode ends' floor
+  spreads over the distinct states the ends reached, those no label has shown first, before it asks
+  about one twice (:func:`spread_ends`);
 - ``"uncertainty"``: the smallest margin between the two most likely classes, mean over the views'
   classifiers (uncertainty sampling; one view: self-training's partner);
 - ``"disagreement"`` (co-testing, Muslea et al.): samples whose views' classifiers predict different
@@ -50,6 +52,7 @@ import numpy as np
 
 from dospcot.config.choices import CLASSIFIER_STRATEGIES
 from dospcot.config.learning_sections import TrainingConfig
+from dospcot.core.end_states import EndStates, spread_ends
 
 LOG_COLUMNS: tuple[str, ...] = ("round", "sample", "strategy", "answer")
 """The columns of a run's ``queries.csv``."""
@@ -89,6 +92,10 @@ class QueriedTask(Protocol):
 
     def episode_ends(self) -> tuple[np.ndarray, np.ndarray]:
         """(N,) bool each: the samples that ended their episode, and those cut by the time limit."""
+
+    def end_states(self, ids: np.ndarray) -> np.ndarray:
+        """The states samples ``ids`` led to, as :data:`EndStates` describes them (read by
+        ``"outcomes"`` alone)."""
 
     def describe(self, sample: int) -> dict[str, Any]:
         """What a person is shown of a sample: its key or step."""
@@ -193,18 +200,34 @@ def disagreement_order(probabilities: np.ndarray) -> np.ndarray:
 
 
 def outcome_order(
-    candidates: np.ndarray, n: int, terminated: np.ndarray, truncated: np.ndarray, rng: np.random.Generator
+    candidates: np.ndarray,
+    n: int,
+    terminated: np.ndarray,
+    truncated: np.ndarray,
+    rng: np.random.Generator,
+    end_states: EndStates | None = None,
+    labelled: np.ndarray | None = None,
 ) -> np.ndarray:
     """``n`` candidate indices that cover the kinds of step: each kind present (ended its episode, cut
-    by the time limit, the rest) an equal floor ``ceil(n / kinds)``, in that order, at random within a
-    kind; what a kind lacks goes to the next, and what is left at random."""
+    by the time limit, the rest) an equal floor ``ceil(n / kinds)``, in that order; what a kind lacks
+    goes to the next, and what is left at random.
+
+    Within the episode ends, with ``end_states`` the floor spreads over the distinct states the ends
+    reached, those no labelled end (``labelled``: (N,) bool) reached first (:func:`spread_ends`);
+    without it, and within the other kinds, at random."""
     kinds = [terminated, truncated & ~terminated, ~terminated & ~truncated]
     pools = [rng.permutation(np.flatnonzero(candidates & kind)) for kind in kinds]
-    present = [pool for pool in pools if pool.size]
+    present = [i for i, pool in enumerate(pools) if pool.size]
     chosen: list[int] = []
     floor = math.ceil(n / len(present)) if present else 0
-    for pool in present:
-        chosen += pool[: min(floor, n - len(chosen))].tolist()
+    for i in present:
+        want = min(floor, n - len(chosen))
+        if i == 0 and end_states is not None:
+            seen = labelled if labelled is not None else np.zeros_like(terminated)
+            labelled_ends = np.flatnonzero(seen & terminated)
+            chosen += spread_ends(pools[0], want, end_states, labelled_ends, rng).tolist()
+        else:
+            chosen += pools[i][:want].tolist()
     rest = np.setdiff1d(np.flatnonzero(candidates), chosen)
     chosen += rng.permutation(rest)[: n - len(chosen)].tolist()
     return np.asarray(chosen, dtype=np.int64)
@@ -241,12 +264,14 @@ def _part_choice(
     probabilities: np.ndarray | None,
     terminated: np.ndarray | None,
     truncated: np.ndarray | None,
+    end_states: EndStates | None = None,
+    labelled: np.ndarray | None = None,
 ) -> np.ndarray:
     """``n`` of the candidates as one strategy (not ``"random"``, nor a combination) chooses them."""
     if n <= 0:
         return np.zeros(0, dtype=np.int64)
     if part == "outcomes":
-        return outcome_order(candidates, n, terminated, truncated, rng)
+        return outcome_order(candidates, n, terminated, truncated, rng, end_states, labelled)
     if part == "uncertainty":
         order = uncertainty_order(probabilities)
     else:
@@ -266,6 +291,8 @@ def choose_queries(
     truncated: np.ndarray | None = None,
     class_floor: float = 0.0,
     pool_factor: int = 0,
+    end_states: EndStates | None = None,
+    labelled: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The samples to query now and, for each, whether it was drawn at random.
 
@@ -282,6 +309,10 @@ def choose_queries(
         (:func:`class_floors`; needs ``probabilities``).
     :param pool_factor: choose among at most this many times the chosen queries' number of
         candidates, drawn at random (0: among all).
+    :param end_states: describes the states samples led to (``"outcomes"``: its episode ends spread
+        over them, :func:`spread_ends`); None: the episode ends at random.
+    :param labelled: (N,) bool, the samples whose reward is known (``"outcomes"``, with
+        ``end_states``: their end states count as asked).
     :return: (n,) int sample indices in the order chosen, and (n,) bool, True where drawn at random.
     """
     n = min(n, int(candidates.sum()))
@@ -302,7 +333,9 @@ def choose_queries(
         left = pool.copy()
         left[chosen] = False
         want = min((guided - chosen.size) // (len(parts) - i), int(left.sum()))
-        picked = _part_choice(part, left, want, rng, probabilities, terminated, truncated)
+        picked = _part_choice(
+            part, left, want, rng, probabilities, terminated, truncated, end_states, labelled
+        )
         chosen = np.concatenate([chosen, picked]).astype(np.int64)
     rest = candidates.copy()
     rest[chosen] = False
@@ -371,7 +404,8 @@ class RewardQueries:
         self.revealed = np.concatenate([self.revealed, np.zeros(grow, dtype=bool)])
         self.met_round = np.concatenate([self.met_round, np.zeros(grow, dtype=np.int64)])
         self.met_round[met & (self.met_round == 0)] = round_
-        candidates = met & ~task.labelled()
+        labelled = task.labelled()
+        candidates = met & ~labelled
         probs = probabilities() if self.reads_probabilities else None
         if probs is not None and training.query_skip_confidence < 1:  # what the views agree on is known
             predicted = probs.argmax(axis=-1)
@@ -394,6 +428,8 @@ class RewardQueries:
             truncated=truncated,
             class_floor=training.query_class_floor,
             pool_factor=training.query_pool_factor,
+            end_states=task.end_states if training.query_end_states == "spread" else None,
+            labelled=labelled & met,
         )
         described = [task.describe(int(i)) for i in ids]
         if probs is not None:

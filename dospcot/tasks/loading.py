@@ -5,6 +5,7 @@ Nothing here imports torch, stable-baselines3 or an env, so a config reads at on
 from __future__ import annotations
 
 import dataclasses
+import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -51,11 +52,17 @@ def config_from_table(data: Mapping[str, Any]) -> RunConfig:
     if cls is not TrainConfig:  # no version moves a paper-protocol key
         cfg = from_mapping(cls, data)
     else:
-        cfg = from_mapping(cls, with_version_defaults(data))
-        if (fitted := fit_budget(data, task.most_samples(cfg))) is not None:
-            cfg = from_mapping(cls, with_version_defaults(fitted))
+        section = task_section(task.section)
+        cfg = from_mapping(cls, with_version_defaults(data, section))
+        if (fitted := fit_budget(data, section, task.most_samples(cfg))) is not None:
+            cfg = from_mapping(cls, with_version_defaults(fitted, section))
     task.check_config(cfg)
     return cfg
+
+
+def task_section(name: str) -> tuple[str, type]:
+    """A :class:`~dospcot.config.run_configs.TrainConfig` task section: its name and its dataclass."""
+    return name, typing.get_type_hints(TrainConfig)[name]
 
 
 def _check_kind(cls: type, data: Mapping[str, Any]) -> None:
