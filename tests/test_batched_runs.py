@@ -107,6 +107,7 @@ def test_a_config_that_cannot_batch_trains_its_seeds_one_after_another_saying_wh
     assert [json.loads((f / "summary.json").read_text())["seed"] for f in folders] == [0, 1]
 
 
+@pytest.mark.slow
 def test_a_batch_killed_after_a_round_resumes_to_the_files_of_one_never_stopped(tmp_path):
     overrides = [a for s in ["training.rounds=3", "training.steps_per_round=600"] for a in ("--set", s)]
     args = ["train", "tiny", "--seeds", "2", "--no-progress", *overrides]

@@ -235,6 +235,7 @@ def test_reward_classifier_files_round_trip_with_weights_only(tmp_path):
     assert th.equal(clf(x, mask), loaded(x, mask))
 
 
+@pytest.mark.slow
 def test_learns_cliffwalking_to_the_optimal_return():
     # A linear Q-network on one-hot states, full rewards, 20k steps: the cliff-edge optimum, -13.
     model = ExpectedSarsaDQN(

@@ -303,6 +303,7 @@ def test_fast_env_config_keys_and_views_are_checked():
         load_config("fasthighway-dospcot", ['views=["ttc"]'])
 
 
+@pytest.mark.slow
 def test_a_file_raters_queries_on_highway_env_show_the_frames_of_each_step(tmp_path):
     overrides = [
         *TINY,

@@ -43,7 +43,8 @@ def test_paper_presets_hold_the_papers_hyperparameters():
         ConfigError, match="paper-protocol config, which has no 'views' \\(a key of a dospcot train"
     ):
         load_config("paper-text", ['views=["patch"]'])
-    with pytest.raises(ConfigError, match="unknown key 'nokey'; allowed: name, seed, task, tabular"):
+    allowed = "name, seed, defaults, task, tabular"
+    with pytest.raises(ConfigError, match=f"unknown key 'nokey'; allowed: {allowed}"):
         load_config("paper-text", ["nokey=1"])
     with pytest.raises(ConfigError, match=r"tabular: label_fraction must lie in \(0, 1\]"):
         load_config("paper-text", ["tabular.label_fraction=0"])
@@ -84,6 +85,7 @@ def test_the_local_backend_batches_a_paper_cells_seeds_over_its_workers():
         SweepSpec(("paper-text", "tiny"), {}, (0,)).trials()
 
 
+@pytest.mark.slow
 def test_report_of_a_paper_sweep_gives_the_hand_computed_figures(tmp_path):
     spec = SweepSpec(("paper-text",), {}, (0, 1, 2), tuple(QUICK))
     assert not run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False).failed

@@ -428,6 +428,7 @@ def test_a_tiny_run_answered_in_chromium_equals_the_simulated_run(tmp_path):
     _answered_in_chromium(tmp_path, "tiny", TINY_SETS, then_train=True)
 
 
+@pytest.mark.slow
 def test_a_minigrid_run_answered_in_chromium_equals_the_simulated_run(tmp_path):
     pytest.importorskip("minigrid")
     screenshot = tmp_path / "rating-page.png"

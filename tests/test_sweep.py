@@ -201,6 +201,7 @@ def test_ray_backend_runs_the_same_trials_to_the_same_summaries(tmp_path):
     assert _summaries(tmp_path / "ray") == _summaries(tmp_path / "local")
 
 
+@pytest.mark.slow
 def test_a_killed_sweep_resumes_by_running_only_the_missing_trials(tmp_path):
     sweep_dir = tmp_path / "killed"
     cmd = [sys.executable, "-m", "dospcot", "sweep", "tiny", "--seeds", "4", "--workers", "1"]
@@ -368,6 +369,7 @@ def test_the_per_view_table_shows_which_views_agent_failed_where_the_mean_hides_
     assert "| a | 0.1 | rays | 4 | 0.500 [" in text and "| a | 0.5 | patch |" not in text
 
 
+@pytest.mark.slow
 def test_resume_with_more_seeds_runs_only_the_new_seeds_and_refuses_to_drop_one(tmp_path, capsys):
     sweep_dir, quiet = tmp_path / "tiny", ["--workers", "1", "--no-progress"]
     one_round = ["--set", "training.rounds=1", "--runs-dir", str(tmp_path)]

@@ -126,6 +126,7 @@ def test_oracle_q_learning_finds_the_optimal_path(mdp):
     assert all(r["agreement"] == 1.0 for r in result.records)
 
 
+@pytest.mark.slow
 def test_cotraining_learns_the_masked_task_where_masked_zero_fails(mdp):
     seeds = range(4)
     specs = [TabularRunSpec("dospcot", ("esarsa", "esarsa"), ("coords", "patch"), seed=s) for s in seeds]

@@ -308,6 +308,7 @@ def test_corrupt_checkpoint_and_agent_give_clear_errors(trained, tmp_path, capsy
             load_classifier(clf_path)
 
 
+@pytest.mark.slow
 def test_resume_after_a_kill_in_round_two_ends_with_the_uninterrupted_summary(trained, tmp_path, capsys):
     overrides = ["--set", "training.rounds=3", "--set", "training.steps_per_round=800", "--no-progress"]
     full = trained("training.rounds=3", "training.steps_per_round=800")

@@ -59,6 +59,13 @@ def test_a_key_the_config_sets_keeps_its_value_under_version_2():
     assert _moved("fasthighway-reward-model")[2] == "disagreement"
 
 
+def test_version_2_leaves_the_query_keys_of_a_run_that_asks_no_rater():
+    uniform = _moved("grid16-dospcot", 'training.label_strategy="uniform"')
+    assert uniform == ("rounds", "own", "uniform", "asap", 0)
+    segments = load_config("tiny", ["defaults=2", "training.segment_length=3"]).training
+    assert (segments.label_strategy, segments.label_budget) == ("uniform", 0)
+
+
 def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
     cfg = load_config("tiny", ["defaults=2", "training.rounds=1", "training.steps_per_round=30"])
     assert cfg.training.label_budget == 60 < BUDGET  # 1 round x 30 steps x 2 views

@@ -18,8 +18,10 @@ tables are merged key by key over the base's.
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import difflib
+import functools
 import math
 import re
 import tomllib
@@ -111,19 +113,31 @@ def read_config_data(config: str, _seen: tuple[str, ...] = ()) -> dict[str, Any]
     """The TOML table of a preset or a path, with its ``extends`` chain merged in."""
     if config in _seen:
         raise ConfigError(f"extends: a cycle through {' -> '.join([*_seen, config])}")
-    text, origin = read_config_text(config)
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as err:
-        raise ConfigError(f"{origin} is not valid TOML: {err}") from None
+    data = copy.deepcopy(_preset_data(config)) if is_preset(config) else _toml_data(*read_config_text(config))
     if not data:  # it would train the code's defaults, which no one asked for
-        raise ConfigError(f'{origin} holds no key; start it from a preset: extends = "tiny"')
+        raise ConfigError(
+            f'{read_config_text(config)[1]} holds no key; start it from a preset: extends = "tiny"'
+        )
     base = data.pop("extends", None)
     if base is None:
         return data
     if not isinstance(base, str):
         raise ConfigError(f"extends: expected a preset name or a path, got {base!r}")
     return _merge(read_config_data(extends_target(config, base), (*_seen, config)), data)
+
+
+@functools.cache
+def _preset_data(name: str) -> dict[str, Any]:
+    """A shipped preset's own table (package data, the same all process long), parsed once: a study
+    resolves each of its presets for every one of its trials."""
+    return _toml_data(*read_config_text(name))
+
+
+def _toml_data(text: str, origin: str) -> dict[str, Any]:
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as err:
+        raise ConfigError(f"{origin} is not valid TOML: {err}") from None
 
 
 def extends_target(config: str, base: str) -> str:
@@ -189,13 +203,20 @@ def _dotted(table: Mapping[str, Any], prefix: str = "") -> set[str]:
     return keys
 
 
+@functools.cache
+def type_hints(cls: type) -> dict[str, Any]:
+    """The resolved field types of the config dataclass ``cls``, read once: resolving them is most of
+    what reading a config costs, and a study checks thousands of run folders against their configs."""
+    return typing.get_type_hints(cls)
+
+
 def renamed_to_now(cls: type, data: Mapping[str, Any]) -> dict[str, Any]:
     """``data`` with the renamed keys of ``cls`` and of its sections (``renamed_keys``) under their new
     names, and the keys added since (``added_keys``) at the value a folder written before them ran
     under: a run folder outlives its code (the record's do), so its ``config.toml`` is read this way,
     while a config a person writes with an old key is refused (:func:`from_mapping`)."""
     renamed: dict[str, str] = getattr(cls, "renamed_keys", {})
-    hints = typing.get_type_hints(cls)
+    hints = type_hints(cls)
     out: dict[str, Any] = dict(getattr(cls, "added_keys", {}))
     for key, value in data.items():
         key = renamed.get(key, key)
@@ -245,7 +266,7 @@ def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
                     + "?"
                 )
             raise ConfigError(f"unknown key '{prefix}{key}'; allowed: {', '.join(fields)}")
-    hints = typing.get_type_hints(cls)
+    hints = type_hints(cls)
     unbounded: frozenset[str] = getattr(cls, "infinite_keys", frozenset())
     respelled: dict[str, dict[str, str]] = getattr(cls, "renamed_values", {})
     data = {

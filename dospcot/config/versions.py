@@ -67,8 +67,9 @@ def _learns_rewards(table: Mapping[str, Any]) -> bool:
 
 def _strategy(table: Mapping[str, Any]) -> str | None:
     """Episode ends first, then where the views (or the reward model's members) disagree; a run with one
-    classifier asks where it is least sure instead."""
-    if not _learns_rewards(table):
+    classifier asks where it is least sure instead. None for a run that asks no rater: one that learns
+    no reward, or learns from segment labels."""
+    if not _learns_rewards(table) or table.get("training", {}).get("segment_length", 1) > 1:
         return None
     classifiers = len(table.get("views", DEFAULT_VIEWS))
     if _method(table) == "reward-model":
@@ -78,6 +79,16 @@ def _strategy(table: Mapping[str, Any]) -> str | None:
 
 def _when_learning(value: Any) -> Callable[[Mapping[str, Any]], Any]:
     return lambda table: value if _learns_rewards(table) else None
+
+
+def _when_asking(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    """``value`` for a run whose strategy, its own or the version's, asks a rater."""
+
+    def rule(table: Mapping[str, Any]) -> Any:
+        strategy = table.get("training", {}).get("label_strategy") or _strategy(table)
+        return value if strategy not in (None, "uniform") else None
+
+    return rule
 
 
 def _without_labelled_demonstrations(value: Any) -> Callable[[Mapping[str, Any]], Any]:
@@ -102,11 +113,11 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
         ),
         MovedDefault("training.agent_draws", lambda table: "own", "budget study: each agent its own draws"),
         MovedDefault("training.label_strategy", _strategy, "budget study: outcomes+disagreement"),
-        MovedDefault("training.query_schedule", _when_learning("decay"), "budget study: a decaying schedule"),
+        MovedDefault("training.query_schedule", _when_asking("decay"), "budget study: a decaying schedule"),
         MovedDefault(
-            "training.query_end_states", _when_learning("spread"), "episode ends spread over their end states"
+            "training.query_end_states", _when_asking("spread"), "episode ends spread over their end states"
         ),
-        MovedDefault("training.label_budget", _when_learning(BUDGET), "budget study: 100 labels"),
+        MovedDefault("training.label_budget", _when_asking(BUDGET), "budget study: 100 labels"),
         MovedDefault(
             "cotraining.refit_new_classes", _when_learning(True), "budget study: the refit on a new class"
         ),

@@ -5,13 +5,19 @@ Nothing here imports torch, stable-baselines3 or an env, so a config reads at on
 from __future__ import annotations
 
 import dataclasses
-import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 from dospcot.config.errors import ConfigError
-from dospcot.config.loading import config_table, from_mapping, given_keys, read_config_data, renamed_to_now
+from dospcot.config.loading import (
+    config_table,
+    from_mapping,
+    given_keys,
+    read_config_data,
+    renamed_to_now,
+    type_hints,
+)
 from dospcot.config.run_configs import PaperConfig, RunConfig, TrainConfig
 from dospcot.config.versions import fit_budget, version_of, with_version_defaults
 from dospcot.tasks.registry import get_task
@@ -62,7 +68,7 @@ def config_from_table(data: Mapping[str, Any]) -> RunConfig:
 
 def task_section(name: str) -> tuple[str, type]:
     """A :class:`~dospcot.config.run_configs.TrainConfig` task section: its name and its dataclass."""
-    return name, typing.get_type_hints(TrainConfig)[name]
+    return name, type_hints(TrainConfig)[name]
 
 
 def _check_kind(cls: type, data: Mapping[str, Any]) -> None:
