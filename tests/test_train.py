@@ -446,3 +446,27 @@ def test_metrics_csv_holds_every_rows_columns_when_a_resumed_run_adds_one(tmp_pa
             {"round": "1", "success": "0.5", "labelled_steps": ""},
             {"round": "2", "success": "1.0", "labelled_steps": "40"},
         ]
+
+
+def test_a_run_stops_where_its_greedy_evaluation_stops_improving_and_says_why(trained, tmp_path):
+    capped = json.loads((trained() / "summary.json").read_text())
+    assert (capped["stopped_early"], capped["stopped_because"]) == (
+        False,
+        "its last round (training.rounds = 2)",
+    )
+    run_dir = _train(tmp_path, "training.rounds=8", "training.stop_patience=2")
+    summary = json.loads((run_dir / "summary.json").read_text())
+    rows = list(csv.DictReader((run_dir / "metrics.csv").open()))
+    # Each round's greedy evaluation, mean over the agents: the run ends two rounds after its best.
+    greedy = [
+        tuple(
+            float(np.mean([float(r[key]) for r in rows if int(r["round"]) == n]))
+            for key in ("success", "normalised_score")
+        )
+        for n in range(1, summary["rounds"] + 1)
+    ]
+    best = max(range(len(greedy)), key=lambda i: (greedy[i], -i))
+    assert summary["rounds"] == best + 3 < 8 and summary["stopped_early"]
+    assert summary["stopped_because"] == "no new best greedy evaluation in 2 rounds (training.stop_patience)"
+    with pytest.raises(ConfigError, match="stop_patience must be >= 0"):
+        load_config("tiny", ["training.stop_patience=-1"])

@@ -100,6 +100,10 @@ class TrainingConfig(AddedKeys):
         shown first, before any is asked twice (:func:`dospcot.core.end_states.spread_ends`), so a rare
         outcome such as a sparse task's goal is asked about early.
     :param query_recent_rounds: prefer the samples first met in the latest this many rounds (0: all).
+    :param stop_patience: stop a run once this many rounds in a row brought its agents' greedy
+        evaluation no new best (mean success, then mean normalised score), so ``rounds`` is a cap
+        rather than a length a new task must be guessed at; 0: every round runs. The run's
+        ``summary.json`` says why it stopped (``stopped_because``).
     :param rater: who answers the queries: ``"simulated"`` (the hidden reward) or ``"file"`` (a person:
         each round's queries go to the run folder's ``queries/round_<r>.csv`` and the run stops until
         ``dospcot train --resume`` finds them answered).
@@ -132,11 +136,17 @@ class TrainingConfig(AddedKeys):
     query_recent_rounds: int = 0
     rater: Literal["simulated", "file"] = "simulated"
     agent_draws: AgentDraws = "shared"
+    stop_patience: int = 0
 
-    added_keys: ClassVar[dict[str, Any]] = {"agent_draws": "shared", "query_end_states": "random"}
+    added_keys: ClassVar[dict[str, Any]] = {
+        "agent_draws": "shared",
+        "query_end_states": "random",
+        "stop_patience": 0,
+    }
 
     def __post_init__(self) -> None:
         check_at_least(self, 1, "segment_length")
+        check_at_least(self, 0, "stop_patience")
         if self.rounds < 1 or self.steps_per_round < 1:
             raise ValueError(
                 f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"

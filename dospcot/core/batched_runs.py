@@ -63,8 +63,11 @@ def config_refusal(cfg: TrainConfig) -> str | None:
         return "only hard target updates (dqn.tau = 1) are stacked"
     if cfg.dqn.optimize_memory_usage:
         return "dqn.optimize_memory_usage is not stacked"
-    if cfg.cotraining.tol > 0 or cfg.cotraining.stop_when_fully_admitted:
-        return "a stopping rule (cotraining.tol, stop_when_fully_admitted) ends seeds at different rounds"
+    if cfg.cotraining.tol > 0 or cfg.cotraining.stop_when_fully_admitted or cfg.training.stop_patience:
+        return (
+            "a stopping rule (cotraining.tol, stop_when_fully_admitted, training.stop_patience) ends seeds "
+            "at different rounds"
+        )
     return None
 
 

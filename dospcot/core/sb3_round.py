@@ -230,7 +230,14 @@ class CoTrainingRun:
         run that learns rewards, on single-step labels."""
         self.round = 0
         self.stopped = False
-        """Whether the co-trainer's stopping rule (``tol``, ``stop_when_fully_admitted``) has fired."""
+        """Whether a stopping rule has fired: the co-trainer's (``tol``, ``stop_when_fully_admitted``) or
+        the greedy evaluation's (``training.stop_patience``)."""
+        self.stop_reason = ""
+        """Why the run stopped before its last round ("" while it has not)."""
+        self.best_greedy: tuple[float, float] | None = None
+        """The best (mean success, mean normalised score) of the agents' greedy evaluations so far."""
+        self.rounds_since_best = 0
+        """Rounds since :attr:`best_greedy` last improved."""
 
     def _agent_env(self, k: int, view: str) -> gym.Env:
         env = self.task.agent_env(k, view)
@@ -333,7 +340,26 @@ class CoTrainingRun:
             pace = stats.get("pace", pace)
         for agent in self.agents:
             agent.set_pace(min(pace, 1.0))
-        return self._records(stats)  # 6. record
+        rows = self._records(stats)  # 6. record
+        self._check_patience(rows)
+        return rows
+
+    def _check_patience(self, rows: list[dict]) -> None:
+        """Stop once ``training.stop_patience`` rounds in a row brought the agents' greedy evaluation no
+        new best (mean success first, then mean normalised score): a run given more rounds than its task
+        needs ends where its agents stopped improving, as SB3's ``StopTrainingOnNoModelImprovement``
+        ends one agent's training."""
+        greedy = tuple(float(np.nanmean([r[key] for r in rows])) for key in ("success", "normalised_score"))
+        if self.best_greedy is None or greedy > self.best_greedy:
+            self.best_greedy, self.rounds_since_best = greedy, 0
+        else:
+            self.rounds_since_best += 1
+        patience = self.cfg.training.stop_patience
+        if self.stopped and not self.stop_reason:
+            self.stop_reason = "the co-trainer's stopping rule (cotraining.tol or every sample admitted)"
+        elif patience and self.rounds_since_best >= patience and self.round < self.cfg.training.rounds:
+            self.stopped = True
+            self.stop_reason = f"no new best greedy evaluation in {patience} rounds (training.stop_patience)"
 
     def cotrain(self) -> dict:
         """Steps 2-3 of a round: co-train on the task's pool and write the pseudo-rewards and their
@@ -415,6 +441,7 @@ class CoTrainingRun:
         return {
             "round": self.round,
             "stopped": self.stopped,
+            "patience": (self.stop_reason, self.best_greedy, self.rounds_since_best),
             "agents": zips,
             "buffers": [agent.replay_buffer for agent in self.agents],
             "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
@@ -437,6 +464,7 @@ class CoTrainingRun:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
         self.round, self.stopped = state["round"], state["stopped"]
+        self.stop_reason, self.best_greedy, self.rounds_since_best = state["patience"]
         self.store.load_state_dict(state["store"])  # in place: the store wrappers keep pointing at it
         if self.segments is not None:
             self.segments.load_state_dict(state["segments"])

@@ -20,6 +20,11 @@ CHECKPOINT_FIELDS_ADDED: tuple[tuple[str, str], ...] = (
     ("run.segment_classes", "a run on segment labels' reward classes: the run's fresh ones"),
     ("run.collected", "whether a round was collected and awaits a person's answers: no, at a round's end"),
     ("run.class_records", "the pseudo-rewards per reward class of the rounds before: not recorded"),
+    (
+        "run.patience",
+        "why the run stopped and its best greedy evaluation so far: the co-trainer's rule if it had "
+        "stopped, no best yet",
+    ),
 )
 """The fields of a run's checkpoint state added since format 1, and what their absence means."""
 
@@ -34,5 +39,17 @@ def upgrade_run_state(state: dict[str, Any]) -> dict[str, Any]:
         "extra": {},
         **state,
     }
-    upgraded["run"] = {"segment_classes": None, "collected": False, "class_records": [], **state["run"]}
+    # A checkpoint written before the patience rule: its co-trainer's stop, if any, is the reason.
+    reason = (
+        "the co-trainer's stopping rule (cotraining.tol or every sample admitted)"
+        if state["run"]["stopped"]
+        else ""
+    )
+    upgraded["run"] = {
+        "segment_classes": None,
+        "collected": False,
+        "class_records": [],
+        "patience": (reason, None, 0),
+        **state["run"],
+    }
     return upgraded

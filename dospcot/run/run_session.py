@@ -260,6 +260,7 @@ def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:
         "seed": cfg.seed,
         "rounds": run.round,
         "stopped_early": run.stopped,
+        "stopped_because": run.stop_reason or f"its last round (training.rounds = {cfg.training.rounds})",
         "env_steps_per_agent": int(last[0]["env_steps"]),
         **run.reference_returns(),
         "mean": {key: float(np.mean([r[key] for r in last])) for key in SUMMARY_METRICS},
