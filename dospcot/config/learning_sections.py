@@ -14,6 +14,7 @@ from dospcot.config.choices import (
     LOSS_KINDS,
     MODEL_KINDS,
     NUMERICS_VERSIONS,
+    PSEUDO_REWARDS,
     QUERY_SCHEDULES,
     QUOTAS,
     WEIGHTINGS,
@@ -21,6 +22,7 @@ from dospcot.config.choices import (
     LabelStrategy,
     LossKind,
     ModelKind,
+    PseudoRewards,
     QuerySchedule,
     Quota,
     Weighting,
@@ -385,6 +387,13 @@ class CoTrainingConfig(AddedKeys):
         1, each view's classifier first learns the labels alone again, as in round 1, before the round
         selects: a class's output had never been trained, so its scores were those of its random
         initial parameters, and the consensus could give it to most of the pool.
+    :param pseudo_rewards: what an admitted sample's reward in the agents' reward table is:
+        ``"classifiers"``, the decoded consensus class of the views' classifiers (the method), or
+        ``"hidden"``, its true (hidden) reward: a control that keeps everything else (which samples are
+        admitted and when, their weights, the pace, the classifiers' fits and scores) as the
+        classifiers decide it, so that a gap to the oracle splits into wrong pseudo-rewards and what
+        the path itself loses. Under ``"hidden"`` the record's pseudo-reward accuracy describes the
+        rewards given (1 wherever a sample is admitted); each view's figures still score its classifier.
     """
 
     consensus_weight: float = 0.3
@@ -399,10 +408,15 @@ class CoTrainingConfig(AddedKeys):
     numerics: int = 1
     ensemble_size: int = 3
     refit_new_classes: bool = False
+    pseudo_rewards: PseudoRewards = "classifiers"
 
     renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
     """Keys of older configs and their names now."""
-    added_keys: ClassVar[dict[str, Any]] = {"numerics": 1, "refit_new_classes": False}
+    added_keys: ClassVar[dict[str, Any]] = {
+        "numerics": 1,
+        "refit_new_classes": False,
+        "pseudo_rewards": "classifiers",
+    }
 
     def __post_init__(self) -> None:
         if self.consensus_weight < 0:
@@ -411,6 +425,8 @@ class CoTrainingConfig(AddedKeys):
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
         if self.quota not in QUOTAS:
             raise ValueError(f"quota must be one of {QUOTAS}, got {self.quota!r}")
+        if self.pseudo_rewards not in PSEUDO_REWARDS:
+            raise ValueError(f"pseudo_rewards must be one of {PSEUDO_REWARDS}, got {self.pseudo_rewards!r}")
         if self.add_fraction_start <= 0:
             raise ValueError(f"add_fraction_start must be > 0, got {self.add_fraction_start}")
         if self.add_fraction_step < 0:
@@ -464,4 +480,9 @@ class TabularConfig:
             raise ValueError(
                 "cotraining.numerics: the paper protocol's batched co-trainer fits in numerics 1; set "
                 "numerics = 1 in [tabular.cotraining]"
+            )
+        if self.cotraining.pseudo_rewards != "classifiers":
+            raise ValueError(
+                "cotraining.pseudo_rewards: the paper protocol's batched co-trainer gives the classifiers' "
+                "pseudo-rewards only; the true-rewards control runs under dospcot train"
             )

@@ -58,7 +58,7 @@ import numpy as np
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
-from dospcot.core.cotrainer import NUMERICS, RunCoTrainer, RunPool
+from dospcot.core.cotrainer import NUMERICS, RunCoTrainer, RunPool, RunRound
 from dospcot.core.queries import QueriedTask, Rater, RewardQueries
 from dospcot.core.raters import SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
@@ -345,13 +345,15 @@ class CoTrainingRun:
             return self._cotrain_segments(pool)
         result = self.trainer.step(pool)
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class), nan=0.0)
+        true_class = self.task.true_class()  # metrics only, and the true-rewards control's classes
+        if self.true_rewards:
+            pseudo, result = self._given_truth(result, pseudo, self.store.hidden_reward, true_class)
         self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight)
         if self.queries is not None:  # a bought label reaches every stored and future step of its sample
             bought = np.flatnonzero(self.queries.revealed)
             self.table.set(bought, self.store.label_value[bought], 1.0)
         self.stopped = result.stopped
-        true_class = self.task.true_class()  # metrics only
-        stats = round_stats(result, pool.unlabelled, true_class)
+        stats = round_stats(result, pool.unlabelled, true_class, self.true_rewards)
         rewards = self.classes.decode(np.arange(self.task.n_classes))
         labelled, unlabelled = pool.labelled, pool.unlabelled
         self.class_records += class_rows(self.round, result, labelled, unlabelled, true_class, rewards)
@@ -365,14 +367,17 @@ class CoTrainingRun:
         result = self.trainer.step(pool)
         labelled = pool.labelled
         pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class), nan=0.0)
+        # Metrics only, and the true-rewards control's classes.
+        true_class = self.segment_classes.encode_hidden(segments.hidden[:n])
+        if self.true_rewards:
+            pseudo, result = self._given_truth(result, pseudo, segments.hidden, true_class)
         sums = np.where(labelled, segments.label[:n], pseudo)
         weight = np.where(labelled, 1.0, result.pseudo_weight)
         model = self.cfg.cotraining.classifier
         reward, step_weight = step_rewards(steps, segments, sums, weight, model, self.step_model_seeds())
         self.table.set(np.arange(reward.size), reward, step_weight)
         self.stopped = result.stopped
-        true_class = self.segment_classes.encode_hidden(segments.hidden[:n])  # metrics only
-        stats = round_stats(result, pool.unlabelled, true_class)
+        stats = round_stats(result, pool.unlabelled, true_class, self.true_rewards)
         # How far the decoded per-step rewards lie from the hidden ones, where the agents read them.
         decoded = step_weight > 0
         error = np.abs(reward - self.store.hidden_reward[: reward.size])[decoded]  # metrics only
@@ -381,6 +386,24 @@ class CoTrainingRun:
             "labelled_steps": int((segments.ids[:n][labelled] >= 0).sum()),
             "step_reward_error": float(error.mean()) if decoded.any() else float("nan"),
         }
+
+    @property
+    def true_rewards(self) -> bool:
+        """Whether the admitted samples read their true rewards (``cotraining.pseudo_rewards = "hidden"``)."""
+        return self.cfg.cotraining.pseudo_rewards == "hidden"
+
+    @staticmethod
+    def _given_truth(
+        result: RunRound, pseudo: np.ndarray, hidden: np.ndarray, true_class: np.ndarray
+    ) -> tuple[np.ndarray, RunRound]:
+        """The true-rewards control: each admitted sample's pseudo-reward replaced by its hidden reward
+        (``hidden``, indexed by pool sample), and the round with ``pseudo_class`` the class given, its
+        true one, for the record. Which samples are admitted, and their weights, stay the co-trainer's;
+        the others keep their entries, which weigh 0."""
+        admitted = result.pseudo_weight > 0
+        given = np.where(admitted, hidden[: pseudo.size], pseudo)
+        given_class = np.where(admitted, true_class, result.pseudo_class)
+        return given, dataclasses.replace(result, pseudo_class=given_class)
 
     def _probabilities(self) -> np.ndarray | None:
         """(m, N, K) the views' class probabilities of the task's pool, or None before any fit."""
