@@ -42,7 +42,8 @@ target (``dqn``), or a Q-table over the view's observations (``tabular``,
 Baselines: ``oracle`` (every reward revealed), ``masked-zero`` (masked rewards read as 0 with weight
 1) and ``labels-only`` (masked steps weigh 0); the peer ``reward-model`` takes the co-trainer's place
 in step 2 with ensembles fitted on the labels alone (:mod:`dospcot.core.reward_model`). The hidden
-reward reaches only the metrics.
+reward reaches only the metrics, but under the true-rewards control (``cotraining.pseudo_rewards =
+"hidden"``), which writes it for every admitted sample in step 3.
 """
 
 from __future__ import annotations
