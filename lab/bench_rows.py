@@ -14,7 +14,7 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3 import DQN
 
-from dospcot.config.learning_sections import TabularConfig
+from dospcot.config.paper_sections import TabularConfig
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.tabular_runs import TabularCoTraining
 from dospcot.envs import ViewObservationWrapper

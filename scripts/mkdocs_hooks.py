@@ -118,7 +118,7 @@ def rendered_modules(pages: Path = API_PAGES) -> set[str]:
 def _protocol_docs() -> dict[str, str]:
     """Methods documented on the protocols a task adapter implements: an implementation inherits the
     protocol's docstring as a subclass inherits its base's."""
-    from dospcot.core.sb3_round import TaskAdapter
+    from dospcot.core.task_adapter import TaskAdapter
 
     return {name: inspect.getdoc(member) or "" for name, member in vars(TaskAdapter).items()}
 

@@ -323,3 +323,54 @@ def test_agents_take_their_first_gradient_step_in_learn_from_round():
     assert all(agent.replay_buffer.size() == 300 for agent in run.agents)
     run.run_round()
     assert all(agent._n_updates > 0 for agent in run.agents)
+
+
+def test_the_hidden_rewards_control_changes_only_the_rewards_of_the_admitted_samples():
+    """``cotraining.pseudo_rewards = "hidden"``: round 1 admits the same samples with the same weights
+    and fits the same classifiers as the method, but every admitted sample reads its true reward; the
+    record's pseudo-reward accuracy is then 1, while each view's figures still score its classifier."""
+    views = ("coords", "patch")
+    runs, first = {}, {}
+    for mode in ("classifiers", "hidden"):  # one run at a time: SB3 seeds the global generators
+        runs[mode] = grid(
+            config(agents=("dqn", "dqn"), views=views, seed=6, cotraining={"pseudo_rewards": mode})
+        )
+        first[mode] = runs[mode].run_round()
+    method, control = runs["classifiers"], runs["hidden"]
+    admitted = control.table.weight > 0
+    assert admitted.sum() > 5 and np.array_equal(control.table.weight, method.table.weight)
+    true = control.store.hidden_reward.astype(np.float32)
+    assert np.array_equal(control.table.reward[admitted], true[admitted])
+    assert not np.array_equal(method.table.reward[admitted], true[admitted])  # the classifiers erred
+    assert np.array_equal(control.table.reward[~admitted], method.table.reward[~admitted])
+    assert [r["pseudo_accuracy"] for r in first["hidden"]] == [1.0, 1.0]
+    assert [r["worst_class_recall"] for r in first["hidden"]] == [1.0, 1.0]
+    assert first["classifiers"][0]["pseudo_accuracy"] < 1.0
+    for a, b in zip(first["classifiers"], first["hidden"], strict=True):
+        for key in (
+            "pace",
+            "coverage",
+            "eps",
+            "view_coverage",
+            "view_pseudo_accuracy",
+            "lambda",
+            "classifier_loss",
+        ):
+            assert a[key] == b[key], key
+    # Round 2 admits from the control's own experience, and still gives every admitted sample its truth.
+    second = control.run_round()
+    admitted = control.table.weight > 0
+    assert [r["pseudo_accuracy"] for r in second] == [1.0, 1.0]
+    assert np.array_equal(
+        control.table.reward[admitted], control.store.hidden_reward.astype(np.float32)[admitted]
+    )
+
+
+def test_the_hidden_rewards_control_is_read_by_reward_learners_only():
+    assert load_config("tiny", ["cotraining.pseudo_rewards=hidden"]).cotraining.pseudo_rewards == "hidden"
+    with pytest.raises(ConfigError, match='method = "oracle" never reads it'):
+        load_config("grid16-oracle", ["cotraining.pseudo_rewards=hidden"])
+    with pytest.raises(ConfigError, match="allowed: classifiers, hidden"):
+        load_config("tiny", ["cotraining.pseudo_rewards=true"])
+    with pytest.raises(ConfigError, match="the paper protocol's batched co-trainer gives the classifiers'"):
+        load_config("paper-text", ["tabular.cotraining.pseudo_rewards=hidden"])

@@ -12,7 +12,7 @@ from dospcot.tasks import get_task
 
 if TYPE_CHECKING:
     from dospcot.config.run_configs import TrainConfig
-    from dospcot.core.sb3_round import TaskAdapter
+    from dospcot.core.task_adapter import TaskAdapter
 
 
 def build_adapter(cfg: TrainConfig) -> TaskAdapter:

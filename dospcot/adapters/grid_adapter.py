@@ -124,7 +124,7 @@ MakeEnv = Callable[[], gym.Env]
 
 
 class GridAdapter(StoreQueries):
-    """The grid adapter of a run (:class:`~dospcot.core.sb3_round.TaskAdapter`).
+    """The grid adapter of a run (:class:`~dospcot.core.task_adapter.TaskAdapter`).
 
     :param cfg: the run's config: its views, method, seed, label fraction, episode lengths
         (``env.episode_steps``, ``env.train_episode_steps``), reward classes and demonstrations.

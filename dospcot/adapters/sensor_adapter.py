@@ -68,7 +68,7 @@ class _RandomPolicy:
 
 
 class SensorAdapter(StoreQueries):
-    """The sensor adapter of a run (:class:`~dospcot.core.sb3_round.TaskAdapter`).
+    """The sensor adapter of a run (:class:`~dospcot.core.task_adapter.TaskAdapter`).
 
     :param cfg: the run's config: its views, method, seed, label fraction and demonstrations.
     :param section: the task's section (:data:`SensorSection`); its ``episode_steps`` bound evaluation

@@ -42,11 +42,15 @@ QuerySchedule = Literal["asap", "even", "decay"]
 AgentDraws = Literal["shared", "own"]
 """Whose random draws a run's agents make: the global generators in turn, or each its own
 (:mod:`dospcot.core.agent_draws`)."""
+PseudoRewards = Literal["classifiers", "hidden"]
+"""What an admitted sample's reward is: the consensus class of the views' reward classifiers (DOSPCoT),
+or its hidden reward (a control: the same admissions, true rewards)."""
 ModelKind = Literal["mlp", "linear"]
 LossKind = Literal["cross_entropy", "hinge"]
 
 WEIGHTINGS: tuple[str, ...] = get_args(Weighting)
 QUOTAS: tuple[str, ...] = get_args(Quota)
+PSEUDO_REWARDS: tuple[str, ...] = get_args(PseudoRewards)
 LABEL_STRATEGIES: tuple[str, ...] = get_args(LabelStrategy)
 QUERY_SCHEDULES: tuple[str, ...] = get_args(QuerySchedule)
 CLASSIFIER_STRATEGIES: tuple[str, ...] = ("uncertainty", "disagreement")

@@ -14,6 +14,7 @@ from dospcot.config.choices import (
     LOSS_KINDS,
     MODEL_KINDS,
     NUMERICS_VERSIONS,
+    PSEUDO_REWARDS,
     QUERY_SCHEDULES,
     QUOTAS,
     WEIGHTINGS,
@@ -22,6 +23,7 @@ from dospcot.config.choices import (
     LabelStrategy,
     LossKind,
     ModelKind,
+    PseudoRewards,
     QuerySchedule,
     Quota,
     Weighting,
@@ -401,6 +403,13 @@ class CoTrainingConfig(AddedKeys):
         1, each view's classifier first learns the labels alone again, as in round 1, before the round
         selects: a class's output had never been trained, so its scores were those of its random
         initial parameters, and the consensus could give it to most of the pool.
+    :param pseudo_rewards: what an admitted sample's reward in the agents' reward table is:
+        ``"classifiers"``, the decoded consensus class of the views' classifiers (the method), or
+        ``"hidden"``, its true (hidden) reward: a control that keeps everything else (which samples are
+        admitted and when, their weights, the pace, the classifiers' fits and scores) as the
+        classifiers decide it, so that a gap to the oracle splits into wrong pseudo-rewards and what
+        the path itself loses. Under ``"hidden"`` the record's pseudo-reward accuracy describes the
+        rewards given (1 wherever a sample is admitted); each view's figures still score its classifier.
     """
 
     consensus_weight: float = 0.3
@@ -415,10 +424,15 @@ class CoTrainingConfig(AddedKeys):
     numerics: int = 1
     ensemble_size: int = 3
     refit_new_classes: bool = False
+    pseudo_rewards: PseudoRewards = "classifiers"
 
     renamed_keys: ClassVar[dict[str, str]] = {"gamma": "consensus_weight"}
     """Keys of older configs and their names now."""
-    added_keys: ClassVar[dict[str, Any]] = {"numerics": 1, "refit_new_classes": False}
+    added_keys: ClassVar[dict[str, Any]] = {
+        "numerics": 1,
+        "refit_new_classes": False,
+        "pseudo_rewards": "classifiers",
+    }
 
     def __post_init__(self) -> None:
         if self.consensus_weight < 0:
@@ -427,6 +441,8 @@ class CoTrainingConfig(AddedKeys):
             raise ValueError(f"weighting must be one of {WEIGHTINGS}, got {self.weighting!r}")
         if self.quota not in QUOTAS:
             raise ValueError(f"quota must be one of {QUOTAS}, got {self.quota!r}")
+        if self.pseudo_rewards not in PSEUDO_REWARDS:
+            raise ValueError(f"pseudo_rewards must be one of {PSEUDO_REWARDS}, got {self.pseudo_rewards!r}")
         if self.add_fraction_start <= 0:
             raise ValueError(f"add_fraction_start must be > 0, got {self.add_fraction_start}")
         if self.add_fraction_step < 0:
@@ -436,48 +452,4 @@ class CoTrainingConfig(AddedKeys):
         if self.numerics not in NUMERICS_VERSIONS:
             raise ValueError(
                 f"numerics must be one of {', '.join(map(str, NUMERICS_VERSIONS))}, got {self.numerics}"
-            )
-
-
-@dataclass(frozen=True)
-class TabularConfig:
-    """Hyperparameters shared by every run of a study.
-
-    :param rounds: co-training rounds (each one a collection of ``episodes_per_round`` episodes).
-    :param episodes_per_round: episodes each agent plays per round.
-    :param replay_sweeps: synchronous TD sweeps over the store after each round's co-training.
-    :param label_fraction: share of labelled (s, a) keys, in (0, 1].
-    :param cotraining: the self-paced schedule (its consensus weight is replaced by each run's gamma).
-    :param learning_rate: TD step size.
-    :param discount: discount factor (also the one value iteration uses for the optimum).
-    :param eps_start: exploration rate at pace 0.
-    :param eps_end: exploration rate at pace 1; eps(p) = eps_start + (eps_end - eps_start) * p.
-    """
-
-    rounds: int = 5
-    episodes_per_round: int = 500
-    replay_sweeps: int = 1
-    label_fraction: float = 0.1
-    cotraining: CoTrainingConfig = field(default_factory=lambda: CoTrainingConfig(numerics=1))
-    learning_rate: float = 0.8
-    discount: float = 0.95
-    eps_start: float = 0.1
-    eps_end: float = 0.1
-
-    def __post_init__(self) -> None:
-        check_label_fraction(self.label_fraction)
-        if not 0 < self.learning_rate <= 1 or not 0 < self.discount <= 1:
-            raise ValueError(
-                f"learning_rate and discount must lie in (0, 1], got {self.learning_rate}, {self.discount}"
-            )
-        if self.rounds < 1 or self.episodes_per_round < 1 or self.replay_sweeps < 0:
-            raise ValueError(
-                f"rounds and episodes_per_round must be >= 1 and replay_sweeps >= 0; got {self.rounds}, "
-                f"{self.episodes_per_round}, {self.replay_sweeps}"
-            )
-        check_within(self, 0, 1, "eps_start", "eps_end")
-        if self.cotraining.numerics != 1:
-            raise ValueError(
-                "cotraining.numerics: the paper protocol's batched co-trainer fits in numerics 1; set "
-                "numerics = 1 in [tabular.cotraining]"
             )

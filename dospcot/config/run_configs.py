@@ -18,9 +18,9 @@ from dospcot.config.learning_sections import (
     CoTrainingConfig,
     DQNConfig,
     TabularAgentConfig,
-    TabularConfig,
     TrainingConfig,
 )
+from dospcot.config.paper_sections import TabularConfig
 from dospcot.config.task_sections import DemonstrationsConfig, EnvConfig, GymConfig, HighwayConfig
 from dospcot.config.versions import ADOPTED, FIRST
 
@@ -39,7 +39,11 @@ SELF_PACED_KEYS: frozenset[str] = frozenset(
     )
 )
 """The ``[cotraining]`` keys of the self-paced schedule, which only co-training reads."""
-REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {"cotraining.ensemble_size", "cotraining.classifier"}
+REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {
+    "cotraining.ensemble_size",
+    "cotraining.classifier",
+    "cotraining.pseudo_rewards",
+}
 """The ``[cotraining]`` keys read by a method that learns rewards alone (``cotraining.classifier``: its
 section), which the baselines never read. ``numerics`` is not among them: every run names it in its
 ``run_info.json``, so a study pins it for every arm."""

@@ -60,11 +60,16 @@ def _view_stats(result: RunRound, j: int, unlabelled: np.ndarray, correct: np.nd
     }
 
 
-def round_stats(result: RunRound, unlabelled: np.ndarray, true_class: np.ndarray) -> dict[str, Any]:
+def round_stats(
+    result: RunRound, unlabelled: np.ndarray, true_class: np.ndarray, given_truth: bool = False
+) -> dict[str, Any]:
     """A run's round: pace, coverage of U (``unlabelled``,
     (N,) bool), accuracy of the admitted pseudo-rewards with its worst class, whether the stopping rule
     fired, and each view's figures (:data:`VIEW_STATS`). ``true_class`` (N,) is each sample's hidden
-    class (-1: a value no label showed, never a right prediction).
+    class (-1: a value no label showed, never a right prediction). With ``given_truth`` the admitted
+    samples were given their hidden rewards (``cotraining.pseudo_rewards = "hidden"``; ``result``'s
+    ``pseudo_class`` is then their true class), so each one is right, a value no label showed included;
+    each view's figures still score its classifier's predictions.
 
     The worst-class figures show what the mean hides: a rare class (lava) admitted on ordinary steps,
     or a class no label showed (the goal) read as another. ``worst_class_recall`` is the lowest share
@@ -75,7 +80,7 @@ def round_stats(result: RunRound, unlabelled: np.ndarray, true_class: np.ndarray
     admitted = result.pseudo_weight > 0
     right = (result.view_class == true_class) & (true_class >= 0)  # (m, N) per view
     given, truth = result.pseudo_class[admitted], true_class[admitted]
-    correct = (given == truth) & (truth >= 0)
+    correct = (given == truth) & ((truth >= 0) | given_truth)
     recall = [correct[truth == c].mean() for c in np.unique(truth)]
     precision = [correct[given == c].mean() for c in np.unique(given)]
     return {

@@ -42,28 +42,32 @@ target (``dqn``), or a Q-table over the view's observations (``tabular``,
 Baselines: ``oracle`` (every reward revealed), ``masked-zero`` (masked rewards read as 0 with weight
 1) and ``labels-only`` (masked steps weigh 0); the peer ``reward-model`` takes the co-trainer's place
 in step 2 with ensembles fitted on the labels alone (:mod:`dospcot.core.reward_model`). The hidden
-reward reaches only the metrics.
+reward reaches only the metrics, but under the true-rewards control (``cotraining.pseudo_rewards =
+"hidden"``), which writes it for every admitted sample in step 3.
 """
 
 from __future__ import annotations
 
 import dataclasses
 import io
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.type_aliases import MaybeCallback
 
 from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
-from dospcot.core.queries import QueriedTask, Rater, RewardQueries, SimulatedRater
+from dospcot.core.queries import Rater, RewardQueries, SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
 from dospcot.core.reward_model import RewardModelTrainer
 from dospcot.core.round_records import VIEW_STATS, class_rows, record_head, round_stats
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.core.self_paced import NUMERICS, RunCoTrainer, RunPool
+from dospcot.core.stopping import CO_TRAINER_STOPPED, GreedyPatience
+from dospcot.core.task_adapter import TaskAdapter
+from dospcot.core.true_rewards import given_truth
 from dospcot.envs.finite_check import FiniteCheckWrapper
 from dospcot.policies import ExpectedSarsaDQN, RewardTable, TabularExpectedSarsa
 from dospcot.seeding import agent_seed, classifier_seed, query_seed, round_reset_seed
@@ -74,49 +78,6 @@ if TYPE_CHECKING:
 AGENT_TARGETS = {"esarsa_dqn": "expected_sarsa", "dqn": "q", "tabular": "expected_sarsa"}
 """Agent kinds and their TD target: ExpectedSarsaDQN with its Expected-SARSA target or DQN's max target,
 and the tabular Expected-SARSA agent."""
-
-
-class TaskAdapter(QueriedTask, Protocol):
-    """What a task adapter supplies to :class:`CoTrainingRun` (and, for reward queries, what
-    :class:`~dospcot.core.queries.QueriedTask` asks, plus ``hidden_reward(ids)`` for the simulated
-    rater alone)."""
-
-    store: Any
-    """Every step the agents took, in the form the pool is built from; its ``state_dict()`` and
-    ``load_state_dict(state)`` checkpoint it in place."""
-    classes: RunRewardClasses | QuantileRewardClasses
-    """The reward classes of the run's labels (one run)."""
-    n_classes: int
-    """K, the most reward classes the run may hold (the classifiers' outputs)."""
-
-    def agent_env(self, k: int, view: str) -> gym.Env:
-        """Agent ``k``'s env: masked, observing ``view``, writing every step into the store with its
-        pool sample in ``info["store_id"]``."""
-
-    def observations(self, view: str) -> np.ndarray | None:
-        """(S, d) the view of every state, for a ``tabular`` agent; None where states are not known."""
-
-    def feature_dims(self) -> list[int]:
-        """Each view's classifier input width."""
-
-    def pool(self, dtype: type = np.float32) -> RunPool:
-        """This round's pool, after the classes have seen every label so far, its features in
-        ``dtype`` (the classifiers' own, so that a fit makes no copy of them)."""
-
-    def true_class(self) -> np.ndarray:
-        """(N,) each pool sample's hidden reward as a class of the run, -1 where the reward is a value
-        no label has shown (metrics only)."""
-
-    def evaluate(self, agents: Sequence[ExpectedSarsaDQN]) -> dict[str, np.ndarray]:
-        """Each agent's greedy policy: (m,) ``greedy_return``, ``success``, ``normalised_score``,
-        ``agreement``."""
-
-    def reference_returns(self) -> dict[str, float]:
-        """The returns the normalised score is measured between."""
-
-    def demonstrations(self, view: str) -> tuple[np.ndarray, np.ndarray] | None:
-        """(N, d) the demonstrated states in ``view`` and (N,) the demonstrated actions, for the
-        agents' large-margin loss (read only when it is on); None: the run has no demonstrations."""
 
 
 def relabelling_kwargs(method: str, table: RewardTable) -> dict[str, Any]:
@@ -234,10 +195,7 @@ class CoTrainingRun:
         the greedy evaluation's (``training.stop_patience``)."""
         self.stop_reason = ""
         """Why the run stopped before its last round ("" while it has not)."""
-        self.best_greedy: tuple[float, float] | None = None
-        """The best (mean success, mean normalised score) of the agents' greedy evaluations so far."""
-        self.rounds_since_best = 0
-        """Rounds since :attr:`best_greedy` last improved."""
+        self.patience = GreedyPatience(cfg.training.stop_patience)
 
     def _agent_env(self, k: int, view: str) -> gym.Env:
         env = self.task.agent_env(k, view)
@@ -345,21 +303,13 @@ class CoTrainingRun:
         return rows
 
     def _check_patience(self, rows: list[dict]) -> None:
-        """Stop once ``training.stop_patience`` rounds in a row brought the agents' greedy evaluation no
-        new best (mean success first, then mean normalised score): a run given more rounds than its task
-        needs ends where its agents stopped improving, as SB3's ``StopTrainingOnNoModelImprovement``
-        ends one agent's training."""
-        greedy = tuple(float(np.nanmean([r[key] for r in rows])) for key in ("success", "normalised_score"))
-        if self.best_greedy is None or greedy > self.best_greedy:
-            self.best_greedy, self.rounds_since_best = greedy, 0
-        else:
-            self.rounds_since_best += 1
-        patience = self.cfg.training.stop_patience
+        """Record why the run stops, where a stopping rule fired this round (the co-trainer's, or the
+        greedy evaluation's patience, :class:`~dospcot.core.stopping.GreedyPatience`)."""
+        out_of_patience = self.patience.update(rows) and self.round < self.cfg.training.rounds
         if self.stopped and not self.stop_reason:
-            self.stop_reason = "the co-trainer's stopping rule (cotraining.tol or every sample admitted)"
-        elif patience and self.rounds_since_best >= patience and self.round < self.cfg.training.rounds:
-            self.stopped = True
-            self.stop_reason = f"no new best greedy evaluation in {patience} rounds (training.stop_patience)"
+            self.stop_reason = CO_TRAINER_STOPPED
+        elif out_of_patience:
+            self.stopped, self.stop_reason = True, self.patience.reason()
 
     def cotrain(self) -> dict:
         """Steps 2-3 of a round: co-train on the task's pool and write the pseudo-rewards and their
@@ -370,13 +320,15 @@ class CoTrainingRun:
             return self._cotrain_segments(pool)
         result = self.trainer.step(pool)
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class), nan=0.0)
+        true_class = self.task.true_class()  # metrics only, and the true-rewards control's classes
+        if self.true_rewards:
+            pseudo, result = given_truth(result, pseudo, self.store.hidden_reward, true_class)
         self.table.set(np.arange(pseudo.size), pseudo, result.pseudo_weight)
         if self.queries is not None:  # a bought label reaches every stored and future step of its sample
             bought = np.flatnonzero(self.queries.revealed)
             self.table.set(bought, self.store.label_value[bought], 1.0)
         self.stopped = result.stopped
-        true_class = self.task.true_class()  # metrics only
-        stats = round_stats(result, pool.unlabelled, true_class)
+        stats = round_stats(result, pool.unlabelled, true_class, self.true_rewards)
         rewards = self.classes.decode(np.arange(self.task.n_classes))
         labelled, unlabelled = pool.labelled, pool.unlabelled
         self.class_records += class_rows(self.round, result, labelled, unlabelled, true_class, rewards)
@@ -390,14 +342,17 @@ class CoTrainingRun:
         result = self.trainer.step(pool)
         labelled = pool.labelled
         pseudo = np.nan_to_num(self.segment_classes.decode(result.pseudo_class), nan=0.0)
+        # Metrics only, and the true-rewards control's classes.
+        true_class = self.segment_classes.encode_hidden(segments.hidden[:n])
+        if self.true_rewards:
+            pseudo, result = given_truth(result, pseudo, segments.hidden, true_class)
         sums = np.where(labelled, segments.label[:n], pseudo)
         weight = np.where(labelled, 1.0, result.pseudo_weight)
         model = self.cfg.cotraining.classifier
         reward, step_weight = step_rewards(steps, segments, sums, weight, model, self.step_model_seeds())
         self.table.set(np.arange(reward.size), reward, step_weight)
         self.stopped = result.stopped
-        true_class = self.segment_classes.encode_hidden(segments.hidden[:n])  # metrics only
-        stats = round_stats(result, pool.unlabelled, true_class)
+        stats = round_stats(result, pool.unlabelled, true_class, self.true_rewards)
         # How far the decoded per-step rewards lie from the hidden ones, where the agents read them.
         decoded = step_weight > 0
         error = np.abs(reward - self.store.hidden_reward[: reward.size])[decoded]  # metrics only
@@ -406,6 +361,11 @@ class CoTrainingRun:
             "labelled_steps": int((segments.ids[:n][labelled] >= 0).sum()),
             "step_reward_error": float(error.mean()) if decoded.any() else float("nan"),
         }
+
+    @property
+    def true_rewards(self) -> bool:
+        """Whether the admitted samples read their true rewards (``cotraining.pseudo_rewards = "hidden"``)."""
+        return self.cfg.cotraining.pseudo_rewards == "hidden"
 
     def _probabilities(self) -> np.ndarray | None:
         """(m, N, K) the views' class probabilities of the task's pool, or None before any fit."""
@@ -441,7 +401,7 @@ class CoTrainingRun:
         return {
             "round": self.round,
             "stopped": self.stopped,
-            "patience": (self.stop_reason, self.best_greedy, self.rounds_since_best),
+            "patience": (self.stop_reason, self.patience.best, self.patience.since_best),
             "agents": zips,
             "buffers": [agent.replay_buffer for agent in self.agents],
             "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
@@ -464,7 +424,7 @@ class CoTrainingRun:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
         self.round, self.stopped = state["round"], state["stopped"]
-        self.stop_reason, self.best_greedy, self.rounds_since_best = state["patience"]
+        self.stop_reason, self.patience.best, self.patience.since_best = state["patience"]
         self.store.load_state_dict(state["store"])  # in place: the store wrappers keep pointing at it
         if self.segments is not None:
             self.segments.load_state_dict(state["segments"])

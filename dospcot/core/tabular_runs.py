@@ -33,7 +33,7 @@ from itertools import groupby
 import numpy as np
 
 from dospcot import metrics
-from dospcot.config.learning_sections import TabularConfig
+from dospcot.config.paper_sections import TabularConfig
 from dospcot.core.key_pool import key_features
 from dospcot.core.reward_classes import RewardClasses
 from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
