@@ -11,6 +11,7 @@ from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.tables import (
     NON_INFERIORITY_MARGIN,
+    adoption_glance,
     cpu_per_run,
     held_lines,
     non_inferior,
@@ -67,20 +68,15 @@ def tables(runs: list[TrialRun]) -> list[str]:
 def glance(runs: list[TrialRun]) -> Glance:
     """The headline: DoorKey's success, version 2 minus 1 (grid16's until DoorKey is measured); the
     verdict: adopt version 2 only where every difference on both presets is non-inferior."""
-    differences = {preset: _differences(runs, preset) for preset in PRESETS}
-    measured = [preset for preset in PRESETS if differences[preset]["success"].n]
-    if not measured:
-        return Glance("defaults 2 minus 1: not measured yet", "not measured yet")
-    diffs = [d for by_metric in differences.values() for d in by_metric.values() if d.n]
-    if not all(non_inferior(d) for d in diffs):
-        verdict = "version 2 not shown non-inferior: version 1 stays adopted"
-    elif len(measured) < len(PRESETS):
-        verdict = "not measured yet (a preset lacks one version's runs)"
-    else:
-        verdict = "version 2 non-inferior: adopt it"
-    preset = measured[-1]
-    headline = f"{preset} success, defaults 2 minus 1, paired by seed: {differences[preset]['success']}"
-    return Glance(headline, verdict)
+    return adoption_glance(
+        {preset: _differences(runs, preset) for preset in PRESETS},
+        "defaults 2 minus 1",
+        (
+            "version 2 not shown non-inferior: version 1 stays adopted",
+            "not measured yet (a preset lacks one version's runs)",
+            "version 2 non-inferior: adopt it",
+        ),
+    )
 
 
 STUDIES: dict[str, Study] = {

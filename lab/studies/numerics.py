@@ -10,6 +10,7 @@ from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.tables import (
     NON_INFERIORITY_MARGIN,
+    adoption_glance,
     cpu_per_run,
     held_lines,
     non_inferior,
@@ -75,23 +76,16 @@ def tables(runs: list[TrialRun]) -> list[str]:
 
 def glance(runs: list[TrialRun]) -> Glance:
     """The headline: success, numerics 2 minus 1, on the last preset measured under both (DoorKey once
-    it is); the verdict by the adoption rule for a default: not shown non-inferior where any measured
-    difference's lower end lies at or below the margin, adopt only where every one on both presets
-    lies above it."""
-    differences = {preset: _differences(runs, preset) for preset in PRESETS}
-    measured = [preset for preset in PRESETS if differences[preset]["success"].n]
-    if not measured:
-        return Glance("numerics 2 minus 1: not measured yet", "not measured yet")
-    diffs = [d for by_metric in differences.values() for d in by_metric.values() if d.n]
-    if not all(non_inferior(d) for d in diffs):
-        verdict = "numerics 2 not shown non-inferior"
-    elif len(measured) < len(PRESETS):
-        verdict = "non-inferior where measured; DoorKey not measured yet"
-    else:
-        verdict = "numerics 2 non-inferior: adopt it"
-    preset = measured[-1]
-    headline = f"{preset} success, numerics 2 minus 1, paired by seed: {differences[preset]['success']}"
-    return Glance(headline, verdict)
+    it is); the verdict by the adoption rule for a default (non-inferiority on both presets)."""
+    return adoption_glance(
+        {preset: _differences(runs, preset) for preset in PRESETS},
+        "numerics 2 minus 1",
+        (
+            "numerics 2 not shown non-inferior",
+            "non-inferior where measured; DoorKey not measured yet",
+            "numerics 2 non-inferior: adopt it",
+        ),
+    )
 
 
 STUDIES: dict[str, Study] = {

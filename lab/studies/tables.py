@@ -202,6 +202,31 @@ def non_inferior(diff: SeedSummary, margin: float = NON_INFERIORITY_MARGIN) -> b
     return diff.n > 0 and diff.low > -margin
 
 
+def adoption_glance(
+    differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str]
+) -> Glance:
+    """The row of a study that decides a default: its headline, ``change`` in success on the last preset
+    measured, and its verdict by :func:`non_inferior` over every measured difference.
+
+    :param differences: preset -> metric -> the paired difference, new minus old.
+    :param change: the comparison in words (``"numerics 2 minus 1"``).
+    :param verdicts: what to say where a difference is not non-inferior, where every measured one is
+        but a preset is not measured yet, and where every one on every preset is.
+    """
+    measured = [preset for preset, by_metric in differences.items() if by_metric["success"].n]
+    if not measured:
+        return Glance(f"{change}: not measured yet", "not measured yet")
+    diffs = [d for by_metric in differences.values() for d in by_metric.values() if d.n]
+    if not all(non_inferior(d) for d in diffs):
+        verdict = verdicts[0]
+    elif len(measured) < len(differences):
+        verdict = verdicts[1]
+    else:
+        verdict = verdicts[2]
+    preset = measured[-1]
+    return Glance(f"{preset} success, {change}, paired by seed: {differences[preset]['success']}", verdict)
+
+
 def verdict(diff: SeedSummary, ours: str = "DOSPCoT", theirs: str = "self-training") -> str:
     """What a paired difference ``ours`` minus ``theirs`` shows: one above the other where its 95%
     interval excludes 0, else no difference."""
