@@ -77,7 +77,12 @@ def test_agent_draws_names_its_choices():
 
 def test_a_folder_or_checkpoint_written_before_the_key_reads_shared_whatever_the_default():
     old_table = renamed_to_now(TrainingConfig, {"rounds": 3})
-    assert old_table == {"agent_draws": "shared", "query_end_states": "random", "rounds": 3}
+    assert old_table == {
+        "agent_draws": "shared",
+        "query_end_states": "random",
+        "stop_patience": 0,
+        "rounds": 3,
+    }
     state = dict(TrainingConfig(agent_draws="own").__dict__)
     del state["agent_draws"]
     old = TrainingConfig.__new__(TrainingConfig)
