@@ -390,6 +390,7 @@ def _assert_every_run_file_whole(run_dir: Path) -> None:
             assert data.startswith(b"\x89PNG") and data.endswith(b"IEND\xaeB`\x82")
 
 
+@pytest.mark.slow
 def test_a_run_killed_at_random_moments_resumes_to_the_uninterrupted_result(trained, tmp_path):
     overrides = ["training.rounds=3", "training.steps_per_round=800"]
     full = trained(*overrides)
