@@ -1,5 +1,5 @@
-"""The sensor adapter's stores (:mod:`dospcot.tasks.sensor_tasks`): every step the agents of a run took, with
-every view of s and s' (:class:`StepStore`), or each (state key, action) pair once
+"""The sensor adapter's stores (:mod:`dospcot.adapters.sensor_adapter`): every step the agents of a run took,
+with every view of s and s' (:class:`StepStore`), or each (state key, action) pair once
 (:class:`KeyedStepStore`), and the wrapper that writes an agent's steps into one
 (:class:`SensorStoreWrapper`)."""
 

@@ -269,10 +269,11 @@ def from_mapping(cls: type, data: Mapping[str, Any], prefix: str = "") -> Any:
     hints = type_hints(cls)
     unbounded: frozenset[str] = getattr(cls, "infinite_keys", frozenset())
     respelled: dict[str, dict[str, str]] = getattr(cls, "renamed_values", {})
-    data = {
-        key: respelled[key].get(value, value) if key in respelled and isinstance(value, str) else value
-        for key, value in data.items()
-    }
+    if respelled:  # only a root config has values read under a newer spelling
+        data = {
+            key: respelled[key].get(value, value) if key in respelled and isinstance(value, str) else value
+            for key, value in data.items()
+        }
     kwargs = {
         key: _convert(hints[key], value, f"{prefix}{key}", may_be_infinite=key in unbounded)
         for key, value in data.items()

@@ -152,7 +152,7 @@ class HighwayConfig:
         """The views of the task ``env_id``."""
         return FAST_HIGHWAY_VIEWS if self.env_id == FAST_HIGHWAY_ID else HIGHWAY_ENV_VIEWS
 
-    # The sensor adapter reads these of every sensor task's section (dospcot.tasks.sensor_tasks).
+    # The sensor adapter reads these of every sensor task's section (dospcot.adapters.sensor_adapter).
     success_return = None
     """A highway episode is a success when it lasts every step (no crash)."""
     max_return = None

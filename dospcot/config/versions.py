@@ -15,6 +15,7 @@ for it (docs/guide/defaults.md); until then ``defaults = 2`` opts in. Nothing he
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
@@ -23,6 +24,7 @@ from typing import Any
 from dospcot.config.choices import DEFAULT_VIEWS, method_name
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import CoTrainingConfig
+from dospcot.config.loading import set_key
 
 TaskSection = tuple[str, type]
 """A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
@@ -178,13 +180,9 @@ def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tupl
 
 def with_version_defaults(table: Mapping[str, Any], section: TaskSection) -> dict[str, Any]:
     """``table`` with the defaults its version moves filled in where it sets nothing itself."""
-    out = _copy(table)
+    out = copy.deepcopy(dict(table))
     for key, (value, _) in moved_keys(table, section).items():
-        *sections, name = key.split(".")
-        part = out
-        for section in sections:
-            part = part.setdefault(section, {})
-        part[name] = value
+        set_key(out, key.split("."), value, f"defaults = {version_of(table)}")
     return out
 
 
@@ -194,8 +192,8 @@ def fit_budget(table: Mapping[str, Any], section: TaskSection, most_samples: int
     moved = moved_keys(table, section)
     if "training.label_budget" not in moved or moved["training.label_budget"][0] <= most_samples:
         return None
-    out = _copy(table)
-    out.setdefault("training", {})["label_budget"] = most_samples
+    out = copy.deepcopy(dict(table))
+    set_key(out, ["training", "label_budget"], most_samples, "training.label_budget")
     return out
 
 
@@ -206,7 +204,3 @@ def _has(table: Mapping[str, Any], key: str) -> bool:
             return False
         part = part[name]
     return True
-
-
-def _copy(table: Mapping[str, Any]) -> dict[str, Any]:
-    return {k: _copy(v) if isinstance(v, Mapping) else v for k, v in table.items()}

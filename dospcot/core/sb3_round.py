@@ -29,11 +29,11 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
 folder, TensorBoard and checkpoints) hangs on its ``on_round`` hook. The run reads its config
 (:class:`~dospcot.config.run_configs.TrainConfig`) directly.
 
-What a task supplies (:class:`TaskAdapter`, built by the task registry, :mod:`dospcot.tasks`):
-each agent's env (masked, writing the store), its reward classes, the pool, each sample's true class
-(metrics only) and the evaluator. The grid adapter (:mod:`dospcot.tasks.grid`) pools (s, a) keys and
-measures against the exact optimum; the sensor adapter (:mod:`dospcot.tasks.sensor_tasks`) pools every step
-and runs evaluation episodes.
+What a task supplies (:class:`~dospcot.core.task_adapter.TaskAdapter`, built by
+:func:`dospcot.adapters.build_adapter`): each agent's env (masked, writing the store), its reward
+classes, the pool, each sample's true class (metrics only) and the evaluator. The grid adapter
+(:mod:`dospcot.adapters.grid_adapter`) pools (s, a) keys and measures against the exact optimum; the
+sensor adapter (:mod:`dospcot.adapters.sensor_adapter`) pools every step and runs evaluation episodes.
 
 Agents (``cfg.agent_kinds``): ExpectedSarsaDQN with its Expected-SARSA target (``esarsa_dqn``) or DQN's max
 target (``dqn``), or a Q-table over the view's observations (``tabular``,
