@@ -1,6 +1,8 @@
 """The co-training core on its own: reward classes, the key pool's features, one SelfPacedCoTrainer
 round after another, each against figures worked out by hand."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -12,12 +14,13 @@ from dospcot.core.reward_classes import (
     RunRewardClasses,
     episode_end_class_mask,
 )
-from dospcot.core.round_records import record_head, round_stats
+from dospcot.core.round_records import error_dependence, record_head, round_stats
 from dospcot.core.self_paced import (
     Pool,
     RoundResult,
     RunCoTrainer,
     RunPool,
+    RunRound,
     SelfPacedCoTrainer,
 )
 
@@ -100,9 +103,62 @@ def test_round_stats_read_the_run_they_are_given_in_a_batch():
     view = stats["views"][0]
     assert view["view_coverage"] == 1.0 and view["view_pseudo_accuracy"] == pytest.approx(2 / 3)
     assert view["lambda"] == 0.6 and view["classifier_loss"] == 0.7
+    assert view["view_error"] == pytest.approx(1 / 3)  # sample 3 of U, predicted 0 and truly 1
     first = round_stats(result.of_run(0), unlabelled, truth)
     assert first["coverage"] == pytest.approx(1 / 3) and first["pseudo_accuracy"] == 1.0
     assert first["stopped"] is False and first["views"][0]["lambda"] == pytest.approx(0.3)
+
+
+def test_error_dependence_by_hand():
+    # Eight samples of U, all of class 0 but the last, a value no label showed: left out, since every
+    # predictor errs on it.
+    truth = np.array([0, 0, 0, 0, 0, 0, 0, -1])
+    where = np.ones(8, bool)
+    # A predicts class 1 on samples 0-3, B on 2-5: of the seven scored, each errs on 4, both on 2 and 3.
+    a = np.array([1, 1, 1, 1, 0, 0, 0, 0])
+    b = np.array([0, 0, 1, 1, 1, 1, 0, 0])
+    stats = error_dependence(np.stack([a, b]), truth, where)
+    assert stats["joint_error"] == pytest.approx(2 / 7)
+    assert stats["independent_error"] == pytest.approx(16 / 49)
+    assert stats["disagreement"] == pytest.approx(4 / 7)  # samples 0, 1, 4, 5
+    assert stats["error_correlation"] == pytest.approx((2 / 7 - 16 / 49) / (4 / 7 * 3 / 7))  # -1/6
+    # Errors on the same samples correlate 1; identical predictors never disagree.
+    same = error_dependence(np.stack([a, a]), truth, where)
+    assert same["error_correlation"] == pytest.approx(1.0) and same["disagreement"] == 0.0
+    # Only the samples of ``where`` count: of 2, 3, 4 and 6, both err on 2 and 3.
+    assert (
+        error_dependence(np.stack([a, b]), truth, np.isin(np.arange(8), [2, 3, 4, 6, 7]))["joint_error"]
+        == 0.5
+    )
+    # One predictor, or no sample scored (the unseen value alone), gives NaN.
+    assert all(np.isnan(v) for v in error_dependence(a[None], truth, where).values())
+    assert np.isnan(error_dependence(np.stack([a, b]), truth, np.arange(8) == 7)["disagreement"])
+    # A predictor never wrong has no error correlation, while its joint error is still 0.
+    right = error_dependence(np.stack([np.zeros(8, int), b]), truth, where)
+    assert np.isnan(right["error_correlation"]) and right["joint_error"] == 0.0
+
+
+def test_round_stats_compare_the_members_where_the_round_names_them():
+    # One view (no pair of views), three ensemble members: the dependence figures read the members.
+    n = 4
+    result = RunRound(
+        pseudo_class=np.zeros(n, int),
+        pseudo_weight=np.ones(n),
+        view_weight=np.ones((1, n)),
+        view_class=np.zeros((1, n), int),
+        threshold=np.full((1, 2), np.nan),
+        classifier_loss=np.zeros(1),
+        pace=1.0,
+        changed=1.0,
+        stopped=False,
+        member_class=np.array([[0, 0, 1, 1], [0, 1, 1, 0], [0, 0, 0, 0]]),
+    )
+    stats = round_stats(result, np.ones(n, bool), np.zeros(n, int))
+    assert stats["disagreement"] == 0.75 and stats["joint_error"] == 0.0
+    assert stats["independent_error"] == 0.0  # the third member is never wrong
+    assert stats["views"][0]["view_error"] == 0.0
+    views_only = round_stats(replace(result, member_class=None), np.ones(n, bool), np.zeros(n, int))
+    assert np.isnan(views_only["disagreement"])  # one view: no pair to compare
 
 
 def test_record_head_names_the_run_and_the_agent():

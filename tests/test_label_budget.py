@@ -13,7 +13,7 @@ from test_queries import PROBABILITIES, _grid_run, _tiny_grid, _unqueried_permut
 
 from dospcot.config.errors import ConfigError
 from dospcot.core.queries import RewardQueries, SimulatedRater, choose_queries, class_floors, scheduled_labels
-from dospcot.core.round_records import class_rows
+from dospcot.core.round_records import class_rows, error_dependence
 from dospcot.core.self_paced import RunRound
 from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
@@ -173,6 +173,18 @@ def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_lab
     assert admitted[pool.unlabelled].all()  # no self-paced selection: all of U is rewarded
     # The members differ (their own seeds and bootstraps), so disagreement has something to read.
     assert not np.allclose(probabilities[0], probabilities[1])
+
+
+def test_the_reward_models_error_dependence_compares_its_members():
+    run = _grid_run("disagreement", *SHORT_BUDGET, 'method="reward-model"', 'views=["coords"]')
+    rows = run.run_round()
+    assert {"joint_error", "independent_error", "disagreement", "error_correlation"} <= set(rows[0])
+    stats = run.cotrain()  # another fit on the same pool: the figures read its members' classes
+    pool = run.task.pool()
+    members = run.trainer.probabilities(pool).argmax(axis=-1)  # (3, N): one view, three members
+    expected = error_dependence(members, run.task.true_class(), pool.unlabelled)
+    assert expected["disagreement"] > 0
+    assert {key: stats[key] for key in expected} == pytest.approx(expected, nan_ok=True)
 
 
 @pytest.mark.parametrize(

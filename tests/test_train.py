@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import tomli_w
+import torch as th
 from stable_baselines3 import DQN
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 from tensorboard.backend.event_processing.event_file_loader import EventFileLoader
@@ -29,6 +30,7 @@ from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import DQN_DEFAULTS, DQN_SET_ELSEWHERE, DQNConfig
 from dospcot.config.presets import preset_names
 from dospcot.core.classifier import load_classifier
+from dospcot.core.round_records import DEPENDENCE_STATS
 from dospcot.envs import GridWorld, TabularMDP
 from dospcot.run.run_folder import RunFolderError, read_checkpoint, write_csv
 from dospcot.run.run_session import ROUND_SCALARS, SEGMENT_SCALARS
@@ -237,8 +239,16 @@ def test_unknown_preset_and_bad_resume_folder_fail_with_one_line(tmp_path, capsy
     assert "has no config.toml" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize("views", [["coords"], ["coords", "patch"], ["coords", "patch", "rays"]])
-def test_tiny_run_writes_every_file_for_one_two_and_three_views(trained, views):
+@pytest.mark.parametrize(
+    ("views", "names"),
+    [
+        (["coords"], ["coords"]),
+        (["coords", "patch"], ["coords", "patch"]),
+        (["coords", "patch", "rays"], ["coords", "patch", "rays"]),
+        (["coords", "coords"], ["coords", "coords-2"]),  # a same-sensor twin
+    ],
+)
+def test_tiny_run_writes_every_file_for_one_two_and_three_views_and_a_twin(trained, views, names):
     run_dir = trained(f"views={json.dumps(views)}")
     for name in RUN_FILES:
         assert (run_dir / name).is_file(), name
@@ -247,17 +257,29 @@ def test_tiny_run_writes_every_file_for_one_two_and_three_views(trained, views):
     rows = (run_dir / "metrics.csv").read_text().splitlines()
     assert len(rows) == 1 + 2 * len(views)  # one row per round and view
     summary = json.loads((run_dir / "summary.json").read_text())
-    assert summary["rounds"] == 2 and summary["m"] == len(views) and list(summary["per_view"]) == views
+    assert summary["rounds"] == 2 and summary["m"] == len(views) and list(summary["per_view"]) == names
     assert summary["env_steps_per_agent"] == 600
     assert load_config(str(run_dir / "config.toml")).views == tuple(views)
     assert json.loads((run_dir / "reward_classes.json").read_text())["rewards"]
-    for view in views:
-        agent = DQN.load(run_dir / f"agent_{view}.zip", device="cpu")  # plain SB3, no dospcot class
-        clf = load_classifier(run_dir / f"classifier_{view}.pt")
-        assert clf.weights[0].shape[1] == 2 * agent.observation_space.shape[0] + 4  # (s, a, s') features
-        tags = EventAccumulator(str(run_dir / "tb" / f"agent_{view}")).Reload().Tags()["scalars"]
+    agents, classifiers = [], []
+    for name in names:
+        agents.append(DQN.load(run_dir / f"agent_{name}.zip", device="cpu"))  # plain SB3, no dospcot class
+        classifiers.append(load_classifier(run_dir / f"classifier_{name}.pt"))
+        features = 2 * agents[-1].observation_space.shape[0] + 4  # (s, a, s') features
+        assert classifiers[-1].weights[0].shape[1] == features
+        tags = EventAccumulator(str(run_dir / "tb" / f"agent_{name}")).Reload().Tags()["scalars"]
         assert {f"dospcot/{key}" for key in ROUND_SCALARS} <= set(tags)
+        # The views' error dependence, where there are two classifiers to compare.
+        assert ({f"dospcot/{key}" for key in DEPENDENCE_STATS} <= set(tags)) == (len(views) > 1)
         assert {"rollout/exploration_rate", "train/loss"} <= set(tags)  # SB3's own scalars
+    if len(set(views)) < len(views):  # the twin's agents and classifiers: a second model of one view
+        first, second = (a.policy.state_dict() for a in agents)
+        assert any(not th.equal(first[key], second[key]) for key in first)
+        assert not th.equal(classifiers[0].weights[0], classifiers[1].weights[0])
+        assert [(r["agent"], r["view"]) for r in csv.DictReader(rows)][:2] == [
+            ("0", "coords"),
+            ("1", "coords"),
+        ]
 
 
 def test_a_run_on_segment_labels_logs_and_summarises_its_decoding_error(tmp_path):

@@ -61,6 +61,9 @@ class TrainConfig:
         self-training) or ``reward-model`` (the peer without co-training: an ensemble of reward
         classifiers per view fitted on the labels alone rewards every unlabelled sample).
     :param views: one view per agent, from the task's views (the grid's ``coords``, ``patch``, ``rays``).
+        A view named twice is a same-sensor twin: two agents and two classifiers on one sensor, each
+        from its own initial weights and draws (a second model without a second view); its second
+        agent's files and figures are named ``<view>-2`` (:attr:`agent_names`).
     :param agents: the agent kind of each view (``esarsa_dqn``, ``dqn`` or, on a grid, ``tabular``);
         empty: ``agent`` for every view.
     :param agent: the agent kind of every view when ``agents`` is empty (``--set agent=tabular``
@@ -105,8 +108,6 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         check_name_and_seed(self.name, self.seed)
-        if len(set(self.views)) != len(self.views):
-            raise ConfigError(f"views: each view may appear once, got {list(self.views)}")
         if self.agents and len(self.agents) != len(self.views):
             raise ConfigError(
                 f"agents: need one agent kind per view ({len(self.views)}), got {len(self.agents)}"
@@ -198,6 +199,16 @@ class TrainConfig:
     def agent_kinds(self) -> tuple[str, ...]:
         """The agent kind of each view."""
         return self.agents or (self.agent,) * len(self.views)
+
+    @property
+    def agent_names(self) -> tuple[str, ...]:
+        """Each agent's name in its files and figures: its view, numbered from the view's second agent
+        on (``("image", "image-2")`` for a twin on ``image``)."""
+        names = []
+        for k, view in enumerate(self.views):
+            count = self.views[: k + 1].count(view)
+            names.append(view if count == 1 else f"{view}-{count}")
+        return tuple(names)
 
     @property
     def buffer_size(self) -> int:

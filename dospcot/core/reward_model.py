@@ -102,6 +102,7 @@ class RewardModelTrainer(FitsUnderNumerics):
             pace=1.0,
             changed=changed,
             stopped=False,
+            member_class=probabilities.reshape(m * members, *pool.labelled.shape, -1).argmax(axis=-1),
         )
 
     def probabilities(self, pool: RunPool) -> np.ndarray | None:

@@ -15,8 +15,10 @@ import numpy as np
 
 from dospcot.core.self_paced import RunRound
 
-VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "lambda", "classifier_loss")
+VIEW_STATS = ("view_coverage", "view_pseudo_accuracy", "view_error", "lambda", "classifier_loss")
 """The per-view figures of :func:`round_stats`, under the names a record gives them."""
+DEPENDENCE_STATS = ("joint_error", "independent_error", "disagreement", "error_correlation")
+"""The figures of :func:`error_dependence`, under the names a record gives them."""
 CLASS_COLUMNS = ("round", "class", "reward", "samples", "labelled", "admitted", "recall", "precision")
 """The columns of a run's ``pseudo_rewards.csv`` (:func:`class_rows`)."""
 
@@ -48,15 +50,57 @@ def record_head(
 
 
 def _view_stats(result: RunRound, j: int, unlabelled: np.ndarray, correct: np.ndarray) -> dict[str, float]:
-    """View j's round: coverage of U, accuracy of what it admitted, mean
-    lambda and classifier loss. ``correct`` (N,) says where its predicted class matches the truth."""
+    """View j's round: coverage of U, accuracy of what it admitted, its error rate over all of U
+    (admitted or not), mean lambda and classifier loss. ``correct`` (N,) says where its predicted class
+    matches the truth."""
     taken = result.view_weight[j] > 0
     lam = result.threshold[j]
     return {
         "view_coverage": float(taken[unlabelled].mean()) if unlabelled.any() else 0.0,
         "view_pseudo_accuracy": float(correct[taken].mean()) if taken.any() else float("nan"),
+        "view_error": float(1.0 - correct[unlabelled].mean()) if unlabelled.any() else float("nan"),
         "lambda": float(np.nanmean(lam)) if np.isfinite(lam).any() else float("nan"),
         "classifier_loss": float(result.classifier_loss[j]),
+    }
+
+
+def error_dependence(predicted: np.ndarray, true_class: np.ndarray, where: np.ndarray) -> dict[str, float]:
+    """How dependent P predictors' errors are over the samples ``where`` of a class some label showed:
+    co-training's second view pays when its errors are close to independent of the first's given the
+    label. A sample of a value no label showed is left out: every predictor errs on it, whatever its
+    view, so it would make any two predictors look dependent (``view_error`` counts it).
+
+    - ``joint_error``: the share of samples every predictor gets wrong;
+    - ``independent_error``: the product of their error rates, what ``joint_error`` would be were
+      their errors independent (below it: errors in different places; above it: the same places);
+    - ``disagreement``: the share of samples on which the predictors do not all predict one class;
+    - ``error_correlation``: the correlation of two predictors' error indicators (the phi
+      coefficient; 0 for independent errors, 1 for errors on the same samples), averaged over pairs;
+      NaN where a predictor is never or always wrong.
+
+    All NaN for fewer than two predictors or no sample.
+
+    :param predicted: (P, N) each predictor's class of each sample.
+    :param true_class: (N,) each sample's hidden class, -1 for a value no label showed.
+    :param where: (N,) bool, the samples scored (a round's U).
+    """
+    scored = where & (true_class >= 0)
+    if predicted.shape[0] < 2 or not scored.any():
+        return dict.fromkeys(DEPENDENCE_STATS, float("nan"))
+    classes = predicted[:, scored]
+    wrong = classes != true_class[scored]  # (P, n)
+    rates = wrong.mean(axis=1)
+    pairs = [(a, b) for a in range(len(wrong)) for b in range(a + 1, len(wrong))]
+    spread = np.sqrt(rates * (1.0 - rates))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        phi = [
+            ((wrong[a] & wrong[b]).mean() - rates[a] * rates[b]) / (spread[a] * spread[b]) for a, b in pairs
+        ]
+    return {
+        "joint_error": float(wrong.all(axis=0).mean()),
+        "independent_error": float(np.prod(rates)),
+        "disagreement": float((classes != classes[0]).any(axis=0).mean()),
+        "error_correlation": float(np.mean(phi)),
     }
 
 
@@ -91,6 +135,9 @@ def round_stats(
         "worst_class_precision": float(min(precision, default=float("nan"))),
         "stopped": result.stopped,
         "views": [_view_stats(result, j, unlabelled, c) for j, c in enumerate(right)],
+        **error_dependence(
+            result.view_class if result.member_class is None else result.member_class, true_class, unlabelled
+        ),
     }
 
 

@@ -62,7 +62,7 @@ from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
 from dospcot.core.queries import Rater, RewardQueries, SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
 from dospcot.core.reward_model import RewardModelTrainer
-from dospcot.core.round_records import VIEW_STATS, class_rows, record_head, round_stats
+from dospcot.core.round_records import DEPENDENCE_STATS, VIEW_STATS, class_rows, record_head, round_stats
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.core.self_paced import NUMERICS, RunCoTrainer, RunPool
 from dospcot.core.stopping import CO_TRAINER_STOPPED, GreedyPatience
@@ -471,6 +471,7 @@ class CoTrainingRun:
                     "labelled_steps": stats.get("labelled_steps", float("nan")),
                     "step_reward_error": stats.get("step_reward_error", float("nan")),
                     **{key: round_view.get(key, float("nan")) for key in VIEW_STATS},
+                    **{key: stats.get(key, float("nan")) for key in DEPENDENCE_STATS},
                     # Runs on the uniform mask keep the columns they always had.
                     **({} if self.queries is None else {"queries": self.queries.answers_of(self.round).size}),
                 }

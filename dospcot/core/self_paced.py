@@ -146,6 +146,9 @@ class RoundResult:
     :param pace: (B,) admitted share of U, in [0, 1]; 1 where U is empty.
     :param changed: (B,) share of U whose pseudo-label changed since the previous round.
     :param stopped: (B,) bool, runs whose stopping rule fired this round.
+    :param member_class: (P, B, N) the class each of P predictors predicts, where the predictors whose
+        errors the round's dependence figures compare are not the views' classifiers (the reward
+        model's ensemble members); None: they are, ``view_class``.
     """
 
     pseudo_class: np.ndarray
@@ -157,6 +160,7 @@ class RoundResult:
     pace: np.ndarray
     changed: np.ndarray
     stopped: np.ndarray
+    member_class: np.ndarray | None = None
 
     def of_run(self, b: int) -> RunRound:
         """Run ``b``'s part of the round."""
@@ -170,6 +174,7 @@ class RoundResult:
             float(self.pace[b]),
             float(self.changed[b]),
             bool(self.stopped[b]),
+            None if self.member_class is None else self.member_class[:, b],
         )
 
 
@@ -184,8 +189,8 @@ class RunPool(Pool):
 class RunRound(RoundResult):
     """What one co-training round decided for one run (:meth:`RoundResult.of_run`): a
     :class:`RoundResult` without the runs' axis, so ``pseudo_class`` and ``pseudo_weight`` (N,),
-    ``view_weight`` and ``view_class`` (m, N), ``threshold`` (m, K), ``classifier_loss`` (m,), and
-    ``pace``, ``changed`` and ``stopped`` plain numbers."""
+    ``view_weight`` and ``view_class`` (m, N), ``member_class`` (P, N) or None, ``threshold`` (m, K),
+    ``classifier_loss`` (m,), and ``pace``, ``changed`` and ``stopped`` plain numbers."""
 
 
 class SelfPacedCoTrainer(FitsUnderNumerics):

@@ -36,7 +36,7 @@ from dospcot import metrics
 from dospcot.config.paper_sections import TabularConfig
 from dospcot.core.key_pool import key_features
 from dospcot.core.reward_classes import RewardClasses
-from dospcot.core.round_records import VIEW_STATS, record_head, round_stats
+from dospcot.core.round_records import DEPENDENCE_STATS, VIEW_STATS, record_head, round_stats
 from dospcot.core.self_paced import Pool, SelfPacedCoTrainer
 from dospcot.envs.masking import StateActionMask
 from dospcot.envs.tabular import TabularMDP
@@ -316,6 +316,7 @@ class TabularCoTraining:
                     "coverage": stats["coverage"] if stats else float("nan"),
                     "pseudo_accuracy": stats["pseudo_accuracy"] if stats else float("nan"),
                     **{key: view_stats.get(key, float("nan")) for key in VIEW_STATS},
+                    **{key: stats[key] if stats else float("nan") for key in DEPENDENCE_STATS},
                     "active": bool(self.active[r]),
                 }
             )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from functools import partial
 from pathlib import Path
@@ -22,17 +23,18 @@ PANELS = (
 )
 
 
-def plot_learning_curves(records: list[dict], path: Path, title: str = "") -> None:
+def plot_learning_curves(records: list[dict], path: Path, names: Sequence[str], title: str = "") -> None:
     """Four panels against each agent's env steps: greedy return, agreement, pseudo-reward accuracy
-    and coverage (the last two only where the run co-trains), one line per view."""
+    and coverage (the last two only where the run co-trains), one line per agent, labelled by its
+    name in ``names`` (by the records' ``agent`` index; a twin's two agents share a view)."""
     fig, axes = plt.subplots(2, 2, figsize=(10, 6.5), constrained_layout=True)
     for ax, (key, label) in zip(axes.flat, PANELS, strict=True):
-        for view in dict.fromkeys(r["view"] for r in records):
-            rows = [r for r in records if r["view"] == view]
+        for k, name in enumerate(names):
+            rows = [r for r in records if r["agent"] == k]
             steps = np.array([r["env_steps"] for r in rows])
             values = np.array([r[key] for r in rows], dtype=float)
             if np.isfinite(values).any():
-                ax.plot(steps, values, marker="o", label=view)
+                ax.plot(steps, values, marker="o", label=name)
         ax.set_title(label)
         ax.set_xlabel("env steps per agent")
         ax.grid(alpha=0.3)

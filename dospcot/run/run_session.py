@@ -18,7 +18,7 @@ from dospcot.adapters import build_adapter
 from dospcot.config.run_configs import TrainConfig
 from dospcot.core.classifier import save_classifier
 from dospcot.core.queries import LOG_COLUMNS, Rater
-from dospcot.core.round_records import CLASS_COLUMNS
+from dospcot.core.round_records import CLASS_COLUMNS, DEPENDENCE_STATS
 from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.raters.file_rater import FileRater, action_names
 from dospcot.run.interrupts import Interrupted
@@ -47,6 +47,7 @@ ROUND_SCALARS = (
     "view_coverage",
     "pseudo_accuracy",
     "view_pseudo_accuracy",
+    "view_error",
     "worst_class_recall",
     "worst_class_precision",
     "classifier_loss",
@@ -120,8 +121,8 @@ class RunSession:
             # A resumed run may have been trained by other code before: each session's commit is kept.
             self.commits = state["commits"] + self.commits
             self.extra = state["extra"]
-        for agent, view in zip(self.run.agents, cfg.views, strict=True):
-            folder = str(run_dir / "tb" / f"agent_{view}")
+        for agent, name in zip(self.run.agents, cfg.agent_names, strict=True):
+            folder = str(run_dir / "tb" / f"agent_{name}")
             if state is not None:
                 # The killed session logged part of the round resumed now: TensorBoard drops every event
                 # from this step on in the files before this marker, so each step appears once.
@@ -185,7 +186,7 @@ class RunSession:
         for agent in run.agents:
             agent.logger.close()
         title = f"{cfg.name} (seed {cfg.seed})"
-        plot_learning_curves(self.records, run_dir / "learning_curves.png", title=title)
+        plot_learning_curves(self.records, run_dir / "learning_curves.png", self.cfg.agent_names, title=title)
         resumed = {"session_commits": self.commits} if self.sessions > 1 else {}
         cpu = self._cpu_now()
         times = {} if np.isnan(cpu) else {"cpu_time_s": round(cpu, 2)}  # NaN: a session's CPU time unknown
@@ -212,7 +213,8 @@ class RunSession:
         run = self.run
         bought = {} if run.queries is None else _queries_per_class(run)
         for agent, row in zip(run.agents, rows, strict=True):
-            for key in (*ROUND_SCALARS, *SEGMENT_SCALARS):
+            # The dependence figures (NaN, so not logged, with one predictor) under dospcot/ too.
+            for key in (*ROUND_SCALARS, *DEPENDENCE_STATS, *SEGMENT_SCALARS):
                 if math.isfinite(row[key]):
                     agent.logger.record(f"dospcot/{key}", row[key])
             for key, count in bought.items():
@@ -225,13 +227,13 @@ class RunSession:
         write_csv(run_dir / METRICS_FILE, self.records)
         if run.queries is not None:
             write_csv(run_dir / QUERIES_FILE, run.queries.log, LOG_COLUMNS)
-        for agent, view in zip(run.agents, cfg.views, strict=True):
-            atomic_write(run_dir / f"agent_{view}.zip", agent.save)
+        for agent, name in zip(run.agents, cfg.agent_names, strict=True):
+            atomic_write(run_dir / f"agent_{name}.zip", agent.save)
         if run.class_records:
             write_csv(run_dir / PSEUDO_REWARDS_FILE, run.class_records, CLASS_COLUMNS)
         if run.trainer is not None:
-            for clf, view in zip(run.trainer.classifiers, cfg.views, strict=True):
-                atomic_write(run_dir / f"classifier_{view}.pt", partial(save_classifier, clf))
+            for clf, name in zip(run.trainer.classifiers, cfg.agent_names, strict=True):
+                atomic_write(run_dir / f"classifier_{name}.pt", partial(save_classifier, clf))
             rewards = run.classes.values[run.classes.mask]
             write_json(run_dir / REWARD_CLASSES_FILE, {"rewards": [float(v) for v in rewards]})
 
@@ -264,5 +266,8 @@ def run_summary(records: list[dict], run: CoTrainingRun) -> dict[str, Any]:
         "env_steps_per_agent": int(last[0]["env_steps"]),
         **run.reference_returns(),
         "mean": {key: float(np.mean([r[key] for r in last])) for key in SUMMARY_METRICS},
-        "per_view": {r["view"]: {key: r[key] for key in (*SUMMARY_METRICS, "eps", "pace")} for r in last},
+        "per_view": {
+            cfg.agent_names[r["agent"]]: {key: r[key] for key in (*SUMMARY_METRICS, "eps", "pace")}
+            for r in last
+        },
     }

@@ -155,9 +155,12 @@ def evaluate_cotraining_run(run_dir: Path, cfg: TrainConfig) -> dict[str, Any]:
         the figures; a finished run's are written to ``evaluation.json``, an unfinished one's nowhere
         (a later resume would leave the file stale).
     """
-    agents = [_load_agent(run_dir, f"agent_{v}.zip") for v in cfg.views]
+    agents = [_load_agent(run_dir, f"agent_{name}.zip") for name in cfg.agent_names]
     policy = build_adapter(cfg).evaluate(agents)
-    per_view = {v: {key: float(value[k]) for key, value in policy.items()} for k, v in enumerate(cfg.views)}
+    per_view = {
+        name: {key: float(value[k]) for key, value in policy.items()}
+        for k, name in enumerate(cfg.agent_names)
+    }
     finished = (run_dir / SUMMARY_FILE).is_file()
     result = {
         "round": _rounds_done(run_dir),

@@ -78,6 +78,7 @@ from dospcot_lab.studies import (
     paper,
     queries,
     second_view,
+    views,
 )
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.pages import GLANCE, glance_cells, is_published, page, page_prose, write_glance
@@ -115,6 +116,7 @@ STUDIES: dict[str, Study] = {
     **budget_confirm.STUDIES,
     **numerics.STUDIES,
     **defaults.STUDIES,
+    **views.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 

@@ -63,10 +63,14 @@ def unpublished(name: str, study: Study) -> str:
     )
 
 
+UNPUBLISHED_CELL = "unpublished: the record holds no runs of it"
+"""The headline cell of a study the record holds no run of."""
+
+
 def glance_cells(study: Study, runs: list[TrialRun]) -> list[str]:
     """The study's cells in the results at a glance, after its name: task, headline, seeds, verdict."""
     if not runs:
-        return [study.task, "unpublished: the record holds no runs of it", "", "no verdict"]
+        return [study.task, UNPUBLISHED_CELL, "", "no verdict"]
     glance = study.glance(runs)
     seeds = sorted({run.trial.seed for run in runs})
     return [study.task, glance.headline, f"{len(seeds)} ({seeds[0]}-{seeds[-1]})", glance.verdict]
@@ -77,18 +81,22 @@ def glance_table(rows: dict[str, list[str]], order: list[str], link: str, brief:
     without them is named with the command that renders it), each study linked to its page under
     ``link`` (``docs/results/`` from the README, nothing beside the pages), and a line that counts the
     studies whose headline finds DOSPCoT above self-training. ``brief`` (the README's) leaves out the
-    exploratory studies' rows and says where they are."""
+    rows of exploratory studies and of studies not run yet, and says where they are."""
     lines = list(GLANCE_HEAD)
-    left_out = []
+    exploratory, not_run = [], []
     for name in order:
         render = f"`dospcot-lab study {name} --render-only --docs`"
         cells = rows.get(name) or ["", "not rendered yet", "", render]
         if brief and cells[3] == EXPLORATORY:
-            left_out.append(name)
-            continue
-        lines.append(f"| [{name}]({link}{name}.md) | " + " | ".join(cells) + " |")
-    if left_out:
-        lines += ["", f"And {len(left_out)} exploratory studies, in the [full table]({link}index.md)."]
+            exploratory.append(name)
+        elif brief and cells[1] == UNPUBLISHED_CELL:
+            not_run.append(name)
+        else:
+            lines.append(f"| [{name}]({link}{name}.md) | " + " | ".join(cells) + " |")
+    if exploratory or not_run:
+        kinds = [f"{len(exploratory)} exploratory studies"] if exploratory else []
+        kinds += [f"{len(not_run)} registered and not run yet ({', '.join(not_run)})"] if not_run else []
+        lines += ["", f"And {' and '.join(kinds)}, in the [full table]({link}index.md)."]
     paired = [cells for cells in rows.values() if "DOSPCoT minus self-training" in cells[1]]
     above = [cells for cells in paired if "DOSPCoT above self-training" in cells[3]]
     lines += [

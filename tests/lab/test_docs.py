@@ -11,7 +11,8 @@ import pytest
 
 from dospcot_lab.repository import Repository
 from dospcot_lab.studies import STUDIES, check_record, get_study, header_command, render_study
-from dospcot_lab.studies.pages import GLANCE, PAGES, TABLE, glance_table
+from dospcot_lab.studies.declaration import EXPLORATORY
+from dospcot_lab.studies.pages import GLANCE, PAGES, TABLE, glance_cells, glance_table
 from dospcot_lab.studies.readme import read_block
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -57,9 +58,22 @@ def test_the_results_at_a_glance_and_the_readme_blocks_come_from_the_same_record
             assert read_block(README, f"{name}-table") == result.readme
 
 
-REGISTERED_BEFORE_RUNS = {"budget", "defaults"}
-"""Studies committed with their pre-registration before their first run: the only ones whose record
-may hold no run."""
+def test_the_readmes_glance_leaves_out_exploratory_studies_and_studies_not_run_and_counts_them():
+    rows = {
+        "a": ["grid", "success, DOSPCoT minus self-training, paired: 0.1 [0.0, 0.2]", "5 (0-4)", "held"],
+        "b": ["grid", "a headline", "5 (0-4)", EXPLORATORY],
+        "c": ["grid", glance_cells(STUDIES["views"], [])[1], "", "no verdict"],
+    }
+    brief = glance_table(rows, ["a", "b", "c"], "docs/results/", brief=True)
+    assert "[a](docs/results/a.md)" in brief and "[b]" not in brief and "[c]" not in brief
+    assert "And 1 exploratory studies and 1 registered and not run yet (c), in the [full table]" in brief
+    full = glance_table(rows, ["a", "b", "c"], "")
+    assert all(f"[{name}]({name}.md)" in full for name in "abc")
+
+
+REGISTERED_BEFORE_RUNS = {"budget", "defaults", "views"}
+"""Studies committed before their first run (with their pre-registration, where they test
+hypotheses): the only ones whose record may hold no run."""
 
 
 def test_a_study_without_runs_publishes_no_figure(rendered, tmp_path):

@@ -1,0 +1,100 @@
+"""Label-efficiency curves: an arm's success, as a share of the oracle's, against the labels its runs
+used, read off at several budgets; from it, the labels the arm needs to reach 90% of the oracle (with
+a bootstrap interval over seeds) and the area under the curve on a log axis of labels.
+
+The seeds are paired: a seed's runs at every budget of an arm and the oracle's run of that seed are
+resampled together, so the interval carries the seeds' spread in the oracle's success as well.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+RESAMPLES = 10_000
+"""Bootstrap resamples of the seeds (the count ``dospcot.statistics.SeedSummary`` draws)."""
+SHARE = 0.9
+"""The share of the oracle's success an arm must reach."""
+
+
+@dataclass(frozen=True)
+class Curve:
+    """One arm on one task, over the seeds run at every one of its budgets and by the oracle.
+
+    :param budgets: (B,) the label budgets the columns were run at, ascending.
+    :param labels: (S, B) the labels each seed's run used at each budget (counted from its files).
+    :param success: (S, B) each run's success.
+    :param oracle: (S,) the oracle's success on each seed.
+    """
+
+    budgets: np.ndarray
+    labels: np.ndarray
+    success: np.ndarray
+    oracle: np.ndarray
+
+    def shares(self) -> np.ndarray:
+        """(S, B) each run's success as a share of the oracle's mean success."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return self.success / self.oracle.mean()
+
+    def share(self) -> tuple[np.ndarray, np.ndarray]:
+        """(B,) the mean labels used at each budget, sorted, and the mean success there as a share of
+        the oracle's mean success."""
+        x, y = _mean_share(self.labels[None], self.success[None], self.oracle[None])
+        return x[0], y[0]
+
+    def labels_to_reach(self) -> float:
+        """The labels at which the mean curve first reaches :data:`SHARE` of the oracle, interpolated
+        linearly between budgets; inf where no budget reaches it."""
+        x, y = self.share()
+        return float(_first_reach(x[None], y[None])[0])
+
+    def labels_interval(self, seed: int = 0) -> tuple[float, float]:
+        """The 95% percentile bootstrap interval of :meth:`labels_to_reach` over the seeds (inf where
+        over 2.5% of the resamples never reach it)."""
+        draws = np.random.default_rng(seed).integers(0, len(self.oracle), (RESAMPLES, len(self.oracle)))
+        x, y = _mean_share(self.labels[draws], self.success[draws], self.oracle[draws])
+        # Order statistics, not interpolation: a resample that never reaches the share is inf.
+        low, high = np.percentile(_first_reach(x, y), [2.5, 97.5], method="inverted_cdf")
+        return float(low), float(high)
+
+    def area(self) -> float:
+        """The area under the share curve over log labels, from the arm's smallest budget to its
+        largest, divided by that width: the oracle's curve (share 1 everywhere) scores 1. NaN with one
+        budget."""
+        x, y = self.share()
+        if x.size < 2 or x[0] <= 0 or x[-1] == x[0]:
+            return math.nan
+        log_x = np.log(x)
+        return float(np.sum((y[1:] + y[:-1]) / 2 * np.diff(log_x)) / (log_x[-1] - log_x[0]))
+
+
+def _mean_share(labels: np.ndarray, success: np.ndarray, oracle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per resample (R, S, B) of runs and (R, S) of oracle runs: (R, B) the mean labels at each budget,
+    sorted, and the mean success there over the oracle's mean (NaN where the oracle never succeeds)."""
+    x, y = labels.mean(axis=1), success.mean(axis=1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        y = y / oracle.mean(axis=1)[:, None]
+    order = np.argsort(x, axis=1)
+    return np.take_along_axis(x, order, axis=1), np.take_along_axis(y, order, axis=1)
+
+
+def _first_reach(x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """(R,) for each row of (R, B) curves, the x where y first reaches :data:`SHARE`, interpolated
+    from the budget before; inf where it never does."""
+    reached = y >= SHARE
+    first = reached.argmax(axis=1)
+    rows = np.arange(len(x))
+    before = np.maximum(first - 1, 0)
+    x0, y0, x1, y1 = x[rows, before], y[rows, before], x[rows, first], y[rows, first]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        between = x0 + (SHARE - y0) * (x1 - x0) / (y1 - y0)
+    at = np.where(first == 0, x1, between)
+    return np.where(reached.any(axis=1), at, np.inf)
+
+
+def labels_text(value: float, largest: float) -> str:
+    """``value`` labels as a table cell: "more than <largest>" where it is never reached."""
+    return f"> {largest:,.0f}" if math.isinf(value) else f"{value:,.0f}"

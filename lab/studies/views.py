@@ -1,0 +1,251 @@
+"""The views study, exploratory (issue 79): where does the second view pay? On each task (grid16,
+grid16 with blind spots, where each view errs where the other sees, MiniGrid DoorKey and LavaGap, the
+fast highway), at four label budgets, DOSPCoT (two views) against the one-view peers with the same
+query strategy and labels: a same-sensor twin (two agents and classifiers on one view: a second model
+without a second view), the reward-model peer and self-training; the blind control (random queries)
+at the largest budget; the oracle with every reward; on the blind-spot task also DOSPCoT with both
+views blind on the same cells, its errors made dependent. Every arm trains under version 2 of the
+defaults (one schedule, one exploration setting) and numerics 2, seeds 0-9; a confirmatory study on
+other seeds and maps follows its preregistration.
+
+Arms carry short names on every table and figure (:data:`ARMS`); their full settings are in one table
+under the figure.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+
+from dospcot.run.plots import Band, plot_bands
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.budget import BUDGET, STRATEGY
+from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
+from dospcot_lab.studies.label_curves import SHARE, Curve, labels_text
+from dospcot_lab.studies.tables import cpu_per_run, labels_used
+
+DEFAULTS, NUMERICS, SEEDS = 2, 2, 10
+
+BLIND_RATE, BLIND_SPOTS = "env.blind_spot_rate", "env.blind_spots"
+BLIND = {BLIND_RATE: ("0.5",), BLIND_SPOTS: ('"independent"',)}
+"""grid16 with blind spots: each terrain view reads half the lava cells as floor, each view its own
+half, so each errs where the other sees (the second-view study's setting): where theory says a second
+view must pay."""
+
+TASKS: dict[str, tuple[str, str, tuple[str, ...], dict[str, tuple[str, ...]]]] = {
+    "grid16": ("grid16", "patch", ("5", "10", "20", "40"), {}),
+    "grid16-blind-spots": ("grid16", "patch", ("5", "10", "20", "40"), BLIND),
+    "doorkey": ("minigrid-doorkey", "image", ("25", "50", "100", "200"), {}),
+    "lavagap": ("minigrid-lavagap", "image", ("25", "50", "100", "200"), {}),
+    "fasthighway": ("fasthighway", "kinematics", ("100", "200", "400", "800"), {}),
+}
+"""Per task: its presets' prefix, the view of its one-view arms (the presets' own), its budgets and
+the settings every arm of it takes."""
+
+DISAGREEMENT, UNCERTAINTY = '"outcomes+disagreement"', '"outcomes+uncertainty"'
+ARMS: dict[str, str] = {
+    "DOSPCoT": "two views co-trained (the task's DOSPCoT preset), outcomes+disagreement queries",
+    "twin": "two agents and two classifiers on the one-view arms' view, each from its own initial "
+    "weights and draws, co-trained as DOSPCoT is, outcomes+disagreement queries",
+    "reward model": "an ensemble of reward classifiers on one view fitted on the labels alone, "
+    "rewarding every unlabelled sample; outcomes+disagreement queries (between its members)",
+    "self-training": "one view co-trained with itself (one agent, one classifier), "
+    "outcomes+uncertainty queries",
+    "blind": "DOSPCoT with random queries, at the largest budget only",
+    "DOSPCoT, identical blind spots": "DOSPCoT where both views miss the same lava cells (blind-spot task "
+    "only): the views' errors made dependent, so no view can correct the other",
+}
+"""Each arm's short name and its settings in words; every arm also takes version 2's defaults."""
+ONE_VIEW = ("twin", "reward model", "self-training")
+"""The arms that read one view, DOSPCoT's peers."""
+
+
+def _sweeps(task: str) -> tuple[Sweep, ...]:
+    prefix, view, budgets, settings = TASKS[task]
+
+    def sweep(arm: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
+        name = f"views-{task}-{arm.lower().replace(' ', '-')}"
+        grid = {**settings, **grid}
+        return Sweep(name, (f"{prefix}-{preset}",), grid, numerics=NUMERICS, defaults=DEFAULTS)
+
+    spend = {BUDGET: budgets}
+    identical = (
+        (
+            sweep(
+                "dospcot-identical",
+                "dospcot",
+                {**spend, STRATEGY: (DISAGREEMENT,), BLIND_SPOTS: ('"identical"',)},
+            ),
+        )
+        if BLIND_SPOTS in settings
+        else ()
+    )
+    return (
+        sweep("oracle", "oracle", {}),
+        sweep("DOSPCoT", "dospcot", {**spend, STRATEGY: (DISAGREEMENT,)}),
+        sweep("twin", "dospcot", {**spend, STRATEGY: (DISAGREEMENT,), "views": (f'["{view}", "{view}"]',)}),
+        sweep("reward model", "reward-model", {**spend, STRATEGY: (DISAGREEMENT,)}),
+        sweep("self-training", "self-training", {**spend, STRATEGY: (UNCERTAINTY,)}),
+        sweep("blind", "dospcot", {BUDGET: budgets[-1:], STRATEGY: ('"random"',)}),
+        *identical,
+    )
+
+
+def arm_of(run: TrialRun) -> str:
+    """A run's short arm name (a key of :data:`ARMS`, or "oracle")."""
+    config, params = run.trial.config, run.trial.params
+    if config.endswith("-oracle"):
+        return "oracle"
+    if config.endswith("-reward-model"):
+        return "reward model"
+    if config.endswith("-self-training"):
+        return "self-training"
+    if params.get(STRATEGY) == '"random"':
+        return "blind"
+    if params.get(BLIND_SPOTS) == '"identical"':
+        return "DOSPCoT, identical blind spots"
+    return "twin" if "views" in params else "DOSPCoT"
+
+
+def task_of(run: TrialRun) -> str | None:
+    """The key of :data:`TASKS` a run belongs to, by its preset and whether it has blind spots (None:
+    none)."""
+    blind = BLIND_RATE in run.trial.params
+    return next(
+        (
+            task
+            for task, (prefix, _, _, settings) in TASKS.items()
+            if run.trial.config.startswith(f"{prefix}-") and (BLIND_RATE in settings) == blind
+        ),
+        None,
+    )
+
+
+def curves(runs: list[TrialRun]) -> dict[str, Curve]:
+    """Each arm's curve on one task's ``runs``, over the seeds the arm ran at every budget and the oracle
+    ran too; an arm with no such seed has none."""
+    oracle = {r.trial.seed: r.summary["mean"]["success"] for r in runs if arm_of(r) == "oracle"}
+    found = {}
+    for arm in ARMS:
+        cells: dict[str, dict[int, TrialRun]] = {}
+        for r in runs:
+            if arm_of(r) == arm:
+                cells.setdefault(r.trial.params[BUDGET], {})[r.trial.seed] = r
+        seeds = sorted(set(oracle).intersection(*(set(c) for c in cells.values()))) if cells else []
+        if seeds:
+            order = sorted(cells, key=float)
+            found[arm] = Curve(
+                np.array([float(b) for b in order]),
+                np.array([[labels_used(cells[b][s]) for b in order] for s in seeds]),
+                np.array([[cells[b][s].summary["mean"]["success"] for b in order] for s in seeds]),
+                np.array([oracle[s] for s in seeds], dtype=float),
+            )
+    return found
+
+
+def _task_table(task: str, runs: list[TrialRun]) -> list[str]:
+    """One task: each arm's success as a share of the oracle's at each budget (labels used beside it),
+    the labels to reach 90% of the oracle with its interval, and the area under its curve."""
+    budgets = TASKS[task][2]
+    found = curves(runs)
+    oracle = [r for r in runs if arm_of(r) == "oracle"]
+    lines = [
+        "",
+        f"### {task}",
+        "",
+        f"The oracle (every reward): success {SeedSummary.of([r.summary['mean']['success'] for r in oracle])}"
+        f" over {len(oracle)} seeds; {cpu_per_run(oracle)}.",
+        "",
+        f"| arm | {' | '.join(f'budget {b}' for b in budgets)} | labels to {SHARE:.0%} of the oracle "
+        "[95% interval] | area under the curve | seeds | CPU time per run |",
+        "|---|" + "---|" * (len(budgets) + 4),
+    ]
+    for arm, curve in found.items():
+        at = dict(
+            zip(
+                curve.budgets,
+                zip(curve.labels.mean(axis=0), curve.shares().mean(axis=0), strict=True),
+                strict=True,
+            )
+        )
+        shown = [
+            f"{at[float(b)][1]:.2f} ({at[float(b)][0]:,.0f})" if float(b) in at else "–" for b in budgets
+        ]
+        largest = float(np.max(curve.labels))
+        low, high = curve.labels_interval()
+        reach = f"{labels_text(curve.labels_to_reach(), largest)} [{labels_text(low, largest)}, " + (
+            f"{labels_text(high, largest)}]"
+        )
+        area = curve.area()
+        members = [r for r in runs if arm_of(r) == arm]
+        lines.append(
+            f"| {arm} | {' | '.join(shown)} | {reach} | {'–' if math.isnan(area) else f'{area:.2f}'} | "
+            f"{len(curve.oracle)} | {cpu_per_run(members)} |"
+        )
+    return lines
+
+
+def tables(runs: list[TrialRun]) -> list[str]:
+    """Per task, the arms' curves (:func:`_task_table`); then every arm's settings."""
+    lines = [
+        "",
+        f"Each budget's cell: success as a share of the oracle's mean success (labels used per run). "
+        f"Labels to {SHARE:.0%} of the oracle are interpolated on the arm's mean curve, with a 95% "
+        'bootstrap interval over seeds ("> N": not reached by its largest budget, N labels); the area '
+        "under the curve is over log labels from the arm's smallest budget to its largest, the oracle's "
+        "being 1. Figure: [views.png](views.png).",
+    ]
+    for task in TASKS:
+        members = [r for r in runs if task_of(r) == task]
+        if members:
+            lines += _task_table(task, members)
+    return [*lines, "", "| arm | settings |", "|---|---|", *(f"| {a} | {s} |" for a, s in ARMS.items())]
+
+
+def figure(runs: list[TrialRun], path: Path) -> None:
+    """One panel per task: each arm's success as a share of the oracle's against labels used (log
+    axis), with its 95% band over seeds."""
+    panels = {}
+    for task in TASKS:
+        bands = []
+        for arm, curve in curves([r for r in runs if task_of(r) == task]).items():
+            x, y = curve.share()
+            order = np.argsort(curve.labels.mean(axis=0))
+            stats = [SeedSummary.of(list(curve.shares()[:, i])) for i in order]
+            bands.append(Band(arm, x, y, np.array([s.low for s in stats]), np.array([s.high for s in stats])))
+        if bands:
+            panels[task] = bands
+    if panels:
+        plot_bands(panels, "labels used per run", "success / oracle's", path, log_x=True, markers=True)
+
+
+def glance(runs: list[TrialRun]) -> Glance:
+    """The headline: on each task measured, DOSPCoT's labels to 90% of the oracle against the best
+    one-view peer's."""
+    parts = []
+    for task in TASKS:
+        found = curves([r for r in runs if task_of(r) == task])
+        if "DOSPCoT" in found:
+            peers = {a: c.labels_to_reach() for a, c in found.items() if a in ONE_VIEW}
+            best = min(peers, key=peers.get) if peers else None
+            largest = float(np.max(found["DOSPCoT"].labels))
+            mine = labels_text(found["DOSPCoT"].labels_to_reach(), largest)
+            theirs = f", {best} {labels_text(peers[best], largest)}" if best else ""
+            parts.append(f"{task}: DOSPCoT {mine}{theirs}")
+    return Glance(f"labels to {SHARE:.0%} of the oracle: " + "; ".join(parts) if parts else "", EXPLORATORY)
+
+
+STUDIES: dict[str, Study] = {
+    "views": Study(
+        tuple(s for task in TASKS for s in _sweeps(task)),
+        tables,
+        "Where the second view pays: label-efficiency curves",
+        "grid16 (layout 0, and with blind spots), MiniGrid DoorKey-5x5 and LavaGapS7, the fast highway",
+        glance,
+        seeds=SEEDS,
+        figure=figure,
+    ),
+}

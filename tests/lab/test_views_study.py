@@ -1,0 +1,138 @@
+"""The views study (lab/studies/views.py) and its label-efficiency curves (lab/studies/label_curves.py):
+labels to 90% of the oracle and the area under a curve worked out by hand, the bootstrap interval's
+ends where only two seeds can be drawn, each run's short arm name, and the trials the study trains."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from dospcot.sweeps.report import TrialRun
+from dospcot.sweeps.sweep import Trial
+from dospcot_lab.studies import sweep_spec
+from dospcot_lab.studies.label_curves import Curve, labels_text
+from dospcot_lab.studies.views import STUDIES, arm_of, curves, tables, task_of
+
+# Two seeds at budgets 10/20/40 against an oracle that always succeeds: the mean curve's shares are
+# 0.3, 0.7 and 1.0.
+CURVE = Curve(
+    np.array([10.0, 20.0, 40.0]),
+    np.array([[10.0, 20.0, 40.0], [10.0, 20.0, 40.0]]),
+    np.array([[0.2, 0.6, 1.0], [0.4, 0.8, 1.0]]),
+    np.array([1.0, 1.0]),
+)
+
+
+def test_labels_to_reach_and_area_by_hand():
+    assert CURVE.labels_to_reach() == pytest.approx(20 + (0.9 - 0.7) / (1.0 - 0.7) * 20)  # 33.3
+    # Trapezoids over ln 10, ln 20, ln 40 (equal widths ln 2): (0.5 + 0.85) / 2.
+    assert CURVE.area() == pytest.approx(0.675)
+    # A resample draws seed 0 twice (35 labels: 20 + 0.3 / 0.4 x 20), seed 1 twice (30), or one of
+    # each (33.3); each pure draw has probability 1/4, so the 2.5th and 97.5th percentiles are 30, 35.
+    assert CURVE.labels_interval() == pytest.approx((30.0, 35.0))
+
+
+def test_a_curve_that_never_reaches_the_share_says_so():
+    low = Curve(CURVE.budgets, CURVE.labels, CURVE.success / 2, CURVE.oracle)
+    assert math.isinf(low.labels_to_reach()) and labels_text(low.labels_to_reach(), 40) == "> 40"
+    assert labels_text(33.4, 40) == "33"
+    first = Curve(CURVE.budgets, CURVE.labels, np.full((2, 3), 0.95), CURVE.oracle)
+    assert first.labels_to_reach() == 10.0  # the smallest budget already reaches it
+    # A share is of the oracle's mean: an oracle at 0.5 doubles every share.
+    half = Curve(CURVE.budgets, CURVE.labels, CURVE.success / 2, np.array([0.5, 0.5]))
+    assert half.labels_to_reach() == pytest.approx(CURVE.labels_to_reach())
+
+
+def _run(
+    folder: Path, preset: str, params: dict[str, str], seed: int, success: float, labels: float
+) -> TrialRun:
+    """A finished run whose folder under ``folder`` holds a ``run_info.json`` of 60 CPU-s (the tables
+    read it)."""
+    run_dir = folder / f"{preset}-{'-'.join(params.values())}-{seed}"
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0}))
+    mean = {"success": success, "labelled_steps": labels}
+    return TrialRun(Trial(preset, preset, params, seed), {"mean": mean}, [], run_dir)
+
+
+def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_ran(tmp_path):
+    strategy, budget = "training.label_strategy", "training.label_budget"
+    disagreement = {strategy: '"outcomes+disagreement"'}
+    twin = {**disagreement, "views": '["patch", "patch"]'}
+    runs = [_run(tmp_path, "grid16-oracle", {}, seed, 1.0, 500.0) for seed in (0, 1)]
+    for b, success in (("5", (0.2, 0.4)), ("10", (0.6, 0.8)), ("20", (1.0, 1.0))):
+        for seed in (0, 1):
+            runs.append(
+                _run(
+                    tmp_path,
+                    "grid16-dospcot",
+                    {**disagreement, budget: b},
+                    seed,
+                    success[seed],
+                    2.0 * float(b),
+                )
+            )
+            runs.append(
+                _run(tmp_path, "grid16-dospcot", {**twin, budget: b}, seed, success[seed] / 2, float(b))
+            )
+    runs.append(_run(tmp_path, "grid16-dospcot", {strategy: '"random"', budget: "20"}, 0, 0.1, 20.0))
+    runs.append(
+        _run(tmp_path, "grid16-reward-model", {**disagreement, budget: "5"}, 2, 0.5, 5.0)
+    )  # no oracle run
+    assert [arm_of(r) for r in runs[:4]] == ["oracle", "oracle", "DOSPCoT", "twin"]
+    assert arm_of(runs[-2]) == "blind" and arm_of(runs[-1]) == "reward model"
+    found = curves(runs)
+    assert sorted(found) == ["DOSPCoT", "blind", "twin"]  # seed 2 of the peer has no oracle run
+    assert found["DOSPCoT"].budgets.tolist() == [5.0, 10.0, 20.0]
+    assert found["DOSPCoT"].labels_to_reach() == pytest.approx(CURVE.labels_to_reach())  # x2 labels
+    assert math.isinf(found["twin"].labels_to_reach())
+    text = "\n".join(tables(runs))
+    assert "| DOSPCoT | 0.30 (10) | 0.70 (20) | 1.00 (40) | – | 33 [30, 35] | 0.68 | 2 | 60 CPU-s |" in text
+    assert "| twin | 0.15 (5) | 0.35 (10) | 0.50 (20) | – | > 20 [> 20, > 20] |" in text
+    assert "| blind | – | – | 0.10 (20) | – | > 20 [> 20, > 20] | – | 1 |" in text
+
+
+def test_the_study_trains_every_arm_under_version_2_at_the_tasks_budgets():
+    study = STUDIES["views"]
+    specs = {sweep.name: sweep_spec(sweep, study.seeds) for sweep in study.sweeps}
+    assert all(spec.defaults == 2 for spec in specs.values())
+    twin = specs["views-doorkey-twin"]
+    assert twin.configs == ("minigrid-doorkey-dospcot",) and twin.grid["views"] == ('["image", "image"]',)
+    assert specs["views-grid16-dospcot"].grid["training.label_budget"] == ("5", "10", "20", "40")
+    assert specs["views-fasthighway-blind"].grid["training.label_budget"] == ("800",)
+    # The blind-spot task: every arm with independent blind spots, and DOSPCoT's control with identical.
+    identical = specs["views-grid16-blind-spots-dospcot-identical"].grid
+    assert identical["env.blind_spots"] == ('"identical"',) and identical["env.blind_spot_rate"] == ("0.5",)
+    assert specs["views-grid16-blind-spots-twin"].grid["env.blind_spots"] == ('"independent"',)
+    assert "env.blind_spot_rate" not in specs["views-grid16-twin"].grid
+    assert sum(len(spec.trials(check_task=False)) for spec in specs.values()) == 940
+
+
+@pytest.mark.parametrize(
+    ("preset", "params", "task", "arm"),
+    [
+        (
+            "grid16-dospcot",
+            {"env.blind_spot_rate": "0.5", "env.blind_spots": '"identical"'},
+            "grid16-blind-spots",
+            "DOSPCoT, identical blind spots",
+        ),
+        (
+            "grid16-dospcot",
+            {"env.blind_spot_rate": "0.5", "views": '["patch", "patch"]'},
+            "grid16-blind-spots",
+            "twin",
+        ),
+        ("grid16-reward-model", {}, "grid16", "reward model"),
+        ("fasthighway-oracle", {}, "fasthighway", "oracle"),
+        ("minigrid-lavagap-self-training", {}, "lavagap", "self-training"),
+        ("grid32-dospcot", {}, None, "DOSPCoT"),
+    ],
+)
+def test_each_run_finds_its_task_and_arm_by_its_preset_and_settings(preset, params, task, arm):
+    run = TrialRun(Trial(preset, "", params, 0), {}, [], Path())
+    assert (task_of(run), arm_of(run)) == (task, arm)
