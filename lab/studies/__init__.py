@@ -61,6 +61,7 @@ from pathlib import Path
 
 from dospcot.config.presets import did_you_mean
 from dospcot.run.interrupts import Interrupted
+from dospcot.run.run_folder import source_commit
 from dospcot.sweeps.report import TrialRun, load_runs, write_report
 from dospcot.sweeps.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
 from dospcot_lab.repository import Repository
@@ -240,6 +241,14 @@ def run_study(args: argparse.Namespace, command: str, repo: Repository | None, p
                 read_block(repo.readme, block)
         except ValueError as err:
             sys.exit(f"{prog}: {err}")
+    if study.confirmatory and not args.render_only:
+        commit = source_commit()
+        if commit is None or commit.endswith("+dirty"):
+            where = "not from a git checkout" if commit is None else "with uncommitted changes"
+            sys.exit(
+                f"{prog}: {args.study} is confirmatory and trains only from a committed checkout with no "
+                f"uncommitted change; this code runs {where} (commit it, or run from a clean clone)"
+            )
     args.seeds = args.seeds or study.seeds
     # Another --seeds or --set is another sweep: it gets its own folder.
     default = (args.seeds, args.overrides) == (study.seeds, [])

@@ -165,20 +165,24 @@ def _round_success(run: TrialRun) -> dict[int, float]:
 
 
 def _rounds_table(arms: dict[str, list[TrialRun]]) -> list[str]:
-    """Mean success after each round, per arm, beside the oracle's: where co-trained agents trail it
-    from the first rounds, they had fewer rounds with a reward to learn from."""
-    curves = {arm: [_round_success(r) for r in members] for arm, members in arms.items()}
+    """Mean success after each round, per arm and budget, beside the oracle's: where co-trained agents
+    trail it from the first rounds, they had fewer rounds with a reward to learn from."""
+    curves = {
+        (arm, budget): [_round_success(r) for r in cell]
+        for arm, members in arms.items()
+        for budget, cell in _by_budget(members).items()
+    }
     rounds = sorted({r for runs in curves.values() for curve in runs for r in curve})
     lines = [
-        "| arm | " + " | ".join(f"round {r}" for r in rounds) + " |",
-        "|---|" + "---|" * len(rounds),
+        "| arm | label budget | " + " | ".join(f"round {r}" for r in rounds) + " |",
+        "|---|---|" + "---|" * len(rounds),
     ]
-    for arm, runs in curves.items():
+    for (arm, budget), runs in curves.items():
         cells = [
             f"{np.mean([c[r] for c in runs if r in c]):.2f}" if any(r in c for c in runs) else ""
             for r in rounds
         ]
-        lines.append(f"| {arm} | " + " | ".join(cells) + " |")
+        lines.append(f"| {arm} | {budget} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -225,15 +229,18 @@ def _by_class(tables: list[list[dict[str, str]]]) -> dict[str, list[dict[str, st
 
 
 def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
-    """The last round's pseudo-rewards per hidden reward class, mean over each arm's runs: recall (the
-    share of a class's unlabelled samples given it) and precision (the share of those given it that
-    hold it). Low recall with high precision: rewards missing, not wrong."""
+    """The last round's pseudo-rewards per hidden reward class, mean over the runs of each arm and
+    budget: recall (the share of a class's unlabelled samples given it) and precision (the share of
+    those given it that hold it). Low recall with high precision: rewards missing, not wrong."""
     lines = [
-        "| arm | reward | samples | labelled | recall | precision | runs |",
-        "|---|---|---|---|---|---|---|",
+        "| arm | label budget | reward | samples | labelled | recall | precision | runs |",
+        "|---|---|---|---|---|---|---|---|",
     ]
-    for arm, members in arms.items():
-        tables = [rows for run in members if (rows := _last_round(run)) is not None]
+    cells = (
+        (arm, budget, cell) for arm, members in arms.items() for budget, cell in _by_budget(members).items()
+    )
+    for arm, budget, cell in cells:
+        tables = [rows for run in cell if (rows := _last_round(run)) is not None]
         for reward, members_rows in _by_class(tables).items():
             mean = {
                 key: SeedSummary.of([float(row[key]) for row in members_rows]).mean
@@ -243,7 +250,7 @@ def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
                 key: "n/a" if np.isnan(mean[key]) else f"{mean[key]:.3f}" for key in ("recall", "precision")
             }
             lines.append(
-                f"| {arm} | {reward} | {mean['samples']:.0f} | {mean['labelled']:.0f} | "
+                f"| {arm} | {budget} | {reward} | {mean['samples']:.0f} | {mean['labelled']:.0f} | "
                 f"{share['recall']} | {share['precision']} | {len(members_rows)} |"
             )
     return lines if len(lines) > 2 else []

@@ -319,5 +319,6 @@ STUDIES: dict[str, Study] = {
         seeds=SEEDS,
         first_seed=FIRST_SEED,
         figure=figure({task: belongs for task, (_, belongs) in TASKS.items()}),
+        confirmatory=True,
     ),
 }

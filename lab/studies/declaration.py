@@ -77,3 +77,6 @@ class Study:
     cells_explained: bool = False
     """Whether its tables say what a cell is themselves (the paper's): the header then says only where
     the figures come from."""
+    confirmatory: bool = False
+    """Whether it tests hypotheses fixed before its runs, or decides a default: it then trains only from
+    a committed checkout with no uncommitted change, so every run names the code it ran."""

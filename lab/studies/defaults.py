@@ -90,5 +90,6 @@ STUDIES: dict[str, Study] = {
         "grid16 (layout 0) and MiniGrid DoorKey-5x5",
         glance,
         seeds=20,
+        confirmatory=True,
     ),
 }

@@ -329,6 +329,7 @@ STUDIES: dict[str, Study] = {
         "grid16 (unseen layouts), MiniGrid DoorKey-5x5 and LavaGapS7",
         _glance,
         seeds=10,
+        confirmatory=True,
     ),
     "queries-highway": Study(
         _arms("fasthighway", "0.02", {}, "queries-fasthighway"),

@@ -260,6 +260,7 @@ STUDIES: dict[str, Study] = {
         "16 x 16 grid: blind spots, a reward monitor",
         second_view_glance,
         seeds=10,
+        confirmatory=True,
     ),
     "second-view-highway": Study(
         _second_view_highway_sweeps(),
@@ -267,5 +268,6 @@ STUDIES: dict[str, Study] = {
         "When does a second view help? (fast highway)",
         "our fast highway: a reward monitor",
         partial(second_view_glance, columns=HIGHWAY_SECOND_VIEW_COLUMNS),
+        confirmatory=True,
     ),
 }

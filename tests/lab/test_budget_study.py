@@ -50,7 +50,7 @@ def test_the_budget_tables_pair_arms_by_seed_and_count_their_labels(tmp_path):
     arm = "dospcot disagreement even exploration by rounds"
     assert f"| {arm} | 100 | 100 | 0.850 [0.800, 0.900] |" in text
     assert "| oracle | preset | every reward | 1.000 [1.000, 1.000] |" in text
-    assert f"| {arm} | 0.00 | 0.85 |" in text  # success after each round
+    assert f"| {arm} | 100 | 0.00 | 0.85 |" in text  # success after each round, at its budget
     # Even minus asap, paired by seed: 0.2, 0.25, 0.3.
     assert "the budget spread evenly against spent at once: success of " in text
     assert "paired: 0.250 [0.200, 0.300] over 3 seeds." in text
@@ -78,7 +78,7 @@ def test_the_third_exploration_names_the_admitted_share_and_pairs_all_against_ha
     text = "\n".join(BUDGET_STUDIES["budget-explore-admit"].tables(runs))
     doorkey, grid = text.split("### grid16, layout 11")
     arm = "dospcot uniform exploration by rounds admitting 100% of U in round 1"
-    assert f"| {arm} | 0.50 | 0.85 |" in doorkey  # success after each round, mean over the seeds
+    assert f"| {arm} | share 0.1 | 0.50 | 0.85 |" in doorkey  # success after each round, mean over seeds
     # All minus half, paired by seed: DoorKey 0.5 and 0.4; grid16 -0.2 on both seeds.
     assert "a blind 10% mask, admitting all of U in round 1 against half: success of " in doorkey
     assert "paired: 0.450 [0.400, 0.500] over 2 seeds." in doorkey
@@ -177,6 +177,27 @@ def test_the_confirmatory_comparisons_flag_arms_whose_labels_differ_by_more_than
         BUDGET_CONFIRM["budget"].tables([r for r in runs if r.trial.config != "grid16-reward-model"])
     )
     assert "(20 against n/a labels a run); interval above 0: not decided yet." in text
+
+
+def test_the_round_and_class_tables_keep_one_row_per_arm_and_budget(tmp_path):
+    runs = []
+    for labels, success in (("100", [0.0, 0.9]), ("200", [0.4, 1.0])):
+        params = {"training.label_budget": labels, "training.label_strategy": "disagreement"}
+        run = _budget_run(tmp_path, "minigrid-doorkey-dospcot", params, 0, success, float(labels))
+        (run.run_dir / "pseudo_rewards.csv").write_text(
+            f"round,class,reward,samples,labelled,admitted,recall,precision\n2,0,0.0,{labels},1,5,1.0,1.0\n"
+        )
+        runs.append(run)
+    arms = budget.by_arm(runs)
+    assert list(arms) == ["dospcot disagreement"]  # one arm, two budgets: two rows, never pooled
+    assert budget._rounds_table(arms)[2:] == [
+        "| dospcot disagreement | 100 | 0.00 | 0.90 |",
+        "| dospcot disagreement | 200 | 0.40 | 1.00 |",
+    ]
+    assert budget._class_table(arms)[2:] == [
+        "| dospcot disagreement | 100 | 0 | 100 | 1 | 1.000 | 1.000 | 1 |",
+        "| dospcot disagreement | 200 | 0 | 200 | 1 | 1.000 | 1.000 | 1 |",
+    ]
 
 
 def test_the_class_table_groups_goal_rewards_that_differ_by_run_under_one_class():

@@ -63,11 +63,29 @@ def test_the_readmes_glance_leaves_out_exploratory_studies_and_studies_not_run_a
         "a": ["grid", "success, DOSPCoT minus self-training, paired: 0.1 [0.0, 0.2]", "5 (0-4)", "held"],
         "b": ["grid", "a headline", "5 (0-4)", EXPLORATORY],
         "c": ["grid", glance_cells(STUDIES["views"], [])[1], "", "no verdict"],
+        "d": [
+            "road",
+            "return, DOSPCoT (4,006 labels a run) minus self-training (2,019): 2.6 [2.3, 2.7]",
+            "3",
+            "DOSPCoT above self-training",
+        ],
+        "e": [
+            "road",
+            "success, DOSPCoT disagreement (800 labels) minus self-training uncertainty (400)",
+            "5",
+            "x",
+        ],
     }
-    brief = glance_table(rows, ["a", "b", "c"], "docs/results/", brief=True)
+    order = ["a", "b", "c", "d", "e"]
+    brief = glance_table(rows, order, "docs/results/", brief=True)
+    # Either spelling of DOSPCoT minus self-training counts, the labels each spent named or not.
+    assert (
+        "Of the 2 studies whose headline is DOSPCoT minus self-training, the interval lies above 0 in 1."
+        in brief
+    )
     assert "[a](docs/results/a.md)" in brief and "[b]" not in brief and "[c]" not in brief
     assert "And 1 exploratory studies and 1 registered and not run yet (c), in the [full table]" in brief
-    full = glance_table(rows, ["a", "b", "c"], "")
+    full = glance_table(rows, order, "")
     assert all(f"[{name}]({name}.md)" in full for name in "abc")
 
 

@@ -86,6 +86,29 @@ def test_a_stop_between_two_sweeps_of_a_study_says_what_it_kept_and_how_to_go_on
     )
 
 
+@pytest.mark.parametrize(
+    ("commit", "where"), [("abc123+dirty", "with uncommitted changes"), (None, "not from a git")]
+)
+def test_a_confirmatory_study_trains_only_from_a_committed_clean_checkout(
+    commit, where, tmp_path, capsys, monkeypatch
+):
+    from dospcot_lab import studies
+    from dospcot_lab.cli import main as lab_main
+
+    started = []
+    monkeypatch.setattr(studies, "source_commit", lambda: commit)
+    monkeypatch.setattr(studies, "run_sweep", lambda sweep_dir, spec, **options: started.append(sweep_dir))
+    with pytest.raises(SystemExit) as stop:
+        lab_main(["study", "defaults", "--runs-dir", str(tmp_path)])
+    assert "defaults is confirmatory and trains only from a committed checkout" in str(stop.value)
+    assert where in str(stop.value) and started == [] and list(tmp_path.iterdir()) == []
+    # An exploratory study trains from any checkout; a confirmatory one renders from any.
+    assert not studies.get_study("minigrid").confirmatory and studies.get_study("budget").confirmatory
+    with pytest.raises(SystemExit) as stop:
+        lab_main(["study", "defaults", "--render-only", "--runs-dir", str(tmp_path)])
+    assert "no finished run of this study" in str(stop.value)
+
+
 def test_the_studies_are_the_labs_command_and_the_library_says_where_they_are(capsys, tmp_path):
     from dospcot.cli import main
     from dospcot_lab.cli import main as lab_main
