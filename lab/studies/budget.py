@@ -81,10 +81,16 @@ def method_of(run: TrialRun) -> str:
 def arm_of(run: TrialRun) -> str:
     """A run's arm: its method and the settings its sweep varies or sets, but for the label budget (the
     curves' x-axis) and the label fraction of a uniform mask (its budget)."""
+    return " ".join(arm_parts(run))
+
+
+def arm_parts(run: TrialRun) -> list[str]:
+    """The words of :func:`arm_of`, one setting each: the method first, then the query strategy and
+    the settings its sweep varies or sets."""
     params = run.trial.params
     method = method_of(run)
     if method == "oracle":
-        return "oracle"
+        return ["oracle"]
     parts = [method, params.get(STRATEGY, "uniform").strip('"')]  # a TOML string keeps its quotes
     if SCHEDULE in params:
         parts.append(params[SCHEDULE])
@@ -108,7 +114,48 @@ def arm_of(run: TrialRun) -> str:
         )
     if ADMIT in params:
         parts.append(f"admitting {float(params[ADMIT]):.0%} of U in round 1")
-    return " ".join(parts)
+    return parts
+
+
+SHORT_NAME = 30
+"""The longest arm name a table or figure shows (settings shortened by :data:`ABBREVIATIONS` first,
+then a letter, its settings in a table under the task's tables)."""
+ABBREVIATIONS = {
+    "dospcot": "DOSPCoT",
+    "self-training": "ST",
+    "reward-model": "RM",
+    "outcomes+disagreement": "o+d",
+    "outcomes+uncertainty": "o+u",
+    "disagreement": "dis",
+    "uncertainty": "unc",
+    REFIT_ARM: "refit",
+    ENDS_ARM: "ends",
+    "every reward labelled": "all labelled",
+    "quota candidates": "quota",
+}
+"""Short words for the settings that make arm names long, said above each task's tables that use them."""
+
+
+def short_names(arms: dict[str, list[TrialRun]]) -> tuple[list[str], dict[str, str], dict[str, str]]:
+    """What a task's tables and figure call each arm: the settings every arm but the oracle shares
+    (said once, above the tables); per arm, its method and the settings left, in
+    :data:`ABBREVIATIONS`' short words where the name is longer than :data:`SHORT_NAME` characters,
+    and "arm A", "arm B", ... where it still is; and the short words used, with what they stand for."""
+    parts = {arm: arm_parts(members[0]) for arm, members in arms.items()}
+    others = [words for arm, words in parts.items() if arm != "oracle"]
+    shared = [word for word in others[0][1:] if all(word in words[1:] for words in others)] if others else []
+    names, used, letters = {}, {}, iter("ABCDEFGHIJKLMNOPQRSTUVWXYZ")
+    for arm, words in parts.items():
+        kept = [words[0], *(word for word in words[1:] if word not in shared)]
+        name = " ".join(kept)
+        if len(name) > SHORT_NAME:
+            name = " ".join(ABBREVIATIONS.get(word, word) for word in kept)
+            # DOSPCoT needs no gloss: only a short word that spells another is said.
+            used.update(
+                {ABBREVIATIONS[w]: w for w in kept if w in ABBREVIATIONS and ABBREVIATIONS[w].lower() != w}
+            )
+        names[arm] = name if len(name) <= SHORT_NAME else f"arm {next(letters)}"
+    return shared, names, used
 
 
 def by_arm(runs: list[TrialRun]) -> dict[str, list[TrialRun]]:
@@ -302,7 +349,9 @@ def figure(tasks: dict[str, Callable[[TrialRun], bool]]) -> Callable[[list[Trial
     def draw(runs: list[TrialRun], path: Path) -> None:
         panels = {}
         for task, belongs in tasks.items():
-            bands = _arm_bands(by_arm([r for r in runs if belongs(r)]))
+            arms = by_arm([r for r in runs if belongs(r)])
+            names = short_names(arms)[1] if arms else {}
+            bands = _arm_bands({names[arm]: members for arm, members in arms.items()})
             if bands:
                 panels[task] = bands
         if panels:
@@ -390,18 +439,36 @@ def exploration(
 
 
 def task_tables(task: str, arms: dict[str, list[TrialRun]], read: list[str]) -> list[str]:
-    """One task's tables of a label-budget study: its arms, any control against the oracle, success
-    after each round, pseudo-rewards per hidden reward class, then ``read`` (the study's comparisons
-    on the task, left out with its heading where it holds nothing past it) and label efficiency."""
-    lines = ["", f"### {task}", "", *_arm_table(arms), *(["", *c] if (c := _controls(arms)) else [])]
-    lines += ["", "Success after each round:", "", *_rounds_table(arms)]
-    classes = _class_table(arms)
+    """One task's tables of a label-budget study: the settings its arms share, its arms (by their short
+    names, :func:`short_names`), any control against the oracle, success after each round,
+    pseudo-rewards per hidden reward class, then ``read`` (the study's comparisons on the task, left
+    out with its heading where it holds nothing past it), label efficiency and the settings of each
+    arm shown by a letter."""
+    shared, names, used = short_names(arms)
+    shown = {names[arm]: members for arm, members in arms.items()}
+    lines = ["", f"### {task}", ""]
+    if shared:
+        lines += [f"Every arm but the oracle: {', '.join(shared)}.", ""]
+    if used:
+        lines += ["Arm names: " + "; ".join(f"{short} = {word}" for short, word in used.items()) + ".", ""]
+    lines += [*_arm_table(shown), *(["", *c] if (c := _controls(arms)) else [])]
+    lines += ["", "Success after each round:", "", *_rounds_table(shown)]
+    classes = _class_table(shown)
     if classes:
         lines += ["", "Pseudo-rewards per hidden reward class, last round:", "", *classes]
     if any(line.startswith("- ") for line in read):
         lines += ["", *read]
-    efficiency = _efficiency(arms)
-    return [*lines, *(["", *efficiency] if efficiency else [])]
+    efficiency = _efficiency(shown)
+    lines += ["", *efficiency] if efficiency else []
+    lettered = [(names[arm], arm) for arm in arms if names[arm] != arm and names[arm].startswith("arm ")]
+    if lettered:
+        lines += [
+            "",
+            "| arm | its settings |",
+            "|---|---|",
+            *(f"| {name} | {arm} |" for name, arm in lettered),
+        ]
+    return lines
 
 
 def _view_success(run: TrialRun, view: str | None) -> float:

@@ -9,7 +9,7 @@ import re
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import budget, sweep_spec
-from dospcot_lab.studies.budget import labels_to_reach
+from dospcot_lab.studies.budget import STRATEGY, labels_to_reach
 from dospcot_lab.studies.budget_confirm import STUDIES as BUDGET_CONFIRM
 from dospcot_lab.studies.budget_explore import STUDIES as BUDGET_STUDIES
 
@@ -47,15 +47,16 @@ def test_the_budget_tables_pair_arms_by_seed_and_count_their_labels(tmp_path):
         )
         runs.append(_budget_run(tmp_path, "minigrid-doorkey-dospcot", asap, seed, [0.0, 0.6], 100))
     text = "\n".join(BUDGET_STUDIES["budget-explore"].tables(runs))
-    arm = "dospcot disagreement even exploration by rounds"
-    assert f"| {arm} | 100 | 100 | 0.850 [0.800, 0.900] |" in text
+    # The tables name the arms by what sets them apart; what they share is said once above.
+    assert "Every arm but the oracle: disagreement, exploration by rounds." in text
+    assert "| dospcot even | 100 | 100 | 0.850 [0.800, 0.900] |" in text
     assert "| oracle | preset | every reward | 1.000 [1.000, 1.000] |" in text
-    assert f"| {arm} | 100 | 0.00 | 0.85 |" in text  # success after each round, at its budget
+    assert "| dospcot even | 100 | 0.00 | 0.85 |" in text  # success after each round, at its budget
     # Even minus asap, paired by seed: 0.2, 0.25, 0.3.
     assert "the budget spread evenly against spent at once: success of " in text
     assert "paired: 0.250 [0.200, 0.300] over 3 seeds." in text
     # 90% of the oracle's 1.0 is 0.9: the even arm's one budget (0.85) does not reach it.
-    assert f"| {arm} | 100 | not reached |" in text
+    assert "| dospcot even | 100 | not reached |" in text
 
 
 def test_the_third_exploration_names_the_admitted_share_and_pairs_all_against_half_per_task(tmp_path):
@@ -78,7 +79,9 @@ def test_the_third_exploration_names_the_admitted_share_and_pairs_all_against_ha
     text = "\n".join(BUDGET_STUDIES["budget-explore-admit"].tables(runs))
     doorkey, grid = text.split("### grid16, layout 11")
     arm = "dospcot uniform exploration by rounds admitting 100% of U in round 1"
-    assert f"| {arm} | share 0.1 | 0.50 | 0.85 |" in doorkey  # success after each round, mean over seeds
+    # A name still over 30 characters is shown as a letter, its settings in a table under the task's.
+    assert "| arm A | share 0.1 | 0.50 | 0.85 |" in doorkey  # success after each round, mean over seeds
+    assert f"| arm A | {arm} |" in doorkey and "| dospcot | share 0.1 | 0.00 | 0.40 |" in doorkey
     # All minus half, paired by seed: DoorKey 0.5 and 0.4; grid16 -0.2 on both seeds.
     assert "a blind 10% mask, admitting all of U in round 1 against half: success of " in doorkey
     assert "paired: 0.450 [0.400, 0.500] over 2 seeds." in doorkey
@@ -101,10 +104,10 @@ def test_the_budget_figure_draws_each_task_in_its_own_panel(tmp_path, monkeypatc
     doorkey, grid = drawn.values()
     # DoorKey's mask arm at its 90 labels and the oracle's line across it; grid16's arm alone, at 40.
     assert [(b.label, list(b.x), list(b.mean)) for b in doorkey] == [
-        ("dospcot uniform", [90.0], [0.5]),
+        ("dospcot", [90.0], [0.5]),  # one arm: every setting of it is shared
         ("oracle (every reward)", [90.0, 90.0], [1.0, 1.0]),
     ]
-    assert [(b.label, list(b.x)) for b in grid] == [("dospcot uniform", [40.0])]
+    assert [(b.label, list(b.x)) for b in grid] == [("dospcot", [40.0])]
 
 
 def _confirmatory_runs(tmp_path, success) -> list[TrialRun]:
@@ -177,6 +180,41 @@ def test_the_confirmatory_comparisons_flag_arms_whose_labels_differ_by_more_than
         BUDGET_CONFIRM["budget"].tables([r for r in runs if r.trial.config != "grid16-reward-model"])
     )
     assert "(20 against n/a labels a run); interval above 0: not decided yet." in text
+
+
+def test_long_arm_names_take_short_words_said_above_the_tables(tmp_path):
+    decay = {
+        "training.label_budget": "100",
+        "training.query_schedule": "decay",
+        "training.exploration": "rounds",
+    }
+    refit = {**decay, "cotraining.refit_new_classes": "true"}
+    runs = [
+        _budget_run(
+            tmp_path, "minigrid-doorkey-dospcot", {**refit, STRATEGY: '"outcomes+disagreement"'}, 0, [1], 1
+        ),
+        _budget_run(
+            tmp_path, "minigrid-doorkey-self-training", {**refit, STRATEGY: '"uncertainty"'}, 0, [1], 1
+        ),
+        _budget_run(
+            tmp_path, "minigrid-doorkey-reward-model", {**decay, STRATEGY: '"disagreement"'}, 0, [1], 1
+        ),
+    ]
+    shared, names, used = budget.short_names(budget.by_arm(runs))
+    assert shared == ["decay", "exploration by rounds"]  # said once; the refit is not every arm's
+    assert list(names.values()) == [
+        "DOSPCoT o+d refit",
+        "ST unc refit",
+        "reward-model disagreement",
+    ]
+    # 31 characters and more take the short words; a name that fits keeps its words.
+    assert used == {
+        "o+d": "outcomes+disagreement",
+        "refit": "refit on a new class",
+        "ST": "self-training",
+        "unc": "uncertainty",
+    }
+    assert all(len(name) <= budget.SHORT_NAME for name in names.values())
 
 
 def test_the_round_and_class_tables_keep_one_row_per_arm_and_budget(tmp_path):
