@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from dospcot.core.round_records import DEPENDENCE_STATS
 from dospcot.run.plots import Band, plot_bands
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
@@ -188,8 +189,63 @@ def _task_table(task: str, runs: list[TrialRun]) -> list[str]:
     return lines
 
 
+def last_round_dependence(run: TrialRun) -> dict[str, float]:
+    """The error-dependence figures of a run's last round (:data:`DEPENDENCE_STATS`; NaN where its
+    ``metrics.csv`` predates them or the round had one classifier)."""
+    last = max((row["round"] for row in run.curves), default=None)
+    row = next((row for row in run.curves if row["round"] == last), {})
+    return {key: float(row.get(key, math.nan)) for key in DEPENDENCE_STATS}
+
+
+def _mean(values: list[float]) -> str:
+    finite = [v for v in values if not math.isnan(v)]
+    return f"{np.mean(finite):.3f}" if finite else "–"
+
+
+def _dependence_table(runs: list[TrialRun]) -> list[str]:
+    """Per arm with two classifiers or more to compare: its runs' last-round error dependence, mean
+    over the runs (every budget)."""
+    lines = [
+        "| arm | joint error | independent error | disagreement | error correlation | runs |",
+        "|---|---|---|---|---|---|",
+    ]
+    for arm in ("DOSPCoT", "twin", "reward model", "DOSPCoT, identical blind spots"):
+        figures = [last_round_dependence(r) for r in runs if arm_of(r) == arm]
+        if figures:
+            cells = " | ".join(_mean([f[key] for f in figures]) for key in DEPENDENCE_STATS)
+            lines.append(f"| {arm} | {cells} | {len(figures)} |")
+    return lines if len(lines) > 2 else []
+
+
+def _margins(runs: list[TrialRun]) -> list[str]:
+    """Across tasks: DOSPCoT's views' error correlation beside the twin's, and the labels each needs to
+    reach the oracle's share beside the best one-view peer's, so dependence reads against margin."""
+    lines = [
+        f"| task | DOSPCoT's error correlation | the twin's | DOSPCoT's labels to {SHARE:.0%} | "
+        "best one-view peer's |",
+        "|---|---|---|---|---|",
+    ]
+    for task in TASKS:
+        members = [r for r in runs if task_of(r) == task]
+        found = curves(members)
+        if "DOSPCoT" not in found:
+            continue
+        correlation = {
+            arm: _mean([last_round_dependence(r)["error_correlation"] for r in members if arm_of(r) == arm])
+            for arm in ("DOSPCoT", "twin")
+        }
+        largest = float(np.max(found["DOSPCoT"].labels))
+        peers = {arm: found[arm].labels_to_reach() for arm in ONE_VIEW if arm in found}
+        best = min(peers, key=peers.get) if peers else None
+        peer = f"{best} {labels_text(peers[best], largest)}" if best else "–"
+        mine = labels_text(found["DOSPCoT"].labels_to_reach(), largest)
+        lines.append(f"| {task} | {correlation['DOSPCoT']} | {correlation['twin']} | {mine} | {peer} |")
+    return lines if len(lines) > 2 else []
+
+
 def tables(runs: list[TrialRun]) -> list[str]:
-    """Per task, the arms' curves (:func:`_task_table`); then every arm's settings."""
+    """Per task, the arms' curves (:func:`_task_table`) and their classifiers' error dependence; then,
+    across tasks, dependence beside margin; then every arm's settings."""
     lines = [
         "",
         f"Each budget's cell: success as a share of the oracle's mean success (labels used per run). "
@@ -202,6 +258,17 @@ def tables(runs: list[TrialRun]) -> list[str]:
         members = [r for r in runs if task_of(r) == task]
         if members:
             lines += _task_table(task, members)
+            dependence = _dependence_table(members)
+            if dependence:
+                lines += [
+                    "",
+                    "The classifiers' error dependence, last round (docs/design.md, section 4):",
+                    "",
+                ]
+                lines += dependence
+    margins = _margins(runs)
+    if margins:
+        lines += ["", "### Dependence against margin", "", *margins]
     return [*lines, "", "| arm | settings |", "|---|---|", *(f"| {a} | {s} |" for a, s in ARMS.items())]
 
 

@@ -48,7 +48,13 @@ def test_a_curve_that_never_reaches_the_share_says_so():
 
 
 def _run(
-    folder: Path, preset: str, params: dict[str, str], seed: int, success: float, labels: float
+    folder: Path,
+    preset: str,
+    params: dict[str, str],
+    seed: int,
+    success: float,
+    labels: float,
+    correlation: float = math.nan,
 ) -> TrialRun:
     """A finished run whose folder under ``folder`` holds a ``run_info.json`` of 60 CPU-s (the tables
     read it)."""
@@ -56,7 +62,9 @@ def _run(
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0}))
     mean = {"success": success, "labelled_steps": labels}
-    return TrialRun(Trial(preset, preset, params, seed), {"mean": mean}, [], run_dir)
+    # metrics.csv's rows: the last round's error correlation is the one the tables read.
+    rows = [{"round": 1.0, "error_correlation": 0.9}, {"round": 2.0, "error_correlation": correlation}]
+    return TrialRun(Trial(preset, preset, params, seed), {"mean": mean}, rows, run_dir)
 
 
 def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_ran(tmp_path):
@@ -74,10 +82,11 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
                     seed,
                     success[seed],
                     2.0 * float(b),
+                    correlation=0.1 * seed,
                 )
             )
             runs.append(
-                _run(tmp_path, "grid16-dospcot", {**twin, budget: b}, seed, success[seed] / 2, float(b))
+                _run(tmp_path, "grid16-dospcot", {**twin, budget: b}, seed, success[seed] / 2, float(b), 0.8)
             )
     runs.append(_run(tmp_path, "grid16-dospcot", {strategy: '"random"', budget: "20"}, 0, 0.1, 20.0))
     runs.append(
@@ -94,6 +103,9 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
     assert "| DOSPCoT | 0.30 (10) | 0.70 (20) | 1.00 (40) | – | 33 [30, 35] | 0.68 | 2 | 60 CPU-s |" in text
     assert "| twin | 0.15 (5) | 0.35 (10) | 0.50 (20) | – | > 20 [> 20, > 20] |" in text
     assert "| blind | – | – | 0.10 (20) | – | > 20 [> 20, > 20] | – | 1 |" in text
+    # The last round's error correlation, mean over each arm's runs: DOSPCoT's 0 and 0.1, the twin's 0.8.
+    assert "| DOSPCoT | – | – | – | 0.050 | 6 |" in text and "| twin | – | – | – | 0.800 | 6 |" in text
+    assert "| grid16 | 0.050 | 0.800 | 33 | twin > 40 |" in text  # its largest budget: 40 labels
 
 
 def test_the_study_trains_every_arm_under_version_2_at_the_tasks_budgets():
