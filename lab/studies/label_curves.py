@@ -95,6 +95,9 @@ def _first_reach(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.where(reached.any(axis=1), at, np.inf)
 
 
-def labels_text(value: float, largest: float) -> str:
-    """``value`` labels as a table cell: "more than <largest>" where it is never reached."""
-    return f"> {largest:,.0f}" if math.isinf(value) else f"{value:,.0f}"
+def labels_text(value: float, largest: float, smallest: float = 0.0) -> str:
+    """``value`` labels as a table cell: "> <largest>" where it is never reached, "<= <smallest>" where
+    the smallest budget already reaches it (the curve cannot say how much less would)."""
+    if math.isinf(value):
+        return f"> {largest:,.0f}"
+    return f"<= {smallest:,.0f}" if value <= smallest else f"{value:,.0f}"

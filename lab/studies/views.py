@@ -147,6 +147,12 @@ def curves(runs: list[TrialRun]) -> dict[str, Curve]:
     return found
 
 
+def _ends(curve: Curve) -> tuple[float, float]:
+    """The most labels any of the curve's runs used, and the fewest its budgets used on average: the
+    range :func:`labels_text` reads a value against."""
+    return float(np.max(curve.labels)), float(curve.labels.mean(axis=0).min())
+
+
 def _task_table(task: str, runs: list[TrialRun]) -> list[str]:
     """One task: each arm's success as a share of the oracle's at each budget (labels used beside it),
     the labels to reach 90% of the oracle with its interval, and the area under its curve."""
@@ -159,6 +165,10 @@ def _task_table(task: str, runs: list[TrialRun]) -> list[str]:
         "",
         f"The oracle (every reward): success {SeedSummary.of([r.summary['mean']['success'] for r in oracle])}"
         f" over {len(oracle)} seeds; {cpu_per_run(oracle)}.",
+    ]
+    if not found:
+        return lines
+    lines += [
         "",
         f"| arm | {' | '.join(f'budget {b}' for b in budgets)} | labels to {SHARE:.0%} of the oracle "
         "[95% interval] | area under the curve | seeds | CPU time per run |",
@@ -175,10 +185,10 @@ def _task_table(task: str, runs: list[TrialRun]) -> list[str]:
         shown = [
             f"{at[float(b)][1]:.2f} ({at[float(b)][0]:,.0f})" if float(b) in at else "–" for b in budgets
         ]
-        largest = float(np.max(curve.labels))
+        ends = _ends(curve)
         low, high = curve.labels_interval()
-        reach = f"{labels_text(curve.labels_to_reach(), largest)} [{labels_text(low, largest)}, " + (
-            f"{labels_text(high, largest)}]"
+        reach = f"{labels_text(curve.labels_to_reach(), *ends)} [{labels_text(low, *ends)}, " + (
+            f"{labels_text(high, *ends)}]"
         )
         area = curve.area()
         members = [r for r in runs if arm_of(r) == arm]
@@ -234,11 +244,10 @@ def _margins(runs: list[TrialRun]) -> list[str]:
             arm: _mean([last_round_dependence(r)["error_correlation"] for r in members if arm_of(r) == arm])
             for arm in ("DOSPCoT", "twin")
         }
-        largest = float(np.max(found["DOSPCoT"].labels))
         peers = {arm: found[arm].labels_to_reach() for arm in ONE_VIEW if arm in found}
         best = min(peers, key=peers.get) if peers else None
-        peer = f"{best} {labels_text(peers[best], largest)}" if best else "–"
-        mine = labels_text(found["DOSPCoT"].labels_to_reach(), largest)
+        peer = f"{best} {labels_text(peers[best], *_ends(found[best]))}" if best else "–"
+        mine = labels_text(found["DOSPCoT"].labels_to_reach(), *_ends(found["DOSPCoT"]))
         lines.append(f"| {task} | {correlation['DOSPCoT']} | {correlation['twin']} | {mine} | {peer} |")
     return lines if len(lines) > 2 else []
 
@@ -250,7 +259,8 @@ def tables(runs: list[TrialRun]) -> list[str]:
         "",
         f"Each budget's cell: success as a share of the oracle's mean success (labels used per run). "
         f"Labels to {SHARE:.0%} of the oracle are interpolated on the arm's mean curve, with a 95% "
-        'bootstrap interval over seeds ("> N": not reached by its largest budget, N labels); the area '
+        'bootstrap interval over seeds ("> N": not reached by its largest budget, N labels; "<= N": reached '
+        "at its smallest); the area "
         "under the curve is over log labels from the arm's smallest budget to its largest, the oracle's "
         "being 1. Figure: [views.png](views.png).",
     ]
@@ -298,9 +308,8 @@ def glance(runs: list[TrialRun]) -> Glance:
         if "DOSPCoT" in found:
             peers = {a: c.labels_to_reach() for a, c in found.items() if a in ONE_VIEW}
             best = min(peers, key=peers.get) if peers else None
-            largest = float(np.max(found["DOSPCoT"].labels))
-            mine = labels_text(found["DOSPCoT"].labels_to_reach(), largest)
-            theirs = f", {best} {labels_text(peers[best], largest)}" if best else ""
+            mine = labels_text(found["DOSPCoT"].labels_to_reach(), *_ends(found["DOSPCoT"]))
+            theirs = f", {best} {labels_text(peers[best], *_ends(found[best]))}" if best else ""
             parts.append(f"{task}: DOSPCoT {mine}{theirs}")
     return Glance(f"labels to {SHARE:.0%} of the oracle: " + "; ".join(parts) if parts else "", EXPLORATORY)
 

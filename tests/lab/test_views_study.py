@@ -41,7 +41,8 @@ def test_a_curve_that_never_reaches_the_share_says_so():
     assert math.isinf(low.labels_to_reach()) and labels_text(low.labels_to_reach(), 40) == "> 40"
     assert labels_text(33.4, 40) == "33"
     first = Curve(CURVE.budgets, CURVE.labels, np.full((2, 3), 0.95), CURVE.oracle)
-    assert first.labels_to_reach() == 10.0  # the smallest budget already reaches it
+    assert first.labels_to_reach() == 10.0  # the smallest budget already reaches it ...
+    assert labels_text(first.labels_to_reach(), 40, 10) == "<= 10"  # ... and the curve says no less
     # A share is of the oracle's mean: an oracle at 0.5 doubles every share.
     half = Curve(CURVE.budgets, CURVE.labels, CURVE.success / 2, np.array([0.5, 0.5]))
     assert half.labels_to_reach() == pytest.approx(CURVE.labels_to_reach())
@@ -105,7 +106,7 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
     assert "| blind | – | – | 0.10 (20) | – | > 20 [> 20, > 20] | – | 1 |" in text
     # The last round's error correlation, mean over each arm's runs: DOSPCoT's 0 and 0.1, the twin's 0.8.
     assert "| DOSPCoT | – | – | – | 0.050 | 6 |" in text and "| twin | – | – | – | 0.800 | 6 |" in text
-    assert "| grid16 | 0.050 | 0.800 | 33 | twin > 40 |" in text  # its largest budget: 40 labels
+    assert "| grid16 | 0.050 | 0.800 | 33 | twin > 20 |" in text  # the twin's largest budget: 20 labels
 
 
 def test_the_study_trains_every_arm_under_version_2_at_the_tasks_budgets():
