@@ -22,18 +22,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from dospcot_lab.studies.budget import (
-    ENDS_ON,
-    FLOOR,
-    QUOTA,
-    RANDOM_SHARE,
-    REFIT_ARM,
-    REFIT_ON,
-    ROUNDS_ARM,
-    exploration,
-    goal_on_ends,
-    spend,
-)
+from dospcot_lab.studies.budget import ENDS_ON, REFIT_ON, exploration, spend
+from dospcot_lab.studies.budget_arms import FLOOR, QUOTA, RANDOM_SHARE, REFIT_ARM, ROUNDS_ARM, goal_on_ends
 from dospcot_lab.studies.budget_explore import (
     DECAY,
     DECAY_SWEEPS,

@@ -13,21 +13,17 @@ import numpy as np
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.budget import (
-    BUDGET,
     ENDS_ON,
     ORACLE_SHARE,
     OUTCOMES,
-    REFIT_ARM,
     REFIT_ON,
-    ROUNDS_ARM,
     budget_sweep,
-    by_arm,
     figure,
-    goal_on_ends,
     paired_values,
     spend,
     task_tables,
 )
+from dospcot_lab.studies.budget_arms import BUDGET, REFIT_ARM, ROUNDS_ARM, by_arm, goal_on_ends
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.tables import labels_cell, labels_used

@@ -14,21 +14,15 @@ from dataclasses import replace
 
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.budget import (
-    ADMIT,
-    BUDGET,
-    EXPLORATION,
     OUTCOMES,
     OWN,
     ROUNDS,
-    ROUNDS_ARM,
-    SCHEDULE,
-    STRATEGY,
     budget_sweep,
-    by_arm,
     exploration,
     paired_difference,
     spend,
 )
+from dospcot_lab.studies.budget_arms import ADMIT, BUDGET, EXPLORATION, ROUNDS_ARM, SCHEDULE, STRATEGY, by_arm
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.tables import FRACTION

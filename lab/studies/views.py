@@ -23,7 +23,7 @@ from dospcot.core.round_records import DEPENDENCE_STATS
 from dospcot.run.plots import Band, plot_bands
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
-from dospcot_lab.studies.budget import BUDGET, STRATEGY
+from dospcot_lab.studies.budget_arms import BUDGET, STRATEGY
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.label_curves import SHARE, Curve, labels_text
 from dospcot_lab.studies.tables import cpu_per_run, labels_used

@@ -8,8 +8,9 @@ import re
 
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
-from dospcot_lab.studies import budget, sweep_spec
-from dospcot_lab.studies.budget import STRATEGY, labels_to_reach
+from dospcot_lab.studies import budget, budget_arms, sweep_spec
+from dospcot_lab.studies.budget import labels_to_reach
+from dospcot_lab.studies.budget_arms import STRATEGY
 from dospcot_lab.studies.budget_confirm import STUDIES as BUDGET_CONFIRM
 from dospcot_lab.studies.budget_explore import STUDIES as BUDGET_STUDIES
 
@@ -200,7 +201,7 @@ def test_long_arm_names_take_short_words_said_above_the_tables(tmp_path):
             tmp_path, "minigrid-doorkey-reward-model", {**decay, STRATEGY: '"disagreement"'}, 0, [1], 1
         ),
     ]
-    shared, names, used = budget.short_names(budget.by_arm(runs))
+    shared, names, used = budget_arms.short_names(budget_arms.by_arm(runs))
     assert shared == ["decay", "exploration by rounds"]  # said once; the refit is not every arm's
     assert list(names.values()) == [
         "DOSPCoT o+d refit",
@@ -214,7 +215,7 @@ def test_long_arm_names_take_short_words_said_above_the_tables(tmp_path):
         "ST": "self-training",
         "unc": "uncertainty",
     }
-    assert all(len(name) <= budget.SHORT_NAME for name in names.values())
+    assert all(len(name) <= budget_arms.SHORT_NAME for name in names.values())
 
 
 def test_the_round_and_class_tables_keep_one_row_per_arm_and_budget(tmp_path):
@@ -226,7 +227,7 @@ def test_the_round_and_class_tables_keep_one_row_per_arm_and_budget(tmp_path):
             f"round,class,reward,samples,labelled,admitted,recall,precision\n2,0,0.0,{labels},1,5,1.0,1.0\n"
         )
         runs.append(run)
-    arms = budget.by_arm(runs)
+    arms = budget_arms.by_arm(runs)
     assert list(arms) == ["dospcot disagreement"]  # one arm, two budgets: two rows, never pooled
     assert budget._rounds_table(arms)[2:] == [
         "| dospcot disagreement | 100 | 0.00 | 0.90 |",
