@@ -19,8 +19,7 @@ import numpy as np
 import torch
 
 from dospcot.config.learning_sections import CoTrainingConfig
-from dospcot.core.classifier import BatchedRewardClassifier
-from dospcot.core.self_paced import NUMERICS, FitsUnderNumerics, RunPool, RunRound
+from dospcot.core.self_paced import FitsUnderNumerics, RunPool, RunRound
 from dospcot.seeding import bootstrap_seed, ensemble_seed
 
 
@@ -38,15 +37,7 @@ class RewardModelTrainer(FitsUnderNumerics):
         self.config, self.seed = config, seed
         members = config.ensemble_size
         self.classifiers = [
-            BatchedRewardClassifier(
-                members,
-                dim,
-                n_classes,
-                config.classifier,
-                [ensemble_seed(seed, j, e) for e in range(members)],
-                NUMERICS[self.numerics].sparse_inputs,
-                NUMERICS[self.numerics].fused_adam,
-            ).to(self.dtype)
+            self.classifier(dim, n_classes, [ensemble_seed(seed, j, e) for e in range(members)])
             for j, dim in enumerate(view_dims)
         ]
         self.round = 0

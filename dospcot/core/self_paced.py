@@ -85,6 +85,20 @@ class FitsUnderNumerics:
         """:attr:`dtype` as numpy's."""
         return NUMERICS[self.numerics].np_dtype
 
+    def classifier(self, dim: int, n_classes: int, seeds: list[int]) -> BatchedRewardClassifier:
+        """A stack of ``len(seeds)`` reward classifiers of ``dim`` inputs and ``n_classes`` outputs, the
+        config's model (``config.classifier``) fitted under its numerics version, each from its seed."""
+        numerics = NUMERICS[self.numerics]
+        return BatchedRewardClassifier(
+            len(seeds),
+            dim,
+            n_classes,
+            self.config.classifier,
+            seeds,
+            numerics.sparse_inputs,
+            numerics.fused_adam,
+        ).to(self.dtype)
+
 
 def _fit(
     clf: BatchedRewardClassifier,
@@ -219,15 +233,7 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         if self.n_views < 1:
             raise ValueError("co-training needs at least one view")
         self.classifiers = [
-            BatchedRewardClassifier(
-                n_runs,
-                dim,
-                n_classes,
-                config.classifier,
-                [classifier_seed(s, j) for s in seeds],
-                NUMERICS[self.numerics].sparse_inputs,
-                NUMERICS[self.numerics].fused_adam,
-            ).to(self.dtype)
+            self.classifier(dim, n_classes, [classifier_seed(s, j) for s in seeds])
             for j, dim in enumerate(view_dims)
         ]
         self.round = 0
