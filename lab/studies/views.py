@@ -227,6 +227,16 @@ def _dependence_table(runs: list[TrialRun]) -> list[str]:
     return lines if len(lines) > 2 else []
 
 
+def _reach_against_best_peer(found: dict[str, Curve]) -> tuple[str, str | None]:
+    """DOSPCoT's labels to the oracle's share (its curve in ``found``), and the one-view peer's that
+    needs the fewest, named ("twin 40"; None where no peer has a curve), as :func:`labels_text` writes
+    them."""
+    peers = {arm: found[arm].labels_to_reach() for arm in ONE_VIEW if arm in found}
+    best = min(peers, key=peers.get) if peers else None
+    mine = labels_text(found["DOSPCoT"].labels_to_reach(), *_ends(found["DOSPCoT"]))
+    return mine, (f"{best} {labels_text(peers[best], *_ends(found[best]))}" if best else None)
+
+
 def _margins(runs: list[TrialRun]) -> list[str]:
     """Across tasks: DOSPCoT's views' error correlation beside the twin's, and the labels each needs to
     reach the oracle's share beside the best one-view peer's, so dependence reads against margin."""
@@ -244,11 +254,10 @@ def _margins(runs: list[TrialRun]) -> list[str]:
             arm: _mean([last_round_dependence(r)["error_correlation"] for r in members if arm_of(r) == arm])
             for arm in ("DOSPCoT", "twin")
         }
-        peers = {arm: found[arm].labels_to_reach() for arm in ONE_VIEW if arm in found}
-        best = min(peers, key=peers.get) if peers else None
-        peer = f"{best} {labels_text(peers[best], *_ends(found[best]))}" if best else "–"
-        mine = labels_text(found["DOSPCoT"].labels_to_reach(), *_ends(found["DOSPCoT"]))
-        lines.append(f"| {task} | {correlation['DOSPCoT']} | {correlation['twin']} | {mine} | {peer} |")
+        mine, peer = _reach_against_best_peer(found)
+        lines.append(
+            f"| {task} | {correlation['DOSPCoT']} | {correlation['twin']} | {mine} | {peer or '–'} |"
+        )
     return lines if len(lines) > 2 else []
 
 
@@ -290,8 +299,8 @@ def figure(runs: list[TrialRun], path: Path) -> None:
         bands = []
         for arm, curve in curves([r for r in runs if task_of(r) == task]).items():
             x, y = curve.share()
-            order = np.argsort(curve.labels.mean(axis=0))
-            stats = [SeedSummary.of(list(curve.shares()[:, i])) for i in order]
+            shares, order = curve.shares(), np.argsort(curve.labels.mean(axis=0))
+            stats = [SeedSummary.of(list(shares[:, i])) for i in order]
             bands.append(Band(arm, x, y, np.array([s.low for s in stats]), np.array([s.high for s in stats])))
         if bands:
             panels[task] = bands
@@ -306,11 +315,8 @@ def glance(runs: list[TrialRun]) -> Glance:
     for task in TASKS:
         found = curves([r for r in runs if task_of(r) == task])
         if "DOSPCoT" in found:
-            peers = {a: c.labels_to_reach() for a, c in found.items() if a in ONE_VIEW}
-            best = min(peers, key=peers.get) if peers else None
-            mine = labels_text(found["DOSPCoT"].labels_to_reach(), *_ends(found["DOSPCoT"]))
-            theirs = f", {best} {labels_text(peers[best], *_ends(found[best]))}" if best else ""
-            parts.append(f"{task}: DOSPCoT {mine}{theirs}")
+            mine, peer = _reach_against_best_peer(found)
+            parts.append(f"{task}: DOSPCoT {mine}" + (f", {peer}" if peer else ""))
     return Glance(f"labels to {SHARE:.0%} of the oracle: " + "; ".join(parts) if parts else "", EXPLORATORY)
 
 
