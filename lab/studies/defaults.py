@@ -10,17 +10,17 @@ from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.tables import (
+    ADOPTION_METRICS,
     NON_INFERIORITY_MARGIN,
     adoption_glance,
-    cpu_per_run,
     held_lines,
     non_inferior,
-    over_seeds,
     paired,
+    version_rows,
 )
 
 PRESETS = ("grid16-dospcot", "minigrid-doorkey-dospcot")
-METRICS = ("success", "pseudo_accuracy")
+METRICS = tuple(ADOPTION_METRICS)
 VERSIONS = (1, 2)
 
 
@@ -43,17 +43,14 @@ def tables(runs: list[TrialRun]) -> list[str]:
     difference, version 2 minus 1, against the non-inferiority margin."""
     lines = [
         "",
-        "| preset | defaults | success | pseudo-reward accuracy | labels | CPU time per run | seeds |",
-        "|---|---|---|---|---|---|---|",
+        *version_rows(
+            lambda preset, version: list(_by_seed(runs, preset, version).values()),
+            PRESETS,
+            VERSIONS,
+            "defaults",
+            {**ADOPTION_METRICS, "labelled_steps": "labels"},
+        ),
     ]
-    for preset in PRESETS:
-        for version in VERSIONS:
-            members = list(_by_seed(runs, preset, version).values())
-            if members:
-                cells = " | ".join(over_seeds(members, m) for m in (*METRICS, "labelled_steps"))
-                lines.append(
-                    f"| `{preset}` | {version} | {cells} | {cpu_per_run(members)} | {len(members)} |"
-                )
     bound = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
     differences = {preset: _differences(runs, preset) for preset in PRESETS}
     return [

@@ -9,18 +9,18 @@ from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.tables import (
+    ADOPTION_METRICS,
     NON_INFERIORITY_MARGIN,
     adoption_glance,
-    cpu_per_run,
     held_lines,
     non_inferior,
     numerics_of,
-    over_seeds,
     paired,
+    version_rows,
 )
 
 PRESETS = ("grid16-dospcot", "minigrid-doorkey-dospcot")
-METRICS = ("success", "pseudo_accuracy")
+METRICS = tuple(ADOPTION_METRICS)
 HALF_WIDTH = 0.1
 """How far from 0 either end of a difference's 95% interval may lie for the same science (the bound
 registered before the runs: equivalence)."""
@@ -48,16 +48,14 @@ def tables(runs: list[TrialRun]) -> list[str]:
     difference, numerics 2 minus 1."""
     lines = [
         "",  # the table a block of its own, after the page's provenance lines
-        "| preset | numerics | success | pseudo-reward accuracy | CPU time per run | seeds |",
-        "|---|---|---|---|---|---|",
+        *version_rows(
+            lambda preset, version: list(_by_seed(runs, preset, version).values()),
+            PRESETS,
+            VERSIONS,
+            "numerics",
+            ADOPTION_METRICS,
+        ),
     ]
-    for preset in PRESETS:
-        for version in VERSIONS:
-            members = list(_by_seed(runs, preset, version).values())
-            if members:
-                cells = " | ".join(over_seeds(members, metric) for metric in METRICS)
-                cpu = cpu_per_run(members)
-                lines.append(f"| `{preset}` | {version} | {cells} | {cpu} | {len(members)} |")
     bound = f"the interval holds 0 and lies within +-{HALF_WIDTH}"
     margin = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
     differences = {preset: _differences(runs, preset) for preset in PRESETS}

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 from dospcot.statistics import SeedSummary
@@ -155,6 +155,34 @@ def cpu_per_run(runs: list[TrialRun]) -> str:
     """The CPU time per run over ``runs`` (each run's ``cpu_time_s``; a batch member's share)."""
     known = [s for s in map(cpu_seconds, runs) if s is not None]
     return f"{sum(known) / len(known):.0f} CPU-s" if known else "unknown"
+
+
+ADOPTION_METRICS = {"success": "success", "pseudo_accuracy": "pseudo-reward accuracy"}
+"""The metrics the adoption rule holds a new default to (:func:`non_inferior`), with their headings."""
+
+
+def version_rows(
+    members_of: Callable[[str, int], list[TrialRun]],
+    presets: Sequence[str],
+    versions: Sequence[int],
+    kind: str,
+    columns: dict[str, str],
+) -> list[str]:
+    """A table of a study comparing versions (of the defaults, of the numerics): per preset and
+    version whose runs ``members_of(preset, version)`` gives, each metric of ``columns`` (metric ->
+    its heading) over the seeds, the CPU time per run and the seeds; ``kind`` heads the version's
+    column. A preset and version with no run has no row."""
+    lines = [
+        f"| preset | {kind} | {' | '.join(columns.values())} | CPU time per run | seeds |",
+        "|---|---|" + "---|" * (len(columns) + 2),
+    ]
+    for preset in presets:
+        for version in versions:
+            members = members_of(preset, version)
+            if members:
+                cells = [*(over_seeds(members, metric) for metric in columns), cpu_per_run(members)]
+                lines.append(f"| `{preset}` | {version} | {' | '.join(cells)} | {len(members)} |")
+    return lines
 
 
 def paired(
