@@ -12,6 +12,7 @@ success against labels bought with the labels each arm needs to reach 90% of the
 from __future__ import annotations
 
 import csv
+import math
 from collections.abc import Callable
 from pathlib import Path
 
@@ -33,6 +34,7 @@ from dospcot_lab.studies.budget_arms import (
 )
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.grid_studies import LAYOUT
+from dospcot_lab.studies.label_curves import first_reach
 from dospcot_lab.studies.tables import FRACTION, LABELS_COLUMN, labels_cell, labels_used
 
 ORACLE_SHARE = 0.9
@@ -204,14 +206,9 @@ def _class_table(arms: dict[str, list[TrialRun]]) -> list[str]:
 def labels_to_reach(points: list[tuple[float, float]], target: float) -> float | None:
     """The labels at which success first reaches ``target``, linearly interpolated between the
     (labels, success) points sorted by labels; None where no point reaches it."""
-    points = sorted(points)
-    for i, (labels, success) in enumerate(points):
-        if success >= target:
-            if i == 0:
-                return labels
-            (x0, y0), (x1, y1) = points[i - 1], (labels, success)
-            return x0 + (target - y0) * (x1 - x0) / (y1 - y0)
-    return None
+    x, y = np.array(sorted(points), dtype=float).T
+    reached = float(first_reach(x[None], y[None], target)[0])
+    return None if math.isinf(reached) else reached
 
 
 def _efficiency(arms: dict[str, list[TrialRun]]) -> list[str]:

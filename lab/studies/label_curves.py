@@ -49,7 +49,7 @@ class Curve:
         """The labels at which the mean curve first reaches :data:`SHARE` of the oracle, interpolated
         linearly between budgets; inf where no budget reaches it."""
         x, y = self.share()
-        return float(_first_reach(x[None], y[None])[0])
+        return float(first_reach(x[None], y[None])[0])
 
     def labels_interval(self, seed: int = 0) -> tuple[float, float]:
         """The 95% percentile bootstrap interval of :meth:`labels_to_reach` over the seeds (inf where
@@ -57,7 +57,7 @@ class Curve:
         draws = np.random.default_rng(seed).integers(0, len(self.oracle), (RESAMPLES, len(self.oracle)))
         x, y = _mean_share(self.labels[draws], self.success[draws], self.oracle[draws])
         # Order statistics, not interpolation: a resample that never reaches the share is inf.
-        low, high = np.percentile(_first_reach(x, y), [2.5, 97.5], method="inverted_cdf")
+        low, high = np.percentile(first_reach(x, y), [2.5, 97.5], method="inverted_cdf")
         return float(low), float(high)
 
     def area(self) -> float:
@@ -81,16 +81,16 @@ def _mean_share(labels: np.ndarray, success: np.ndarray, oracle: np.ndarray) -> 
     return np.take_along_axis(x, order, axis=1), np.take_along_axis(y, order, axis=1)
 
 
-def _first_reach(x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """(R,) for each row of (R, B) curves, the x where y first reaches :data:`SHARE`, interpolated
-    from the budget before; inf where it never does."""
-    reached = y >= SHARE
+def first_reach(x: np.ndarray, y: np.ndarray, target: float = SHARE) -> np.ndarray:
+    """(R,) for each row of (R, B) curves (x ascending), the x where y first reaches ``target``,
+    interpolated linearly from the point before; inf where it never does."""
+    reached = y >= target
     first = reached.argmax(axis=1)
     rows = np.arange(len(x))
     before = np.maximum(first - 1, 0)
     x0, y0, x1, y1 = x[rows, before], y[rows, before], x[rows, first], y[rows, first]
     with np.errstate(invalid="ignore", divide="ignore"):
-        between = x0 + (SHARE - y0) * (x1 - x0) / (y1 - y0)
+        between = x0 + (target - y0) * (x1 - x0) / (y1 - y0)
     at = np.where(first == 0, x1, between)
     return np.where(reached.any(axis=1), at, np.inf)
 
