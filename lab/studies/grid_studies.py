@@ -24,6 +24,7 @@ from dospcot_lab.studies.tables import (
     per_view_rows,
     verdict,
     versus,
+    views_line,
     with_headline,
 )
 
@@ -42,6 +43,7 @@ def grid16_tables(runs: list[TrialRun]) -> list[str]:
     """Per method: every column over seeds; then per method and view."""
     grouped = by_method(runs)
     lines = [
+        views_line(grouped),
         WORST_CLASS,
         LABELS_EXPLAINED,
         "",
@@ -71,6 +73,7 @@ def layout_tables(runs: list[TrialRun]) -> list[str]:
     floors = {dict(params)[LAYOUT]: score_floor(members[0]) for (_, params), members in by_layout}
     lines = [f"Layout {layout}: the map's {floor}." for layout, floor in floors.items()]
     lines += [
+        views_line(grouped),
         WORST_CLASS,
         LABELS_EXPLAINED,
         "",

@@ -19,6 +19,7 @@ from dospcot_lab.studies.tables import (
     mean_over_oracles,
     over_seeds,
     per_view_rows,
+    views_line,
     with_headline,
 )
 
@@ -68,6 +69,7 @@ def highway_tables(runs: list[TrialRun], bound: bool = False) -> list[str]:
         f"(reward per step in [0, 1]); a uniformly random policy returns "
         f"{sum(random.values()) / len(random):.1f} on average over the seeds "
         f"({min(random.values()):.1f} to {max(random.values()):.1f}).",
+        views_line(grouped),
         LABELS_EXPLAINED,
         "",
         "| method | preset | "

@@ -35,8 +35,8 @@ DEMO_ARMS: dict[str, dict[str, str]] = {  # the target's two arms first: a parti
     "labels 5%": {FRACTION: "0.05"},
     "labels 1% + 10 demonstrations": {FRACTION: "0.01", DEMOS: "10"},
     "labels 1%": {FRACTION: "0.01"},
-    "labels 1% + 10 demonstrations, as labels only": {FRACTION: "0.01", DEMOS: "10", MARGIN_WEIGHT: "0"},
-    "labels 1% + 10 demonstrations, margin loss only": {FRACTION: "0.01", DEMOS: "10", DEMO_LABELS: "false"},
+    "demonstrations as labels only": {FRACTION: "0.01", DEMOS: "10", MARGIN_WEIGHT: "0"},
+    "demonstrations as margin only": {FRACTION: "0.01", DEMOS: "10", DEMO_LABELS: "false"},
 }
 DEMO_COLUMNS = ("success", "agreement", "pseudo_accuracy", "worst_class_precision")
 DEMO_TARGET = ("labels 1% + 10 demonstrations", "labels 5%")
@@ -54,14 +54,15 @@ def _by_arm(runs: list[TrialRun], arms: dict[str, dict[str, str]]) -> dict[str, 
 
 
 def _arm_sweeps(
-    prefix: str, arms: dict[str, dict[str, str]], shared: dict[str, str], preset: str = "grid16-dospcot"
+    prefix: str, arms: dict[str, dict[str, str]], sweep_names: dict[str, str], preset: str = "grid16-dospcot"
 ) -> tuple[Sweep, ...]:
-    """One sweep of ``preset`` per arm, named after it; ``shared`` names arms that another study's
-    sweep already holds (the same trials: they run once). They train under numerics 2, as their
-    pre-registration fixes (docs/preregistration-future-work.md)."""
+    """One sweep of ``preset`` per arm, named after it but where ``sweep_names`` names it: an arm that
+    another study's sweep already holds (the same trials: they run once), or one the record holds under
+    the arm's longer earlier name. They train under numerics 2, as their pre-registration fixes
+    (docs/preregistration-future-work.md)."""
     return tuple(
         Sweep(
-            shared.get(arm) or prefix + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
+            sweep_names.get(arm) or prefix + re.sub(r"[^a-z0-9]+", "-", arm.lower()).strip("-"),
             (preset,),
             {key: (value,) for key, value in keys.items()},
             numerics=2,
@@ -94,7 +95,9 @@ def demonstration_tables(runs: list[TrialRun]) -> list[str]:
     by_arm = _by_arm(runs, DEMO_ARMS)
     lines = [
         "Every arm is `grid16-dospcot` with the overrides named; demonstrations are value iteration's "
-        "optimal episodes, the first from the map's start (docs/demonstrations.md).",
+        "optimal episodes, the first from the map's start (docs/demonstrations.md). The last two arms are "
+        "labels 1% + 10 demonstrations with the demonstrations used one way only: as labels with no "
+        "margin loss, or in the margin loss and not as labels.",
         LABELS_EXPLAINED,
         "",
         *_arm_rows(by_arm, DEMO_ARMS, DEMO_COLUMNS, COLUMNS, labels=True),
@@ -131,8 +134,13 @@ EFFORT_ARMS: dict[str, dict[str, str]] = {  # the target's arms first: a partial
     "segments of 4, 5% of segments": {FRACTION: "0.05", SEGMENT: "4"},
 }
 EFFORT_SHARED = {"labels 1% + 10 demonstrations": "demonstrations-labels-1-10-demonstrations"}
-DEMO_SHARED = {"labels 5%": "effort-per-step-labels-5-of-keys"}
-"""The two studies' arms with the same overrides of the same preset train once, in one sweep."""
+DEMO_SHARED = {
+    "labels 5%": "effort-per-step-labels-5-of-keys",
+    "demonstrations as labels only": "demonstrations-labels-1-10-demonstrations-as-labels-only",
+    "demonstrations as margin only": "demonstrations-labels-1-10-demonstrations-margin-loss-only",
+}
+"""The two studies' arms with the same overrides of the same preset train once, in one sweep; two
+arms' sweeps keep their earlier, longer names."""
 EFFORT_COLUMNS = ("labelled_steps", "success", "agreement", "pseudo_accuracy")
 NO_WORSE = 0.1
 """F2's margin (docs/preregistration-future-work.md): segments at equal effort are "no worse" than
@@ -232,13 +240,18 @@ F3 = EffortTarget("F3", "segments of 4, 5% of segments", "greedy_return")
 # same 100 answers at random as soon as it meets samples (docs/preregistration-future-work.md).
 VIEWS, BUDGET, STRATEGY = "views", "training.label_budget", "training.label_strategy"
 THIRD_VIEW_ARMS: dict[str, dict[str, str]] = {
-    "m = 2 (image, ego), 100 labels": {VIEWS: '["image", "ego"]', BUDGET: "100", STRATEGY: "random"},
-    "m = 3 (image, ego, full), 100 labels": {
+    "m = 2 (image, ego)": {VIEWS: '["image", "ego"]', BUDGET: "100", STRATEGY: "random"},
+    "m = 3 (image, ego, full)": {
         VIEWS: '["image", "ego", "full"]',
         BUDGET: "100",
         STRATEGY: "random",
     },
 }
+THIRD_VIEW_SWEEPS = {
+    "m = 2 (image, ego)": "third-view-doorkey-m-2-image-ego-100-labels",
+    "m = 3 (image, ego, full)": "third-view-doorkey-m-3-image-ego-full-100-labels",
+}
+"""The arms' sweeps, named when the arms' names still said their shared 100 labels."""
 THIRD_VIEW_COLUMNS = ("success", "pseudo_accuracy")
 THIRD_VIEW_PRESET = "minigrid-doorkey-dospcot"
 
@@ -248,7 +261,7 @@ def third_view_tables(runs: list[TrialRun]) -> list[str]:
     paired by seed."""
     by_arm = _by_arm(runs, THIRD_VIEW_ARMS)
     lines = [
-        f"Every arm is `{THIRD_VIEW_PRESET}` with the overrides named (numerics 2).",
+        f"Every arm is `{THIRD_VIEW_PRESET}` with the views named, buying 100 labels at random (numerics 2).",
         LABELS_EXPLAINED,
         "",
         *_arm_rows(by_arm, THIRD_VIEW_ARMS, THIRD_VIEW_COLUMNS, COLUMNS, labels=True),
@@ -307,7 +320,7 @@ STUDIES: dict[str, Study] = {
         seeds=10,
     ),
     "third-view-doorkey": Study(
-        _arm_sweeps("third-view-doorkey-", THIRD_VIEW_ARMS, {}, THIRD_VIEW_PRESET),
+        _arm_sweeps("third-view-doorkey-", THIRD_VIEW_ARMS, THIRD_VIEW_SWEEPS, THIRD_VIEW_PRESET),
         third_view_tables,
         "A third view against two at equal labels (MiniGrid DoorKey-5x5)",
         "MiniGrid DoorKey-5x5, 100 labels at random: a third view",

@@ -21,6 +21,7 @@ from dospcot_lab.studies.tables import (
     per_view_rows,
     verdict,
     versus,
+    views_line,
     with_headline,
 )
 
@@ -41,6 +42,7 @@ def minigrid_tables(runs: list[TrialRun]) -> list[str]:
         f"Evaluation: {episodes} greedy episodes per agent from the task's own start, each on a new map; "
         "success is the share that reach the goal, and the return is MiniGrid's (1 - 0.9 t / T at the "
         "goal). The label fraction is the share of (state, action) pairs whose reward is revealed.",
+        views_line(grouped),
         LABELS_EXPLAINED,
         "",
         "| task | method | preset | "

@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dospcot.run.run_folder import METRICS_FILE, QUERIES_FILE, REWARD_CLASSES_FILE
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.budget_arms import ABBREVIATIONS
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.grid_studies import LAYOUT, UNSEEN_LAYOUTS
 from dospcot_lab.studies.tables import FRACTION, MINIGRID_TASKS, labels_cell, over_seeds
@@ -42,6 +43,11 @@ def _arm(run: TrialRun) -> str:
     return f"{method} {strategy} @ {run.trial.params.get(FRACTION, '')}"
 
 
+def _shown(arm: str) -> str:
+    """An arm's name in a table, self-training said as ST so that every name fits in 30 characters."""
+    return arm.replace("self-training", ABBREVIATIONS["self-training"])
+
+
 def _pairs(runs: list[TrialRun], arm: str) -> dict[tuple[str, int], TrialRun]:
     """The runs of one arm by (layout, seed): the pairs of a paired comparison."""
     return {(r.trial.params.get(LAYOUT, ""), r.trial.seed): r for r in runs if _arm(r) == arm}
@@ -67,7 +73,7 @@ def _arm_table(runs: list[TrialRun], task: str) -> list[str]:
         cells = [over_seeds(members, column) for column in COLUMNS]
         if goal:  # the oracle is told every reward: it has no labels to count
             cells.append("n/a" if arm == "oracle" else f"{sum(map(_goal_labelled, members))}/{len(members)}")
-        lines.append(f"| {arm} | {' | '.join(cells)} | {len(members)} |")
+        lines.append(f"| {_shown(arm)} | {' | '.join(cells)} | {len(members)} |")
     return lines
 
 
@@ -120,9 +126,8 @@ def _chosen_table(runs: list[TrialRun], task: str) -> list[str]:
                 rows += list(csv.DictReader(handle))
         later = sum(int(row["round"]) > 1 for row in rows) / max(len(rows), 1)
         chosen = sum(row["strategy"] == strategy for row in rows) / max(len(rows), 1)
-        lines.append(
-            f"| {arm} | {len(rows) / len(members):.1f} | {later:.1%} | {chosen:.1%} | {len(members)} |"
-        )
+        per_run = len(rows) / len(members)
+        lines.append(f"| {_shown(arm)} | {per_run:.1f} | {later:.1%} | {chosen:.1%} | {len(members)} |")
     return lines if len(lines) > 2 else []
 
 
@@ -208,7 +213,8 @@ def _identical(runs: list[TrialRun], task: str) -> list[str]:
 def _tables(tasks: dict[str, Callable[[TrialRun], bool]], hypotheses: Callable[..., list[str]]) -> Callable:
     def tables(runs: list[TrialRun]) -> list[str]:
         lines = [
-            "The arm names the method, its label strategy and its label fraction (docs/queries.md). "
+            "The arm names the method (ST: self-training, in the tables), its label strategy and its label "
+            "fraction (docs/queries.md). "
             "Under each task, who chose the active arms' queries (their runs' queries.csv, pooled): every "
             "strategy draws its random share at random, and uncertainty and disagreement also draw at "
             "random where no classifier has been fitted yet (all of round 1). "

@@ -13,12 +13,12 @@ from dospcot.sweeps.report import TrialRun, cells
 from dospcot_lab.studies.declaration import Glance
 
 GRID_METHODS = {
-    "oracle": "oracle (all rewards)",
+    "oracle": "oracle",
     "masked-zero": "masked-zero",
     "labels-only": "labels-only",
-    "self-training": "self-training (m = 1, patch)",
-    "dospcot": "DOSPCoT (m = 2, patch + rays)",
-    "m3": "m = 3 (patch + rays + coords)",
+    "self-training": "self-training",
+    "dospcot": "DOSPCoT",
+    "m3": "m = 3",
 }
 METHODS = {
     **{f"{grid}-{method}": label for grid in ("grid16", "grid32") for method, label in GRID_METHODS.items()},
@@ -26,10 +26,10 @@ METHODS = {
         f"{base}-{method}": label
         for base in ("highway", "fasthighway")
         for method, label in {
-            "oracle": "oracle (all rewards)",
+            "oracle": "oracle",
             "masked-zero": "masked-zero",
-            "self-training": "self-training (m = 1, kinematics)",
-            "dospcot": "DOSPCoT (m = 2, kinematics + occupancy)",
+            "self-training": "self-training",
+            "dospcot": "DOSPCoT",
         }.items()
     },
 }
@@ -39,10 +39,10 @@ METHODS.update(
         f"minigrid-{task}-{method}": label
         for task in MINIGRID_TASKS
         for method, label in {
-            "oracle": "oracle (all rewards)",
+            "oracle": "oracle",
             "masked-zero": "masked-zero",
-            "self-training": "self-training (m = 1, image)",
-            "dospcot": "DOSPCoT (m = 2, image + egocentric map)",
+            "self-training": "self-training",
+            "dospcot": "DOSPCoT",
         }.items()
     }
 )
@@ -79,6 +79,15 @@ def cell_labels(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> dict[tuple[
     with_rounds = len(set(rounds.values())) > 1
     suffix = {key: f", {n} rounds" if with_rounds else "" for key, n in rounds.items()}
     return {key: METHODS.get(key[0], key[0]) + suffix[key] for key in grouped}
+
+
+def views_line(grouped: dict[tuple[str, tuple], list[TrialRun]]) -> str:
+    """The views each method's agents see, once per method, for the tables that name methods short."""
+    seen = dict.fromkeys(
+        f"{METHODS.get(name, name)}: {' + '.join(members[0].summary['views'])}"
+        for (name, _), members in grouped.items()
+    )
+    return f"Each method's views: {'; '.join(seen)}."
 
 
 def over_seeds(members: list[TrialRun], key: str, view: str | None = None) -> str:

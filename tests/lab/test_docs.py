@@ -269,3 +269,37 @@ def test_runs_readme_lists_the_files_gitignore_keeps_of_the_record():
             "pseudo_rewards.csv",
         }
     )
+
+
+ARM_COLUMNS = {"arm", "method"}
+"""Headers of the columns that name an arm; the queries study's tables name their arms in the first
+column under the task's name, before a ``success`` or ``per run`` column."""
+ARM_NAME_LIMIT = 30
+
+
+def _arm_cells(page: str) -> list[str]:
+    """Every cell of ``page``'s tables that names an arm, by :data:`ARM_COLUMNS` or the queries' layout."""
+    lines, found = page.splitlines(), []
+    for at, line in enumerate(lines[:-1]):
+        if not (line.startswith("| ") and lines[at + 1].startswith("|---")):
+            continue
+        header = [cell.strip() for cell in line.strip().strip("|").split("|")]
+        columns = [i for i, title in enumerate(header) if title in ARM_COLUMNS]
+        if not columns and len(header) > 1 and header[1] in ("success", "per run"):
+            columns = [0]
+        for row in lines[at + 2 :]:
+            if not row.startswith("| "):
+                break
+            cells = [cell.strip() for cell in row.strip().strip("|").split("|")]
+            found += [cells[i] for i in columns if i < len(cells)]
+    return found
+
+
+def test_no_table_in_the_record_names_an_arm_by_more_than_30_characters(rendered):
+    """Long settings go to a settings table or a line above the table; the arm columns stay short."""
+    pages = {name: result.page for name, result in rendered.items()}
+    long = {name: [c for c in _arm_cells(page) if len(c) > ARM_NAME_LIMIT] for name, page in pages.items()}
+    assert {name: cells for name, cells in long.items() if cells} == {}
+    # The check reads the method columns and the queries' first columns.
+    assert "DOSPCoT, 10 rounds" in _arm_cells(pages["grid16-tabular"])
+    assert "ST uncertainty @ 0.1" in _arm_cells(pages["queries"])

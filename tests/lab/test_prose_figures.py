@@ -248,13 +248,13 @@ def queries_highway(s: Sources, _: str) -> tuple:
 
     after = [
         s.page_cell("queries-highway", "fast highway: queries", arm, "after round 1")
-        for arm in ("dospcot disagreement @ 0.02", "self-training uncertainty @ 0.02")
+        for arm in ("dospcot disagreement @ 0.02", "ST uncertainty @ 0.02")
     ]
-    uniform = [success(f"{m} uniform @ 0.02") for m in ("self-training", "dospcot")]
+    uniform = [success(f"{m} uniform @ 0.02") for m in ("ST", "dospcot")]
     active = [
         success(arm)
         for arm in (
-            "self-training uncertainty @ 0.02",
+            "ST uncertainty @ 0.02",
             "dospcot uncertainty @ 0.02",
             "dospcot disagreement @ 0.02",
         )
@@ -701,7 +701,7 @@ FIGURES = [
         r"where the image agent's study mean is [\d.]+ \(DoorKey\) and [\d.]+ \(LavaGap\)",
         r"is ([\d.]+) \(DoorKey\) and ([\d.]+) \(LavaGap\)",
         lambda s, _: tuple(
-            float(s.page_figure("minigrid", rf"\| {task} \| oracle \(all rewards\) \| image \| ([\d.]+) ")[0])
+            float(s.page_figure("minigrid", rf"\| {task} \| oracle \| image \| ([\d.]+) ")[0])
             for task in (DOORKEY, LAVAGAP)
         ),
         "docs/results/minigrid.md's per-view table (the oracle's image agent)",
@@ -715,7 +715,7 @@ FIGURES = [
             float(
                 s.page_figure(
                     "minigrid",
-                    rf"\| {LAVAGAP} \| oracle \(all rewards\) \| `minigrid-lavagap-oracle` \| ([\d.]+) ",
+                    rf"\| {LAVAGAP} \| oracle \| `minigrid-lavagap-oracle` \| ([\d.]+) ",
                 )[0]
             ),
         ),
@@ -730,7 +730,7 @@ FIGURES = [
             float(
                 s.page_figure(
                     "minigrid",
-                    rf"\| {LAVAGAP} \| DOSPCoT [^|]* \| `minigrid-lavagap-dospcot` \|(?: [^|]* \|){{3}} ([\d.]+) ",
+                    rf"\| {LAVAGAP} \| DOSPCoT[^|]* \| `minigrid-lavagap-dospcot` \|(?: [^|]* \|){{3}} ([\d.]+) ",
                 )[0]
             ),
         ),

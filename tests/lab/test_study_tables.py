@@ -140,7 +140,7 @@ def test_the_minigrid_table_gives_each_method_its_share_of_its_own_tasks_oracle_
     lines = minigrid_tables(runs)
     assert "20 greedy episodes per agent" in lines[0]
     text = "\n".join(lines)
-    assert "| MiniGrid-DoorKey-5x5-v0 | DOSPCoT (m = 2, image + egocentric map) | image | 0.500" in text
+    assert "| MiniGrid-DoorKey-5x5-v0 | DOSPCoT | image | 0.500" in text
     assert (
         "- MiniGrid-LavaGapS7-v0: seeds whose DOSPCoT run met a labelled goal pair: 0, 1 (of 0, 1)." in text
     )
@@ -167,13 +167,17 @@ def test_the_grid_tables_give_the_labels_each_method_used_per_run():
         *(_labelled_run("grid16-masked-zero", seed, None) for seed in range(2)),
     ]
     lines = grid16_tables(runs)
-    assert "| pseudo-reward accuracy | worst-class precision | coverage | labels used per run |" in lines[3]
+    # Every method once, in the presets' order, with the views its agents saw.
+    assert lines[0] == (
+        "Each method's views: oracle: patch; masked-zero: patch; self-training: patch; DOSPCoT: patch."
+    )
+    assert "| pseudo-reward accuracy | worst-class precision | coverage | labels used per run |" in lines[4]
     rows = {line.split(" | ")[1]: line for line in lines if line.startswith("| ") and "`" in line}
     assert rows["`grid16-oracle`"].endswith("| every reward |")
     assert rows["`grid16-dospcot`"].endswith("| 43 |")  # (40 + 43 + 47) / 3 = 43.3
     assert rows["`grid16-self-training`"].endswith("| 41 |")  # seed 1 predates the count
     assert rows["`grid16-masked-zero`"].endswith("| unknown |")
-    assert "| DOSPCoT (m = 2, patch + rays) | patch | 1.000 [1.000, 1.000] | n/a | n/a | 43 |" in lines
+    assert "| DOSPCoT | patch | 1.000 [1.000, 1.000] | n/a | n/a | 43 |" in lines
 
 
 def test_the_label_fraction_tables_give_each_cells_labels_in_the_same_shape():
@@ -189,7 +193,7 @@ def test_the_label_fraction_tables_give_each_cells_labels_in_the_same_shape():
     assert lines[at + 2 : at + 6] == [
         "| method | 0.01 | 0.05 |",
         "|---|---|---|",
-        "| DOSPCoT (m = 2, patch + rays) | 10 | 44 |",  # 20 / 2; 132 / 3
+        "| DOSPCoT | 10 | 44 |",  # 20 / 2; 132 / 3
         "| masked-zero | 9 | n/a |",
     ]
 
