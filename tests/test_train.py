@@ -297,12 +297,16 @@ def test_evaluate_reproduces_the_summary_with_plain_sb3_agents(trained, tmp_path
     run_dir = _copy(trained(f"agent={agent}"), tmp_path)
     capsys.readouterr()
     assert main(["evaluate", str(run_dir)]) == 0
-    assert "wrote" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "wrote" in out
     summary = json.loads((run_dir / "summary.json").read_text())
     evaluation = json.loads((run_dir / "evaluation.json").read_text())
     for view, row in evaluation["per_view"].items():
         for key in ("greedy_return", "success", "normalised_score", "agreement"):
             assert row[key] == pytest.approx(summary["per_view"][view][key])
+        # One line per agent, its name first; success is a share of episodes, printed as one.
+        (line,) = [line for line in out.splitlines() if line.startswith(f"{view}:")]
+        assert f"success {row['success']:.3f}" in line
     assert evaluation == evaluate(run_dir)
 
 

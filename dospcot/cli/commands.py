@@ -63,9 +63,10 @@ def _evaluate(args: argparse.Namespace, command: str) -> int:
     result = evaluate(args.run_dir)
     state = "finished" if result["finished"] else "unfinished"
     print(f"{args.run_dir}: the agents of round {result['round']} of {result['rounds']} ({state})")
+    width = max(map(len, result["per_view"])) + 1  # the agents' names, left-aligned, colons in a column
     for view, row in result["per_view"].items():
         print(
-            f"{view:>8}: return {row['greedy_return']:8.1f}  success {row['success']:.0f}  "
+            f"{view + ':':<{width}} return {row['greedy_return']:8.1f}  success {row['success']:.3f}  "
             f"normalised score {row['normalised_score']:.3f}  agreement {row['agreement']:.3f}"
         )
     if result["finished"]:

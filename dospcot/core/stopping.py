@@ -4,9 +4,8 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
-
-import numpy as np
 
 CO_TRAINER_STOPPED = "the co-trainer's stopping rule (cotraining.tol or every sample admitted)"
 """Why a run stopped where the co-trainer's rule fired."""
@@ -19,6 +18,10 @@ class GreedyPatience:
     their returns rise). The co-training rounds' counterpart of SB3's
     ``StopTrainingOnNoModelImprovement``, which ends one agent's training.
 
+    The count starts once an evaluation has beaten a random policy (success above 0, or a normalised
+    score above 0): on a sparse task the first rounds often show nothing at all, and a run stopped
+    there would stop before its agents had met the reward.
+
     :param patience: rounds without a new best after which the run stops; 0: never.
     """
 
@@ -30,13 +33,25 @@ class GreedyPatience:
 
     def update(self, rows: list[dict]) -> bool:
         """Take a round's records (one per agent); return whether the patience ran out."""
-        greedy = tuple(float(np.nanmean([r[key] for r in rows])) for key in ("success", "normalised_score"))
+        greedy = tuple(_mean_over_known([r[key] for r in rows]) for key in ("success", "normalised_score"))
         if self.best is None or greedy > self.best:
             self.best, self.since_best = greedy, 0
-        else:
+        elif self.learned:
             self.since_best += 1
         return bool(self.patience) and self.since_best >= self.patience
+
+    @property
+    def learned(self) -> bool:
+        """Whether an evaluation so far beat a random policy (a NaN score, unknown, does not)."""
+        return self.best is not None and (self.best[0] > 0 or self.best[1] > 0)
 
     def reason(self) -> str:
         """Why a run stopped where the patience ran out."""
         return f"no new best greedy evaluation in {self.patience} rounds (training.stop_patience)"
+
+
+def _mean_over_known(values: list[float]) -> float:
+    """The mean of the values that are not NaN; NaN, without numpy's warning, where none is known (a
+    normalised score without ``max_return``)."""
+    known = [float(v) for v in values if not math.isnan(v)]
+    return sum(known) / len(known) if known else math.nan

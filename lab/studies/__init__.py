@@ -25,6 +25,7 @@
     dospcot-lab study budget-explore-grid-highway --docs  # those settings on grid16 and the fast highway
     dospcot-lab study budget --docs           # docs/preregistration-budget.md: B1-B4, seeds 100-109
     dospcot-lab study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
+    dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
 
 A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
@@ -79,6 +80,7 @@ from dospcot_lab.studies import (
     paper,
     queries,
     second_view,
+    sizing,
     views,
 )
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
@@ -117,6 +119,7 @@ STUDIES: dict[str, Study] = {
     **budget_confirm.STUDIES,
     **numerics.STUDIES,
     **defaults.STUDIES,
+    **sizing.STUDIES,
     **views.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""

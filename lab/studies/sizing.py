@@ -1,0 +1,140 @@
+"""The sizing study (exploratory): how long to train on a task no preset was sized for.
+
+MiniGrid-Unlock-v0 under the DoorKey presets' settings, as the budget study's B4 arms ran it (5
+rounds of 10,000 steps, its oracle at 0.240), against the same runs capped at :data:`CAP` rounds. A
+stop by the greedy evaluation's patience (``training.stop_patience``) leaves the rounds before it as
+the capped run trained them, so each patience's outcome is read off the capped runs' curves with the
+library's own rule (:class:`~dospcot.core.stopping.GreedyPatience`), with no run of its own."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+from dospcot.core.stopping import GreedyPatience
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.budget_confirm import SWEEPS as BUDGET_SWEEPS
+from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
+
+CAP = 20
+"""The capped arms' rounds."""
+PATIENCES = (2, 3, 4)
+"""The patiences read off the capped curves."""
+ARMS = ("oracle", "dospcot")
+PRESET_LENGTH = "5 rounds (the preset)"
+"""The budget study's runs, read on the seeds the capped arm has run (all ten before it has any)."""
+FIRST_SEED, SEEDS = 100, 5
+"""The budget study's Unlock seeds (its arms ran 100-109); the capped arms run the first five."""
+
+
+def _five_rounds(arm: str) -> Sweep:
+    """The budget study's Unlock sweep of ``arm`` (5 rounds), read here with its own ten seeds."""
+    sweep = next(s for s in BUDGET_SWEEPS if s.name == f"budget-confirm-unlock-{arm}")
+    return dataclasses.replace(sweep, seeds=10)
+
+
+def _capped(arm: str) -> Sweep:
+    sweep = _five_rounds(arm)
+    grid = {**sweep.grid, "training.rounds": (str(CAP),)}
+    return dataclasses.replace(sweep, name=f"sizing-unlock-{arm}-{CAP}", grid=grid, seeds=None)
+
+
+def _arm(run: TrialRun) -> str:
+    return "oracle" if run.trial.config.endswith("-oracle") else "dospcot"
+
+
+def _per_round(run: TrialRun) -> list[list[dict]]:
+    """A run's ``metrics.csv`` rows, one list per round (one row per agent)."""
+    rounds: dict[int, list[dict]] = {}
+    for row in run.curves:
+        rounds.setdefault(int(row["round"]), []).append(row)
+    return [rounds[r] for r in sorted(rounds)]
+
+
+def _stop(run: TrialRun, patience: int) -> int:
+    """The round (1-based) after which ``patience`` would have stopped the capped run, else its last."""
+    rule, rounds = GreedyPatience(patience), _per_round(run)
+    for number, rows in enumerate(rounds, 1):
+        if rule.update([{k: float(r[k]) for k in ("success", "normalised_score")} for r in rows]):
+            return number
+    return len(rounds)
+
+
+def _at(run: TrialRun, number: int, key: str) -> float:
+    """Round ``number``'s ``key``, mean over the run's agents."""
+    values = [float(row[key]) for row in _per_round(run)[number - 1]]
+    return sum(values) / len(values)
+
+
+def _rules(runs: list[TrialRun], arm: str) -> dict[str, dict[int, tuple[float, int, float]]]:
+    """Per length rule, per seed: (success, rounds trained, labels held) at the end it gives."""
+    capped = {r.trial.seed: r for r in runs if _arm(r) == arm and "training.rounds" in r.trial.params}
+    five = {
+        r.trial.seed: r
+        for r in runs
+        if _arm(r) == arm and "training.rounds" not in r.trial.params
+        if not capped or r.trial.seed in capped
+    }
+    rules = {PRESET_LENGTH: {s: _end(r, len(_per_round(r))) for s, r in five.items()}}
+    for patience in PATIENCES:
+        rules[f"cap {CAP}, patience {patience}"] = {s: _end(r, _stop(r, patience)) for s, r in capped.items()}
+    rules[f"{CAP} rounds"] = {s: _end(r, len(_per_round(r))) for s, r in capped.items()}
+    return rules
+
+
+def _end(run: TrialRun, number: int) -> tuple[float, int, float]:
+    labels = _at(run, number, "labelled_steps") if "labelled_steps" in run.curves[0] else math.nan
+    return _at(run, number, "success"), number, labels
+
+
+def tables(runs: list[TrialRun]) -> list[str]:
+    """Per arm and length rule: success, rounds trained and labels held over seeds; then each rule's
+    success minus the preset's 5 rounds, paired by seed."""
+    lines = [
+        f"Each capped run trains {CAP} rounds; a patience's row is each capped run read at the round its "
+        "rule would have stopped it (rounds in a row with no new best greedy evaluation, counted once an "
+        "evaluation beat a random policy). The 5-round rows are the budget study's own runs, whose "
+        "exploration falls over 5 rounds rather than 20.",
+        "",
+        "| arm | length | success | rounds trained | labels held | seeds |",
+        "|---|---|---|---|---|---|",
+    ]
+    differences = []
+    for arm in ARMS:
+        rules = _rules(runs, arm)
+        base = rules[PRESET_LENGTH]
+        for rule, by_seed in rules.items():
+            if not by_seed:
+                continue
+            success, rounds, labels = (SeedSummary.of([v[i] for v in by_seed.values()]) for i in range(3))
+            labelled = "every reward" if arm == "oracle" else f"{labels.mean:.0f}"
+            lines.append(f"| {arm} | {rule} | {success} | {rounds.mean:.1f} | {labelled} | {len(by_seed)} |")
+            seeds = sorted(set(base) & set(by_seed))
+            if rule != PRESET_LENGTH and seeds:
+                diff = SeedSummary.of([by_seed[s][0] - base[s][0] for s in seeds])
+                differences.append(f"- {arm}, {rule} minus 5 rounds, success paired by seed: {diff}")
+    return [*lines, "", *differences]
+
+
+def glance(runs: list[TrialRun]) -> Glance:
+    """The oracle's success under patience 3 capped at :data:`CAP`, against the preset's 5 rounds."""
+    rules = _rules(runs, "oracle")
+    base, rule = rules[PRESET_LENGTH], rules[f"cap {CAP}, patience 3"]
+    seeds = sorted(set(base) & set(rule))
+    diff = SeedSummary.of([rule[s][0] - base[s][0] for s in seeds])
+    headline = f"Unlock oracle success, cap {CAP} with patience 3 minus 5 rounds, paired: {diff}"
+    return Glance(headline, EXPLORATORY)
+
+
+STUDIES: dict[str, Study] = {
+    "sizing": Study(
+        tuple(sweep for arm in ARMS for sweep in (_capped(arm), _five_rounds(arm))),
+        tables,
+        "Training sized to the task: rounds capped, stopped by the greedy evaluation's patience",
+        "MiniGrid Unlock with the DoorKey presets (no preset sized for it)",
+        glance,
+        seeds=SEEDS,
+        first_seed=FIRST_SEED,
+    ),
+}
