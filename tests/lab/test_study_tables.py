@@ -361,12 +361,14 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
         run_dir = tmp_path / str(seed)
         run_dir.mkdir()
         (run_dir / "run_info.json").write_text(json.dumps({"wall_time_s": 48.0, **info}))
+        (run_dir / "config.toml").write_text('name = "tiny"\n')  # written before versions: the first
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
     line = header(runs, "dospcot-lab study x", [tmp_path])[0]
     assert line.endswith(
         "; 4 minutes of training, the runs' wall times summed (one torch thread per run); source commits "
         "aaaaaaa (2), "
-        "bbbbbbb with uncommitted changes (1), not recorded (1), not recorded then bbbbbbb then aaaaaaa (1)."
+        "bbbbbbb with uncommitted changes (1), not recorded (1), not recorded then bbbbbbb then aaaaaaa (1)"
+        "; defaults version 1 (5)."
     )
     for run in runs:  # every run with its CPU time: the header counts that, not the wall time
         info = json.loads((run.run_dir / "run_info.json").read_text())
@@ -384,10 +386,13 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
         run_dir.mkdir()
         info = {"wall_time_s": 60.0, "commit": "a" * 40} | ({"cpu": cpu} if cpu else {})
         (run_dir / "run_info.json").write_text(json.dumps(info))
+        (run_dir / "config.toml").write_text(f"defaults = {1 + (seed == 0)}\n")
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
     line = header(runs, "dospcot-lab study x", [tmp_path])[0]
+    # The versions of the defaults the runs resolved under, counted as the kernels are.
     assert line.endswith(
-        "source commit aaaaaaa (3); torch CPU kernels AVX2 (1), AVX512 (1), not recorded (1)."
+        "source commit aaaaaaa (3); torch CPU kernels AVX2 (1), AVX512 (1), not recorded (1); "
+        "defaults versions 1 (2), 2 (1)."
     )
 
 
