@@ -143,8 +143,9 @@ def study_runs(
     study: Study, runs_dir: Path, suffix: str = ""
 ) -> tuple[list[TrialRun], list[Path], list[str]]:
     """The finished runs of ``study``'s sweeps under ``runs_dir`` (each sweep's folder name plus
-    ``suffix``), the sweep folders that hold them, and each sweep not finished, in words (never
-    started, or how many of its trials have finished)."""
+    ``suffix``; of a sweep it reuses for some configs, those it reads), the sweep folders that hold
+    them, and each sweep not finished, in words (never started, or how many of its trials have
+    finished)."""
     runs, sweep_dirs, unfinished = [], [], []
     for sweep in study.sweeps:
         sweep_dir = runs_dir / f"{sweep.name}{suffix}"
@@ -153,9 +154,11 @@ def study_runs(
         except SweepError:  # never started, or no trial finished yet: the study was cut short there
             unfinished.append(f"`{sweep_dir.name}`")
             continue
+        read = sweep.reads or spec.configs
+        finished = [run for run in finished if run.trial.config in read]
         runs += finished
         sweep_dirs.append(sweep_dir)
-        planned = len(spec.trials(check_task=False))
+        planned = len([t for t in spec.trials(check_task=False) if t.config in read])
         if len(finished) < planned:
             unfinished.append(f"`{sweep_dir.name}` ({len(finished)} of its {planned} runs)")
     return runs, sweep_dirs, unfinished

@@ -31,6 +31,9 @@ class Sweep:
     seeds: int | None = None
     """Its own seed count, where it is another study's sweep reused with more seeds than this study
     runs (None: the study's)."""
+    reads: tuple[str, ...] | None = None
+    """The configs whose runs this study reads, where it reuses another study's sweep for some of its
+    configs only (None: every config). The sweep still trains all of them: it is the other study's."""
 
     def overrides(self) -> tuple[str, ...]:
         """The settings every trial of the sweep gets before the grid's: its numerics version."""

@@ -76,12 +76,16 @@ def glance(runs: list[TrialRun]) -> Glance:
     )
 
 
+VERSION_SWEEPS = {
+    version: Sweep(f"defaults-{version}", PRESETS, {"defaults": (str(version),)}, batch_seeds=1)
+    for version in VERSIONS
+}
+"""Each version's sweep: both presets, nothing but the version set, under numerics 1 (a sweep's own)."""
+
+
 STUDIES: dict[str, Study] = {
     "defaults": Study(
-        (
-            Sweep("defaults-1", PRESETS, {"defaults": ("1",)}, batch_seeds=1),
-            Sweep("defaults-2", PRESETS, {"defaults": ("2",)}, batch_seeds=1),
-        ),
+        tuple(VERSION_SWEEPS.values()),
         tables,
         "Version 2 of the defaults against version 1",
         "grid16 (layout 0) and MiniGrid DoorKey-5x5",

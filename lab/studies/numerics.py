@@ -4,10 +4,13 @@ weight) against numerics 1 (float64, the whole pool), paired by seed on ``grid16
 
 from __future__ import annotations
 
+import dataclasses
+
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
+from dospcot_lab.studies.defaults import VERSION_SWEEPS
 from dospcot_lab.studies.tables import (
     ADOPTION_METRICS,
     NON_INFERIORITY_MARGIN,
@@ -90,9 +93,10 @@ STUDIES: dict[str, Study] = {
     "numerics": Study(
         (
             Sweep("numerics-2", PRESETS, {"cotraining.numerics": ("2",)}, batch_seeds=1, numerics=None),
-            Sweep("numerics-1", PRESETS[1:], {"cotraining.numerics": ("1",)}, batch_seeds=1, numerics=None),
-            # grid16-dospcot's seeds 0-19 under numerics 1 are the batched-seeds study's runs alone
+            # grid16-dospcot's seeds 0-19 under numerics 1 are the batched-seeds study's runs alone, and
+            # DoorKey's the defaults study's under version 1: each the preset alone under numerics 1.
             Sweep(ALONE, ("grid16-dospcot", "grid16-oracle"), {}, batch_seeds=1),
+            dataclasses.replace(VERSION_SWEEPS[1], reads=PRESETS[1:]),
         ),
         tables,
         "Numerics 2 against numerics 1: the cheaper classifier fits",

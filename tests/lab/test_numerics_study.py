@@ -61,8 +61,9 @@ def test_a_studys_sweep_pins_its_numerics_before_the_commands_overrides():
     assert pinned.overrides == ("cotraining.numerics=2", "training.rounds=1")
     assert pinned.trials()[0].overrides()[0] == "cotraining.numerics=2"
     assert sweep_spec(Sweep("s", ("paper-text",), {}, numerics=None), 2).overrides == ()
-    # the numerics study varies the version in its grid, so those sweeps pin nothing
-    assert [s.numerics for s in STUDIES["numerics"].sweeps] == [None, None, 1]
+    # numerics 2's sweep varies the version in its grid, so it pins nothing; the numerics-1 arms are
+    # other studies' sweeps, each pinning the version it trains under
+    assert [s.numerics for s in STUDIES["numerics"].sweeps] == [None, 1, 1]
 
 
 def test_a_comparison_that_mixes_numerics_versions_is_refused(tmp_path):
@@ -109,3 +110,27 @@ def test_the_numerics_study_shows_the_registered_bound_and_decides_by_non_inferi
     (tmp_path / "lost").mkdir()
     runs.append(_run(tmp_path / "lost", "minigrid-doorkey-dospcot", 1, 2, 0.0, 0.95))
     assert glance(runs).verdict == "numerics 2 not shown non-inferior"
+
+
+def test_doorkeys_numerics_1_arm_is_the_defaults_studys_version_1_sweep_read_for_doorkey_alone():
+    """The preset alone under numerics 1 is one config whichever study names it: the numerics study
+    reads DoorKey's from the defaults study's version-1 sweep, and none of that sweep's grid16 runs,
+    whose seeds it has from the batched-seeds study."""
+    from dospcot_lab.studies import study_runs
+    from dospcot_lab.studies.defaults import VERSION_SWEEPS
+
+    study = STUDIES["numerics"]
+    (reused,) = [s for s in study.sweeps if s.name == VERSION_SWEEPS[1].name]
+    assert (reused.configs, reused.grid, reused.reads) == (
+        VERSION_SWEEPS[1].configs,
+        VERSION_SWEEPS[1].grid,
+        ("minigrid-doorkey-dospcot",),
+    )
+    assert sweep_spec(reused, 20).trials(check_task=False) == sweep_spec(VERSION_SWEEPS[1], 20).trials(
+        check_task=False
+    )
+    runs, _, _ = study_runs(study, Path(__file__).resolve().parents[2] / "runs" / "sweeps")
+    from_defaults = [r for r in runs if "defaults" in r.trial.params]
+    assert all(r.trial.config == "minigrid-doorkey-dospcot" for r in from_defaults)
+    grid16_seeds = [r.trial.seed for r in runs if r.trial.config == "grid16-dospcot" and numerics_of(r) == 1]
+    assert len(grid16_seeds) == len(set(grid16_seeds)) == 20
