@@ -104,9 +104,9 @@ class TrainingConfig(AddedKeys):
     :param query_recent_rounds: prefer the samples first met in the latest this many rounds (0: all).
     :param stop_patience: stop a run once this many rounds in a row brought its agents' greedy
         evaluation no new best (mean success, then mean normalised score), counted from the first
-        evaluation that beat a random policy, so ``rounds`` is a cap rather than a length a new task
-        must be guessed at; 0: every round runs. The run's ``summary.json`` says why it stopped
-        (``stopped_because``).
+        round whose mean greedy return beat a random policy's, so ``rounds`` is a cap rather than a
+        length a new task must be guessed at; 0: every round runs. The run's ``summary.json`` says why
+        it stopped (``stopped_because``).
     :param rater: who answers the queries: ``"simulated"`` (the hidden reward) or ``"file"`` (a person:
         each round's queries go to the run folder's ``queries/round_<r>.csv`` and the run stops until
         ``dospcot train --resume`` finds them answered).

@@ -195,7 +195,7 @@ class CoTrainingRun:
         the greedy evaluation's (``training.stop_patience``)."""
         self.stop_reason = ""
         """Why the run stopped before its last round ("" while it has not)."""
-        self.patience = GreedyPatience(cfg.training.stop_patience)
+        self.patience = GreedyPatience(cfg.training.stop_patience, task.reference_returns()["random_return"])
 
     def _agent_env(self, k: int, view: str) -> gym.Env:
         env = self.task.agent_env(k, view)
@@ -401,7 +401,7 @@ class CoTrainingRun:
         return {
             "round": self.round,
             "stopped": self.stopped,
-            "patience": (self.stop_reason, self.patience.best, self.patience.since_best),
+            "patience": (self.stop_reason, *self.patience.state()),
             "agents": zips,
             "buffers": [agent.replay_buffer for agent in self.agents],
             "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
@@ -424,7 +424,8 @@ class CoTrainingRun:
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
         self.round, self.stopped = state["round"], state["stopped"]
-        self.stop_reason, self.patience.best, self.patience.since_best = state["patience"]
+        self.stop_reason, *patience = state["patience"]
+        self.patience.load_state(tuple(patience))
         self.store.load_state_dict(state["store"])  # in place: the store wrappers keep pointing at it
         if self.segments is not None:
             self.segments.load_state_dict(state["segments"])

@@ -18,32 +18,43 @@ class GreedyPatience:
     their returns rise). The co-training rounds' counterpart of SB3's
     ``StopTrainingOnNoModelImprovement``, which ends one agent's training.
 
-    The count starts once an evaluation has beaten a random policy (success above 0, or a normalised
-    score above 0): on a sparse task the first rounds often show nothing at all, and a run stopped
-    there would stop before its agents had met the reward.
+    The count starts once a round's agents have beaten a random policy (their mean greedy return above
+    a random policy's): on a sparse task the first rounds often show nothing, or a lucky success from
+    a policy that does worse than chance, and a run stopped there would stop before its agents had met
+    the reward.
 
     :param patience: rounds without a new best after which the run stops; 0: never.
+    :param random_return: a random policy's mean return on the task (-inf: every round counts).
     """
 
     patience: int
+    random_return: float = -math.inf
     best: tuple[float, float] | None = None
     """The best (mean success, mean normalised score) so far."""
     since_best: int = 0
-    """Rounds since :attr:`best` was reached."""
+    """Rounds since :attr:`best` was reached, counted once :attr:`learned`."""
+    learned: bool = False
+    """Whether some round's mean greedy return has exceeded :attr:`random_return`."""
 
     def update(self, rows: list[dict]) -> bool:
         """Take a round's records (one per agent); return whether the patience ran out."""
         greedy = tuple(_mean_over_known([r[key] for r in rows]) for key in ("success", "normalised_score"))
+        greedy_return = _mean_over_known([r["greedy_return"] for r in rows])
+        self.learned = self.learned or greedy_return > self.random_return
         if self.best is None or greedy > self.best:
             self.best, self.since_best = greedy, 0
         elif self.learned:
             self.since_best += 1
         return bool(self.patience) and self.since_best >= self.patience
 
-    @property
-    def learned(self) -> bool:
-        """Whether an evaluation so far beat a random policy (a NaN score, unknown, does not)."""
-        return self.best is not None and (self.best[0] > 0 or self.best[1] > 0)
+    def state(self) -> tuple[tuple[float, float] | None, int, bool]:
+        """What a checkpoint keeps: :attr:`best`, :attr:`since_best`, :attr:`learned`."""
+        return self.best, self.since_best, self.learned
+
+    def load_state(self, state: tuple) -> None:
+        """Continue from :meth:`state`; a checkpoint written before :attr:`learned` counted every round."""
+        self.best, self.since_best, *learned = state
+        self.learned = learned[0] if learned else True
 
     def reason(self) -> str:
         """Why a run stopped where the patience ran out."""

@@ -54,9 +54,11 @@ def _per_round(run: TrialRun) -> list[list[dict]]:
 
 def _stop(run: TrialRun, patience: int) -> int:
     """The round (1-based) after which ``patience`` would have stopped the capped run, else its last."""
-    rule, rounds = GreedyPatience(patience), _per_round(run)
+    rule, rounds = GreedyPatience(patience, run.summary["random_return"]), _per_round(run)
     for number, rows in enumerate(rounds, 1):
-        if rule.update([{k: float(r[k]) for k in ("success", "normalised_score")} for r in rows]):
+        if rule.update(
+            [{k: float(r[k]) for k in ("success", "normalised_score", "greedy_return")} for r in rows]
+        ):
             return number
     return len(rounds)
 
@@ -93,9 +95,9 @@ def tables(runs: list[TrialRun]) -> list[str]:
     success minus the preset's 5 rounds, paired by seed."""
     lines = [
         f"Each capped run trains {CAP} rounds; a patience's row is each capped run read at the round its "
-        "rule would have stopped it (rounds in a row with no new best greedy evaluation, counted once an "
-        "evaluation beat a random policy). The 5-round rows are the budget study's own runs, whose "
-        "exploration falls over 5 rounds rather than 20.",
+        "rule would have stopped it (rounds in a row with no new best greedy evaluation, counted once a "
+        "round's greedy return beat a random policy's). The 5-round rows are the budget study's own "
+        "runs, whose exploration falls over 5 rounds rather than 20.",
         "",
         "| arm | length | success | rounds trained | labels held | seeds |",
         "|---|---|---|---|---|---|",

@@ -13,21 +13,22 @@ ORACLE = "minigrid-doorkey-oracle"
 
 
 def _run(seed: int, success: list[float], capped: bool) -> TrialRun:
-    """An oracle run of one agent whose greedy success per round is ``success`` (its normalised score
-    below a random policy's until it first succeeds)."""
+    """An oracle run of one agent whose greedy success per round is ``success``, its return the same
+    and a random policy's 0.1 (so a round beats it from a success of 0.2 on)."""
     curves = [
-        {"round": str(n), "success": str(s), "normalised_score": str(s - 0.1)}
+        {"round": str(n), "success": str(s), "normalised_score": str(s - 0.1), "greedy_return": str(s)}
         for n, s in enumerate(success, 1)
     ]
     params = {"training.rounds": str(CAP)} if capped else {}
-    summary = {"rounds": len(success), "mean": {"success": success[-1]}}
+    summary = {"rounds": len(success), "mean": {"success": success[-1]}, "random_return": 0.1}
     return TrialRun(Trial(ORACLE, ORACLE, params, seed), summary, curves, Path())
 
 
 def test_each_patience_is_read_where_the_rule_stops_the_capped_run():
-    # Seed 0: nothing for three rounds (they do not count), a best of 0.6 in round 5, none in 6-7, 0.9
-    # in round 8; seed 1 rises to 1.0 in round 9, then holds it.
-    early = [0.0, 0.0, 0.0, 0.2, 0.6, 0.5, 0.5, 0.9, 0.9, 0.9]
+    # Seed 0: a lucky 0.1, then nothing for two rounds (none beats a random policy's return, so they do
+    # not count), a best of 0.6 in round 5, none in 6-7, 0.9 in round 8; seed 1 rises to 1.0 in round
+    # 9, then holds it.
+    early = [0.1, 0.0, 0.0, 0.2, 0.6, 0.5, 0.5, 0.9, 0.9, 0.9]
     late = [0.0, 0.3, 0.4, 0.5, 0.8, 0.85, 0.9, 0.95, 1.0, 1.0]
     runs = [
         _run(0, early + [1.0] * (CAP - 10), True),
