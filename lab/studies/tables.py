@@ -240,20 +240,23 @@ def non_inferior(diff: SeedSummary, margin: float = NON_INFERIORITY_MARGIN) -> b
 
 
 def adoption_glance(
-    differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str]
+    differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str], seeds: int
 ) -> Glance:
     """The row of a study that decides a default: its headline, ``change`` in success on the last preset
-    measured, and its verdict by :func:`non_inferior` over every measured difference.
+    measured, and its verdict by :func:`non_inferior` over every measured difference. A preset counts
+    as measured once it holds the ``seeds`` pairs the rule names: a verdict on fewer would be read off
+    a part of the sample.
 
     :param differences: preset -> metric -> the paired difference, new minus old.
     :param change: the comparison in words (``"numerics 2 minus 1"``).
     :param verdicts: what to say where a difference is not non-inferior, where every measured one is
         but a preset is not measured yet, and where every one on every preset is.
+    :param seeds: the paired seeds a preset needs to count as measured.
     """
-    measured = [preset for preset, by_metric in differences.items() if by_metric["success"].n]
+    measured = [preset for preset, by_metric in differences.items() if by_metric["success"].n >= seeds]
     if not measured:
         return Glance(f"{change}: not measured yet", "not measured yet")
-    diffs = [d for by_metric in differences.values() for d in by_metric.values() if d.n]
+    diffs = [d for preset in measured for d in differences[preset].values()]
     if not all(non_inferior(d) for d in diffs):
         verdict = verdicts[0]
     elif len(measured) < len(differences):

@@ -8,7 +8,7 @@ from pathlib import Path
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES, sweep_spec
-from dospcot_lab.studies.defaults import glance, tables
+from dospcot_lab.studies.defaults import SEEDS, glance, tables
 
 
 def _run(tmp_path: Path, preset: str, seed: int, version: int, success: float) -> TrialRun:
@@ -23,14 +23,11 @@ def test_version_2_is_adopted_only_where_both_presets_are_non_inferior(tmp_path)
     runs = [
         _run(tmp_path, preset, seed, version, 0.8 + 0.05 * (version == 2) * (seed % 2))
         for preset in ("grid16-dospcot", "minigrid-doorkey-dospcot")
-        for seed in range(6)
+        for seed in range(SEEDS)
         for version in (1, 2)
     ]
     text = "\n".join(tables(runs))
-    assert (
-        "| `grid16-dospcot` | 2 | 0.825 [0.808, 0.842] | 0.900 [0.900, 0.900] | 200.0 [200.0, 200.0] |"
-        in text
-    )
+    assert "| `grid16-dospcot` | 2 | 0.825 [" in text and "| 200.0 [200.0, 200.0] | 60 CPU-s | 20 |" in text
     assert text.count("**held**") == 4
     assert glance(runs).verdict == "version 2 non-inferior: adopt it"
     assert glance([r for r in runs if r.trial.config == "grid16-dospcot"]).verdict.startswith(
@@ -41,9 +38,13 @@ def test_version_2_is_adopted_only_where_both_presets_are_non_inferior(tmp_path)
         r for r in runs if not (r.trial.config.startswith("minigrid") and r.trial.params["defaults"] == "2")
     ]
     (tmp_path / "worse").mkdir()
-    worse += [_run(tmp_path / "worse", "minigrid-doorkey-dospcot", s, 2, 0.8 * (s % 2)) for s in range(6)]
+    worse += [_run(tmp_path / "worse", "minigrid-doorkey-dospcot", s, 2, 0.8 * (s % 2)) for s in range(SEEDS)]
     assert glance(worse).verdict == "version 2 not shown non-inferior: version 1 stays adopted"
     assert "**not met**" in "\n".join(tables(worse))
+    # The same loss on DoorKey's first two seeds alone decides nothing: the rule names 20 pairs.
+    begun = [r for r in worse if r.trial.config.startswith("grid16") or r.trial.seed < 2]
+    assert glance(begun).verdict.startswith("not measured yet")
+    assert glance(begun).headline.startswith("grid16-dospcot success")
 
 
 def test_the_studys_sweeps_train_each_preset_under_both_versions_and_pin_nothing_else():

@@ -430,6 +430,19 @@ FIGURES = [
     ),
     # The CHANGELOG's newest entry
     Figure(
+        "defaults study's grid16 success",
+        "CHANGELOG.md",
+        r"The defaults study's grid16 half has run, .*? pseudo-reward accuracy held\.",
+        r"version 2 minus version 1 in success is ([-\d.]+) \[([-\d.]+), ([-\d.]+)\]",
+        lambda s, _: tuple(
+            float(x)
+            for x in s.page_figure(
+                "defaults", r"`grid16-dospcot` success: ([-\d.]+) \[([-\d.]+), ([-\d.]+)\] over 20 seeds"
+            )
+        ),
+        "docs/results/defaults.md (grid16's paired difference in success)",
+    ),
+    Figure(
         "batched-seeds study's saving",
         "CHANGELOG.md",
         r"The batched-seeds study \(.*? short of the \d+x aimed at",
