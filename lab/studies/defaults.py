@@ -11,6 +11,7 @@ from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.tables import (
     ADOPTION_METRICS,
+    ADOPTION_SEEDS,
     NON_INFERIORITY_MARGIN,
     adoption_glance,
     held_lines,
@@ -20,8 +21,6 @@ from dospcot_lab.studies.tables import (
 )
 
 PRESETS = ("grid16-dospcot", "minigrid-doorkey-dospcot")
-SEEDS = 20
-"""The paired seeds per preset the adoption rule names; a preset with fewer decides nothing yet."""
 METRICS = tuple(ADOPTION_METRICS)
 VERSIONS = (1, 2)
 
@@ -75,7 +74,6 @@ def glance(runs: list[TrialRun]) -> Glance:
             "not measured yet (a preset lacks one version's runs)",
             "version 2 non-inferior: adopt it",
         ),
-        SEEDS,
     )
 
 
@@ -93,7 +91,7 @@ STUDIES: dict[str, Study] = {
         "Version 2 of the defaults against version 1",
         "grid16 (layout 0) and MiniGrid DoorKey-5x5",
         glance,
-        seeds=SEEDS,
+        seeds=ADOPTION_SEEDS,
         confirmatory=True,
     ),
 }

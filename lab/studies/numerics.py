@@ -13,6 +13,7 @@ from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.defaults import VERSION_SWEEPS
 from dospcot_lab.studies.tables import (
     ADOPTION_METRICS,
+    ADOPTION_SEEDS,
     NON_INFERIORITY_MARGIN,
     adoption_glance,
     held_lines,
@@ -23,8 +24,6 @@ from dospcot_lab.studies.tables import (
 )
 
 PRESETS = ("grid16-dospcot", "minigrid-doorkey-dospcot")
-SEEDS = 20
-"""The paired seeds per preset the adoption rule names; a preset with fewer decides nothing yet."""
 METRICS = tuple(ADOPTION_METRICS)
 HALF_WIDTH = 0.1
 """How far from 0 either end of a difference's 95% interval may lie for the same science (the bound
@@ -88,7 +87,6 @@ def glance(runs: list[TrialRun]) -> Glance:
             "non-inferior where measured; DoorKey not measured yet",
             "numerics 2 non-inferior: adopt it",
         ),
-        SEEDS,
     )
 
 
@@ -105,7 +103,7 @@ STUDIES: dict[str, Study] = {
         "Numerics 2 against numerics 1: the cheaper classifier fits",
         "grid16 (layout 0) and MiniGrid DoorKey-5x5",
         glance,
-        seeds=SEEDS,
+        seeds=ADOPTION_SEEDS,
         confirmatory=True,
     ),
 }

@@ -239,8 +239,12 @@ def non_inferior(diff: SeedSummary, margin: float = NON_INFERIORITY_MARGIN) -> b
     return diff.n > 0 and diff.low > -margin
 
 
+ADOPTION_SEEDS = 20
+"""The paired seeds per preset the adoption rule names: a preset with fewer decides nothing yet."""
+
+
 def adoption_glance(
-    differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str], seeds: int
+    differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str]
 ) -> Glance:
     """The row of a study that decides a default: its headline, ``change`` in success on the last preset
     measured, and its verdict by :func:`non_inferior` over every measured difference. A preset counts
@@ -251,9 +255,10 @@ def adoption_glance(
     :param change: the comparison in words (``"numerics 2 minus 1"``).
     :param verdicts: what to say where a difference is not non-inferior, where every measured one is
         but a preset is not measured yet, and where every one on every preset is.
-    :param seeds: the paired seeds a preset needs to count as measured.
     """
-    measured = [preset for preset, by_metric in differences.items() if by_metric["success"].n >= seeds]
+    measured = [
+        preset for preset, by_metric in differences.items() if by_metric["success"].n >= ADOPTION_SEEDS
+    ]
     if not measured:
         return Glance(f"{change}: not measured yet", "not measured yet")
     diffs = [d for preset in measured for d in differences[preset].values()]

@@ -8,7 +8,8 @@ from pathlib import Path
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES, sweep_spec
-from dospcot_lab.studies.defaults import SEEDS, glance, tables
+from dospcot_lab.studies.defaults import glance, tables
+from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 
 def _run(tmp_path: Path, preset: str, seed: int, version: int, success: float) -> TrialRun:
@@ -23,7 +24,7 @@ def test_version_2_is_adopted_only_where_both_presets_are_non_inferior(tmp_path)
     runs = [
         _run(tmp_path, preset, seed, version, 0.8 + 0.05 * (version == 2) * (seed % 2))
         for preset in ("grid16-dospcot", "minigrid-doorkey-dospcot")
-        for seed in range(SEEDS)
+        for seed in range(ADOPTION_SEEDS)
         for version in (1, 2)
     ]
     text = "\n".join(tables(runs))
@@ -38,7 +39,10 @@ def test_version_2_is_adopted_only_where_both_presets_are_non_inferior(tmp_path)
         r for r in runs if not (r.trial.config.startswith("minigrid") and r.trial.params["defaults"] == "2")
     ]
     (tmp_path / "worse").mkdir()
-    worse += [_run(tmp_path / "worse", "minigrid-doorkey-dospcot", s, 2, 0.8 * (s % 2)) for s in range(SEEDS)]
+    worse += [
+        _run(tmp_path / "worse", "minigrid-doorkey-dospcot", s, 2, 0.8 * (s % 2))
+        for s in range(ADOPTION_SEEDS)
+    ]
     assert glance(worse).verdict == "version 2 not shown non-inferior: version 1 stays adopted"
     assert "**not met**" in "\n".join(tables(worse))
     # The same loss on DoorKey's first two seeds alone decides nothing: the rule names 20 pairs.
