@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import json
 import platform
-import tomllib
 from collections import Counter
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
+from dospcot.config.loading import read_config_data
 from dospcot.config.versions import FIRST
 from dospcot.sweeps.report import TrialRun
 from dospcot.tasks import load_run_config
@@ -75,8 +75,7 @@ def _defaults(runs: list[TrialRun]) -> str:
 
 
 def _version(config: Path) -> int:
-    with config.open("rb") as handle:
-        return int(tomllib.load(handle).get("defaults", FIRST))
+    return int(read_config_data(str(config)).get("defaults", FIRST))
 
 
 def _counted(counts: Counter[str]) -> str:

@@ -52,9 +52,10 @@ def _per_round(run: TrialRun) -> list[list[dict]]:
     return [rounds[r] for r in sorted(rounds)]
 
 
-def _stop(run: TrialRun, patience: int) -> int:
-    """The round (1-based) after which ``patience`` would have stopped the capped run, else its last."""
-    rule, rounds = GreedyPatience(patience, run.summary["random_return"]), _per_round(run)
+def _stop(rounds: list[list[dict]], random_return: float, patience: int) -> int:
+    """The round (1-based) after which ``patience`` would have stopped a capped run of these
+    :func:`_per_round` rows, else its last."""
+    rule = GreedyPatience(patience, random_return)
     for number, rows in enumerate(rounds, 1):
         if rule.update(
             [{k: float(r[k]) for k in ("success", "normalised_score", "greedy_return")} for r in rows]
@@ -63,10 +64,16 @@ def _stop(run: TrialRun, patience: int) -> int:
     return len(rounds)
 
 
-def _at(run: TrialRun, number: int, key: str) -> float:
-    """Round ``number``'s ``key``, mean over the run's agents."""
-    values = [float(row[key]) for row in _per_round(run)[number - 1]]
+def _mean(rows: list[dict], key: str) -> float:
+    """One round's ``key``, mean over the run's agents (NaN where the runs did not record it)."""
+    values = [float(row.get(key, math.nan)) for row in rows]
     return sum(values) / len(values)
+
+
+def _end(rounds: list[list[dict]], number: int) -> tuple[float, int, float]:
+    """(success, rounds trained, labels held) of a run stopped after round ``number``."""
+    rows = rounds[number - 1]
+    return _mean(rows, "success"), number, _mean(rows, "labelled_steps")
 
 
 def _rules(runs: list[TrialRun], arm: str) -> dict[str, dict[int, tuple[float, int, float]]]:
@@ -78,16 +85,16 @@ def _rules(runs: list[TrialRun], arm: str) -> dict[str, dict[int, tuple[float, i
         if _arm(r) == arm and "training.rounds" not in r.trial.params
         if not capped or r.trial.seed in capped
     }
-    rules = {PRESET_LENGTH: {s: _end(r, len(_per_round(r))) for s, r in five.items()}}
+    preset = {seed: _per_round(r) for seed, r in five.items()}
+    rounds = {seed: _per_round(r) for seed, r in capped.items()}
+    rules = {PRESET_LENGTH: {seed: _end(rows, len(rows)) for seed, rows in preset.items()}}
     for patience in PATIENCES:
-        rules[f"cap {CAP}, patience {patience}"] = {s: _end(r, _stop(r, patience)) for s, r in capped.items()}
-    rules[f"{CAP} rounds"] = {s: _end(r, len(_per_round(r))) for s, r in capped.items()}
+        rules[f"cap {CAP}, patience {patience}"] = {
+            seed: _end(rounds[seed], _stop(rounds[seed], r.summary["random_return"], patience))
+            for seed, r in capped.items()
+        }
+    rules[f"{CAP} rounds"] = {seed: _end(rows, len(rows)) for seed, rows in rounds.items()}
     return rules
-
-
-def _end(run: TrialRun, number: int) -> tuple[float, int, float]:
-    labels = _at(run, number, "labelled_steps") if "labelled_steps" in run.curves[0] else math.nan
-    return _at(run, number, "success"), number, labels
 
 
 def tables(runs: list[TrialRun]) -> list[str]:

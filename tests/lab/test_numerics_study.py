@@ -12,7 +12,8 @@ from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.config.loading import renamed_to_now
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
-from dospcot_lab.studies import STUDIES, Sweep, sweep_spec
+from dospcot_lab.studies import STUDIES, Sweep, study_runs, sweep_spec
+from dospcot_lab.studies.defaults import VERSION_SWEEPS
 from dospcot_lab.studies.numerics import glance, tables
 from dospcot_lab.studies.tables import ADOPTION_SEEDS, numerics_of, paired
 
@@ -116,9 +117,6 @@ def test_doorkeys_numerics_1_arm_is_the_defaults_studys_version_1_sweep_read_for
     """The preset alone under numerics 1 is one config whichever study names it: the numerics study
     reads DoorKey's from the defaults study's version-1 sweep, and none of that sweep's grid16 runs,
     whose seeds it has from the batched-seeds study."""
-    from dospcot_lab.studies import study_runs
-    from dospcot_lab.studies.defaults import VERSION_SWEEPS
-
     study = STUDIES["numerics"]
     (reused,) = [s for s in study.sweeps if s.name == VERSION_SWEEPS[1].name]
     assert (reused.configs, reused.grid, reused.reads) == (
