@@ -29,14 +29,16 @@ chromium:
 		|| echo "chromium not installed: tests/test_rate_page.py skips its browser test outside CI"
 
 # The output guard runs again under torch's portable kernels: its numbers must hold on any x86-64 CPU.
+# `--dist loadscope` keeps each test module on one worker, so a module-scoped fixture (the record's
+# pages rendered, a finished sweep, the quickstart's run) is built once, not once per worker.
 test: $(STAMP) chromium  ## the tests not marked slow, ruff, and the documentation site with --strict
-	$(PY) -m pytest -q -n 2
+	$(PY) -m pytest -q -n 2 --dist loadscope
 	ATEN_CPU_CAPABILITY=default $(PY) -m pytest -q -n 2 tests/test_output_digests.py
 	$(VENV)/bin/ruff check .
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 test-slow: $(STAMP)
-	$(PY) -m pytest -q -n 2 -m slow
+	$(PY) -m pytest -q -n 2 --dist loadscope -m slow
 
 bench: $(STAMP)  ## every benchmark row, written to BENCHMARKS.md (most of an hour: the tabular row alone took 17 minutes on 2 cores)
 	$(VENV)/bin/dospcot-lab bench
