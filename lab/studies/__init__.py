@@ -25,6 +25,7 @@
     dospcot-lab study budget-explore-grid-highway --docs  # those settings on grid16 and the fast highway
     dospcot-lab study budget --docs           # docs/preregistration-budget.md: B1-B4, seeds 100-109
     dospcot-lab study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
+    dospcot-lab study numerics-3 --docs       # numerics 3 vs 1: the same presets and seeds, adoption rule
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
 
 A study is one or more sweeps in ``runs/sweeps/``:

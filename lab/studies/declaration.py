@@ -52,6 +52,9 @@ class Glance:
 EXPLORATORY = "exploratory"
 """The verdict of a study that names no hypothesis: its settings are confirmed by another."""
 
+NOT_MEASURED = "not measured yet"
+"""The verdict of a study that decides a default before any preset holds the pairs its rule names."""
+
 
 @dataclass(frozen=True)
 class Study:

@@ -1,6 +1,8 @@
-"""The numerics study: numerics 2 (the reward classifiers fit in float32, on the samples that carry
-weight) against numerics 1 (float64, the whole pool), paired by seed on ``grid16-dospcot`` and
-``minigrid-doorkey-dospcot``, to show that the cheaper fits give the same science."""
+"""The numerics studies, each a newer numerics version against numerics 1 (float64 fits over the whole
+pool, dense agents), paired by seed on ``grid16-dospcot`` and ``minigrid-doorkey-dospcot``:
+``numerics``, numerics 2 (the reward classifiers fit in float32, on the samples that carry weight), to
+show that the cheaper fits give the same science; ``numerics-3``, numerics 3 (numerics 2 plus a sparse
+first layer and a fused Adam for every network), decided by the adoption rule for a default alone."""
 
 from __future__ import annotations
 
@@ -28,7 +30,6 @@ METRICS = tuple(ADOPTION_METRICS)
 HALF_WIDTH = 0.1
 """How far from 0 either end of a difference's 95% interval may lie for the same science (the bound
 registered before the runs: equivalence)."""
-VERSIONS = (1, 2)
 
 
 def _by_seed(runs: list[TrialRun], preset: str, numerics: int) -> dict[int, TrialRun]:
@@ -36,10 +37,10 @@ def _by_seed(runs: list[TrialRun], preset: str, numerics: int) -> dict[int, Tria
     return {r.trial.seed: r for r in runs if r.trial.config == preset and numerics_of(r) == numerics}
 
 
-def _differences(runs: list[TrialRun], preset: str) -> dict[str, SeedSummary]:
-    """Per metric: numerics 2 minus numerics 1, paired by seed (a pair shares its seed's initial
-    weights, mask and env resets; the fits' numbers differ, and with them every later draw)."""
-    new, old = _by_seed(runs, preset, 2), _by_seed(runs, preset, 1)
+def _differences(runs: list[TrialRun], preset: str, new_numerics: int = 2) -> dict[str, SeedSummary]:
+    """Per metric: numerics ``new_numerics`` minus numerics 1, paired by seed (a pair shares its seed's
+    initial weights, mask and env resets; the fits' numbers differ, and with them every later draw)."""
+    new, old = _by_seed(runs, preset, new_numerics), _by_seed(runs, preset, 1)
     return {metric: paired(new, old, metric, across_numerics=True) for metric in METRICS}
 
 
@@ -55,7 +56,7 @@ def tables(runs: list[TrialRun]) -> list[str]:
         *version_rows(
             lambda preset, version: list(_by_seed(runs, preset, version).values()),
             PRESETS,
-            VERSIONS,
+            (1, 2),
             "numerics",
             ADOPTION_METRICS,
         ),
@@ -90,19 +91,81 @@ def glance(runs: list[TrialRun]) -> Glance:
     )
 
 
+def tables_3(runs: list[TrialRun]) -> list[str]:
+    """Per preset and numerics (1, 3): success, pseudo-reward accuracy and CPU time per run; then each
+    difference, numerics 3 minus 1, against the adoption rule for a default."""
+    rows = version_rows(
+        lambda preset, version: list(_by_seed(runs, preset, version).values()),
+        PRESETS,
+        (1, 3),
+        "numerics",
+        ADOPTION_METRICS,
+    )
+    margin = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
+    differences = {preset: _differences(runs, preset, 3) for preset in PRESETS}
+    verdicts = held_lines(differences, non_inferior, margin) or ["- No preset holds a pair yet."]
+    return [
+        "",  # the table a block of its own, after the page's provenance lines
+        *rows,
+        "",
+        f"Numerics 3 minus numerics 1, paired by seed, against the adoption rule for a default "
+        f"({ADOPTION_SEEDS} pairs on each preset):",
+        "",
+        *verdicts,
+    ]
+
+
+def glance_3(runs: list[TrialRun]) -> Glance:
+    """The headline: success, numerics 3 minus 1, on the last preset measured under both; the verdict by
+    the adoption rule for a default."""
+    return adoption_glance(
+        {preset: _differences(runs, preset, 3) for preset in PRESETS},
+        "numerics 3 minus 1",
+        (
+            "numerics 3 not shown non-inferior",
+            "non-inferior where measured; a preset not measured yet",
+            "numerics 3 non-inferior: adopt it",
+        ),
+    )
+
+
+NUMERICS_1 = (
+    # grid16-dospcot's seeds 0-19 under numerics 1 are the batched-seeds study's runs alone, and
+    # DoorKey's the defaults study's under version 1: each the preset alone under numerics 1.
+    Sweep(ALONE, ("grid16-dospcot", "grid16-oracle"), {}, batch_seeds=1),
+    dataclasses.replace(VERSION_SWEEPS[1], reads=PRESETS[1:]),
+)
+"""The numerics-1 arm both studies pair their runs with."""
+
 STUDIES: dict[str, Study] = {
     "numerics": Study(
         (
             Sweep("numerics-2", PRESETS, {"cotraining.numerics": ("2",)}, batch_seeds=1, numerics=None),
-            # grid16-dospcot's seeds 0-19 under numerics 1 are the batched-seeds study's runs alone, and
-            # DoorKey's the defaults study's under version 1: each the preset alone under numerics 1.
-            Sweep(ALONE, ("grid16-dospcot", "grid16-oracle"), {}, batch_seeds=1),
-            dataclasses.replace(VERSION_SWEEPS[1], reads=PRESETS[1:]),
+            *NUMERICS_1,
         ),
         tables,
         "Numerics 2 against numerics 1: the cheaper classifier fits",
         "grid16 (layout 0) and MiniGrid DoorKey-5x5",
         glance,
+        seeds=ADOPTION_SEEDS,
+        confirmatory=True,
+    ),
+    "numerics-3": Study(
+        (
+            # DoorKey first: its runs cost the most and decide the most.
+            Sweep(
+                "numerics-3",
+                PRESETS[::-1],
+                {"cotraining.numerics": ("3",)},
+                batch_seeds=1,
+                numerics=None,
+            ),
+            *NUMERICS_1,
+        ),
+        tables_3,
+        "Numerics 3 against numerics 1: sparse first layers and fused Adam",
+        "grid16 (layout 0) and MiniGrid DoorKey-5x5",
+        glance_3,
         seeds=ADOPTION_SEEDS,
         confirmatory=True,
     ),

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.repository import Repository
-from dospcot_lab.studies.declaration import EXPLORATORY, Study
+from dospcot_lab.studies.declaration import EXPLORATORY, NOT_MEASURED, Study
 from dospcot_lab.studies.readme import read_block, replace_block
 
 PAGES = Path(__file__).resolve().parent / "pages"
@@ -84,7 +84,8 @@ def glance_table(rows: dict[str, list[str]], order: list[str], link: str, brief:
     without them is named with the command that renders it), each study linked to its page under
     ``link`` (``docs/results/`` from the README, nothing beside the pages), and a line that counts the
     studies whose headline finds DOSPCoT above self-training. ``brief`` (the README's) leaves out the
-    rows of exploratory studies and of studies not run yet, and says where they are."""
+    rows of exploratory studies and of studies not run yet (no runs, or none of the pairs their rule
+    names), and says where they are."""
     lines = list(GLANCE_HEAD)
     exploratory, not_run = [], []
     for name in order:
@@ -92,7 +93,7 @@ def glance_table(rows: dict[str, list[str]], order: list[str], link: str, brief:
         cells = rows.get(name) or ["", "not rendered yet", "", render]
         if brief and cells[3] == EXPLORATORY:
             exploratory.append(name)
-        elif brief and cells[1] == UNPUBLISHED_CELL:
+        elif brief and (cells[1] == UNPUBLISHED_CELL or cells[3] == NOT_MEASURED):
             not_run.append(name)
         else:
             lines.append(f"| [{name}]({link}{name}.md) | " + " | ".join(cells) + " |")

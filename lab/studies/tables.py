@@ -10,7 +10,7 @@ from typing import Any
 
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun, cells
-from dospcot_lab.studies.declaration import Glance
+from dospcot_lab.studies.declaration import NOT_MEASURED, Glance
 
 GRID_METHODS = {
     "oracle": "oracle",
@@ -260,7 +260,7 @@ def adoption_glance(
         preset for preset, by_metric in differences.items() if by_metric["success"].n >= ADOPTION_SEEDS
     ]
     if not measured:
-        return Glance(f"{change}: not measured yet", "not measured yet")
+        return Glance(f"{change}: {NOT_MEASURED}", NOT_MEASURED)
     diffs = [d for preset in measured for d in differences[preset].values()]
     if not all(non_inferior(d) for d in diffs):
         verdict = verdicts[0]

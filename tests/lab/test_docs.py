@@ -11,7 +11,7 @@ import pytest
 
 from dospcot_lab.repository import Repository
 from dospcot_lab.studies import STUDIES, check_record, get_study, header_command, render_study
-from dospcot_lab.studies.declaration import EXPLORATORY
+from dospcot_lab.studies.declaration import EXPLORATORY, NOT_MEASURED
 from dospcot_lab.studies.pages import GLANCE, PAGES, TABLE, glance_cells, glance_table
 from dospcot_lab.studies.readme import read_block
 
@@ -75,18 +75,19 @@ def test_the_readmes_glance_leaves_out_exploratory_studies_and_studies_not_run_a
             "5",
             "x",
         ],
+        "f": ["grid", f"numerics 3 minus 1: {NOT_MEASURED}", "20 (0-19)", NOT_MEASURED],
     }
-    order = ["a", "b", "c", "d", "e"]
+    order = ["a", "b", "c", "d", "e", "f"]
     brief = glance_table(rows, order, "docs/results/", brief=True)
     # Either spelling of DOSPCoT minus self-training counts, the labels each spent named or not.
     assert (
         "Of the 2 studies whose headline is DOSPCoT minus self-training, the interval lies above 0 in 1."
         in brief
     )
-    assert "[a](docs/results/a.md)" in brief and "[b]" not in brief and "[c]" not in brief
-    assert "And 1 exploratory studies and 1 registered and not run yet (c), in the [full table]" in brief
+    assert "[a](docs/results/a.md)" in brief and not any(f"[{name}]" in brief for name in "bcf")
+    assert "And 1 exploratory studies and 2 registered and not run yet (c, f), in the [full table]" in brief
     full = glance_table(rows, order, "")
-    assert all(f"[{name}]({name}.md)" in full for name in "abc")
+    assert all(f"[{name}]({name}.md)" in full for name in "abcf")
 
 
 REGISTERED_BEFORE_RUNS = {"budget", "defaults", "views"}

@@ -14,7 +14,7 @@ from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES, Sweep, study_runs, sweep_spec
 from dospcot_lab.studies.defaults import VERSION_SWEEPS
-from dospcot_lab.studies.numerics import glance, tables
+from dospcot_lab.studies.numerics import glance, glance_3, tables, tables_3
 from dospcot_lab.studies.tables import ADOPTION_SEEDS, numerics_of, paired
 
 
@@ -132,3 +132,31 @@ def test_doorkeys_numerics_1_arm_is_the_defaults_studys_version_1_sweep_read_for
     assert all(r.trial.config == "minigrid-doorkey-dospcot" for r in from_defaults)
     grid16_seeds = [r.trial.seed for r in runs if r.trial.config == "grid16-dospcot" and numerics_of(r) == 1]
     assert len(grid16_seeds) == len(set(grid16_seeds)) == 20
+
+
+def test_the_numerics_3_study_pairs_numerics_3_with_the_same_numerics_1_runs_by_the_adoption_rule(tmp_path):
+    runs = []
+    for preset in ("grid16-dospcot", "minigrid-doorkey-dospcot"):
+        for seed in range(ADOPTION_SEEDS):
+            runs.append(_run(tmp_path, preset, seed, 1, 0.5, 0.95))
+            runs.append(_run(tmp_path, preset, seed, 2, 0.0, 0.95))  # another study's arm: never read
+            runs.append(_run(tmp_path, preset, seed, 3, 0.5 + (0.1 if seed == 0 else 0.0), 0.95))
+    text = "\n".join(tables_3(runs))
+    assert "| `minigrid-doorkey-dospcot` | 3 | 0.505" in text and "| 300 CPU-s | 20 |" in text
+    assert "| 2 |" not in text  # numerics 2 has no row here
+    # the adoption rule alone: four lines, no equivalence bound
+    assert text.count("**held**") == 4 and "+-0.1" not in text
+    assert glance_3(runs).verdict == "numerics 3 non-inferior: adopt it"
+    assert glance_3(runs).headline.startswith(
+        "minigrid-doorkey-dospcot success, numerics 3 minus 1, paired by seed: 0.005"
+    )
+    assert glance_3([r for r in runs if numerics_of(r) != 3]).verdict == "not measured yet"
+    assert "No preset holds a pair yet" in "\n".join(tables_3([r for r in runs if numerics_of(r) != 3]))
+    (tmp_path / "lost").mkdir()
+    runs = [r for r in runs if not (r.trial.seed == 1 and numerics_of(r) == 3)]
+    runs.append(_run(tmp_path / "lost", "grid16-dospcot", 1, 3, 0.0, 0.95))
+    assert glance_3(runs).verdict == "numerics 3 not shown non-inferior"
+    # its numerics-1 arm is the numerics study's, and its own sweep trains DoorKey's runs first
+    sweeps = STUDIES["numerics-3"].sweeps
+    assert sweeps[1:] == STUDIES["numerics"].sweeps[1:]
+    assert sweep_spec(sweeps[0], 20).trials(check_task=False)[0].config == "minigrid-doorkey-dospcot"
