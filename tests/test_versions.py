@@ -4,12 +4,15 @@ existed reads as version 1, and ``dospcot config`` names each moved default's fi
 
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 import tomli_w
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
-from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS
+from dospcot.config.reference import config_reference
+from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS, lineage
 from dospcot.tasks import load_config, load_run_config
 
 
@@ -20,9 +23,14 @@ def _moved(preset: str, *overrides: str) -> tuple:
 
 
 def test_a_config_without_the_key_gets_the_adopted_version_and_version_1_is_the_dataclasses():
-    assert ADOPTED == 1 and VERSIONS[1] == ()
+    assert ADOPTED == 3 and VERSIONS[1] == ()
     cfg = load_config("grid16-dospcot")
-    assert cfg.defaults == 1
+    assert cfg.defaults == 3
+    # version 3 is version 1 with numerics 2's fits, and moves nothing else
+    first = load_config("grid16-dospcot", ["defaults=1"])
+    assert cfg.cotraining.numerics == 2 and first.cotraining.numerics == 1
+    numerics_2 = dataclasses.replace(first.cotraining, numerics=2)
+    assert dataclasses.replace(first, defaults=3, cotraining=numerics_2) == cfg
     t = cfg.training
     assert (t.exploration, t.agent_draws, t.label_strategy, t.label_budget) == (
         "pace",
@@ -31,6 +39,16 @@ def test_a_config_without_the_key_gets_the_adopted_version_and_version_1_is_the_
         0,
     )
     assert not cfg.cotraining.refit_new_classes and not cfg.env.episode_end_classes
+
+
+def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_adopted_defaults():
+    assert (lineage(1), lineage(2), lineage(3)) == ([], [2], [3])
+    # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
+    assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
+    reference = config_reference()
+    train, paper = reference.split('## A paper-protocol config (`task = "paper"`)')
+    assert "| `numerics` | `int` | `2` (`defaults = 1`: `1`) |" in train
+    assert "| `numerics` | `int` | `1` |" in paper and "defaults = 1" not in paper
 
 
 def test_version_2_moves_what_each_method_and_view_count_can_use():
@@ -78,15 +96,17 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
-        ConfigError, match=r"^defaults: unknown version 3; the versions: 1 \(adopted\), 2 \(candidate\)$"
+        ConfigError,
+        match=r"^defaults: unknown version 4; the versions: 1, 2 \(candidate\), 3 \(adopted\)$",
     ):
-        load_config("tiny", ["defaults=3"])
+        load_config("tiny", ["defaults=4"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
 
 def test_no_version_moves_a_paper_protocol_key():
     assert load_config("paper-text", ["defaults=2"]).tabular == load_config("paper-text").tabular
+    assert load_config("paper-text").tabular.cotraining.numerics == 1
 
 
 def test_a_run_folder_written_before_versions_reads_as_version_1(tmp_path):
@@ -104,8 +124,20 @@ def test_a_run_folder_written_before_versions_reads_as_version_1(tmp_path):
 def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(capsys):
     assert main(["config", "tiny", "--set", "defaults=2"]) == 0
     out = capsys.readouterr().out
-    assert "under version 2 of the defaults (the versions: 1 (adopted), 2 (candidate))" in out.splitlines()[0]
+    versions = "(the versions: 1, 2 (candidate), 3 (adopted))"
+    assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
     assert "refit_new_classes = true  # default true (defaults = 1: false)" in out
+    assert "numerics = 1  # default 1:" in out  # version 2 builds on version 1
     assert main(["config", "tiny"]) == 0
+    out = capsys.readouterr().out
+    assert f"under version 3 of the defaults {versions}" in out.splitlines()[0]
+    assert [line for line in out.splitlines() if "(defaults = 1:" in line] == [
+        next(
+            line
+            for line in out.splitlines()
+            if line.startswith("numerics = 2  # default 2 (defaults = 1: 1)")
+        )
+    ]
+    assert main(["config", "tiny", "--set", "defaults=1"]) == 0
     assert "(defaults = 1:" not in capsys.readouterr().out

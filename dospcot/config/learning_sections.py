@@ -391,9 +391,10 @@ class CoTrainingConfig(AddedKeys):
     :param max_classes: the most distinct reward values a run may see.
     :param classifier: the reward classifiers' hyperparameters.
     :param numerics: how the reward classifiers fit (:data:`dospcot.core.self_paced.NUMERICS`): 1, in
-        float64 over the whole pool; 2, in float32 over the samples that carry weight, several times
-        cheaper on large pools (docs/guide/profile.md), but not the same science as 1 within the
-        numerics study's bound (docs/results/numerics.md), so not the default; 3, 2's fits and agents
+        float64 over the whole pool (version 1 of the defaults); 2, in float32 over the samples that
+        carry weight, several times cheaper on large pools (docs/guide/profile.md), and the default
+        under the adopted version 3 of the defaults: the numerics study showed it non-inferior to 1 on
+        both its presets (docs/results/numerics.md); 3, 2's fits and agents
         whose Q-networks read a view of 0s and 1s through a sparse first layer, with a fused Adam (the
         same arithmetic as 2 in another order: equal up to float32 rounding). Every run names it in
         ``run_info.json``; a run folder or checkpoint written before the key existed reads as 1

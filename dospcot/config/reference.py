@@ -139,9 +139,18 @@ def _root_part(cls: type, name: str) -> type:
     return part
 
 
-def section_tables(cls: type, key: str, extra_docs: Mapping[str, str] | None = None) -> list[str]:
+def section_tables(
+    cls: type,
+    key: str,
+    extra_docs: Mapping[str, str] | None = None,
+    adopted: Mapping[str, Any] | None = None,
+) -> list[str]:
     """The markdown reference of one config section (the dataclass ``cls``, read from ``[key]``), then
-    of its sub-sections; the top level's keys where ``key`` is empty."""
+    of its sub-sections; the top level's keys where ``key`` is empty.
+
+    :param adopted: dotted key -> its default under the adopted version of the defaults, for each key
+        that version moves (:func:`dospcot.config.versions.adopted_moves`); its cell names the first
+        version's default beside it."""
     lines: list[str] = []
     by_section: dict[str, list[KeyRow]] = {}
     for row in key_rows(cls, key, extra_docs):
@@ -156,7 +165,10 @@ def section_tables(cls: type, key: str, extra_docs: Mapping[str, str] | None = N
         lines += ["| key | type | default | meaning |", "|---|---|---|---|"]
         for row in by_section.get(section, []):
             meaning = row.meaning.replace("|", "\\|")
-            lines.append(f"| `{row.key}` | `{row.type}` | `{row.default}` | {meaning} |")
+            default = f"`{row.default}`"
+            if adopted and row.dotted in adopted:
+                default = f"`{toml_value(adopted[row.dotted])}` (`defaults = 1`: `{row.default}`)"
+            lines.append(f"| `{row.key}` | `{row.type}` | {default} | {meaning} |")
         for note, mapping in (
             ("Set elsewhere, not in this section", getattr(section_cls, "set_elsewhere", {})),
             (
@@ -183,14 +195,16 @@ def config_reference(dqn_docs: Mapping[str, str] | None = None) -> str:
     """Every key of a ``dospcot train`` config and of a paper-protocol config, with its default, as
     markdown tables; ``dqn_docs``: the ``[dqn]`` keys' meanings from SB3 (:func:`sb3_dqn_docs`)."""
     from dospcot.config.run_configs import PaperConfig, TrainConfig
+    from dospcot.config.versions import adopted_moves
 
+    adopted = adopted_moves()
     lines = ["## A training config (`dospcot train`)", ""]
-    lines += section_tables(_root_part(TrainConfig, "TrainConfig"), "")
+    lines += section_tables(_root_part(TrainConfig, "TrainConfig"), "", adopted=adopted)
     for field in dataclasses.fields(TrainConfig):
         default = field_default(field)
         if dataclasses.is_dataclass(default):
             extra = dqn_docs if field.name == "dqn" else None
-            lines += section_tables(type(default), field.name, extra)
+            lines += section_tables(type(default), field.name, extra, adopted)
     lines += ['## A paper-protocol config (`task = "paper"`)', ""]
     lines += section_tables(_root_part(PaperConfig, "PaperConfig"), "")
     lines += section_tables(type(PaperConfig().tabular), "tabular")

@@ -2,15 +2,18 @@
 (``defaults = N``), so a default can move without restating what an older config, run folder or sweep
 meant.
 
-A config without the key gets :data:`ADOPTED`. Each version after 1 lists the keys whose default it
-moves (:class:`MovedDefault`); a key the config sets itself keeps its value whatever the version. A
-version's rule may depend on the config's method and views (a strategy that asks where two views
-disagree needs two views), and a rule that returns None leaves the key at the earlier default.
+A config without the key gets :data:`ADOPTED`. Each version after 1 builds on an earlier one
+(:data:`BASES`) and lists the keys whose default it moves there (:class:`MovedDefault`); a key the
+config sets itself keeps its value whatever the version. A version's rule may depend on the config's
+method and views (a strategy that asks where two views disagree needs two views), and a rule that
+returns None leaves the key at the earlier default.
 
-Version 2 is a **candidate**: the settings under which the label-budget study's DOSPCoT reached 90% of
-the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on. It becomes
-the version a config without the key gets only when the non-inferiority study of the record decides
-for it (docs/guide/defaults.md); until then ``defaults = 2`` opts in. Nothing here imports torch.
+Version 3 is **adopted**: version 1 with the reward classifiers fitted under numerics 2, which the
+numerics study showed non-inferior on both of its presets (docs/results/numerics.md). Version 2 is a
+**candidate**, built on version 1: the settings under which the label-budget study's DOSPCoT reached
+90% of the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on. The
+defaults study did not show it non-inferior on grid16 (docs/guide/defaults.md), so ``defaults = 2``
+opts in. Nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -25,11 +28,12 @@ from dospcot.config.choices import DEFAULT_VIEWS, method_name
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.config.loading import set_key
+from dospcot.config.task_sections import EnvConfig
 
 TaskSection = tuple[str, type]
 """A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
 
-ADOPTED = 1
+ADOPTED = 3
 """The version of the defaults a config without ``defaults`` gets."""
 
 FIRST = 1
@@ -129,8 +133,18 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
             "budget study: the goal's class kept to episode ends",
         ),
     ),
+    3: (
+        MovedDefault(
+            "cotraining.numerics",
+            lambda table: 2,
+            "numerics study: float32 fits over the samples that carry weight, non-inferior on both presets",
+        ),
+    ),
 }
-"""Each version's moved defaults, on top of the version before it."""
+"""Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
+
+BASES = {2: 1, 3: 1}
+"""The version each later version builds on: its defaults are that version's, then its own moves."""
 
 CANDIDATES = frozenset({2})
 """Versions a config may opt into that no study has adopted yet."""
@@ -156,6 +170,22 @@ def versions_text() -> str:
     return "the versions: " + ", ".join(words)
 
 
+def lineage(version: int) -> list[int]:
+    """The versions whose moves make up ``version``'s defaults, oldest first (without the first
+    version, which moves nothing): ``version`` after the versions it builds on (:data:`BASES`)."""
+    chain = []
+    while version != FIRST:
+        chain.append(version)
+        version = BASES[version]
+    return chain[::-1]
+
+
+def adopted_moves() -> dict[str, Any]:
+    """The keys the adopted version moves for a config that sets nothing of its own (the default
+    method, views and task): dotted key -> its default there. The configuration reference shows these."""
+    return {key: value for key, (value, _) in moved_keys({}, ("env", EnvConfig)).items()}
+
+
 def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tuple[Any, str]]:
     """The keys ``table``'s version moves for it and that it does not set itself: dotted key -> (the
     version's value, why).
@@ -166,7 +196,7 @@ def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tupl
     version = version_of(table)
     name, fields = section[0], {f.name for f in dataclasses.fields(section[1])}
     moved: dict[str, tuple[Any, str]] = {}
-    for number in range(FIRST + 1, version + 1):
+    for number in lineage(version):
         for rule in VERSIONS[number]:
             head, _, key = rule.key.partition(".")
             if head == "{section}" and key not in fields:

@@ -70,7 +70,7 @@ def glance(runs: list[TrialRun]) -> Glance:
         {preset: _differences(runs, preset) for preset in PRESETS},
         "defaults 2 minus 1",
         (
-            "version 2 not shown non-inferior: version 1 stays adopted",
+            "version 2 not shown non-inferior: not adopted",
             "not measured yet (a preset lacks one version's runs)",
             "version 2 non-inferior: adopt it",
         ),

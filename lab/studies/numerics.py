@@ -48,24 +48,27 @@ def _held(diff: SeedSummary) -> bool:
     return diff.low <= 0 <= diff.high and diff.low >= -HALF_WIDTH and diff.high <= HALF_WIDTH
 
 
+def _rows(runs: list[TrialRun], new_numerics: int) -> list[str]:
+    """The table, after a blank line (a block of its own, after the page's provenance lines): per preset
+    and numerics (1, then ``new_numerics``), success, pseudo-reward accuracy and CPU time per run."""
+
+    def members(preset: str, version: int) -> list[TrialRun]:
+        return list(_by_seed(runs, preset, version).values())
+
+    return ["", *version_rows(members, PRESETS, (1, new_numerics), "numerics", ADOPTION_METRICS)]
+
+
+MARGIN = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
+"""The adoption rule for a default, in words."""
+
+
 def tables(runs: list[TrialRun]) -> list[str]:
     """Per preset and numerics: success, pseudo-reward accuracy and CPU time per run; then each
     difference, numerics 2 minus 1."""
-    lines = [
-        "",  # the table a block of its own, after the page's provenance lines
-        *version_rows(
-            lambda preset, version: list(_by_seed(runs, preset, version).values()),
-            PRESETS,
-            (1, 2),
-            "numerics",
-            ADOPTION_METRICS,
-        ),
-    ]
     bound = f"the interval holds 0 and lies within +-{HALF_WIDTH}"
-    margin = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
     differences = {preset: _differences(runs, preset) for preset in PRESETS}
     return [
-        *lines,
+        *_rows(runs, 2),
         "",
         "Numerics 2 minus numerics 1, paired by seed, against the registered equivalence bound:",
         "",
@@ -73,7 +76,7 @@ def tables(runs: list[TrialRun]) -> list[str]:
         "",
         "The same differences against the adoption rule for a default (non-inferiority):",
         "",
-        *held_lines(differences, non_inferior, margin),
+        *held_lines(differences, non_inferior, MARGIN),
     ]
 
 
@@ -94,19 +97,10 @@ def glance(runs: list[TrialRun]) -> Glance:
 def tables_3(runs: list[TrialRun]) -> list[str]:
     """Per preset and numerics (1, 3): success, pseudo-reward accuracy and CPU time per run; then each
     difference, numerics 3 minus 1, against the adoption rule for a default."""
-    rows = version_rows(
-        lambda preset, version: list(_by_seed(runs, preset, version).values()),
-        PRESETS,
-        (1, 3),
-        "numerics",
-        ADOPTION_METRICS,
-    )
-    margin = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
     differences = {preset: _differences(runs, preset, 3) for preset in PRESETS}
-    verdicts = held_lines(differences, non_inferior, margin) or ["- No preset holds a pair yet."]
+    verdicts = held_lines(differences, non_inferior, MARGIN) or ["- No preset holds a pair yet."]
     return [
-        "",  # the table a block of its own, after the page's provenance lines
-        *rows,
+        *_rows(runs, 3),
         "",
         f"Numerics 3 minus numerics 1, paired by seed, against the adoption rule for a default "
         f"({ADOPTION_SEEDS} pairs on each preset):",
