@@ -16,7 +16,7 @@ from dospcot_lab.studies.defaults import VERSION_SWEEPS
 from dospcot_lab.studies.tables import (
     ADOPTION_METRICS,
     ADOPTION_SEEDS,
-    NON_INFERIORITY_MARGIN,
+    NON_INFERIOR_WORDS,
     adoption_glance,
     held_lines,
     non_inferior,
@@ -61,10 +61,6 @@ def _rows(runs: list[TrialRun], versions: tuple[int, ...]) -> list[str]:
     return ["", *version_rows(members, PRESETS, versions, "numerics", ADOPTION_METRICS)]
 
 
-MARGIN = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
-"""The adoption rule for a default, in words."""
-
-
 def tables(runs: list[TrialRun]) -> list[str]:
     """Per preset and numerics: success, pseudo-reward accuracy and CPU time per run; then each
     difference, numerics 2 minus 1."""
@@ -79,7 +75,7 @@ def tables(runs: list[TrialRun]) -> list[str]:
         "",
         "The same differences against the adoption rule for a default (non-inferiority):",
         "",
-        *held_lines(differences, non_inferior, MARGIN),
+        *held_lines(differences, non_inferior, NON_INFERIOR_WORDS),
     ]
 
 
@@ -111,12 +107,12 @@ def tables_3(runs: list[TrialRun]) -> list[str]:
         f"Numerics 3 minus numerics 1, paired by seed, against the adoption rule for a default "
         f"({ADOPTION_SEEDS} pairs on each preset):",
         "",
-        *(held_lines(registered, non_inferior, MARGIN) or none),
+        *(held_lines(registered, non_inferior, NON_INFERIOR_WORDS) or none),
         "",
         "For information, not the registered comparison: numerics 3 minus numerics 2, the numerics "
         "version 3 of the defaults adopted after this study was registered, paired by seed:",
         "",
-        *(held_lines(against_adopted, non_inferior, MARGIN) or none),
+        *(held_lines(against_adopted, non_inferior, NON_INFERIOR_WORDS) or none),
     ]
 
 

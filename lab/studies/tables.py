@@ -233,6 +233,10 @@ NON_INFERIORITY_MARGIN = 0.05
 new default to replace an old one: non-inferiority, not equivalence, since a change may improve."""
 
 
+NON_INFERIOR_WORDS = f"non-inferior where the interval's lower end lies above -{NON_INFERIORITY_MARGIN}"
+"""The adoption rule for a default, in words, for the lines of :func:`held_lines`."""
+
+
 def non_inferior(diff: SeedSummary, margin: float = NON_INFERIORITY_MARGIN) -> bool:
     """Whether the paired difference new minus old shows the new no worse than ``margin``: the lower
     end of its 95% interval lies above ``-margin``."""
@@ -248,8 +252,8 @@ def adoption_glance(
 ) -> Glance:
     """The row of a study that decides a default: its headline, ``change`` in success on the last preset
     measured, and its verdict by :func:`non_inferior` over every measured difference. A preset counts
-    as measured once it holds the ``seeds`` pairs the rule names: a verdict on fewer would be read off
-    a part of the sample.
+    as measured once it holds the :data:`ADOPTION_SEEDS` pairs the rule names: a verdict on fewer
+    would be read off a part of the sample.
 
     :param differences: preset -> metric -> the paired difference, new minus old.
     :param change: the comparison in words (``"numerics 2 minus 1"``).
