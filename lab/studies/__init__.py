@@ -27,6 +27,7 @@
     dospcot-lab study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
     dospcot-lab study numerics-3 --docs       # numerics 3 vs 1: the same presets and seeds, adoption rule
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
+    dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
 
 A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
@@ -82,6 +83,7 @@ from dospcot_lab.studies import (
     queries,
     second_view,
     sizing,
+    true_rewards,
     views,
 )
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
@@ -121,6 +123,7 @@ STUDIES: dict[str, Study] = {
     **numerics.STUDIES,
     **defaults.STUDIES,
     **sizing.STUDIES,
+    **true_rewards.STUDIES,
     **views.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""

@@ -47,6 +47,9 @@ class Glance:
 
     headline: str
     verdict: str
+    seeds: tuple[int, ...] | None = None
+    """The seeds its headline compares, where the study reads other studies' runs of more seeds
+    (None: every run's)."""
 
 
 EXPLORATORY = "exploratory"

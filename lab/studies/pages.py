@@ -75,7 +75,7 @@ def glance_cells(study: Study, runs: list[TrialRun]) -> list[str]:
     if not runs:
         return [study.task, UNPUBLISHED_CELL, "", "no verdict"]
     glance = study.glance(runs)
-    seeds = sorted({run.trial.seed for run in runs})
+    seeds = sorted(glance.seeds or {run.trial.seed for run in runs})
     return [study.task, glance.headline, f"{len(seeds)} ({seeds[0]}-{seeds[-1]})", glance.verdict]
 
 

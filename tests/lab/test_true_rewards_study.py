@@ -1,0 +1,79 @@
+"""The true-rewards study (lab/studies/true_rewards.py) on hand-made runs: the gap from DOSPCoT to the
+oracle splits, paired by seed, into the path's loss and the pseudo-rewards' loss, and the control
+matches the oracle only where its interval holds 0 above the margin."""
+
+from pathlib import Path
+
+import pytest
+
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot.sweeps.sweep import Trial
+from dospcot_lab.studies import STUDIES
+from dospcot_lab.studies.true_rewards import MARGIN, PSEUDO_REWARDS, glance, matches, tables
+
+
+def _run(config: str, seed: int, success: float, params: dict[str, str] | None = None) -> TrialRun:
+    summary = {"mean": {"success": success, "agreement": success, "pseudo_accuracy": 1.0, "coverage": 0.5}}
+    return TrialRun(Trial(config, config, params or {}, seed), summary, [], Path())
+
+
+def _lavagap(control: list[float], oracle: list[float], dospcot: list[float]) -> list[TrialRun]:
+    hidden = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1"}
+    uniform = {"training.label_strategy": "uniform", "training.label_fraction": "0.1"}
+    other = {"training.label_strategy": "random", "training.label_fraction": "0.1"}
+    return [
+        *(_run("minigrid-lavagap-dospcot", s, v, hidden) for s, v in enumerate(control)),
+        *(_run("minigrid-lavagap-oracle", s, v) for s, v in enumerate(oracle)),
+        *(_run("minigrid-lavagap-dospcot", s, v, uniform) for s, v in enumerate(dospcot)),
+        # Another strategy of the active-queries sweep read here: no arm of this study.
+        *(_run("minigrid-lavagap-dospcot", s, 0.0, other) for s in range(len(dospcot))),
+    ]
+
+
+def test_the_gap_splits_into_the_path_and_the_pseudo_rewards_paired_by_seed():
+    control, oracle, dospcot = [1.0, 0.5, 1.0, 1.0], [1.0, 1.0, 1.0, 0.5], [0.5, 0.5, 1.0, 0.0]
+    lines = tables(_lavagap(control, oracle, dospcot))
+    path = SeedSummary.of([c - o for c, o in zip(control, oracle, strict=True)])
+    pseudo = SeedSummary.of([d - c for d, c in zip(dospcot, control, strict=True)])
+    whole = SeedSummary.of([d - o for d, o in zip(dospcot, oracle, strict=True)])
+    assert f"- LavaGapS7, path: control minus oracle: {path} over 4 seeds; " in "\n".join(lines)
+    assert f"- LavaGapS7, pseudo-rewards: DOSPCoT minus control: {pseudo} over 4 seeds." in lines
+    assert f"- LavaGapS7, whole gap: DOSPCoT minus oracle: {whole} over 4 seeds." in lines
+    rows = {line.split(" | ")[0]: line for line in lines if line.startswith("| ")}
+    assert rows["| DOSPCoT"].startswith(f"| DOSPCoT | {SeedSummary.of(dospcot)} |")
+    assert rows["| DOSPCoT"].endswith("| 4 |")  # the other strategy's runs are no arm of it
+
+
+@pytest.mark.parametrize(
+    ("control", "matched"),
+    [
+        ([1.0] * 10, True),  # equal on every seed: an interval of width 0 at 0
+        ([1.0] * 8 + [0.0] * 2, False),  # lower end well below -0.1
+        ([1.0, 0.0] * 5, False),
+    ],
+)
+def test_the_control_matches_only_within_the_margin(control, matched):
+    runs = _lavagap(control, [1.0] * 10, [0.0] * 10)
+    diff = SeedSummary.of([c - 1.0 for c in control])
+    assert matches(diff) is matched
+    verdict = "**matches the oracle**" if matched else "**does not match the oracle**"
+    assert f"- LavaGapS7, path: control minus oracle: {diff} over 10 seeds; {verdict}." in tables(runs)
+    assert glance(runs).headline.endswith(f"(matches the oracle on {int(matched)} of 1 tasks measured, of 4)")
+
+
+def test_matches_needs_zero_inside_and_the_lower_end_above_the_margin():
+    assert not matches(SeedSummary(0.2, 0.1, 0.3, 0.2, 10))  # above the oracle: not "within noise"
+    assert not matches(SeedSummary(-0.05, -MARGIN, 0.0, -0.05, 10))  # the lower end at the margin
+    assert matches(SeedSummary(-0.02, -0.09, 0.04, -0.02, 10))
+
+
+def test_the_controls_are_the_compared_dospcot_runs_with_the_true_rewards():
+    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
+    for task in ("lavagap", "doorkey", "fasthighway"):
+        control, dospcot = sweeps[f"true-rewards-{task}"], sweeps[f"queries-{task}-dospcot"]
+        assert control.configs == dospcot.configs
+        assert control.grid["training.label_fraction"] == dospcot.grid["training.label_fraction"]
+        assert control.grid[PSEUDO_REWARDS] == ("hidden",)
+        assert control.numerics == dospcot.numerics == 1
+    assert sweeps["true-rewards-grid16"].configs == ("grid16-dospcot",)
