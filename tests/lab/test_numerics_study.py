@@ -10,11 +10,12 @@ import pytest
 
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.config.loading import renamed_to_now
+from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES, Sweep, study_runs, sweep_spec
 from dospcot_lab.studies.defaults import VERSION_SWEEPS
-from dospcot_lab.studies.numerics import glance, glance_3, tables, tables_3
+from dospcot_lab.studies.numerics import ADOPT_3, glance, glance_3, tables, tables_3
 from dospcot_lab.studies.tables import ADOPTION_SEEDS, numerics_of, paired
 
 
@@ -134,27 +135,38 @@ def test_doorkeys_numerics_1_arm_is_the_defaults_studys_version_1_sweep_read_for
     assert len(grid16_seeds) == len(set(grid16_seeds)) == 20
 
 
-def test_the_numerics_3_study_pairs_numerics_3_with_the_same_numerics_1_runs_by_the_adoption_rule(tmp_path):
+def test_the_numerics_3_study_pairs_numerics_3_with_numerics_1_and_2_by_the_adoption_rule(tmp_path):
     runs = []
     for preset in ("grid16-dospcot", "minigrid-doorkey-dospcot"):
         for seed in range(ADOPTION_SEEDS):
             runs.append(_run(tmp_path, preset, seed, 1, 0.5, 0.95))
-            runs.append(_run(tmp_path, preset, seed, 2, 0.0, 0.95))  # read only against numerics 3
+            runs.append(_run(tmp_path, preset, seed, 2, 0.0, 0.95))
             runs.append(_run(tmp_path, preset, seed, 3, 0.5 + (0.1 if seed == 0 else 0.0), 0.95))
     text = "\n".join(tables_3(runs))
     assert "| `minigrid-doorkey-dospcot` | 3 | 0.505" in text and "| 300 CPU-s | 20 |" in text
     # the registered comparison, 3 minus 1, by the adoption rule alone (no equivalence bound), then
-    # 3 minus 2 for information: numerics 3 gains 0.5 over numerics 2's 0.0 on every seed
-    registered, information = text.split("For information")
+    # 3 minus 2 by the same rule (the amendment): numerics 3 gains 0.5 over numerics 2's 0.0 on every seed
+    registered, amendment = text.split("Numerics 3 minus numerics 2")
     assert registered.count("**held**") == 4 and "+-0.1" not in text
-    assert "success: 0.505 [0.500, 0.515] over 20 seeds" in information
+    assert "success: 0.505 [0.500, 0.515] over 20 seeds" in amendment and amendment.count("**held**") == 4
     assert "| `grid16-dospcot` | 2 | 0.000" in text
-    assert glance_3(runs).verdict == "numerics 3 non-inferior: adopt it"
-    assert glance_3(runs).headline.startswith(
-        "minigrid-doorkey-dospcot success, numerics 3 minus 1, paired by seed: 0.005"
+    assert glance_3(runs).verdict == ADOPT_3
+    assert glance_3(runs).headline == (
+        f"minigrid-doorkey-dospcot success, numerics 3 minus 1, paired by seed: "
+        f"{SeedSummary.of([0.1] + [0.0] * 19)}; minus 2: {SeedSummary.of([0.6] + [0.5] * 19)}"
     )
     assert glance_3([r for r in runs if numerics_of(r) != 3]).verdict == "not measured yet"
     assert "No preset holds a pair yet" in "\n".join(tables_3([r for r in runs if numerics_of(r) != 3]))
+    # numerics 3 below numerics 2 on every seed, non-inferior to numerics 1: not adopted
+    (tmp_path / "two").mkdir()
+    worse_than_2 = [
+        _run(tmp_path / "two", r.trial.config, r.trial.seed, 2, 1.0, 0.95) if numerics_of(r) == 2 else r
+        for r in runs
+    ]
+    assert glance_3(worse_than_2).verdict == "numerics 3 not shown non-inferior"
+    # numerics 2 missing on a preset: the move from numerics 2 waits for its pairs
+    no_2 = [r for r in runs if not (numerics_of(r) == 2 and r.trial.config == "grid16-dospcot")]
+    assert glance_3(no_2).verdict == "non-inferior where measured; a preset not measured yet"
     (tmp_path / "lost").mkdir()
     runs = [r for r in runs if not (r.trial.seed == 1 and numerics_of(r) == 3)]
     runs.append(_run(tmp_path / "lost", "grid16-dospcot", 1, 3, 0.0, 0.95))
