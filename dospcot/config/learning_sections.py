@@ -396,7 +396,8 @@ class CoTrainingConfig(AddedKeys):
         under the adopted version 3 of the defaults: the numerics study showed it non-inferior to 1 on
         both its presets (docs/results/numerics.md); 3, 2's fits and agents
         whose Q-networks read a view of 0s and 1s through a sparse first layer, with a fused Adam (the
-        same arithmetic as 2 in another order: equal up to float32 rounding). Every run names it in
+        same arithmetic as 2 in another order: equal up to float32 rounding), opt-in: the numerics-3
+        study did not show it non-inferior (docs/results/numerics-3.md). Every run names it in
         ``run_info.json``; a run folder or checkpoint written before the key existed reads as 1
         (``added_keys``), and a study compares the two only where its grid varies it.
     :param ensemble_size: the reward-model peer's (``method = "reward-model"``) classifiers per view,
