@@ -3,8 +3,10 @@
 On each task, the DOSPCoT preset under ``cotraining.pseudo_rewards = "hidden"`` (the control: every
 admitted sample reads its true reward, while the pool, the admissions, their weights, the pace, the
 exploration schedule and the n-step windows stay as the classifiers decide them) against the oracle
-(every reward, no co-training path) and DOSPCoT itself, paired by seed. The control minus the oracle
-is what the path loses; DOSPCoT minus the control is what wrong or missing pseudo-rewards lose. The
+(every reward, no co-training path) and DOSPCoT itself, paired by seed, on the agents of the views the
+oracle trains (MiniGrid's oracle and the fast highway's train one view's agent, grid16's both). The
+control minus the oracle is what the path loses; DOSPCoT minus the control is what wrong or missing
+pseudo-rewards lose. The
 oracle's and DOSPCoT's runs are the record's own (the active-queries study's, and on grid16 the
 batched-seeds study's runs alone), all under the first defaults and numerics 1, so the control trains
 under them too."""
@@ -12,6 +14,7 @@ under them too."""
 from __future__ import annotations
 
 import dataclasses
+import math
 
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
@@ -19,7 +22,7 @@ from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.batched_seeds import PRESETS as GRID16_PRESETS
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.queries import STUDIES as QUERIES
-from dospcot_lab.studies.tables import FRACTION, over_seeds, paired
+from dospcot_lab.studies.tables import FRACTION, numerics_of
 
 PSEUDO_REWARDS = "cotraining.pseudo_rewards"
 SEEDS = 10
@@ -92,43 +95,75 @@ def matches(diff: SeedSummary) -> bool:
     return diff.low <= 0 <= diff.high and diff.low > -MARGIN
 
 
+def oracle_views(runs: list[TrialRun], task: str) -> list[str]:
+    """The views the oracle trains an agent on, on ``task`` (MiniGrid's oracle: the image alone)."""
+    oracle = _by_seed(runs, task, "oracle")
+    return list(next(iter(oracle.values())).summary["views"]) if oracle else []
+
+
+def _view_value(run: TrialRun, views: list[str], metric: str = "success") -> float:
+    """``metric`` of the run's agents on ``views``, their mean (NaN where the run has none of them)."""
+    values = [run.summary["per_view"][v][metric] for v in views if v in run.summary.get("per_view", {})]
+    return sum(values) / len(values) if values else math.nan
+
+
+def _paired(a: dict[int, TrialRun], b: dict[int, TrialRun], views: list[str]) -> SeedSummary:
+    """Success of the agents on ``views``, a minus b, paired by seed over the seeds both ran."""
+    seeds = sorted(set(a) & set(b))
+    if len({numerics_of(run) for s in seeds for run in (a[s], b[s])}) > 1:
+        raise ValueError("the true-rewards study compares runs of one numerics version")
+    return SeedSummary.of([_view_value(a[s], views) - _view_value(b[s], views) for s in seeds])
+
+
 def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
-    """Success, paired by seed: what the path loses (control minus oracle), what the pseudo-rewards
-    lose (DOSPCoT minus control), and the whole gap (DOSPCoT minus oracle)."""
+    """Success of the agents on the oracle's views, paired by seed: what the path loses (control minus
+    oracle), what the pseudo-rewards lose (DOSPCoT minus control), and the whole gap (DOSPCoT minus
+    oracle)."""
     oracle, control, dospcot = (_by_seed(runs, task, arm) for arm in ARMS)
+    views = oracle_views(runs, task)
     return {
-        "path: control minus oracle": paired(control, oracle, "success"),
-        "pseudo-rewards: DOSPCoT minus control": paired(dospcot, control, "success"),
-        "whole gap: DOSPCoT minus oracle": paired(dospcot, oracle, "success"),
+        "path: control minus oracle": _paired(control, oracle, views),
+        "pseudo-rewards: DOSPCoT minus control": _paired(dospcot, control, views),
+        "whole gap: DOSPCoT minus oracle": _paired(dospcot, oracle, views),
     }
 
 
+def _rows(arm: str, members: list[TrialRun]) -> list[str]:
+    """One row per agent (view) of ``arm``'s runs: each metric over the seeds."""
+    rows = []
+    for view in members[0].summary["views"]:
+        cells = [str(SeedSummary.of([_view_value(r, [view], metric) for r in members])) for metric in METRICS]
+        rows.append(f"| {arm} | {view} | {' | '.join(cells)} | {len(members)} |")
+    return rows
+
+
 def tables(runs: list[TrialRun]) -> list[str]:
-    """Per task: each arm's figures over the seeds, then the gap from DOSPCoT to the oracle split in
-    two, with whether the control matches the oracle."""
+    """Per task: each arm's agents over the seeds, then the gap from DOSPCoT to the oracle split in
+    two on the oracle's views, with whether the control matches the oracle."""
     lines = [
         f"Seeds 0-{SEEDS - 1} of each arm (the fast highway's DOSPCoT runs: the seeds the active-queries "
-        "study ran). The control's pseudo-reward accuracy reads 1 wherever it admits a sample: it "
-        "describes the rewards given, not the classifiers. Differences are in success, paired by seed; "
-        f"the control matches the oracle where that interval holds 0 and its lower end lies above -{MARGIN}."
+        "study ran), one row per agent. The oracle trains one agent per view it names, and on MiniGrid "
+        "and the fast highway it names one view: every difference compares the agents on the oracle's "
+        "views, paired by seed, in success. The control's pseudo-reward accuracy reads 1 wherever it "
+        "admits a sample: it describes the rewards given, not the classifiers. The control matches the "
+        f"oracle where its interval holds 0 and its lower end lies above -{MARGIN}."
     ]
     for task, name in TASKS.items():
         arms = {arm: list(_by_seed(runs, task, arm).values()) for arm in ARMS}
         if not arms["control"]:
             continue
-        lines += ["", f"| {name} | " + " | ".join(c.replace("_", " ") for c in METRICS) + " | seeds |"]
-        lines.append("|---|" + "---|" * (len(METRICS) + 1))
+        lines += ["", f"| {name} | view | " + " | ".join(c.replace("_", " ") for c in METRICS) + " | seeds |"]
+        lines.append("|---|---|" + "---|" * (len(METRICS) + 1))
         for arm, members in arms.items():
-            if members:
-                cells = " | ".join(over_seeds(members, metric) for metric in METRICS)
-                lines.append(f"| {arm} | {cells} | {len(members)} |")
+            lines += _rows(arm, members) if members else []
         lines.append("")
+        views = ", ".join(oracle_views(runs, task))
         for label, diff in differences(runs, task).items():
             if diff.n:
                 verdict = ""
                 if label.startswith("path"):
                     verdict = "; **" + ("matches" if matches(diff) else "does not match") + " the oracle**"
-                lines.append(f"- {name}, {label}: {diff} over {diff.n} seeds{verdict}.")
+                lines.append(f"- {name} ({views}), {label}: {diff} over {diff.n} seeds{verdict}.")
     return lines
 
 
@@ -142,7 +177,7 @@ def glance(runs: list[TrialRun]) -> Glance:
     parts = "; ".join(f"{name} {diff}" for name, diff in measured.items()) or "not measured yet"
     held = sum(map(matches, measured.values()))
     return Glance(
-        f"success, true-rewards control minus oracle, paired by seed: {parts} (matches the oracle on "
+        f"success of the oracle's agents, true-rewards control minus oracle, paired: {parts} (matches on "
         f"{held} of {len(measured)} tasks measured, of {len(TASKS)})",
         EXPLORATORY,
         tuple(range(SEEDS)),

@@ -14,7 +14,19 @@ from dospcot_lab.studies.true_rewards import MARGIN, PSEUDO_REWARDS, glance, mat
 
 
 def _run(config: str, seed: int, success: float, params: dict[str, str] | None = None) -> TrialRun:
-    summary = {"mean": {"success": success, "agreement": success, "pseudo_accuracy": 1.0, "coverage": 0.5}}
+    """A run whose image agent succeeds in ``success`` of its episodes; a co-trained run's ego agent
+    never does (the oracle trains the image agent alone, so the ego agent enters no difference)."""
+    views = ["image"] if config.endswith("-oracle") else ["image", "ego"]
+    per_view = {
+        view: {
+            "success": success if view == "image" else 0.0,
+            "agreement": 0.5,
+            "pseudo_accuracy": 1.0,
+            "coverage": 0.5,
+        }
+        for view in views
+    }
+    summary = {"views": views, "per_view": per_view, "mean": {}}
     return TrialRun(Trial(config, config, params or {}, seed), summary, [], Path())
 
 
@@ -37,12 +49,14 @@ def test_the_gap_splits_into_the_path_and_the_pseudo_rewards_paired_by_seed():
     path = SeedSummary.of([c - o for c, o in zip(control, oracle, strict=True)])
     pseudo = SeedSummary.of([d - c for d, c in zip(dospcot, control, strict=True)])
     whole = SeedSummary.of([d - o for d, o in zip(dospcot, oracle, strict=True)])
-    assert f"- LavaGapS7, path: control minus oracle: {path} over 4 seeds; " in "\n".join(lines)
-    assert f"- LavaGapS7, pseudo-rewards: DOSPCoT minus control: {pseudo} over 4 seeds." in lines
-    assert f"- LavaGapS7, whole gap: DOSPCoT minus oracle: {whole} over 4 seeds." in lines
-    rows = {line.split(" | ")[0]: line for line in lines if line.startswith("| ")}
-    assert rows["| DOSPCoT"].startswith(f"| DOSPCoT | {SeedSummary.of(dospcot)} |")
-    assert rows["| DOSPCoT"].endswith("| 4 |")  # the other strategy's runs are no arm of it
+    assert f"- LavaGapS7 (image), path: control minus oracle: {path} over 4 seeds; " in "\n".join(lines)
+    assert f"- LavaGapS7 (image), pseudo-rewards: DOSPCoT minus control: {pseudo} over 4 seeds." in lines
+    assert f"- LavaGapS7 (image), whole gap: DOSPCoT minus oracle: {whole} over 4 seeds." in lines
+    rows = {" | ".join(line.split(" | ")[:2]): line for line in lines if line.startswith("| ")}
+    assert rows["| DOSPCoT | image"].startswith(f"| DOSPCoT | image | {SeedSummary.of(dospcot)} |")
+    assert rows["| DOSPCoT | ego"].startswith(f"| DOSPCoT | ego | {SeedSummary.of([0.0] * 4)} |")
+    assert rows["| DOSPCoT | image"].endswith("| 4 |")  # the other strategy's runs are no arm of it
+    assert "| oracle | ego" not in rows
 
 
 @pytest.mark.parametrize(
@@ -58,8 +72,10 @@ def test_the_control_matches_only_within_the_margin(control, matched):
     diff = SeedSummary.of([c - 1.0 for c in control])
     assert matches(diff) is matched
     verdict = "**matches the oracle**" if matched else "**does not match the oracle**"
-    assert f"- LavaGapS7, path: control minus oracle: {diff} over 10 seeds; {verdict}." in tables(runs)
-    assert glance(runs).headline.endswith(f"(matches the oracle on {int(matched)} of 1 tasks measured, of 4)")
+    assert f"- LavaGapS7 (image), path: control minus oracle: {diff} over 10 seeds; {verdict}." in tables(
+        runs
+    )
+    assert glance(runs).headline.endswith(f"(matches on {int(matched)} of 1 tasks measured, of 4)")
 
 
 def test_matches_needs_zero_inside_and_the_lower_end_above_the_margin():
