@@ -38,7 +38,14 @@ MARGIN = 0.1
 """The control matches the oracle where the 95% interval of its success minus the oracle's, paired
 by seed, holds 0 and its lower end lies above -MARGIN (issue 78's bound, fixed before any run)."""
 METRICS = ("success", "agreement", "pseudo_accuracy", "coverage")
-ARMS = ("oracle", "control", "DOSPCoT")
+EXPLORATION = "training.exploration"
+BY_ROUNDS = "control, exploration by rounds"
+ARMS = ("oracle", "control", BY_ROUNDS, "DOSPCoT")
+DIAGNOSED = {"lavagap": 5}
+"""The tasks whose control also trains with exploration by rounds (version 2's setting), on so many
+seeds: where the control fell short of the oracle, it asks whether the path loses the exploration
+that the pace ends (the pace reached 1 after LavaGap's first round, and the agents' epsilon its floor
+with it, while the oracle's falls over the rounds)."""
 
 
 def _queries_sweep(name: str) -> Sweep:
@@ -68,6 +75,9 @@ def _sweeps() -> tuple[Sweep, ...]:
         # The fast highway's DOSPCoT sweep holds the five seeds its own study ran: read, not extended.
         dospcot = dataclasses.replace(dospcot, seeds=5 if task == "fasthighway" else None)
         sweeps += [_control(task, fraction), oracle, dospcot]
+        if task in DIAGNOSED:
+            control = _control(task, {**fraction, EXPLORATION: ("rounds",)})
+            sweeps.append(dataclasses.replace(control, name=f"{control.name}-rounds", seeds=DIAGNOSED[task]))
     return tuple(sweeps)
 
 
@@ -81,7 +91,7 @@ def _arm(run: TrialRun) -> str | None:
     if run.trial.config.endswith("-oracle"):
         return "oracle"
     if run.trial.params.get(PSEUDO_REWARDS) == "hidden":
-        return "control"
+        return BY_ROUNDS if run.trial.params.get(EXPLORATION) == "rounds" else "control"
     return "DOSPCoT" if run.trial.params.get("training.label_strategy", "uniform") == "uniform" else None
 
 
@@ -119,12 +129,14 @@ def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
     """Success of the agents on the oracle's views, paired by seed: what the path loses (control minus
     oracle), what the pseudo-rewards lose (DOSPCoT minus control), and the whole gap (DOSPCoT minus
     oracle)."""
-    oracle, control, dospcot = (_by_seed(runs, task, arm) for arm in ARMS)
+    oracle, control, by_rounds, dospcot = (_by_seed(runs, task, arm) for arm in ARMS)
     views = oracle_views(runs, task)
     return {
         "path: control minus oracle": _paired(control, oracle, views),
         "pseudo-rewards: DOSPCoT minus control": _paired(dospcot, control, views),
         "whole gap: DOSPCoT minus oracle": _paired(dospcot, oracle, views),
+        "exploration by rounds: its control minus the control": _paired(by_rounds, control, views),
+        "path under exploration by rounds: its control minus oracle": _paired(by_rounds, oracle, views),
     }
 
 

@@ -93,3 +93,24 @@ def test_the_controls_are_the_compared_dospcot_runs_with_the_true_rewards():
         assert control.grid[PSEUDO_REWARDS] == ("hidden",)
         assert control.numerics == dospcot.numerics == 1
     assert sweeps["true-rewards-grid16"].configs == ("grid16-dospcot",)
+
+
+def test_exploration_by_rounds_is_a_second_control_compared_with_the_control_and_the_oracle():
+    rounds = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1", "training.exploration": "rounds"}
+    runs = _lavagap([0.0, 0.5, 0.5], [1.0, 1.0, 1.0], [0.0, 0.0, 0.0])
+    runs += [_run("minigrid-lavagap-dospcot", s, 1.0, rounds) for s in range(2)]
+    lines = tables(runs)
+    gain = SeedSummary.of([1.0 - 0.0, 1.0 - 0.5])
+    assert (
+        f"- LavaGapS7 (image), exploration by rounds: its control minus the control: {gain} over 2 seeds."
+        in lines
+    )
+    path = SeedSummary.of([0.0, 0.0])
+    assert (
+        f"- LavaGapS7 (image), path under exploration by rounds: its control minus oracle: {path} over 2 "
+        "seeds; **matches the oracle**."
+    ) in lines
+    assert glance(runs).headline.endswith("(matches on 0 of 1 tasks measured, of 4)")  # the control's alone
+    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
+    by_rounds = sweeps["true-rewards-lavagap-rounds"]
+    assert by_rounds.grid == {**sweeps["true-rewards-lavagap"].grid, "training.exploration": ("rounds",)}
