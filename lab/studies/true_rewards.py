@@ -154,10 +154,11 @@ def tables(runs: list[TrialRun]) -> list[str]:
     two on the oracle's views, with whether the control matches the oracle."""
     lines = [
         f"Seeds 0-{SEEDS - 1} of each arm (the fast highway's DOSPCoT runs: the seeds the active-queries "
-        "study ran), one row per agent. The oracle trains one agent per view it names, and on MiniGrid "
-        "and the fast highway it names one view: every difference compares the agents on the oracle's "
-        "views, paired by seed, in success. The control's pseudo-reward accuracy reads 1 wherever it "
-        "admits a sample: it describes the rewards given, not the classifiers. The control matches the "
+        "study ran), one row per agent: each cell is the mean over seeds [95% bootstrap interval] of "
+        "the agent's figure at the run's last round. The oracle trains one agent per view it names, and "
+        "on MiniGrid and the fast highway it names one view: every difference compares the agents on the "
+        "oracle's views, paired by seed, in success. The control's pseudo-reward accuracy reads 1 wherever "
+        "it admits a sample: it describes the rewards given, not the classifiers. The control matches the "
         f"oracle where its interval holds 0 and its lower end lies above -{MARGIN}."
     ]
     for task, name in TASKS.items():
@@ -204,5 +205,6 @@ STUDIES: dict[str, Study] = {
         "LavaGapS7, the fast highway, DoorKey-5x5 and grid16 (layout 0)",
         glance,
         seeds=SEEDS,
+        cells_explained=True,
     ),
 }
