@@ -6,10 +6,9 @@ exploration schedule and the n-step windows stay as the classifiers decide them)
 (every reward, no co-training path) and DOSPCoT itself, paired by seed, on the agents of the views the
 oracle trains (MiniGrid's oracle and the fast highway's train one view's agent, grid16's both). The
 control minus the oracle is what the path loses; DOSPCoT minus the control is what wrong or missing
-pseudo-rewards lose. The
-oracle's and DOSPCoT's runs are the record's own (the active-queries study's, and on grid16 the
-batched-seeds study's runs alone), all under the first defaults and numerics 1, so the control trains
-under them too."""
+pseudo-rewards lose. The oracle's and DOSPCoT's runs are the record's own (the active-queries study's,
+and on grid16 the batched-seeds study's runs alone), all under the first defaults and numerics 1, so
+the control trains under them too."""
 
 from __future__ import annotations
 
