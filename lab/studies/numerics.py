@@ -117,6 +117,7 @@ def tables_3(runs: list[TrialRun]) -> list[str]:
 
 
 ADOPT_3 = "numerics 3 non-inferior to 1 and to 2: adopt it"
+"""The numerics-3 study's verdict where both comparisons meet the adoption rule on both presets."""
 
 
 def glance_3(runs: list[TrialRun]) -> Glance:

@@ -62,21 +62,21 @@ def _sweeps() -> tuple[Sweep, ...]:
     """Per task: the control, then the oracle and DOSPCoT runs it pairs with. The fast highway's
     record holds five oracle seeds, so its oracle has a sweep of its own here."""
     sweeps: list[Sweep] = []
-    for task in TASKS:
-        if task == "grid16":
-            sweeps += [_control(task, {}), Sweep(ALONE, GRID16_PRESETS, {}, batch_seeds=1, seeds=20)]
+    for key in TASKS:
+        if key == "grid16":
+            sweeps += [_control(key, {}), Sweep(ALONE, GRID16_PRESETS, {}, batch_seeds=1, seeds=20)]
             continue
-        dospcot = _queries_sweep(f"queries-{task}-dospcot")
+        dospcot = _queries_sweep(f"queries-{key}-dospcot")
         fraction = {FRACTION: dospcot.grid[FRACTION]}
-        oracle = _queries_sweep(f"queries-{task}-oracle")
-        if task == "fasthighway":
-            oracle = dataclasses.replace(oracle, name=f"true-rewards-{task}-oracle")
+        oracle = _queries_sweep(f"queries-{key}-oracle")
+        if key == "fasthighway":
+            oracle = dataclasses.replace(oracle, name=f"true-rewards-{key}-oracle")
         # The fast highway's DOSPCoT sweep holds the five seeds its own study ran: read, not extended.
-        dospcot = dataclasses.replace(dospcot, seeds=5 if task == "fasthighway" else None)
-        sweeps += [_control(task, fraction), oracle, dospcot]
-        if task in DIAGNOSED:
-            control = _control(task, {**fraction, EXPLORATION: ("rounds",)})
-            sweeps.append(dataclasses.replace(control, name=f"{control.name}-rounds", seeds=DIAGNOSED[task]))
+        dospcot = dataclasses.replace(dospcot, seeds=5 if key == "fasthighway" else None)
+        sweeps += [_control(key, fraction), oracle, dospcot]
+        if key in DIAGNOSED:
+            control = _control(key, {**fraction, EXPLORATION: ("rounds",)})
+            sweeps.append(dataclasses.replace(control, name=f"{control.name}-rounds", seeds=DIAGNOSED[key]))
     return tuple(sweeps)
 
 
