@@ -195,14 +195,21 @@ def version_rows(
 
 
 def paired(
-    a: dict[int, TrialRun], b: dict[int, TrialRun], metric: str, across_numerics: bool = False
+    a: dict[int, TrialRun],
+    b: dict[int, TrialRun],
+    metric: str,
+    across_numerics: bool = False,
+    value: Callable[[TrialRun], float] | None = None,
 ) -> SeedSummary:
     """``metric`` of a minus b, paired by seed: mean and 95% bootstrap interval over the seeds both ran.
 
     :param across_numerics: compare runs of different numerics versions (only the study that compares
         the versions does); otherwise such a comparison is refused.
+    :param value: a run's figure, where it is not its mean over agents of ``metric`` (:func:`run_value`;
+        ``metric`` then names it in the error).
     :raises ValueError: the runs compared were trained under more than one numerics version.
     """
+    figure = value or (lambda run: run_value(run, metric))
     seeds = sorted(set(a) & set(b))
     versions = {numerics_of(r) for s in seeds for r in (a[s], b[s])}
     if len(versions) > 1 and not across_numerics:
@@ -210,7 +217,7 @@ def paired(
             f"a comparison of {metric} mixes runs of numerics versions {sorted(versions)}: train every arm "
             "under one version (cotraining.numerics) before comparing them"
         )
-    return SeedSummary.of([run_value(a[s], metric) - run_value(b[s], metric) for s in seeds])
+    return SeedSummary.of([figure(a[s]) - figure(b[s]) for s in seeds])
 
 
 def held_lines(

@@ -21,7 +21,7 @@ from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.batched_seeds import PRESETS as GRID16_PRESETS
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.queries import STUDIES as QUERIES
-from dospcot_lab.studies.tables import FRACTION, numerics_of
+from dospcot_lab.studies.tables import FRACTION, paired
 
 PSEUDO_REWARDS = "cotraining.pseudo_rewards"
 SEEDS = 10
@@ -118,10 +118,7 @@ def _view_value(run: TrialRun, views: list[str], metric: str = "success") -> flo
 
 def _paired(a: dict[int, TrialRun], b: dict[int, TrialRun], views: list[str]) -> SeedSummary:
     """Success of the agents on ``views``, a minus b, paired by seed over the seeds both ran."""
-    seeds = sorted(set(a) & set(b))
-    if len({numerics_of(run) for s in seeds for run in (a[s], b[s])}) > 1:
-        raise ValueError("the true-rewards study compares runs of one numerics version")
-    return SeedSummary.of([_view_value(a[s], views) - _view_value(b[s], views) for s in seeds])
+    return paired(a, b, "success", value=lambda run: _view_value(run, views))
 
 
 def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
