@@ -38,13 +38,48 @@ MARGIN = 0.1
 by seed, holds 0 and its lower end lies above -MARGIN (issue 78's bound, fixed before any run)."""
 METRICS = ("success", "agreement", "pseudo_accuracy", "coverage")
 EXPLORATION = "training.exploration"
-BY_ROUNDS = "control, exploration by rounds"
-ARMS = ("oracle", "control", BY_ROUNDS, "DOSPCoT")
-DIAGNOSED = {"lavagap": 5}
-"""The tasks whose control also trains with exploration by rounds (version 2's setting), on so many
-seeds: where the control fell short of the oracle, it asks whether the path loses the exploration
-that the pace ends (the pace reached 1 after LavaGap's first round, and the agents' epsilon its floor
-with it, while the oracle's falls over the rounds)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class Diagnosis:
+    """A second control that changes one part of the path, where the control fell short of the oracle.
+
+    :param arm: its arm's name in the tables.
+    :param what: what it changes, as the differences name it.
+    :param suffix: its sweeps' names end ``-<suffix>``.
+    :param params: the settings it adds to the control's.
+    :param seeds: the tasks it trains on, each with its number of seeds.
+    """
+
+    arm: str
+    what: str
+    suffix: str
+    params: dict[str, str]
+    seeds: dict[str, int]
+
+
+BY_ROUNDS = Diagnosis(
+    "control, exploration by rounds",
+    "exploration by rounds",
+    "rounds",
+    {EXPLORATION: "rounds"},
+    {"lavagap": 5, "doorkey": 5},
+)
+"""Version 2's exploration: the pace reached 1 after LavaGap's first round, and the agents' epsilon its
+floor with it, while the oracle's falls over the rounds. Added on LavaGap after its control's first
+three seeds, on DoorKey after its ten."""
+SHORT_ROUNDS = Diagnosis(
+    "control, 20 rounds of 2,500 steps",
+    "exploration by rounds and 20 rounds of 2,500 steps",
+    "short-rounds",
+    {EXPLORATION: "rounds", "training.rounds": "20", "training.steps_per_round": "2500"},
+    {"doorkey": 5, "lavagap": 5},
+)
+"""The same env steps in rounds a quarter as long: a step is rewarded in the agents' replay only once a
+round's co-training has admitted it, so the oracle learns from a step as soon as it is taken and the
+control a round later (in round 1, from the labelled share alone)."""
+DIAGNOSES = (BY_ROUNDS, SHORT_ROUNDS)
+ARMS = ("oracle", "control", *(d.arm for d in DIAGNOSES), "DOSPCoT")
 
 
 def _queries_sweep(name: str) -> Sweep:
@@ -74,9 +109,10 @@ def _sweeps() -> tuple[Sweep, ...]:
         # The fast highway's DOSPCoT sweep holds the five seeds its own study ran: read, not extended.
         dospcot = dataclasses.replace(dospcot, seeds=5 if key == "fasthighway" else None)
         sweeps += [_control(key, fraction), oracle, dospcot]
-        if key in DIAGNOSED:
-            control = _control(key, {**fraction, EXPLORATION: ("rounds",)})
-            sweeps.append(dataclasses.replace(control, name=f"{control.name}-rounds", seeds=DIAGNOSED[key]))
+        for diagnosis in (d for d in DIAGNOSES if key in d.seeds):
+            control = _control(key, {**fraction, **{k: (v,) for k, v in diagnosis.params.items()}})
+            name = f"{control.name}-{diagnosis.suffix}"
+            sweeps.append(dataclasses.replace(control, name=name, seeds=diagnosis.seeds[key]))
     return tuple(sweeps)
 
 
@@ -85,12 +121,13 @@ def _task(run: TrialRun) -> str:
 
 
 def _arm(run: TrialRun) -> str | None:
-    """A run's arm: the oracle, the control, DOSPCoT with the preset's uniform mask, or None (the
-    other query strategies of the runs read from the active-queries study)."""
+    """A run's arm: the oracle, the control or one of its diagnoses, DOSPCoT with the preset's uniform
+    mask, or None (the other query strategies of the runs read from the active-queries study)."""
     if run.trial.config.endswith("-oracle"):
         return "oracle"
     if run.trial.params.get(PSEUDO_REWARDS) == "hidden":
-        return BY_ROUNDS if run.trial.params.get(EXPLORATION) == "rounds" else "control"
+        added = {k: v for k, v in run.trial.params.items() if k not in (FRACTION, PSEUDO_REWARDS)}
+        return next((d.arm for d in DIAGNOSES if d.params == added), None if added else "control")
     return "DOSPCoT" if run.trial.params.get("training.label_strategy", "uniform") == "uniform" else None
 
 
@@ -125,15 +162,18 @@ def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
     """Success of the agents on the oracle's views, paired by seed: what the path loses (control minus
     oracle), what the pseudo-rewards lose (DOSPCoT minus control), and the whole gap (DOSPCoT minus
     oracle)."""
-    oracle, control, by_rounds, dospcot = (_by_seed(runs, task, arm) for arm in ARMS)
+    oracle, control, dospcot = (_by_seed(runs, task, arm) for arm in ("oracle", "control", "DOSPCoT"))
     views = oracle_views(runs, task)
-    return {
+    found = {
         "path: control minus oracle": _paired(control, oracle, views),
         "pseudo-rewards: DOSPCoT minus control": _paired(dospcot, control, views),
         "whole gap: DOSPCoT minus oracle": _paired(dospcot, oracle, views),
-        "exploration by rounds: its control minus the control": _paired(by_rounds, control, views),
-        "path under exploration by rounds: its control minus oracle": _paired(by_rounds, oracle, views),
     }
+    for diagnosis in DIAGNOSES:
+        changed = _by_seed(runs, task, diagnosis.arm)
+        found[f"{diagnosis.what}: its control minus the control"] = _paired(changed, control, views)
+        found[f"path under {diagnosis.what}: its control minus oracle"] = _paired(changed, oracle, views)
+    return found
 
 
 def _rows(arm: str, members: list[TrialRun]) -> list[str]:
