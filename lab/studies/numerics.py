@@ -19,6 +19,7 @@ from dospcot_lab.studies.tables import (
     NON_INFERIOR_WORDS,
     adoption_glance,
     held_lines,
+    measured_presets,
     non_inferior,
     numerics_of,
     paired,
@@ -128,16 +129,16 @@ def glance_3(runs: list[TrialRun]) -> Glance:
         "non-inferior where measured; a preset not measured yet",
         ADOPT_3,
     )
-    registered, adopted = (
-        adoption_glance({preset: _differences(runs, preset, 3, old) for preset in PRESETS}, change, verdicts)
-        for old, change in ((1, "numerics 3 minus 1"), (2, "numerics 3 minus 2"))
-    )
+    against_1, against_2 = ({p: _differences(runs, p, 3, old) for p in PRESETS} for old in (1, 2))
+    registered = adoption_glance(against_1, "numerics 3 minus 1", verdicts)
+    adopted = adoption_glance(against_2, "numerics 3 minus 2", verdicts)
     if registered.verdict == NOT_MEASURED:
         return registered
     if adopted.verdict == NOT_MEASURED:
         return Glance(registered.headline, verdicts[1])
     verdict = next(v for v in verdicts if v in (registered.verdict, adopted.verdict))
-    return Glance(f"{registered.headline}; minus 2: {adopted.headline.rsplit(': ', 1)[-1]}", verdict)
+    last = measured_presets(against_2)[-1]
+    return Glance(f"{registered.headline}; minus 2: {against_2[last]['success']}", verdict)
 
 
 NUMERICS_1 = (

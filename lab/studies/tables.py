@@ -254,6 +254,12 @@ ADOPTION_SEEDS = 20
 """The paired seeds per preset the adoption rule names: a preset with fewer decides nothing yet."""
 
 
+def measured_presets(differences: dict[str, dict[str, SeedSummary]]) -> list[str]:
+    """The presets of ``differences`` (preset -> metric -> paired difference) that hold the
+    :data:`ADOPTION_SEEDS` pairs the adoption rule names, in their order."""
+    return [preset for preset, by_metric in differences.items() if by_metric["success"].n >= ADOPTION_SEEDS]
+
+
 def adoption_glance(
     differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str]
 ) -> Glance:
@@ -267,9 +273,7 @@ def adoption_glance(
     :param verdicts: what to say where a difference is not non-inferior, where every measured one is
         but a preset is not measured yet, and where every one on every preset is.
     """
-    measured = [
-        preset for preset, by_metric in differences.items() if by_metric["success"].n >= ADOPTION_SEEDS
-    ]
+    measured = measured_presets(differences)
     if not measured:
         return Glance(f"{change}: {NOT_MEASURED}", NOT_MEASURED)
     diffs = [d for preset in measured for d in differences[preset].values()]
