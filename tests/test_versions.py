@@ -42,7 +42,14 @@ def test_a_config_without_the_key_gets_the_adopted_version_and_version_1_is_the_
 
 
 def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_adopted_defaults():
-    assert (lineage(1), lineage(2), lineage(3)) == ([], [2], [3])
+    assert (lineage(1), lineage(2), lineage(3), lineage(4)) == ([], [2], [3], [3, 4])
+    # version 4 is version 3 with exploration by rounds, and moves nothing else
+    adopted, fourth = (
+        load_config("minigrid-doorkey-dospcot"),
+        load_config("minigrid-doorkey-dospcot", ["defaults=4"]),
+    )
+    rounds = dataclasses.replace(adopted.training, exploration="rounds")
+    assert dataclasses.replace(adopted, defaults=4, training=rounds) == fourth
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -97,9 +104,10 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 4; the versions: 1, 2 \(candidate\), 3 \(adopted\)$",
+        match=r"^defaults: unknown version 5; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        r"4 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=4"])
+        load_config("tiny", ["defaults=5"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -124,7 +132,7 @@ def test_a_run_folder_written_before_versions_reads_as_version_1(tmp_path):
 def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(capsys):
     assert main(["config", "tiny", "--set", "defaults=2"]) == 0
     out = capsys.readouterr().out
-    versions = "(the versions: 1, 2 (candidate), 3 (adopted))"
+    versions = "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate))"
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
     assert "refit_new_classes = true  # default true (defaults = 1: false)" in out

@@ -13,7 +13,10 @@ numerics study showed non-inferior on both of its presets (docs/results/numerics
 **candidate**, built on version 1: the settings under which the label-budget study's DOSPCoT reached
 90% of the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on. The
 defaults study did not show it non-inferior on grid16 (docs/guide/defaults.md), so ``defaults = 2``
-opts in. Nothing here imports torch.
+opts in. Version 4, a candidate, is version 3 with exploration by rounds: an agent's exploration falls
+with the share of rounds done, where under the pace it reached its floor as soon as the co-trainer had
+admitted the pool (after a round or two), which the true-rewards study found costs co-trained agents
+on MiniGrid what the oracle learns. Nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -140,13 +143,20 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
             "numerics study: float32 fits over the samples that carry weight, non-inferior on both presets",
         ),
     ),
+    4: (
+        MovedDefault(
+            "training.exploration",
+            lambda table: "rounds",
+            "true-rewards study: exploration by rounds, where the pace ended it once the pool was admitted",
+        ),
+    ),
 }
 """Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
 
-BASES = {2: 1, 3: 1}
+BASES = {2: 1, 3: 1, 4: 3}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2})
+CANDIDATES = frozenset({2, 4})
 """Versions a config may opt into that no study has adopted yet."""
 
 

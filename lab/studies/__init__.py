@@ -26,6 +26,7 @@
     dospcot-lab study budget --docs           # docs/preregistration-budget.md: B1-B4, seeds 100-109
     dospcot-lab study numerics --docs         # numerics 2 vs 1: grid16-dospcot, DoorKey, seeds 0-19
     dospcot-lab study numerics-3 --docs       # numerics 3 vs 1: the same presets and seeds, adoption rule
+    dospcot-lab study defaults-4 --docs       # version 4 (exploration by rounds) vs 3, the same seeds
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
     dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
 
@@ -74,6 +75,7 @@ from dospcot_lab.studies import (
     budget_confirm,
     budget_explore,
     defaults,
+    defaults_4,
     grid_studies,
     highway_studies,
     label_sources,
@@ -122,6 +124,7 @@ STUDIES: dict[str, Study] = {
     **budget_confirm.STUDIES,
     **numerics.STUDIES,
     **defaults.STUDIES,
+    **defaults_4.STUDIES,
     **sizing.STUDIES,
     **true_rewards.STUDIES,
     **views.STUDIES,

@@ -9,6 +9,8 @@ from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES, sweep_spec
 from dospcot_lab.studies.defaults import glance, tables
+from dospcot_lab.studies.defaults_4 import glance as glance_4
+from dospcot_lab.studies.defaults_4 import tables as tables_4
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 
@@ -60,3 +62,37 @@ def test_the_studys_sweeps_train_each_preset_under_both_versions_and_pin_nothing
     assert sorted({t.seed for t in trials}) == list(range(20))
     first = {t.load_config().defaults for t in trials}
     assert first == {1, 2}
+
+
+def _run_4(tmp_path: Path, preset: str, seed: int, version: int, success: float) -> TrialRun:
+    """A run of the defaults-4 study: version 4's own, or version 3's (a numerics-2 run)."""
+    run_dir = tmp_path / f"{preset}-{version}-{seed}"
+    run_dir.mkdir()
+    (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0}))
+    summary = {"mean": {"success": success, "pseudo_accuracy": 0.9, "labelled_steps": 40.0}}
+    params = {"defaults": "4"} if version == 4 else {"cotraining.numerics": "2"}
+    return TrialRun(Trial(preset, preset, params, seed), summary, [], run_dir)
+
+
+def test_version_4_is_paired_with_the_numerics_2_runs_and_a_failing_preset_decides_alone(tmp_path):
+    grid16 = [
+        _run_4(tmp_path, "grid16-dospcot", seed, version, 1.0 - 0.5 * (version == 4 and seed < 4))
+        for seed in range(ADOPTION_SEEDS)
+        for version in (3, 4)
+    ]
+    # grid16's version 4 loses half its success on 4 of 20 seeds: -0.1 on average, far below the margin
+    assert glance_4(grid16).verdict == "version 4 not shown non-inferior: not adopted"
+    assert glance_4(grid16).headline.startswith(
+        "grid16-dospcot success, defaults 4 minus 3, paired by seed: -0.100"
+    )
+    assert "| `grid16-dospcot` | 4 | 0.900 [" in "\n".join(tables_4(grid16))
+    # the same on the first 19 seeds decides nothing: the rule names 20 pairs
+    assert glance_4([r for r in grid16 if r.trial.seed < 19]).verdict == "not measured yet"
+
+
+def test_version_4_trains_each_preset_under_version_3_with_exploration_by_rounds():
+    sweep = STUDIES["defaults-4"].sweeps[0]
+    trials = sweep_spec(sweep, 20).trials(check_task=False)
+    assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
+    cfg = trials[0].load_config()
+    assert (cfg.defaults, cfg.training.exploration, cfg.cotraining.numerics) == (4, "rounds", 2)
