@@ -6,6 +6,9 @@ for success and for pseudo-reward accuracy (non-inferiority; docs/guide/defaults
 
 from __future__ import annotations
 
+from collections.abc import Callable
+from dataclasses import dataclass
+
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
@@ -25,55 +28,65 @@ METRICS = tuple(ADOPTION_METRICS)
 VERSIONS = (1, 2)
 
 
-def _version(run: TrialRun) -> int:
-    return int(run.trial.params.get("defaults", 1))
+@dataclass(frozen=True)
+class VersionPair:
+    """A new version of the defaults against an old one on :data:`PRESETS`, paired by seed, decided by
+    the adoption rule: a study's tables and its row of the results at a glance.
 
+    :param old: the version adopted when the study was registered.
+    :param new: the candidate.
+    :param version_of: the version a run of the study's sweeps stands for (None: a run it does not read).
+    """
 
-def _by_seed(runs: list[TrialRun], preset: str, version: int) -> dict[int, TrialRun]:
-    return {r.trial.seed: r for r in runs if r.trial.config == preset and _version(r) == version}
+    old: int
+    new: int
+    version_of: Callable[[TrialRun], int | None]
 
+    def by_seed(self, runs: list[TrialRun], preset: str, version: int) -> dict[int, TrialRun]:
+        """The runs of ``preset`` standing for ``version``, by seed."""
+        return {r.trial.seed: r for r in runs if r.trial.config == preset and self.version_of(r) == version}
 
-def _differences(runs: list[TrialRun], preset: str) -> dict[str, SeedSummary]:
-    """Per metric: version 2 minus version 1, paired by seed."""
-    new, old = _by_seed(runs, preset, 2), _by_seed(runs, preset, 1)
-    return {metric: paired(new, old, metric) for metric in METRICS}
+    def differences(self, runs: list[TrialRun], preset: str) -> dict[str, SeedSummary]:
+        """Per metric: the new version minus the old, paired by seed."""
+        new, old = self.by_seed(runs, preset, self.new), self.by_seed(runs, preset, self.old)
+        return {metric: paired(new, old, metric) for metric in METRICS}
 
-
-def tables(runs: list[TrialRun]) -> list[str]:
-    """Per preset and version: success, pseudo-reward accuracy, labels and CPU time per run; then each
-    difference, version 2 minus 1, against the non-inferiority margin."""
-    lines = [
-        "",
-        *version_rows(
-            lambda preset, version: list(_by_seed(runs, preset, version).values()),
+    def tables(self, runs: list[TrialRun]) -> list[str]:
+        """Per preset and version: success, pseudo-reward accuracy, labels and CPU time per run; then
+        each difference, new minus old, against the non-inferiority margin."""
+        rows = version_rows(
+            lambda preset, version: list(self.by_seed(runs, preset, version).values()),
             PRESETS,
-            VERSIONS,
+            (self.old, self.new),
             "defaults",
             {**ADOPTION_METRICS, "labelled_steps": "labels"},
-        ),
-    ]
-    differences = {preset: _differences(runs, preset) for preset in PRESETS}
-    return [
-        *lines,
-        "",
-        "Version 2 minus version 1, paired by seed:",
-        "",
-        *held_lines(differences, non_inferior, NON_INFERIOR_WORDS),
-    ]
+        )
+        differences = {preset: self.differences(runs, preset) for preset in PRESETS}
+        return [
+            "",
+            *rows,
+            "",
+            f"Version {self.new} minus version {self.old}, paired by seed:",
+            "",
+            *held_lines(differences, non_inferior, NON_INFERIOR_WORDS),
+        ]
+
+    def glance(self, runs: list[TrialRun]) -> Glance:
+        """The headline: success, new minus old, on the last preset holding its 20 pairs; the verdict:
+        adopt the new version only where every difference on both presets is non-inferior."""
+        return adoption_glance(
+            {preset: self.differences(runs, preset) for preset in PRESETS},
+            f"defaults {self.new} minus {self.old}",
+            (
+                f"version {self.new} not shown non-inferior: not adopted",
+                "not measured yet (a preset lacks one version's runs)",
+                f"version {self.new} non-inferior: adopt it",
+            ),
+        )
 
 
-def glance(runs: list[TrialRun]) -> Glance:
-    """The headline: DoorKey's success, version 2 minus 1 (grid16's until DoorKey holds its 20 seeds);
-    the verdict: adopt version 2 only where every difference on both presets is non-inferior."""
-    return adoption_glance(
-        {preset: _differences(runs, preset) for preset in PRESETS},
-        "defaults 2 minus 1",
-        (
-            "version 2 not shown non-inferior: not adopted",
-            "not measured yet (a preset lacks one version's runs)",
-            "version 2 non-inferior: adopt it",
-        ),
-    )
+TWO_AGAINST_ONE = VersionPair(1, 2, lambda run: int(run.trial.params.get("defaults", 1)))
+"""The defaults study: each run names its version in its grid."""
 
 
 VERSION_SWEEPS = {
@@ -86,10 +99,10 @@ VERSION_SWEEPS = {
 STUDIES: dict[str, Study] = {
     "defaults": Study(
         tuple(VERSION_SWEEPS.values()),
-        tables,
+        TWO_AGAINST_ONE.tables,
         "Version 2 of the defaults against version 1",
         "grid16 (layout 0) and MiniGrid DoorKey-5x5",
-        glance,
+        TWO_AGAINST_ONE.glance,
         seeds=ADOPTION_SEEDS,
         confirmatory=True,
     ),

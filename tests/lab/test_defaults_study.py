@@ -8,10 +8,13 @@ from pathlib import Path
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES, sweep_spec
-from dospcot_lab.studies.defaults import glance, tables
-from dospcot_lab.studies.defaults_4 import glance as glance_4
-from dospcot_lab.studies.defaults_4 import tables as tables_4
+from dospcot_lab.studies.declaration import NOT_MEASURED
+from dospcot_lab.studies.defaults import TWO_AGAINST_ONE
+from dospcot_lab.studies.defaults_4 import FOUR_AGAINST_THREE
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
+
+glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
+glance_4, tables_4 = FOUR_AGAINST_THREE.glance, FOUR_AGAINST_THREE.tables
 
 
 def _run(tmp_path: Path, preset: str, seed: int, version: int, success: float) -> TrialRun:
@@ -87,7 +90,7 @@ def test_version_4_is_paired_with_the_numerics_2_runs_and_a_failing_preset_decid
     )
     assert "| `grid16-dospcot` | 4 | 0.900 [" in "\n".join(tables_4(grid16))
     # the same on the first 19 seeds decides nothing: the rule names 20 pairs
-    assert glance_4([r for r in grid16 if r.trial.seed < 19]).verdict == "not measured yet"
+    assert glance_4([r for r in grid16 if r.trial.seed < 19]).verdict == NOT_MEASURED
 
 
 def test_version_4_trains_each_preset_under_version_3_with_exploration_by_rounds():
