@@ -58,6 +58,15 @@ def build_parser() -> argparse.ArgumentParser:
     )
     study.add_argument("--docs", action="store_true", help="also write docs/results/<study>.md (and its row)")
     study.add_argument("--render-only", action="store_true", help="train nothing: tables from finished runs")
+    study.add_argument(
+        "--sweep",
+        action="append",
+        default=[],
+        dest="sweeps",
+        metavar="NAME",
+        help="train this sweep of the study alone (repeatable; default: every one); the tables still read "
+        "every finished run of the study",
+    )
     bench = commands.add_parser(
         "bench",
         help="measure performance claims against their peers and write BENCHMARKS.md",
@@ -112,6 +121,7 @@ def _repository(args: argparse.Namespace, needed: bool) -> Repository | None:
 def _study(args: argparse.Namespace, argv: Sequence[str]) -> int:
     from dospcot.config.errors import ConfigError
     from dospcot.config.loading import check_overrides
+    from dospcot.config.presets import did_you_mean
     from dospcot.run.sizes import check_sizes
     from dospcot_lab.studies import get_study, header_command, run_study, sweep_spec
 
@@ -122,6 +132,12 @@ def _study(args: argparse.Namespace, argv: Sequence[str]) -> int:
         raise ConfigError(str(err)) from None
     if args.runs_dir is None:  # relative, as the pages' headers name it
         args.runs_dir = Path(os.path.relpath(repo.root / "runs" / "sweeps")) if repo else Path("runs/sweeps")
+    names = [sweep.name for sweep in study.sweeps]
+    for name in args.sweeps:
+        if name not in names:
+            raise ConfigError(
+                f"{args.study} has no sweep {name!r}{did_you_mean(name, names, 'its sweeps', None)}"
+            )
     specs = [sweep_spec(sweep, 1, args.overrides) for sweep in study.sweeps]
     for spec in specs:  # a --set of a key a sweep's grid varies would lose to it
         check_overrides(args.overrides, list(spec.grid), "--seeds", f"the study's grid of {spec.configs[0]}:")

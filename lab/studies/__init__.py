@@ -142,8 +142,18 @@ def get_study(name: str) -> Study:
 
 def header_command(program: Sequence[str], study: str, options: Sequence[str]) -> str:
     """The command a study's header names: ``program``, the study and its options, less
-    ``--render-only``, so that tables rebuilt from finished runs name the command that trained them."""
-    return shlex.join([*program, study, *(option for option in options if option != "--render-only")])
+    ``--render-only`` and ``--sweep NAME``, so that tables rebuilt from finished runs name the command
+    that trains all of them."""
+    kept: list[str] = []
+    names_a_sweep = False  # the option before was --sweep: this one is its name
+    for option in options:
+        if names_a_sweep:
+            names_a_sweep = False
+        elif option == "--sweep":
+            names_a_sweep = True
+        elif option != "--render-only" and not option.startswith("--sweep="):
+            kept.append(option)
+    return shlex.join([*program, study, *kept])
 
 
 def study_runs(
@@ -236,7 +246,7 @@ def run_study(args: argparse.Namespace, command: str, repo: Repository | None, p
     block into ``repo`` (its docs/results/ and README.md). ``command`` is the header's command line
     (:func:`header_command`); ``prog`` starts each one-line error, on which it exits with status 1.
     ``args`` holds what the lab's ``study`` command parses: study, seeds, workers, backend, overrides,
-    runs_dir, docs and render_only.
+    runs_dir, docs, render_only and sweeps (the sweeps to train; empty: every one).
 
     Without ``--docs`` nothing is written outside ``args.runs_dir``. With it, a study whose runs folder
     holds no run of it keeps its published page: ``--docs`` then writes a page that says the study is
@@ -270,7 +280,7 @@ def run_study(args: argparse.Namespace, command: str, repo: Repository | None, p
         if args.render_only:
             check_record(study, args.runs_dir, args.seeds, args.overrides, suffix)
         else:
-            for sweep in study.sweeps:
+            for sweep in (s for s in study.sweeps if not args.sweeps or s.name in args.sweeps):
                 spec = sweep_spec(sweep, args.seeds, args.overrides, study.first_seed)
                 sweep_dir = args.runs_dir / f"{sweep.name}{suffix}"
                 failed = run_sweep(

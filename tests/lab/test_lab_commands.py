@@ -140,3 +140,35 @@ def test_workers_default_to_the_cores_this_process_may_use(command, what, capsys
         parser.parse_args([command, "--help"])
     help_text = " ".join(capsys.readouterr().out.split())
     assert f"--workers WORKERS {what} (default: the cores this process may use, {cores} here)" in help_text
+
+
+def test_a_study_trains_the_sweeps_named_alone_and_its_header_names_the_whole_study(
+    tmp_path, capsys, monkeypatch
+):
+    from types import SimpleNamespace
+
+    from dospcot_lab import studies
+    from dospcot_lab.cli import main as lab_main
+
+    started = []
+    monkeypatch.setattr(
+        studies,
+        "run_sweep",
+        lambda sweep_dir, spec, **options: started.append(sweep_dir.name) or SimpleNamespace(failed={}),
+    )
+    runs = tmp_path / "sweeps"
+    argv = ["study", "true-rewards", "--sweep", "true-rewards-doorkey-rounds", "--runs-dir", str(runs)]
+    with pytest.raises(SystemExit, match="no finished run of this study"):
+        lab_main([*argv, "--sweep=true-rewards-grid16"])
+    assert started == ["true-rewards-doorkey-rounds", "true-rewards-grid16"]
+    # A sweep the study lacks is one line naming the one meant, before anything trains.
+    assert lab_main(["study", "true-rewards", "--sweep", "true-rewards-doorkey-round"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(
+        "dospcot-lab study: error: true-rewards has no sweep 'true-rewards-doorkey-round'; "
+        "did you mean 'true-rewards-doorkey-rounds' or "
+    )
+    assert err.count("\n") == 1
+    assert started == ["true-rewards-doorkey-rounds", "true-rewards-grid16"]
+    header = studies.header_command(("dospcot-lab", "study"), "x", ["--sweep", "a", "--docs", "--sweep=b"])
+    assert header == "dospcot-lab study x --docs"
