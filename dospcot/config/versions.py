@@ -15,8 +15,8 @@ numerics study showed non-inferior on both of its presets (docs/results/numerics
 defaults study did not show it non-inferior on grid16 (docs/guide/defaults.md), so ``defaults = 2``
 opts in. Version 4, a candidate, is version 3 with exploration by rounds: an agent's exploration falls
 with the share of rounds done, where under the pace it reached its floor as soon as the co-trainer had
-admitted the pool (after a round or two), which the true-rewards study found costs co-trained agents
-on MiniGrid what the oracle learns. Nothing here imports torch.
+admitted the pool (after a round or two); on LavaGap the true-rewards study found that this costs
+co-trained agents part of what the oracle learns from the same rewards. Nothing here imports torch.
 """
 
 from __future__ import annotations
