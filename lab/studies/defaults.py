@@ -72,8 +72,8 @@ class VersionPair:
         ]
 
     def glance(self, runs: list[TrialRun]) -> Glance:
-        """The headline: success, new minus old, on the last preset holding its 20 pairs; the verdict:
-        adopt the new version only where every difference on both presets is non-inferior."""
+        """The headline: success, new minus old, on the preset that decides (a failing one first); the
+        verdict: adopt the new version only where every difference on both presets is non-inferior."""
         return adoption_glance(
             {preset: self.differences(runs, preset) for preset in PRESETS},
             f"defaults {self.new} minus {self.old}",

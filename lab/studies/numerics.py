@@ -18,8 +18,8 @@ from dospcot_lab.studies.tables import (
     ADOPTION_SEEDS,
     NON_INFERIOR_WORDS,
     adoption_glance,
+    deciding_preset,
     held_lines,
-    measured_presets,
     non_inferior,
     numerics_of,
     paired,
@@ -122,8 +122,9 @@ ADOPT_3 = "numerics 3 non-inferior to 1 and to 2: adopt it"
 
 
 def glance_3(runs: list[TrialRun]) -> Glance:
-    """The headline: success, numerics 3 minus 1 and minus 2, on the last preset measured; the verdict
-    by the adoption rule for a default, which both comparisons must meet on both presets."""
+    """The headline: success, numerics 3 minus 1 and minus 2, on the preset deciding the registered
+    comparison (:func:`~dospcot_lab.studies.tables.deciding_preset`); the verdict by the adoption rule
+    for a default, which both comparisons must meet on both presets."""
     verdicts = (
         "numerics 3 not shown non-inferior",
         "non-inferior where measured; a preset not measured yet",
@@ -137,8 +138,9 @@ def glance_3(runs: list[TrialRun]) -> Glance:
     if adopted.verdict == NOT_MEASURED:
         return Glance(registered.headline, verdicts[1])
     verdict = next(v for v in verdicts if v in (registered.verdict, adopted.verdict))
-    last = measured_presets(against_2)[-1]
-    return Glance(f"{registered.headline}; minus 2: {against_2[last]['success']}", verdict)
+    # The headline's preset, the one deciding the registered comparison, named against numerics 2 too.
+    preset = deciding_preset(against_1)
+    return Glance(f"{registered.headline}; minus 2: {against_2[preset]['success']}", verdict)
 
 
 NUMERICS_1 = (

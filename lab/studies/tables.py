@@ -260,13 +260,23 @@ def measured_presets(differences: dict[str, dict[str, SeedSummary]]) -> list[str
     return [preset for preset, by_metric in differences.items() if by_metric["success"].n >= ADOPTION_SEEDS]
 
 
+def deciding_preset(differences: dict[str, dict[str, SeedSummary]]) -> str | None:
+    """The preset a study's headline names: the first measured one where a difference is not
+    non-inferior (it decides the verdict), else the last measured; None where none is measured."""
+    measured = measured_presets(differences)
+    for preset in measured:
+        if not all(non_inferior(d) for d in differences[preset].values()):
+            return preset
+    return measured[-1] if measured else None
+
+
 def adoption_glance(
     differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str]
 ) -> Glance:
-    """The row of a study that decides a default: its headline, ``change`` in success on the last preset
-    measured, and its verdict by :func:`non_inferior` over every measured difference. A preset counts
-    as measured once it holds the :data:`ADOPTION_SEEDS` pairs the rule names: a verdict on fewer
-    would be read off a part of the sample.
+    """The row of a study that decides a default: its headline, ``change`` in success on the preset that
+    decides (:func:`deciding_preset`), and its verdict by :func:`non_inferior` over every measured
+    difference. A preset counts as measured once it holds the :data:`ADOPTION_SEEDS` pairs the rule
+    names: a verdict on fewer would be read off a part of the sample.
 
     :param differences: preset -> metric -> the paired difference, new minus old.
     :param change: the comparison in words (``"numerics 2 minus 1"``).
@@ -283,7 +293,7 @@ def adoption_glance(
         verdict = verdicts[1]
     else:
         verdict = verdicts[2]
-    preset = measured[-1]
+    preset = deciding_preset(differences)
     return Glance(f"{preset} success, {change}, paired by seed: {differences[preset]['success']}", verdict)
 
 
