@@ -91,6 +91,15 @@ def test_version_4_is_paired_with_the_numerics_2_runs_and_a_failing_preset_decid
     assert "| `grid16-dospcot` | 4 | 0.900 [" in "\n".join(tables_4(grid16))
     # the same on the first 19 seeds decides nothing: the rule names 20 pairs
     assert glance_4([r for r in grid16 if r.trial.seed < 19]).verdict == NOT_MEASURED
+    # DoorKey measured and gaining: the headline still names grid16, the preset that decided
+    doorkey = [
+        _run_4(tmp_path, "minigrid-doorkey-dospcot", seed, version, 0.5 + 0.5 * (version == 4))
+        for seed in range(ADOPTION_SEEDS)
+        for version in (3, 4)
+    ]
+    both = glance_4(grid16 + doorkey)
+    assert both.verdict == "version 4 not shown non-inferior: not adopted"
+    assert both.headline.startswith("grid16-dospcot success, defaults 4 minus 3, paired by seed: -0.100")
 
 
 def test_version_4_trains_each_preset_under_version_3_with_exploration_by_rounds():
