@@ -114,3 +114,26 @@ def test_exploration_by_rounds_is_a_second_control_compared_with_the_control_and
     sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
     by_rounds = sweeps["true-rewards-lavagap-rounds"]
     assert by_rounds.grid == {**sweeps["true-rewards-lavagap"].grid, "training.exploration": ("rounds",)}
+
+
+def test_shorter_rounds_are_a_diagnosis_of_their_own_told_apart_from_exploration_by_rounds_alone():
+    hidden = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1", "training.exploration": "rounds"}
+    short = {**hidden, "training.rounds": "20", "training.steps_per_round": "2500"}
+    runs = _lavagap([0.5, 0.5], [1.0, 1.0], [0.0, 0.0])
+    runs += [_run("minigrid-lavagap-dospcot", s, 1.0, short) for s in range(2)]
+    runs += [_run("minigrid-lavagap-dospcot", s, 0.5, hidden) for s in range(2)]
+    lines = tables(runs)
+    what = "exploration by rounds and 20 rounds of 2,500 steps"
+    zero, half = SeedSummary.of([0.0, 0.0]), SeedSummary.of([0.5, 0.5])
+    assert f"- LavaGapS7 (image), {what}: its control minus the control: {half} over 2 seeds." in lines
+    assert (
+        f"- LavaGapS7 (image), exploration by rounds: its control minus the control: {zero} over 2 seeds."
+        in lines
+    )
+    # A hidden-rewards run with settings no diagnosis names belongs to no arm.
+    odd = {**hidden, "training.rounds": "7"}
+    assert tables([*runs, _run("minigrid-lavagap-dospcot", 0, 0.0, odd)]) == lines
+    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
+    for task in ("doorkey", "lavagap"):
+        grid = sweeps[f"true-rewards-{task}-short-rounds"].grid
+        assert grid["training.rounds"] == ("20",) and grid["training.steps_per_round"] == ("2500",)
