@@ -260,14 +260,16 @@ def measured_presets(differences: dict[str, dict[str, SeedSummary]]) -> list[str
     return [preset for preset, by_metric in differences.items() if by_metric["success"].n >= ADOPTION_SEEDS]
 
 
+def _fails(by_metric: dict[str, SeedSummary]) -> bool:
+    """Whether a preset's differences (metric -> paired difference) fail the adoption rule."""
+    return not all(non_inferior(d) for d in by_metric.values())
+
+
 def deciding_preset(differences: dict[str, dict[str, SeedSummary]]) -> str | None:
     """The preset a study's headline names: the first measured one where a difference is not
     non-inferior (it decides the verdict), else the last measured; None where none is measured."""
     measured = measured_presets(differences)
-    for preset in measured:
-        if not all(non_inferior(d) for d in differences[preset].values()):
-            return preset
-    return measured[-1] if measured else None
+    return next((p for p in measured if _fails(differences[p])), measured[-1] if measured else None)
 
 
 def adoption_glance(
@@ -286,14 +288,13 @@ def adoption_glance(
     measured = measured_presets(differences)
     if not measured:
         return Glance(f"{change}: {NOT_MEASURED}", NOT_MEASURED)
-    diffs = [d for preset in measured for d in differences[preset].values()]
-    if not all(non_inferior(d) for d in diffs):
+    preset = deciding_preset(differences)  # a failing preset where there is one
+    if _fails(differences[preset]):
         verdict = verdicts[0]
     elif len(measured) < len(differences):
         verdict = verdicts[1]
     else:
         verdict = verdicts[2]
-    preset = deciding_preset(differences)
     return Glance(f"{preset} success, {change}, paired by seed: {differences[preset]['success']}", verdict)
 
 
