@@ -50,6 +50,13 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     )
     rounds = dataclasses.replace(adopted.training, exploration="rounds")
     assert dataclasses.replace(adopted, defaults=4, training=rounds) == fourth
+    # version 5 is version 3 with four co-training passes a round, for a run that learns single rewards
+    fifth = load_config("minigrid-doorkey-dospcot", ["defaults=5"])
+    passes = dataclasses.replace(adopted.training, cotrain_passes=4)
+    assert dataclasses.replace(adopted, defaults=5, training=passes) == fifth
+    assert load_config("minigrid-doorkey-oracle", ["defaults=5"]).training.cotrain_passes == 1
+    assert load_config("tiny", ["defaults=5", "training.steps_per_round=3"]).training.cotrain_passes == 3
+    assert load_config("tiny", ["defaults=5", "training.segment_length=4"]).training.cotrain_passes == 1
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -104,10 +111,10 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 5; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
-        r"4 \(candidate\)$",
+        match=r"^defaults: unknown version 6; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        r"4 \(candidate\), 5 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=5"])
+        load_config("tiny", ["defaults=6"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -132,7 +139,7 @@ def test_a_run_folder_written_before_versions_reads_as_version_1(tmp_path):
 def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(capsys):
     assert main(["config", "tiny", "--set", "defaults=2"]) == 0
     out = capsys.readouterr().out
-    versions = "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate))"
+    versions = "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate))"
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
     assert "refit_new_classes = true  # default true (defaults = 1: false)" in out

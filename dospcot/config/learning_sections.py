@@ -60,6 +60,13 @@ class TrainingConfig(AddedKeys):
         schedule ends exploration after a round or two), baselines the share of rounds done.
         ``"rounds"``: the share of rounds done for every method, so co-trained agents and baselines
         explore alike.
+    :param cotrain_passes: co-training passes per round (co-training and the reward-model peer). 1: the
+        round collects ``steps_per_round`` steps, then co-trains. c > 1: the collection is cut into c
+        equal parts and every part but the last is followed by a pass of the co-trainer that writes the
+        reward table, so a step the agents take is rewarded in their replay within a part rather than a
+        round; the self-paced schedule ages by 1/c per pass, so it admits what it would by the round's
+        end. Labels are bought, the policy updated, exploration aged and the agents evaluated once a
+        round, as under 1.
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.
@@ -140,9 +147,11 @@ class TrainingConfig(AddedKeys):
     rater: Literal["simulated", "file"] = "simulated"
     agent_draws: AgentDraws = "shared"
     stop_patience: int = 0
+    cotrain_passes: int = 1
 
     added_keys: ClassVar[dict[str, Any]] = {
         "agent_draws": "shared",
+        "cotrain_passes": 1,
         "query_end_states": "random",
         "stop_patience": 0,
     }
@@ -153,6 +162,11 @@ class TrainingConfig(AddedKeys):
         if self.rounds < 1 or self.steps_per_round < 1:
             raise ValueError(
                 f"rounds and steps_per_round must be >= 1, got {self.rounds}, {self.steps_per_round}"
+            )
+        if not 1 <= self.cotrain_passes <= self.steps_per_round:
+            raise ValueError(
+                f"cotrain_passes must lie in [1, steps_per_round = {self.steps_per_round}], "
+                f"got {self.cotrain_passes}"
             )
         check_at_least(self, 0, "update_steps")
         if self.exploration not in ("pace", "rounds"):

@@ -43,9 +43,10 @@ REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {
     "cotraining.ensemble_size",
     "cotraining.classifier",
     "cotraining.pseudo_rewards",
+    "training.cotrain_passes",
 }
-"""The ``[cotraining]`` keys read by a method that learns rewards alone (``cotraining.classifier``: its
-section), which the baselines never read. ``numerics`` is not among them: every run names it in its
+"""The keys read by a method that learns rewards alone (``cotraining.classifier``: its section), which
+the baselines never read. ``numerics`` is not among them: every run names it in its
 ``run_info.json``, so a study pins it for every arm."""
 
 
@@ -141,6 +142,12 @@ class TrainConfig:
             raise ConfigError(
                 "training.segment_length: segment labels reveal no single reward, so demonstrations "
                 "cannot be labels too; set demonstrations.labels = false"
+            )
+        if self.training.cotrain_passes > 1:
+            # A pass inside a round would cut the segments of the episodes still running.
+            raise ConfigError(
+                "training.cotrain_passes: segment labels are co-trained once a round, on whole segments; "
+                f"set cotrain_passes = 1 with segment_length = {self.training.segment_length}"
             )
 
     def _check_queries(self) -> None:

@@ -43,7 +43,7 @@ import numpy as np
 import torch as th
 
 from dospcot.core import sb3_engine as sb3
-from dospcot.core.sb3_round import CoTrainingRun
+from dospcot.core.sb3_round import CoTrainingRun, collection_parts
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
 from dospcot.policies.stacked_esarsa.stacked_q_network import linear_layers
@@ -138,11 +138,17 @@ class BatchedRuns:
         """One round of every member; returns each member's records."""
         for run in self.runs:
             run.round += 1
-        for k in range(self.n_views):  # 1. collect and learn, view by view
-            for run in self.runs:
-                run.seed_round_env(k)
-            self._collect(k, on_steps)
-            self._write_back(k)
+        passes = self.cfg.training.cotrain_passes
+        for part, steps in enumerate(collection_parts(self.cfg.training.steps_per_round, passes)):
+            for k in range(self.n_views):  # 1. collect and learn, view by view
+                if part == 0:
+                    for run in self.runs:
+                        run.seed_round_env(k)
+                self._collect(k, steps, on_steps)
+                self._write_back(k)
+            if part < passes - 1:  # 1a. a pass inside the round (training.cotrain_passes)
+                for run in self.runs:
+                    run.cotrain(record=False)
         for run in self.runs:
             run.collected = True
         stats = [run.label_and_cotrain() for run in self.runs]  # 2. label and co-train
@@ -154,11 +160,10 @@ class BatchedRuns:
     def _agents(self, k: int) -> list[ExpectedSarsaDQN]:
         return [run.agents[k] for run in self.runs]
 
-    def _collect(self, k: int, on_steps: Callable[[int], None] | None) -> None:
-        """``steps_per_round`` lock steps of every member's agent ``k`` (DQN's ``learn`` semantics)."""
+    def _collect(self, k: int, steps: int, on_steps: Callable[[int], None] | None) -> None:
+        """``steps`` lock steps of every member's agent ``k`` (DQN's ``learn`` semantics)."""
         agents, learner, draws = self._agents(k), self.learners[k], self.draws[k]
         first = agents[0]
-        steps = self.cfg.training.steps_per_round
         for agent in agents:
             sb3.start_collection(agent, steps)
         envs = [agent.get_env() for agent in agents]

@@ -8,6 +8,9 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
 1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
    rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
    time, so what earlier rounds admitted drives this round's updates.
+   Under ``training.cotrain_passes`` c > 1 the collection comes in c parts, each but the last
+   followed by steps 2-3, so a step the agents take is rewarded in their replay a part later, not a
+   round later.
    **Queries** (an active ``training.label_strategy``, :mod:`dospcot.core.queries`): a rater labels
    the samples the strategy chooses, within the budget the uniform mask would spend.
 2. **Co-train** (method ``"dospcot"``): the task turns its store into a
@@ -141,6 +144,12 @@ def make_agent(
     return agent
 
 
+def collection_parts(steps: int, passes: int) -> list[int]:
+    """A round's ``steps`` env steps per agent cut into ``passes`` parts as equal as they can be, the
+    longer ones first (``training.cotrain_passes``): ``collection_parts(10, 3) == [4, 3, 3]``."""
+    return [steps // passes + (part < steps % passes) for part in range(passes)]
+
+
 class CoTrainingRun:
     """One run of SB3 agents on a masked task, round by round.
 
@@ -183,7 +192,9 @@ class CoTrainingRun:
         self.trainer: RunCoTrainer | RewardModelTrainer | None = None
         if cfg.method == "dospcot":
             # A segment's input is the sum of its steps' (dospcot.core.segments.segment_pool).
-            self.trainer = RunCoTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
+            self.trainer = RunCoTrainer(
+                task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes, cfg.training.cotrain_passes
+            )
         elif cfg.method == "reward-model":
             self.trainer = RewardModelTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
         self.class_records: list[dict] = []
@@ -249,14 +260,17 @@ class CoTrainingRun:
 
         :param callback: passed to every agent's ``learn()`` (SB3 callbacks, e.g. a progress bar).
         """
-        if not self.collected:  # 1. collect and learn, with last round's rewards and weights
+        if not self.collected:  # 1. collect and learn, with the rewards and weights written so far
             self.round += 1
-            for k, agent in enumerate(self.agents):
-                self.seed_round_env(k)  # learn() then resets it, with that seed
-                with self._draws_of(k):
-                    agent.learn(
-                        self.cfg.training.steps_per_round, callback=callback, reset_num_timesteps=False
-                    )
+            passes = self.cfg.training.cotrain_passes
+            for part, steps in enumerate(collection_parts(self.cfg.training.steps_per_round, passes)):
+                for k, agent in enumerate(self.agents):
+                    if part == 0:
+                        self.seed_round_env(k)  # learn() then resets it, with that seed
+                    with self._draws_of(k):  # a later part goes on with the episodes the last one left
+                        agent.learn(steps, callback=callback, reset_num_timesteps=False)
+                if part < passes - 1:  # 1a. a pass inside the round rewards the steps just taken
+                    self.cotrain(record=False)
             self.collected = True
         stats = self.label_and_cotrain()  # 1b-3.
         for k, agent in enumerate(self.agents):  # 4. policy update on the rewards and weights just written
@@ -311,9 +325,13 @@ class CoTrainingRun:
         elif out_of_patience:
             self.stopped, self.stop_reason = True, self.patience.reason()
 
-    def cotrain(self) -> dict:
+    def cotrain(self, record: bool = True) -> dict:
         """Steps 2-3 of a round: co-train on the task's pool and write the pseudo-rewards and their
-        weights into the reward table; returns the round's co-training figures."""
+        weights into the reward table; returns the round's co-training figures.
+
+        :param record: keep the pseudo-rewards per class in :attr:`class_records` (False for a pass
+            inside a round, ``training.cotrain_passes``: a round keeps its last pass's).
+        """
         # Segment features are sums of step features, taken in float32 as they always were.
         pool = self.task.pool(np.float32 if self.segments is not None else self.trainer.dtype_np)
         if self.segments is not None:
@@ -331,7 +349,8 @@ class CoTrainingRun:
         stats = round_stats(result, pool.unlabelled, true_class, self.true_rewards)
         rewards = self.classes.decode(np.arange(self.task.n_classes))
         labelled, unlabelled = pool.labelled, pool.unlabelled
-        self.class_records += class_rows(self.round, result, labelled, unlabelled, true_class, rewards)
+        if record:
+            self.class_records += class_rows(self.round, result, labelled, unlabelled, true_class, rewards)
         return {**stats, "labelled_steps": int(pool.labelled.sum())}
 
     def _cotrain_segments(self, steps: RunPool) -> dict:

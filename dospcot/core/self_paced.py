@@ -215,10 +215,14 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
     :param config: the schedule's hyperparameters.
     :param seeds: one seed per run; view j of run b initialises from ``(seeds[b], j)``.
     :param n_classes: K, the most reward classes a run may hold (the classifiers' outputs).
+    :param passes_per_round: the steps (passes) the driver takes per round of the schedule
+        (``training.cotrain_passes``): the schedule ages by its inverse per step.
     """
 
     _seen: np.ndarray | None = None
     """(B, K) the classes each run's labels have shown so far (None in a checkpoint older than it)."""
+    passes_per_round = 1
+    """The steps per round of the schedule (1 in a checkpoint older than the key)."""
 
     def __init__(
         self,
@@ -227,8 +231,10 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         config: CoTrainingConfig,
         seeds: list[int],
         n_classes: int,
+        passes_per_round: int = 1,
     ) -> None:
         self.config, self.n_classes = config, n_classes
+        self.passes_per_round = passes_per_round
         self.n_views = len(view_dims)
         if self.n_views < 1:
             raise ValueError("co-training needs at least one view")
@@ -243,8 +249,10 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
 
     @property
     def add_fraction(self) -> float:
-        """add_num of the current round as a share of |U| (grows by ``add_fraction_step`` each round)."""
-        return self.config.add_fraction_start + self.config.add_fraction_step * self.round
+        """add_num of the current step as a share of |U| (grows by ``add_fraction_step`` each round of
+        :attr:`passes_per_round` steps)."""
+        rounds = self.round / self.passes_per_round
+        return self.config.add_fraction_start + self.config.add_fraction_step * rounds
 
     def step(self, pool: Pool) -> RoundResult:
         """Run one round: for each view in turn select, fit and score; then Eq. 9; then age."""
@@ -341,6 +349,7 @@ class RunCoTrainer:
     :param config: the schedule's hyperparameters.
     :param seed: the run's seed; view j's classifier initialises from ``(seed, j)``.
     :param n_classes: K, the most reward classes the run may hold.
+    :param passes_per_round: co-training passes per round (``training.cotrain_passes``).
     """
 
     def __init__(
@@ -349,8 +358,9 @@ class RunCoTrainer:
         config: CoTrainingConfig,
         seed: int,
         n_classes: int,
+        passes_per_round: int = 1,
     ) -> None:
-        self._batch = SelfPacedCoTrainer(view_dims, 1, config, [seed], n_classes)
+        self._batch = SelfPacedCoTrainer(view_dims, 1, config, [seed], n_classes, passes_per_round)
 
     @property
     def numerics(self) -> int:

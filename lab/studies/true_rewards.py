@@ -49,6 +49,8 @@ class Diagnosis:
     :param suffix: its sweeps' names end ``-<suffix>``.
     :param params: the settings it adds to the control's.
     :param seeds: the tasks it trains on, each with its number of seeds.
+    :param against: another diagnosis it differs from in one part alone, which it is also compared with.
+    :param alone: that part, as the differences name it.
     """
 
     arm: str
@@ -56,6 +58,8 @@ class Diagnosis:
     suffix: str
     params: dict[str, str]
     seeds: dict[str, int]
+    against: Diagnosis | None = None
+    alone: str = ""
 
 
 BY_ROUNDS = Diagnosis(
@@ -78,7 +82,20 @@ SHORT_ROUNDS = Diagnosis(
 """The same env steps in rounds a quarter as long: a step is rewarded in the agents' replay only once a
 round's co-training has admitted it, so the oracle learns from a step as soon as it is taken and the
 control a round later (in round 1, from the labelled share alone)."""
-DIAGNOSES = (BY_ROUNDS, SHORT_ROUNDS)
+PASSES = Diagnosis(
+    "control, 4 passes a round",
+    "exploration by rounds and 4 co-training passes a round",
+    "passes",
+    {EXPLORATION: "rounds", "training.cotrain_passes": "4"},
+    {"doorkey": 5, "lavagap": 5},
+    against=BY_ROUNDS,
+    alone="4 co-training passes a round",
+)
+"""Exploration by rounds, each round's co-training in four passes (``training.cotrain_passes``): the
+lag cut as :data:`SHORT_ROUNDS` cuts it, while the rounds, their policy updates, the exploration schedule
+and the evaluations stay :data:`BY_ROUNDS`'s, so against that diagnosis it measures the lag alone. Added
+after every seed of the other two diagnoses had been read."""
+DIAGNOSES = (BY_ROUNDS, SHORT_ROUNDS, PASSES)
 ARMS = ("oracle", "control", *(d.arm for d in DIAGNOSES), "DOSPCoT")
 
 
@@ -173,6 +190,11 @@ def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
         changed = _by_seed(runs, task, diagnosis.arm)
         found[f"{diagnosis.what}: its control minus the control"] = _paired(changed, control, views)
         found[f"path under {diagnosis.what}: its control minus oracle"] = _paired(changed, oracle, views)
+        if diagnosis.against is not None:
+            against = _by_seed(runs, task, diagnosis.against.arm)
+            found[f"{diagnosis.alone} alone: {diagnosis.arm} minus {diagnosis.against.arm}"] = _paired(
+                changed, against, views
+            )
     return found
 
 

@@ -11,6 +11,7 @@ from dospcot_lab.studies import STUDIES, sweep_spec
 from dospcot_lab.studies.declaration import NOT_MEASURED
 from dospcot_lab.studies.defaults import TWO_AGAINST_ONE
 from dospcot_lab.studies.defaults_4 import FOUR_AGAINST_THREE
+from dospcot_lab.studies.defaults_5 import FIVE_AGAINST_THREE
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
@@ -108,3 +109,19 @@ def test_version_4_trains_each_preset_under_version_3_with_exploration_by_rounds
     assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
     cfg = trials[0].load_config()
     assert (cfg.defaults, cfg.training.exploration, cfg.cotraining.numerics) == (4, "rounds", 2)
+
+
+def test_version_5_trains_each_preset_under_version_3_with_four_passes_and_pairs_with_numerics_2(tmp_path):
+    sweep, numerics_2 = STUDIES["defaults-5"].sweeps
+    assert numerics_2.name == "numerics-2" and STUDIES["defaults-5"].confirmatory
+    trials = sweep_spec(sweep, 20).trials(check_task=False)
+    assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
+    for trial in trials[:: len(trials) // 2]:
+        cfg = trial.load_config()
+        assert (cfg.defaults, cfg.training.cotrain_passes, cfg.cotraining.numerics) == (5, 4, 2)
+        assert cfg.training.exploration == "pace"
+    runs = [
+        TrialRun(Trial("grid16-dospcot", "grid16-dospcot", params, 0), {}, [], tmp_path)
+        for params in ({"defaults": "5"}, {"cotraining.numerics": "2"}, {"defaults": "4"})
+    ]
+    assert [FIVE_AGAINST_THREE.version_of(run) for run in runs] == [5, 3, None]

@@ -137,3 +137,25 @@ def test_shorter_rounds_are_a_diagnosis_of_their_own_told_apart_from_exploration
     for task in ("doorkey", "lavagap"):
         grid = sweeps[f"true-rewards-{task}-short-rounds"].grid
         assert grid["training.rounds"] == ("20",) and grid["training.steps_per_round"] == ("2500",)
+
+
+def test_passes_inside_the_rounds_are_compared_with_exploration_by_rounds_alone():
+    """The passes diagnosis differs from exploration by rounds in its passes alone, so besides the
+    control and the oracle it is paired with that diagnosis, seed by seed."""
+    rounds = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1", "training.exploration": "rounds"}
+    passes = {**rounds, "training.cotrain_passes": "4"}
+    runs = _lavagap([0.0, 0.0], [1.0, 1.0], [0.0, 0.0])
+    runs += [_run("minigrid-lavagap-dospcot", s, v, rounds) for s, v in enumerate([0.5, 0.0])]
+    runs += [_run("minigrid-lavagap-dospcot", s, 1.0, passes) for s in range(2)]
+    lines = tables(runs)
+    alone = SeedSummary.of([0.5, 1.0])
+    assert (
+        f"- LavaGapS7 (image), 4 co-training passes a round alone: control, 4 passes a round minus control, "
+        f"exploration by rounds: {alone} over 2 seeds." in lines
+    )
+    assert any(line.startswith("| control, 4 passes a round | image | 1.000") for line in lines)
+    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
+    for task in ("doorkey", "lavagap"):
+        sweep = sweeps[f"true-rewards-{task}-passes"]
+        assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, "training.cotrain_passes": ("4",)}
+        assert sweep.seeds == 5

@@ -1,0 +1,104 @@
+"""Co-training passes inside a round (``training.cotrain_passes``): the collection in parts, each but the
+last followed by a pass of the co-trainer, the self-paced schedule aged per pass."""
+
+from functools import partial
+
+import numpy as np
+import pytest
+import torch as th
+from small_runs import grid_config, grid_run
+
+from dospcot.config.errors import ConfigError
+from dospcot.config.learning_sections import CoTrainingConfig
+from dospcot.core.batched_runs import BatchedRuns, config_refusal
+from dospcot.core.sb3_round import collection_parts
+from dospcot.core.self_paced import RunCoTrainer
+from dospcot.envs import GridWorld, grid_views
+from dospcot.run.sb3_runs import build_run
+from dospcot.tasks import load_config
+
+LAYOUT = GridWorld(size=6, layout_seed=0).layout
+SECTIONS = {
+    "env": {"max_episode_steps": 36},
+    "dqn": {"learning_starts": 50, "buffer_size": 5_000, "net_arch": [32]},
+}
+
+
+def _run(passes: int, seed: int = 3):
+    training = {"rounds": 2, "steps_per_round": 300, "label_fraction": 0.2, "cotrain_passes": passes}
+    cfg = grid_config("dospcot", ("dqn", "dqn"), ("coords", "patch"), seed, training=training, **SECTIONS)
+    return grid_run(cfg, partial(GridWorld, LAYOUT), grid_views(LAYOUT, patch_size=3))
+
+
+def test_a_round_is_cut_into_parts_as_equal_as_they_can_be():
+    assert collection_parts(10, 3) == [4, 3, 3]
+    assert collection_parts(300, 2) == [150, 150] and collection_parts(5, 1) == [5]
+    assert all(sum(collection_parts(n, c)) == n for n in (7, 100, 2501) for c in (1, 2, 3, 4, 7))
+
+
+def test_each_part_but_the_last_is_followed_by_a_pass_that_writes_the_reward_table():
+    """With three passes a round, the co-trainer runs after 100, 200 and 300 steps of every agent; the
+    first pass admits samples the agents then learn from while they take the round's next part, and a
+    round keeps one set of records however many passes it took."""
+    run = _run(3)
+    calls = []
+    cotrain = run.cotrain
+
+    def spy(record: bool = True) -> dict:
+        stats = cotrain(record)
+        calls.append(([a.num_timesteps for a in run.agents], record, int((run.table.weight > 0).sum())))
+        return stats
+
+    run.cotrain = spy
+    records = run.run()
+    assert [c[0] for c in calls] == [[100, 100], [200, 200], [300, 300], [400, 400], [500, 500], [600, 600]]
+    assert [c[1] for c in calls] == [False, False, True] * 2
+    assert calls[0][2] > 0  # admitted after the first part, before the round's end
+    assert run.trainer._batch.round == 6
+    assert [r["round"] for r in records] == [1, 1, 2, 2] and all(r["env_steps"] == 600 for r in records[2:])
+    once = _run(1)
+    once.run()
+    assert {r["round"] for r in run.class_records} == {1, 2}
+    assert len(run.class_records) == len(once.class_records)
+
+
+def test_the_schedule_ages_by_one_round_over_a_rounds_passes():
+    config = CoTrainingConfig()
+    trainer = RunCoTrainer([2, 3], config, seed=0, n_classes=2, passes_per_round=4)
+    start, step = config.add_fraction_start, config.add_fraction_step
+    for passes, expected in ((0, start), (2, start + step / 2), (4, start + step), (6, start + 1.5 * step)):
+        trainer._batch.round = passes
+        assert trainer._batch.add_fraction == pytest.approx(expected)
+    once = RunCoTrainer([2, 3], config, seed=0, n_classes=2)
+    once._batch.round = 1
+    assert once._batch.add_fraction == start + step  # one pass a round: the schedule as it always was
+
+
+def test_bad_passes_are_refused_with_the_reason():
+    with pytest.raises(ConfigError, match=r"cotrain_passes must lie in \[1, steps_per_round = 300\], got 0"):
+        load_config("tiny", ["training.steps_per_round=300", "training.cotrain_passes=0"])
+    with pytest.raises(ConfigError, match="got 301"):
+        load_config("tiny", ["training.steps_per_round=300", "training.cotrain_passes=301"])
+    with pytest.raises(ConfigError, match='method = "oracle" never reads it'):
+        load_config("grid16-oracle", ["training.cotrain_passes=2"])
+    with pytest.raises(ConfigError, match="segment labels are co-trained once a round"):
+        load_config("tiny", ["training.segment_length=4", "training.cotrain_passes=2"])
+    assert load_config("tiny").training.cotrain_passes == 1
+
+
+def _batch(seeds: tuple[int, ...]) -> BatchedRuns:
+    keys = ["training.rounds=2", "training.steps_per_round=400", "training.cotrain_passes=2"]
+    runs = [build_run(load_config("tiny", [*keys, f"seed={seed}"])) for seed in seeds]
+    assert config_refusal(runs[0].cfg) is None
+    batch = BatchedRuns(runs)
+    batch.run()
+    return batch
+
+
+def test_a_batch_of_seeds_takes_its_passes_and_a_member_keeps_its_numbers_beside_another_seed():
+    batch, other = _batch((0, 1)), _batch((0, 5))
+    assert all(run.trainer._batch.round == 4 for run in batch.runs)
+    assert all(agent.num_timesteps == 800 for run in batch.runs for agent in run.agents)
+    assert np.array_equal(batch.runs[0].table.reward, other.runs[0].table.reward)
+    for a, b in zip(batch.runs[0].agents, other.runs[0].agents, strict=True):
+        assert all(th.equal(p, q) for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True))
