@@ -12,7 +12,7 @@ from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import CoTrainingConfig
 from dospcot.core.batched_runs import BatchedRuns, config_refusal
 from dospcot.core.sb3_round import collection_parts
-from dospcot.core.self_paced import RunCoTrainer
+from dospcot.core.self_paced import RunCoTrainer, RunPool
 from dospcot.envs import GridWorld, grid_views
 from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
@@ -102,3 +102,20 @@ def test_a_batch_of_seeds_takes_its_passes_and_a_member_keeps_its_numbers_beside
     assert np.array_equal(batch.runs[0].table.reward, other.runs[0].table.reward)
     for a, b in zip(batch.runs[0].agents, other.runs[0].agents, strict=True):
         assert all(th.equal(p, q) for p, q in zip(a.policy.parameters(), b.policy.parameters(), strict=True))
+
+
+def test_the_stopping_rules_read_a_rounds_last_pass_alone():
+    """A pass inside a round neither stops the run nor becomes what the next round's pseudo-labels are
+    compared with: ``stop_when_fully_admitted`` fires at the round's end, not at the pass that admitted
+    the pool."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(40, 3))
+    labelled = np.arange(40) < 8
+    label_class = np.where(labelled, (x[:, 0] > 0).astype(np.int64), -1)
+    pool = RunPool([x, -x], labelled, label_class, ~labelled, np.ones(2, bool))
+    config = CoTrainingConfig(add_fraction_start=1.0, stop_when_fully_admitted=True)
+    trainer = RunCoTrainer([3, 3], config, seed=0, n_classes=2, passes_per_round=2)
+    first = trainer.step(pool)
+    assert first.pace == 1.0 and not first.stopped and trainer._batch._previous is None
+    second = trainer.step(pool)
+    assert second.stopped and trainer._batch._previous is not None

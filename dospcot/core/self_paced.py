@@ -319,20 +319,25 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         n_unlabelled = pool.unlabelled.sum(axis=1)
         # With nothing unlabelled (every reward revealed), the schedule has nothing left to admit.
         pace = np.where(n_unlabelled > 0, (pseudo_weight > 0).sum(axis=1) / np.maximum(n_unlabelled, 1), 1.0)
-        changed = self._changed_share(pseudo_class, pool.unlabelled)
+        # The stopping rules read rounds: a pass inside a round neither stops nor is compared with.
+        round_end = (self.round + 1) % self.passes_per_round == 0
+        changed = self._changed_share(pseudo_class, pool.unlabelled, round_end)
         stopped = np.zeros(n_runs, dtype=bool)
-        if cfg.tol > 0 and self.round > 0:
+        if cfg.tol > 0 and self.round >= self.passes_per_round and round_end:
             stopped |= changed < cfg.tol
-        if cfg.stop_when_fully_admitted:
+        if cfg.stop_when_fully_admitted and round_end:
             stopped |= pace >= 1.0
         self.round += 1
         return RoundResult(
             pseudo_class, pseudo_weight, weights, view_class, threshold, fit_loss, pace, changed, stopped
         )
 
-    def _changed_share(self, pseudo_class: np.ndarray, unlabelled: np.ndarray) -> np.ndarray:
+    def _changed_share(self, pseudo_class: np.ndarray, unlabelled: np.ndarray, keep: bool) -> np.ndarray:
+        """(B,) the share of each run's unlabelled samples whose pseudo-class differs from the last
+        kept step's; ``keep``: this step's is the next one compared with (a round's last pass)."""
         previous = self._previous
-        self._previous = pseudo_class.copy()
+        if keep:
+            self._previous = pseudo_class.copy()
         if previous is None:
             return np.ones(pseudo_class.shape[0])
         n = min(previous.shape[1], pseudo_class.shape[1])
