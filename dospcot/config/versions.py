@@ -21,7 +21,11 @@ show it non-inferior on grid16, so ``defaults = 4`` opts in. Version 5, a candid
 each round's co-training in four passes (``training.cotrain_passes``), so a step the agents take is
 rewarded in their replay a quarter of a round later rather than a round later: the true-rewards study
 traced much of the co-training path's loss on MiniGrid to that lag. ``defaults = 5`` opts in until its
-study (``dospcot-lab study defaults-5``) decides. Nothing here imports torch.
+study (``dospcot-lab study defaults-5``) decides. Version 6, a candidate, is version 5 with the refit
+on a new class (``cotraining.refit_new_classes``): a pass early in round 1 fits the classifiers on the
+labels alone before every class has shown, and without the refit a class first labelled later is
+never fitted that way (grid16's lava, on the first seed of the defaults-5 study). ``defaults = 6`` opts
+in until its study (``dospcot-lab study defaults-6``) decides. Nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -175,13 +179,20 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
             "true-rewards study: a step rewarded a part of a round after it is taken, not a round",
         ),
     ),
+    6: (
+        MovedDefault(
+            "cotraining.refit_new_classes",
+            _when_learning(True),
+            "defaults-5 study: a pass fits before every class has a label; the refit on a new class",
+        ),
+    ),
 }
 """Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
 
-BASES = {2: 1, 3: 1, 4: 3, 5: 3}
+BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5})
+CANDIDATES = frozenset({2, 4, 5, 6})
 """Versions a config may opt into that no study has adopted yet."""
 
 

@@ -28,6 +28,7 @@
     dospcot-lab study numerics-3 --docs       # numerics 3 vs 1: the same presets and seeds, adoption rule
     dospcot-lab study defaults-4 --docs       # version 4 (exploration by rounds) vs 3, the same seeds
     dospcot-lab study defaults-5 --docs       # version 5 (4 co-training passes a round) vs 3, likewise
+    dospcot-lab study defaults-6 --docs       # version 6 (5 with the refit on a new class) vs 3, likewise
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
     dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
 
@@ -78,6 +79,7 @@ from dospcot_lab.studies import (
     defaults,
     defaults_4,
     defaults_5,
+    defaults_6,
     grid_studies,
     highway_studies,
     label_sources,
@@ -128,6 +130,7 @@ STUDIES: dict[str, Study] = {
     **defaults.STUDIES,
     **defaults_4.STUDIES,
     **defaults_5.STUDIES,
+    **defaults_6.STUDIES,
     **sizing.STUDIES,
     **true_rewards.STUDIES,
     **views.STUDIES,

@@ -12,6 +12,7 @@ from dospcot_lab.studies.declaration import NOT_MEASURED
 from dospcot_lab.studies.defaults import TWO_AGAINST_ONE
 from dospcot_lab.studies.defaults_4 import FOUR_AGAINST_THREE
 from dospcot_lab.studies.defaults_5 import FIVE_AGAINST_THREE
+from dospcot_lab.studies.defaults_6 import SIX_AGAINST_THREE
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
@@ -125,3 +126,14 @@ def test_version_5_trains_each_preset_under_version_3_with_four_passes_and_pairs
         for params in ({"defaults": "5"}, {"cotraining.numerics": "2"}, {"defaults": "4"})
     ]
     assert [FIVE_AGAINST_THREE.version_of(run) for run in runs] == [5, 3, None]
+
+
+def test_version_6_is_version_5_with_the_refit_paired_with_the_numerics_2_runs():
+    sweep, numerics_2 = STUDIES["defaults-6"].sweeps
+    assert numerics_2.name == "numerics-2" and STUDIES["defaults-6"].confirmatory
+    trials = sweep_spec(sweep, 20).trials(check_task=False)
+    assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
+    for trial in trials[:: len(trials) // 2]:
+        cfg = trial.load_config()
+        assert (cfg.defaults, cfg.training.cotrain_passes, cfg.cotraining.refit_new_classes) == (6, 4, True)
+    assert SIX_AGAINST_THREE.version_of(TrialRun(Trial("p", "p", {"defaults": "6"}, 0), {}, [], Path())) == 6
