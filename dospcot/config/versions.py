@@ -20,8 +20,8 @@ co-trained agents part of what the oracle learns from the same rewards. The defa
 show it non-inferior on grid16, so ``defaults = 4`` opts in. Version 5, a candidate, is version 3 with
 each round's co-training in four passes (``training.cotrain_passes``), so a step the agents take is
 rewarded in their replay a quarter of a round later rather than a round later: the true-rewards study
-traced much of the co-training path's loss on MiniGrid to that lag. ``defaults = 5`` opts in until its
-study (``dospcot-lab study defaults-5``) decides. Version 6, a candidate, is version 5 with the refit
+traced much of the co-training path's loss on MiniGrid to that lag. The defaults-5 study did not show
+it non-inferior on grid16, so ``defaults = 5`` opts in. Version 6, a candidate, is version 5 with the refit
 on a new class (``cotraining.refit_new_classes``): a pass early in round 1 fits the classifiers on the
 labels alone before every class has shown, and without the refit a class first labelled later is
 never fitted that way (grid16's lava, on the first seed of the defaults-5 study). ``defaults = 6`` opts

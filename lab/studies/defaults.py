@@ -17,6 +17,7 @@ from dospcot_lab.studies.tables import (
     ADOPTION_SEEDS,
     NON_INFERIOR_WORDS,
     adoption_glance,
+    best_case,
     held_lines,
     non_inferior,
     paired,
@@ -62,6 +63,15 @@ class VersionPair:
             {**ADOPTION_METRICS, "labelled_steps": "labels"},
         )
         differences = {preset: self.differences(runs, preset) for preset in PRESETS}
+        early = []
+        for preset in (p for p in PRESETS if self.decided_early(runs, p)):
+            n = differences[preset]["success"].n
+            best = ", ".join(f"{m} {d}" for m, d in self.best_cases(runs, preset).items())
+            early.append(
+                f"- `{preset}` holds {n} of its {ADOPTION_SEEDS} pairs, and the rule fails whatever the "
+                f"other {ADOPTION_SEEDS - n} show: with each at the most it could read (success and "
+                f"pseudo-reward accuracy 1), the differences would read {best}."
+            )
         return [
             "",
             *rows,
@@ -69,6 +79,7 @@ class VersionPair:
             f"Version {self.new} minus version {self.old}, paired by seed:",
             "",
             *held_lines(differences, non_inferior, NON_INFERIOR_WORDS),
+            *(["", *early] if early else []),
         ]
 
     def glance(self, runs: list[TrialRun]) -> Glance:
@@ -82,7 +93,22 @@ class VersionPair:
                 "not measured yet (a preset lacks one version's runs)",
                 f"version {self.new} non-inferior: adopt it",
             ),
+            [preset for preset in PRESETS if self.decided_early(runs, preset)],
         )
+
+    def best_cases(self, runs: list[TrialRun], preset: str) -> dict[str, SeedSummary]:
+        """Per metric: the new version minus the old on ``preset`` with every seed the new one has not
+        run yet at its best (:func:`~dospcot_lab.studies.tables.best_case`)."""
+        new, old = self.by_seed(runs, preset, self.new), self.by_seed(runs, preset, self.old)
+        return {metric: best_case(new, old, metric) for metric in METRICS}
+
+    def decided_early(self, runs: list[TrialRun], preset: str) -> bool:
+        """Whether ``preset``, short of its :data:`ADOPTION_SEEDS` pairs, fails the adoption rule
+        whatever the pairs it lacks show: its best case does."""
+        pairs = self.differences(runs, preset)["success"].n
+        best = self.best_cases(runs, preset)
+        short = 0 < pairs < ADOPTION_SEEDS and best["success"].n > 0
+        return short and not all(map(non_inferior, best.values()))
 
 
 TWO_AGAINST_ONE = VersionPair(1, 2, lambda run: int(run.trial.params.get("defaults", 1)))

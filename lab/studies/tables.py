@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 from dospcot.statistics import SeedSummary
@@ -272,30 +272,60 @@ def deciding_preset(differences: dict[str, dict[str, SeedSummary]]) -> str | Non
     return next((p for p in measured if _fails(differences[p])), measured[-1] if measured else None)
 
 
+BEST_VALUE = {"success": 1.0, "pseudo_accuracy": 1.0}
+"""The most each metric of the adoption rule can read: both are shares."""
+
+
+def best_case(new: dict[int, TrialRun], old: dict[int, TrialRun], metric: str) -> SeedSummary:
+    """``metric`` of new minus old, paired by seed over the :data:`ADOPTION_SEEDS` seeds old ran, each
+    seed new has not run yet read at the most it could show (:data:`BEST_VALUE`); no seed where old
+    holds fewer. Whatever those seeds show, no end of the real interval can lie above this one's: the
+    bootstrap's resamples are fixed by its own seed, and each resampled mean grows with every value."""
+    seeds = sorted(old)[:ADOPTION_SEEDS]
+    if len(seeds) < ADOPTION_SEEDS:
+        return SeedSummary.of([])
+    best = BEST_VALUE[metric]
+    return SeedSummary.of(
+        [(run_value(new[s], metric) if s in new else best) - run_value(old[s], metric) for s in seeds]
+    )
+
+
 def adoption_glance(
-    differences: dict[str, dict[str, SeedSummary]], change: str, verdicts: tuple[str, str, str]
+    differences: dict[str, dict[str, SeedSummary]],
+    change: str,
+    verdicts: tuple[str, str, str],
+    decided_early: Collection[str] = (),
 ) -> Glance:
     """The row of a study that decides a default: its headline, ``change`` in success on the preset that
     decides (:func:`deciding_preset`), and its verdict by :func:`non_inferior` over every measured
     difference. A preset counts as measured once it holds the :data:`ADOPTION_SEEDS` pairs the rule
-    names: a verdict on fewer would be read off a part of the sample.
+    names: a verdict on fewer would be read off a part of the sample, unless no outcome of the pairs it
+    lacks could meet the rule (``decided_early``, :func:`best_case`).
 
     :param differences: preset -> metric -> the paired difference, new minus old.
     :param change: the comparison in words (``"numerics 2 minus 1"``).
     :param verdicts: what to say where a difference is not non-inferior, where every measured one is
         but a preset is not measured yet, and where every one on every preset is.
+    :param decided_early: the presets, short of their pairs, that fail the rule whatever those show.
     """
     measured = measured_presets(differences)
-    if not measured:
+    early = [p for p in differences if p in decided_early and p not in measured]
+    if not measured and not early:
         return Glance(f"{change}: {NOT_MEASURED}", NOT_MEASURED)
-    preset = deciding_preset(differences)  # a failing preset where there is one
-    if _fails(differences[preset]):
+    failing = [p for p in differences if p in early or (p in measured and _fails(differences[p]))]
+    preset = failing[0] if failing else measured[-1]
+    if failing:
         verdict = verdicts[0]
     elif len(measured) < len(differences):
         verdict = verdicts[1]
     else:
         verdict = verdicts[2]
-    return Glance(f"{preset} success, {change}, paired by seed: {differences[preset]['success']}", verdict)
+    success = differences[preset]["success"]
+    headline = f"{preset} success, {change}, paired by seed: {success}"
+    if preset in early:
+        left = ADOPTION_SEEDS - success.n
+        headline += f" over {success.n} seeds (the rule fails whatever the other {left} show)"
+    return Glance(headline, verdict)
 
 
 def verdict(diff: SeedSummary, ours: str = "DOSPCoT", theirs: str = "self-training") -> str:

@@ -5,6 +5,8 @@ versions with nothing else set."""
 import json
 from pathlib import Path
 
+import pytest
+
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES, sweep_spec
@@ -137,3 +139,24 @@ def test_version_6_is_version_5_with_the_refit_paired_with_the_numerics_2_runs()
         cfg = trial.load_config()
         assert (cfg.defaults, cfg.training.cotrain_passes, cfg.cotraining.refit_new_classes) == (6, 4, True)
     assert SIX_AGAINST_THREE.version_of(TrialRun(Trial("p", "p", {"defaults": "6"}, 0), {}, [], Path())) == 6
+
+
+def test_a_preset_short_of_its_pairs_is_decided_when_even_its_best_case_fails_the_rule(tmp_path):
+    """Version 4 fails outright on two of its first four grid16 seeds: with the other 16 at the most they
+    could read (success 1 against version 3's 1), success minus version 3 would read -0.1 on average,
+    so the rule fails whatever they show, and the glance says so. Four seeds that lost nothing decide
+    nothing."""
+    old = [_run_4(tmp_path, "grid16-dospcot", seed, 3, 1.0) for seed in range(ADOPTION_SEEDS)]
+    new = [_run_4(tmp_path, "grid16-dospcot", seed, 4, float(seed in (1, 2))) for seed in range(4)]
+    best = FOUR_AGAINST_THREE.best_cases(old + new, "grid16-dospcot")
+    assert best["success"].mean == pytest.approx(-2 / ADOPTION_SEEDS) and best["success"].n == ADOPTION_SEEDS
+    assert best["pseudo_accuracy"].mean == pytest.approx(0.1 * 16 / ADOPTION_SEEDS)
+    assert FOUR_AGAINST_THREE.decided_early(old + new, "grid16-dospcot")
+    row = glance_4(old + new)
+    assert row.verdict == "version 4 not shown non-inferior: not adopted"
+    assert row.headline.endswith("over 4 seeds (the rule fails whatever the other 16 show)")
+    assert any("holds 4 of its 20 pairs, and the rule fails" in line for line in tables_4(old + new))
+    (tmp_path / "fine").mkdir()
+    fine = [_run_4(tmp_path / "fine", "grid16-dospcot", seed, 4, 1.0) for seed in range(4)]
+    assert not FOUR_AGAINST_THREE.decided_early(old + fine, "grid16-dospcot")
+    assert glance_4(old + fine).verdict == NOT_MEASURED
