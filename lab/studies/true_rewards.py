@@ -73,7 +73,7 @@ BY_ROUNDS = Diagnosis(
 floor with it, while the oracle's falls over the rounds. Added on LavaGap after its control's first
 three seeds, on DoorKey after its ten."""
 SHORT_ROUNDS = Diagnosis(
-    "control, 20 rounds of 2,500 steps",
+    "control, 20 short rounds",
     "exploration by rounds and 20 rounds of 2,500 steps",
     "short-rounds",
     {EXPLORATION: "rounds", "training.rounds": "20", "training.steps_per_round": "2500"},
