@@ -34,6 +34,22 @@ def test_a_round_is_cut_into_parts_as_equal_as_they_can_be():
     assert collection_parts(10, 3) == [4, 3, 3]
     assert collection_parts(300, 2) == [150, 150] and collection_parts(5, 1) == [5]
     assert all(sum(collection_parts(n, c)) == n for n in (7, 100, 2501) for c in (1, 2, 3, 4, 7))
+    # whole multiples of the agents' train_freq, which SB3's learn() collects in full
+    assert collection_parts(300, 4, 4) == [76, 76, 76, 72] and collection_parts(302, 4, 4) == [76, 76, 76, 74]
+    assert collection_parts(10, 4, 4) == [3, 3, 2, 2]  # fewer units than passes: whole steps
+
+
+def test_agents_take_the_steps_of_a_round_whatever_their_train_freq():
+    """300 steps in four passes with train_freq 4: parts of 76, 76, 76 and 72 steps, so SB3's learn()
+    takes no step beyond the round's (75-step parts would each have taken 76)."""
+    training = {"rounds": 2, "steps_per_round": 300, "label_fraction": 0.2, "cotrain_passes": 4}
+    dqn = {**SECTIONS["dqn"], "train_freq": 4}
+    cfg = grid_config(
+        "dospcot", ("dqn", "dqn"), ("coords", "patch"), 3, training=training, env=SECTIONS["env"], dqn=dqn
+    )
+    run = grid_run(cfg, partial(GridWorld, LAYOUT), grid_views(LAYOUT, patch_size=3))
+    assert run.round_parts() == [76, 76, 76, 72]
+    assert all(r["env_steps"] == 600 for r in run.run()[2:])
 
 
 def test_each_part_but_the_last_is_followed_by_a_pass_that_writes_the_reward_table():

@@ -57,6 +57,9 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     assert load_config("minigrid-doorkey-oracle", ["defaults=5"]).training.cotrain_passes == 1
     assert load_config("tiny", ["defaults=5", "training.steps_per_round=3"]).training.cotrain_passes == 3
     assert load_config("tiny", ["defaults=5", "training.segment_length=4"]).training.cotrain_passes == 1
+    for bad in ("training.steps_per_round=nan", "training.steps_per_round=[2]", "training=3"):
+        with pytest.raises(ConfigError):  # the config's own check, not the version's rule, answers
+            load_config("tiny", ["defaults=5", bad])
     # version 6 is version 5 with the refit on a new class
     refit = dataclasses.replace(fifth.cotraining, refit_new_classes=True)
     sixth = load_config("minigrid-doorkey-dospcot", ["defaults=6"])

@@ -129,9 +129,17 @@ def _passes(table: Mapping[str, Any]) -> int | None:
     """:data:`PASSES` co-training passes a round (at most a round's steps) for a run that learns single
     rewards; None for one that learns none, or learns from segment labels (co-trained once a round)."""
     training = table.get("training", {})
-    if not _learns_rewards(table) or training.get("segment_length", 1) > 1:
+    if not isinstance(training, Mapping):  # the config's own check names what is wrong with it
+        return PASSES
+    segments = training.get("segment_length", TrainingConfig.segment_length)
+    steps = training.get("steps_per_round", TrainingConfig.steps_per_round)
+    if not _learns_rewards(table) or (_whole(segments) and segments > 1):
         return None
-    return min(PASSES, int(training.get("steps_per_round", TrainingConfig.steps_per_round)))
+    return min(PASSES, steps) if _whole(steps) and steps >= 1 else PASSES
+
+
+def _whole(value: Any) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
 
 
 VERSIONS: dict[int, tuple[MovedDefault, ...]] = {

@@ -43,7 +43,7 @@ import numpy as np
 import torch as th
 
 from dospcot.core import sb3_engine as sb3
-from dospcot.core.sb3_round import CoTrainingRun, collection_parts
+from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.policies import ExpectedSarsaDQN
 from dospcot.policies.stacked_esarsa import StackedExpectedSarsa, stack_samples
 from dospcot.policies.stacked_esarsa.stacked_q_network import linear_layers
@@ -139,7 +139,7 @@ class BatchedRuns:
         for run in self.runs:
             run.round += 1
         passes = self.cfg.training.cotrain_passes
-        for part, steps in enumerate(collection_parts(self.cfg.training.steps_per_round, passes)):
+        for part, steps in enumerate(self.runs[0].round_parts()):
             for k in range(self.n_views):  # 1. collect and learn, view by view
                 if part == 0:
                     for run in self.runs:

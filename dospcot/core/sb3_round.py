@@ -53,13 +53,14 @@ from __future__ import annotations
 
 import dataclasses
 import io
+import math
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
 import numpy as np
-from stable_baselines3.common.type_aliases import MaybeCallback
+from stable_baselines3.common.type_aliases import MaybeCallback, TrainFrequencyUnit
 
 from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
 from dospcot.core.queries import Rater, RewardQueries, SimulatedRater
@@ -144,10 +145,21 @@ def make_agent(
     return agent
 
 
-def collection_parts(steps: int, passes: int) -> list[int]:
-    """A round's ``steps`` env steps per agent cut into ``passes`` parts as equal as they can be, the
-    longer ones first (``training.cotrain_passes``): ``collection_parts(10, 3) == [4, 3, 3]``."""
-    return [steps // passes + (part < steps % passes) for part in range(passes)]
+def collection_parts(steps: int, passes: int, unit: int = 1) -> list[int]:
+    """A round's ``steps`` env steps per agent cut into ``passes`` parts (``training.cotrain_passes``),
+    each a whole number of ``unit`` steps, as equal as they can be, the longer ones first; the steps no
+    whole unit holds go to the last part, and with fewer units than passes the unit is one step.
+    ``collection_parts(10, 3) == [4, 3, 3]``, ``collection_parts(300, 4, 4) == [76, 76, 76, 72]``.
+
+    :param unit: the agents' ``train_freq``: SB3's ``learn`` collects whole multiples of it, so a part
+        that is none would take more steps than asked.
+    """
+    if steps // unit < passes:
+        unit = 1
+    units, rest = divmod(steps, unit)
+    parts = [unit * (units // passes + (part < units % passes)) for part in range(passes)]
+    parts[-1] += rest
+    return parts
 
 
 class CoTrainingRun:
@@ -263,7 +275,7 @@ class CoTrainingRun:
         if not self.collected:  # 1. collect and learn, with the rewards and weights written so far
             self.round += 1
             passes = self.cfg.training.cotrain_passes
-            for part, steps in enumerate(collection_parts(self.cfg.training.steps_per_round, passes)):
+            for part, steps in enumerate(self.round_parts()):
                 for k, agent in enumerate(self.agents):
                     if part == 0:
                         self.seed_round_env(k)  # learn() then resets it, with that seed
@@ -277,6 +289,14 @@ class CoTrainingRun:
             with self._draws_of(k):
                 agent.update(self.cfg.training.update_steps)
         return self.close_round(stats)  # 5-6.
+
+    def round_parts(self) -> list[int]:
+        """The env steps of each part of a round's collection (:func:`collection_parts`), in whole
+        multiples of the agents' ``train_freq`` where every agent counts it in steps."""
+        freqs = [agent.train_freq for agent in self.agents]
+        by_steps = all(freq.unit == TrainFrequencyUnit.STEP for freq in freqs)
+        unit = math.lcm(*(freq.frequency for freq in freqs)) if by_steps else 1
+        return collection_parts(self.cfg.training.steps_per_round, self.cfg.training.cotrain_passes, unit)
 
     def _draws_of(self, k: int) -> AbstractContextManager[None]:
         """Where agent ``k`` draws: its own generators under ``agent_draws = "own"``, else the global ones."""
