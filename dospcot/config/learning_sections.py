@@ -66,7 +66,9 @@ class TrainingConfig(AddedKeys):
         reward table, so a step the agents take is rewarded in their replay within a part rather than a
         round; the self-paced schedule ages by 1/c per pass, so it admits what it would by the round's
         end. Labels are bought, the policy updated, exploration aged and the agents evaluated once a
-        round, as under 1, and the co-trainer's stopping rules read a round's last pass.
+        round, as under 1, and the co-trainer's stopping rules read a round's last pass. A pass early
+        in round 1 may come before a rare class (a sparse task's goal) has a label: the steps it admits
+        then all read the common class's reward (docs/results/defaults-6.md).
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.

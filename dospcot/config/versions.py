@@ -24,8 +24,8 @@ traced much of the co-training path's loss on MiniGrid to that lag. The defaults
 it non-inferior on grid16, so ``defaults = 5`` opts in. Version 6, a candidate, is version 5 with the refit
 on a new class (``cotraining.refit_new_classes``): a pass early in round 1 fits the classifiers on the
 labels alone before every class has shown, and without the refit a class first labelled later is
-never fitted that way (grid16's lava, on the first seed of the defaults-5 study). ``defaults = 6`` opts
-in until its study (``dospcot-lab study defaults-6``) decides. Nothing here imports torch.
+never fitted that way (grid16's lava, on the first seed of the defaults-5 study). The defaults-6 study
+did not show it non-inferior on grid16, so ``defaults = 6`` opts in. Nothing here imports torch.
 """
 
 from __future__ import annotations
