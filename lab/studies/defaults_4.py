@@ -7,35 +7,9 @@ pseudo-reward accuracy (non-inferiority; docs/guide/defaults.md)."""
 
 from __future__ import annotations
 
-from dospcot.sweeps.report import TrialRun
-from dospcot_lab.studies.declaration import Study, Sweep
-from dospcot_lab.studies.defaults import PRESETS, VersionPair
-from dospcot_lab.studies.numerics import NUMERICS_2
-from dospcot_lab.studies.tables import ADOPTION_SEEDS
+from dospcot_lab.studies.version_3_pairs import against_version_3
 
+FOUR_AGAINST_THREE, _STUDY = against_version_3(4, "exploration by rounds")
+"""The defaults-4 study's pair: version 4's runs name it in their grid, version 3's are numerics-2 runs."""
 
-def _version(run: TrialRun) -> int | None:
-    """4 for the study's own runs, 3 for the numerics-2 runs, None for the others its sweeps hold."""
-    if run.trial.params.get("defaults") == "4":
-        return 4
-    return 3 if run.trial.params.get("cotraining.numerics") == "2" else None
-
-
-FOUR_AGAINST_THREE = VersionPair(3, 4, _version)
-"""The defaults-4 study: version 4's runs name it in their grid, version 3's are numerics-2 runs."""
-
-STUDIES: dict[str, Study] = {
-    "defaults-4": Study(
-        (
-            # grid16 first: its runs cost the least, and version 2 failed the rule there.
-            Sweep("defaults-4", PRESETS, {"defaults": ("4",)}, batch_seeds=1, numerics=None),
-            NUMERICS_2,
-        ),
-        FOUR_AGAINST_THREE.tables,
-        "Version 4 of the defaults against version 3: exploration by rounds",
-        "grid16 (layout 0) and MiniGrid DoorKey-5x5",
-        FOUR_AGAINST_THREE.glance,
-        seeds=ADOPTION_SEEDS,
-        confirmatory=True,
-    ),
-}
+STUDIES = {"defaults-4": _STUDY}

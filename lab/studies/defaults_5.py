@@ -7,35 +7,9 @@ pseudo-reward accuracy (non-inferiority; docs/guide/defaults.md)."""
 
 from __future__ import annotations
 
-from dospcot.sweeps.report import TrialRun
-from dospcot_lab.studies.declaration import Study, Sweep
-from dospcot_lab.studies.defaults import PRESETS, VersionPair
-from dospcot_lab.studies.numerics import NUMERICS_2
-from dospcot_lab.studies.tables import ADOPTION_SEEDS
+from dospcot_lab.studies.version_3_pairs import against_version_3
 
+FIVE_AGAINST_THREE, _STUDY = against_version_3(5, "four co-training passes a round")
+"""The defaults-5 study's pair: version 5's runs name it in their grid, version 3's are numerics-2 runs."""
 
-def _version(run: TrialRun) -> int | None:
-    """5 for the study's own runs, 3 for the numerics-2 runs, None for the others its sweeps hold."""
-    if run.trial.params.get("defaults") == "5":
-        return 5
-    return 3 if run.trial.params.get("cotraining.numerics") == "2" else None
-
-
-FIVE_AGAINST_THREE = VersionPair(3, 5, _version)
-"""The defaults-5 study: version 5's runs name it in their grid, version 3's are numerics-2 runs."""
-
-STUDIES: dict[str, Study] = {
-    "defaults-5": Study(
-        (
-            # grid16 first: its runs cost the least.
-            Sweep("defaults-5", PRESETS, {"defaults": ("5",)}, batch_seeds=1, numerics=None),
-            NUMERICS_2,
-        ),
-        FIVE_AGAINST_THREE.tables,
-        "Version 5 of the defaults against version 3: four co-training passes a round",
-        "grid16 (layout 0) and MiniGrid DoorKey-5x5",
-        FIVE_AGAINST_THREE.glance,
-        seeds=ADOPTION_SEEDS,
-        confirmatory=True,
-    ),
-}
+STUDIES = {"defaults-5": _STUDY}

@@ -114,31 +114,27 @@ def test_version_4_trains_each_preset_under_version_3_with_exploration_by_rounds
     assert (cfg.defaults, cfg.training.exploration, cfg.cotraining.numerics) == (4, "rounds", 2)
 
 
-def test_version_5_trains_each_preset_under_version_3_with_four_passes_and_pairs_with_numerics_2(tmp_path):
-    sweep, numerics_2 = STUDIES["defaults-5"].sweeps
-    assert numerics_2.name == "numerics-2" and STUDIES["defaults-5"].confirmatory
+@pytest.mark.parametrize(
+    ("version", "pair", "moved"),
+    [
+        (5, FIVE_AGAINST_THREE, (4, False)),  # four co-training passes a round
+        (6, SIX_AGAINST_THREE, (4, True)),  # and the refit on a new class
+    ],
+)
+def test_versions_5_and_6_train_each_preset_with_their_moves_and_pair_with_numerics_2(version, pair, moved):
+    sweep, numerics_2 = STUDIES[f"defaults-{version}"].sweeps
+    assert numerics_2.name == "numerics-2" and STUDIES[f"defaults-{version}"].confirmatory
     trials = sweep_spec(sweep, 20).trials(check_task=False)
     assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
     for trial in trials[:: len(trials) // 2]:
         cfg = trial.load_config()
-        assert (cfg.defaults, cfg.training.cotrain_passes, cfg.cotraining.numerics) == (5, 4, 2)
-        assert cfg.training.exploration == "pace"
+        assert (cfg.defaults, cfg.cotraining.numerics, cfg.training.exploration) == (version, 2, "pace")
+        assert (cfg.training.cotrain_passes, cfg.cotraining.refit_new_classes) == moved
     runs = [
-        TrialRun(Trial("grid16-dospcot", "grid16-dospcot", params, 0), {}, [], tmp_path)
-        for params in ({"defaults": "5"}, {"cotraining.numerics": "2"}, {"defaults": "4"})
+        TrialRun(Trial("grid16-dospcot", "grid16-dospcot", params, 0), {}, [], Path())
+        for params in ({"defaults": str(version)}, {"cotraining.numerics": "2"}, {"defaults": "4"})
     ]
-    assert [FIVE_AGAINST_THREE.version_of(run) for run in runs] == [5, 3, None]
-
-
-def test_version_6_is_version_5_with_the_refit_paired_with_the_numerics_2_runs():
-    sweep, numerics_2 = STUDIES["defaults-6"].sweeps
-    assert numerics_2.name == "numerics-2" and STUDIES["defaults-6"].confirmatory
-    trials = sweep_spec(sweep, 20).trials(check_task=False)
-    assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
-    for trial in trials[:: len(trials) // 2]:
-        cfg = trial.load_config()
-        assert (cfg.defaults, cfg.training.cotrain_passes, cfg.cotraining.refit_new_classes) == (6, 4, True)
-    assert SIX_AGAINST_THREE.version_of(TrialRun(Trial("p", "p", {"defaults": "6"}, 0), {}, [], Path())) == 6
+    assert [pair.version_of(run) for run in runs] == [version, 3, None]
 
 
 def test_a_preset_short_of_its_pairs_is_decided_when_even_its_best_case_fails_the_rule(tmp_path):
