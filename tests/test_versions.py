@@ -163,3 +163,21 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     ]
     assert main(["config", "tiny", "--set", "defaults=1"]) == 0
     assert "(defaults = 1:" not in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    "bad",
+    [
+        ["training.segment_length=[2]"],
+        ["training=3"],
+        ["demonstrations=3"],
+        ["views=3"],
+        ['method="reward-model"', "cotraining.ensemble_size=[1]"],
+    ],
+)
+@pytest.mark.parametrize("version", [2, 5])
+def test_a_versions_rules_leave_a_malformed_value_to_the_configs_own_check(version, bad):
+    """A rule reads only the values it can; the config's check then names what is wrong in one line,
+    rather than the rule failing with a TypeError of its own."""
+    with pytest.raises(ConfigError):
+        load_config("tiny", [f"defaults={version}", *bad])

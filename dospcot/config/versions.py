@@ -91,11 +91,14 @@ def _strategy(table: Mapping[str, Any]) -> str | None:
     """Episode ends first, then where the views (or the reward model's members) disagree; a run with one
     classifier asks where it is least sure instead. None for a run that asks no rater: one that learns
     no reward, or learns from segment labels."""
-    if not _learns_rewards(table) or table.get("training", {}).get("segment_length", 1) > 1:
+    segments = _section(table, "training").get("segment_length", 1)
+    if not _learns_rewards(table) or (_whole(segments) and segments > 1):
         return None
-    classifiers = len(table.get("views", DEFAULT_VIEWS))
+    views = table.get("views", DEFAULT_VIEWS)
+    classifiers = len(views) if isinstance(views, list | tuple) else 1
     if _method(table) == "reward-model":
-        classifiers *= int(table.get("cotraining", {}).get("ensemble_size", CoTrainingConfig.ensemble_size))
+        size = _section(table, "cotraining").get("ensemble_size", CoTrainingConfig.ensemble_size)
+        classifiers *= size if _whole(size) else CoTrainingConfig.ensemble_size
     return "outcomes+disagreement" if classifiers >= 2 else "outcomes+uncertainty"
 
 
@@ -107,7 +110,7 @@ def _when_asking(value: Any) -> Callable[[Mapping[str, Any]], Any]:
     """``value`` for a run whose strategy, its own or the version's, asks a rater."""
 
     def rule(table: Mapping[str, Any]) -> Any:
-        strategy = table.get("training", {}).get("label_strategy") or _strategy(table)
+        strategy = _section(table, "training").get("label_strategy") or _strategy(table)
         return value if strategy not in (None, "uniform") else None
 
     return rule
@@ -118,7 +121,7 @@ def _without_labelled_demonstrations(value: Any) -> Callable[[Mapping[str, Any]]
     which of their steps ended an episode."""
 
     def rule(table: Mapping[str, Any]) -> Any:
-        demos = table.get("demonstrations", {})
+        demos = _section(table, "demonstrations")
         labelled = (demos.get("file") or demos.get("agent")) and demos.get("labels", True)
         return value if _learns_rewards(table) and not labelled else None
 
@@ -128,9 +131,7 @@ def _without_labelled_demonstrations(value: Any) -> Callable[[Mapping[str, Any]]
 def _passes(table: Mapping[str, Any]) -> int | None:
     """:data:`PASSES` co-training passes a round (at most a round's steps) for a run that learns single
     rewards; None for one that learns none, or learns from segment labels (co-trained once a round)."""
-    training = table.get("training", {})
-    if not isinstance(training, Mapping):  # the config's own check names what is wrong with it
-        return PASSES
+    training = _section(table, "training")
     segments = training.get("segment_length", TrainingConfig.segment_length)
     steps = training.get("steps_per_round", TrainingConfig.steps_per_round)
     if not _learns_rewards(table) or (_whole(segments) and segments > 1):
@@ -140,6 +141,13 @@ def _passes(table: Mapping[str, Any]) -> int | None:
 
 def _whole(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
+
+
+def _section(table: Mapping[str, Any], name: str) -> Mapping[str, Any]:
+    """``table``'s section ``name``; empty where it is missing or not a table. A rule reads only what
+    it can: the config's own check names anything wrong with the values it skips."""
+    part = table.get(name, {})
+    return part if isinstance(part, Mapping) else {}
 
 
 VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
