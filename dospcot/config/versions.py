@@ -87,12 +87,17 @@ def _learns_rewards(table: Mapping[str, Any]) -> bool:
     return _method(table) in REWARD_LEARNERS
 
 
+def _learns_single_rewards(table: Mapping[str, Any]) -> bool:
+    """Whether the run learns rewards from labels of single steps, not of segments."""
+    segments = _section(table, "training").get("segment_length", TrainingConfig.segment_length)
+    return _learns_rewards(table) and not (_whole(segments) and segments > 1)
+
+
 def _strategy(table: Mapping[str, Any]) -> str | None:
     """Episode ends first, then where the views (or the reward model's members) disagree; a run with one
     classifier asks where it is least sure instead. None for a run that asks no rater: one that learns
     no reward, or learns from segment labels."""
-    segments = _section(table, "training").get("segment_length", 1)
-    if not _learns_rewards(table) or (_whole(segments) and segments > 1):
+    if not _learns_single_rewards(table):
         return None
     views = table.get("views", DEFAULT_VIEWS)
     classifiers = len(views) if isinstance(views, list | tuple) else 1
@@ -131,11 +136,9 @@ def _without_labelled_demonstrations(value: Any) -> Callable[[Mapping[str, Any]]
 def _passes(table: Mapping[str, Any]) -> int | None:
     """:data:`PASSES` co-training passes a round (at most a round's steps) for a run that learns single
     rewards; None for one that learns none, or learns from segment labels (co-trained once a round)."""
-    training = _section(table, "training")
-    segments = training.get("segment_length", TrainingConfig.segment_length)
-    steps = training.get("steps_per_round", TrainingConfig.steps_per_round)
-    if not _learns_rewards(table) or (_whole(segments) and segments > 1):
+    if not _learns_single_rewards(table):
         return None
+    steps = _section(table, "training").get("steps_per_round", TrainingConfig.steps_per_round)
     return min(PASSES, steps) if _whole(steps) and steps >= 1 else PASSES
 
 

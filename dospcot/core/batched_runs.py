@@ -138,15 +138,15 @@ class BatchedRuns:
         """One round of every member; returns each member's records."""
         for run in self.runs:
             run.round += 1
-        passes = self.cfg.training.cotrain_passes
-        for part, steps in enumerate(self.runs[0].round_parts()):
+        parts = self.runs[0].round_parts()
+        for part, steps in enumerate(parts):
             for k in range(self.n_views):  # 1. collect and learn, view by view
                 if part == 0:
                     for run in self.runs:
                         run.seed_round_env(k)
                 self._collect(k, steps, on_steps)
                 self._write_back(k)
-            if part < passes - 1:  # 1a. a pass inside the round (training.cotrain_passes)
+            if part < len(parts) - 1:  # 1a. a pass inside the round (training.cotrain_passes)
                 for run in self.runs:
                     run.cotrain(record=False)
         for run in self.runs:

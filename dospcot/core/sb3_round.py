@@ -209,14 +209,14 @@ class CoTrainingRun:
         """
         if not self.collected:  # 1. collect and learn, with the rewards and weights written so far
             self.round += 1
-            passes = self.cfg.training.cotrain_passes
-            for part, steps in enumerate(self.round_parts()):
+            parts = self.round_parts()
+            for part, steps in enumerate(parts):
                 for k, agent in enumerate(self.agents):
                     if part == 0:
                         self.seed_round_env(k)  # learn() then resets it, with that seed
                     with self._draws_of(k):  # a later part goes on with the episodes the last one left
                         agent.learn(steps, callback=callback, reset_num_timesteps=False)
-                if part < passes - 1:  # 1a. a pass inside the round rewards the steps just taken
+                if part < len(parts) - 1:  # 1a. a pass inside the round rewards the steps just taken
                     self.cotrain(record=False)
             self.collected = True
         stats = self.label_and_cotrain()  # 1b-3.

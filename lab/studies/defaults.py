@@ -62,15 +62,15 @@ class VersionPair:
             "defaults",
             {**ADOPTION_METRICS, "labelled_steps": "labels"},
         )
-        differences = {preset: self.differences(runs, preset) for preset in PRESETS}
+        differences = self.by_preset(runs)
         early = []
-        for preset in (p for p in PRESETS if self.decided_early(runs, p)):
+        for preset, best in self.decided_early(runs, differences).items():
             n = differences[preset]["success"].n
-            best = ", ".join(f"{m} {d}" for m, d in self.best_cases(runs, preset).items())
+            cells = ", ".join(f"{m} {d}" for m, d in best.items())
             early.append(
                 f"- `{preset}` holds {n} of its {ADOPTION_SEEDS} pairs, and the rule fails whatever the "
                 f"other {ADOPTION_SEEDS - n} show: with each at the most it could read (success and "
-                f"pseudo-reward accuracy 1), the differences would read {best}."
+                f"pseudo-reward accuracy 1), the differences would read {cells}."
             )
         return [
             "",
@@ -85,16 +85,21 @@ class VersionPair:
     def glance(self, runs: list[TrialRun]) -> Glance:
         """The headline: success, new minus old, on the preset that decides (a failing one first); the
         verdict: adopt the new version only where every difference on both presets is non-inferior."""
+        differences = self.by_preset(runs)
         return adoption_glance(
-            {preset: self.differences(runs, preset) for preset in PRESETS},
+            differences,
             f"defaults {self.new} minus {self.old}",
             (
                 f"version {self.new} not shown non-inferior: not adopted",
                 "not measured yet (a preset lacks one version's runs)",
                 f"version {self.new} non-inferior: adopt it",
             ),
-            [preset for preset in PRESETS if self.decided_early(runs, preset)],
+            list(self.decided_early(runs, differences)),
         )
+
+    def by_preset(self, runs: list[TrialRun]) -> dict[str, dict[str, SeedSummary]]:
+        """Per preset of :data:`PRESETS`: :meth:`differences`."""
+        return {preset: self.differences(runs, preset) for preset in PRESETS}
 
     def best_cases(self, runs: list[TrialRun], preset: str) -> dict[str, SeedSummary]:
         """Per metric: the new version minus the old on ``preset`` with every seed the new one has not
@@ -102,13 +107,22 @@ class VersionPair:
         new, old = self.by_seed(runs, preset, self.new), self.by_seed(runs, preset, self.old)
         return {metric: best_case(new, old, metric) for metric in METRICS}
 
-    def decided_early(self, runs: list[TrialRun], preset: str) -> bool:
-        """Whether ``preset``, short of its :data:`ADOPTION_SEEDS` pairs, fails the adoption rule
-        whatever the pairs it lacks show: its best case does."""
-        pairs = self.differences(runs, preset)["success"].n
-        best = self.best_cases(runs, preset)
-        short = 0 < pairs < ADOPTION_SEEDS and best["success"].n > 0
-        return short and not all(map(non_inferior, best.values()))
+    def decided_early(
+        self, runs: list[TrialRun], differences: dict[str, dict[str, SeedSummary]]
+    ) -> dict[str, dict[str, SeedSummary]]:
+        """The presets that, short of their :data:`ADOPTION_SEEDS` pairs, fail the adoption rule whatever
+        the pairs they lack show, each with its best case (:meth:`best_cases`), which fails it.
+
+        :param differences: :meth:`by_preset` of ``runs``.
+        """
+        early = {}
+        for preset in PRESETS:
+            if not 0 < differences[preset]["success"].n < ADOPTION_SEEDS:
+                continue  # a preset with every pair, or none, is read as it is
+            best = self.best_cases(runs, preset)
+            if best["success"].n and not all(map(non_inferior, best.values())):
+                early[preset] = best
+        return early
 
 
 TWO_AGAINST_ONE = VersionPair(1, 2, lambda run: int(run.trial.params.get("defaults", 1)))

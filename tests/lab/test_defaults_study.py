@@ -144,15 +144,16 @@ def test_a_preset_short_of_its_pairs_is_decided_when_even_its_best_case_fails_th
     nothing."""
     old = [_run_4(tmp_path, "grid16-dospcot", seed, 3, 1.0) for seed in range(ADOPTION_SEEDS)]
     new = [_run_4(tmp_path, "grid16-dospcot", seed, 4, float(seed in (1, 2))) for seed in range(4)]
-    best = FOUR_AGAINST_THREE.best_cases(old + new, "grid16-dospcot")
+    pair = FOUR_AGAINST_THREE
+    best = pair.best_cases(old + new, "grid16-dospcot")
     assert best["success"].mean == pytest.approx(-2 / ADOPTION_SEEDS) and best["success"].n == ADOPTION_SEEDS
     assert best["pseudo_accuracy"].mean == pytest.approx(0.1 * 16 / ADOPTION_SEEDS)
-    assert FOUR_AGAINST_THREE.decided_early(old + new, "grid16-dospcot")
+    assert "grid16-dospcot" in pair.decided_early(old + new, pair.by_preset(old + new))
     row = glance_4(old + new)
     assert row.verdict == "version 4 not shown non-inferior: not adopted"
     assert row.headline.endswith("over 4 seeds (the rule fails whatever the other 16 show)")
     assert any("holds 4 of its 20 pairs, and the rule fails" in line for line in tables_4(old + new))
     (tmp_path / "fine").mkdir()
     fine = [_run_4(tmp_path / "fine", "grid16-dospcot", seed, 4, 1.0) for seed in range(4)]
-    assert not FOUR_AGAINST_THREE.decided_early(old + fine, "grid16-dospcot")
+    assert not pair.decided_early(old + fine, pair.by_preset(old + fine))
     assert glance_4(old + fine).verdict == NOT_MEASURED
