@@ -80,6 +80,7 @@ def test_a_folder_or_checkpoint_written_before_the_key_reads_shared_whatever_the
     assert old_table == {
         "agent_draws": "shared",
         "cotrain_passes": 1,
+        "passes_from_round": 1,
         "query_end_states": "random",
         "stop_patience": 0,
         "rounds": 3,

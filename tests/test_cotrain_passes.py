@@ -24,8 +24,14 @@ SECTIONS = {
 }
 
 
-def _run(passes: int, seed: int = 3):
-    training = {"rounds": 2, "steps_per_round": 300, "label_fraction": 0.2, "cotrain_passes": passes}
+def _run(passes: int, seed: int = 3, from_round: int = 1):
+    training = {
+        "rounds": 2,
+        "steps_per_round": 300,
+        "label_fraction": 0.2,
+        "cotrain_passes": passes,
+        "passes_from_round": from_round,
+    }
     cfg = grid_config("dospcot", ("dqn", "dqn"), ("coords", "patch"), seed, training=training, **SECTIONS)
     return grid_run(cfg, partial(GridWorld, LAYOUT), grid_views(LAYOUT, patch_size=3))
 
@@ -48,8 +54,8 @@ def test_agents_take_the_steps_of_a_round_whatever_their_train_freq():
         "dospcot", ("dqn", "dqn"), ("coords", "patch"), 3, training=training, env=SECTIONS["env"], dqn=dqn
     )
     run = grid_run(cfg, partial(GridWorld, LAYOUT), grid_views(LAYOUT, patch_size=3))
-    assert run.round_parts() == [76, 76, 76, 72]
     assert all(r["env_steps"] == 600 for r in run.run()[2:])
+    assert run.round_parts() == [76, 76, 76, 72]
 
 
 def test_each_part_but_the_last_is_followed_by_a_pass_that_writes_the_reward_table():
@@ -78,16 +84,37 @@ def test_each_part_but_the_last_is_followed_by_a_pass_that_writes_the_reward_tab
     assert len(run.class_records) == len(once.class_records)
 
 
+def _pool() -> RunPool:
+    """40 samples, 8 of them labelled by the sign of their first feature; two views."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(40, 3))
+    labelled = np.arange(40) < 8
+    label_class = np.where(labelled, (x[:, 0] > 0).astype(np.int64), -1)
+    return RunPool([x, -x], labelled, label_class, ~labelled, np.ones(2, bool))
+
+
 def test_the_schedule_ages_by_one_round_over_a_rounds_passes():
-    config = CoTrainingConfig()
-    trainer = RunCoTrainer([2, 3], config, seed=0, n_classes=2, passes_per_round=4)
-    start, step = config.add_fraction_start, config.add_fraction_step
-    for passes, expected in ((0, start), (2, start + step / 2), (4, start + step), (6, start + 1.5 * step)):
-        trainer._batch.round = passes
-        assert trainer._batch.add_fraction == pytest.approx(expected)
-    once = RunCoTrainer([2, 3], config, seed=0, n_classes=2)
-    once._batch.round = 1
-    assert once._batch.add_fraction == start + step  # one pass a round: the schedule as it always was
+    """Round 1 in one step, round 2 in four: add_num's share grows by add_fraction_step over each round,
+    a quarter of it per pass of round 2."""
+    config = CoTrainingConfig(add_fraction_start=0.1, add_fraction_step=0.2)
+    trainer, pool = RunCoTrainer([3, 3], config, seed=0, n_classes=2), _pool()
+    shares = []
+    for passes in (1, 4, 4, 4, 4):
+        shares.append(trainer._batch.add_fraction)
+        trainer.step(pool, passes)
+    assert shares == pytest.approx([0.1, 0.3, 0.35, 0.4, 0.45])
+    assert trainer._batch.age == 2 and trainer._batch.add_fraction == pytest.approx(0.5)
+
+
+def test_a_checkpoint_from_before_the_age_reads_its_rounds_from_its_steps():
+    """A trainer pickled before the schedule kept its age counted rounds in steps of
+    ``passes_per_round`` (1 before that key existed)."""
+    trainer = RunCoTrainer([3, 3], CoTrainingConfig(), seed=0, n_classes=2)._batch
+    del trainer._age
+    trainer.round = 6
+    assert trainer.age == 6
+    trainer.passes_per_round = 4
+    assert trainer.age == 1.5
 
 
 def test_bad_passes_are_refused_with_the_reason():
@@ -124,14 +151,36 @@ def test_the_stopping_rules_read_a_rounds_last_pass_alone():
     """A pass inside a round neither stops the run nor becomes what the next round's pseudo-labels are
     compared with: ``stop_when_fully_admitted`` fires at the round's end, not at the pass that admitted
     the pool."""
-    rng = np.random.default_rng(0)
-    x = rng.normal(size=(40, 3))
-    labelled = np.arange(40) < 8
-    label_class = np.where(labelled, (x[:, 0] > 0).astype(np.int64), -1)
-    pool = RunPool([x, -x], labelled, label_class, ~labelled, np.ones(2, bool))
+    pool = _pool()
     config = CoTrainingConfig(add_fraction_start=1.0, stop_when_fully_admitted=True)
-    trainer = RunCoTrainer([3, 3], config, seed=0, n_classes=2, passes_per_round=2)
-    first = trainer.step(pool)
+    trainer = RunCoTrainer([3, 3], config, seed=0, n_classes=2)
+    first = trainer.step(pool, 2)
     assert first.pace == 1.0 and not first.stopped and trainer._batch._previous is None
-    second = trainer.step(pool)
+    second = trainer.step(pool, 2)
     assert second.stopped and trainer._batch._previous is not None
+
+
+def test_passes_from_a_later_round_leave_the_rounds_before_it_one_pass():
+    """``passes_from_round = 2``: round 1 collects its 300 steps whole and co-trains once, as without
+    passes; round 2 in three passes. The schedule ages by one round each round."""
+    run = _run(3, from_round=2)
+    steps = []
+    cotrain = run.cotrain
+
+    def spy(record: bool = True) -> dict:
+        steps.append(run.agents[0].num_timesteps)
+        return cotrain(record)
+
+    run.cotrain = spy
+    run.run()
+    assert steps == [300, 400, 500, 600]
+    assert run.trainer._batch.round == 4 and run.trainer._batch.age == 2
+    # round 1 is the run without passes, draw for draw
+    once = _run(1)
+    once.run(until_round=1)
+    replay = _run(3, from_round=2)
+    replay.run(until_round=1)
+    assert np.array_equal(once.table.reward, replay.table.reward)
+    assert np.array_equal(once.table.weight, replay.table.weight)
+    with pytest.raises(ConfigError, match="passes_from_round must be >= 1, got 0"):
+        load_config("tiny", ["training.passes_from_round=0"])

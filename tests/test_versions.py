@@ -64,6 +64,12 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     refit = dataclasses.replace(fifth.cotraining, refit_new_classes=True)
     sixth = load_config("minigrid-doorkey-dospcot", ["defaults=6"])
     assert dataclasses.replace(fifth, defaults=6, cotraining=refit) == sixth
+    # version 7 is version 6 with the passes from round 2, for a run that learns single rewards
+    later = dataclasses.replace(sixth.training, passes_from_round=2)
+    seventh = load_config("minigrid-doorkey-dospcot", ["defaults=7"])
+    assert dataclasses.replace(sixth, defaults=7, training=later) == seventh
+    assert load_config("minigrid-doorkey-oracle", ["defaults=7"]).training.passes_from_round == 1
+    assert load_config("tiny", ["defaults=7", "training.segment_length=4"]).training.passes_from_round == 1
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -118,10 +124,10 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 7; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
-        r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\)$",
+        match=r"^defaults: unknown version 8; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=7"])
+        load_config("tiny", ["defaults=8"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -146,7 +152,10 @@ def test_a_run_folder_written_before_versions_reads_as_version_1(tmp_path):
 def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(capsys):
     assert main(["config", "tiny", "--set", "defaults=2"]) == 0
     out = capsys.readouterr().out
-    versions = "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate))"
+    versions = (
+        "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate), "
+        "7 (candidate))"
+    )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
     assert "refit_new_classes = true  # default true (defaults = 1: false)" in out

@@ -69,6 +69,10 @@ class TrainingConfig(AddedKeys):
         round, as under 1, and the co-trainer's stopping rules read a round's last pass. A pass early
         in round 1 may come before a rare class (a sparse task's goal) has a label: the steps it admits
         then all read the common class's reward (docs/results/defaults-6.md).
+    :param passes_from_round: the first round (1-based) co-trained in ``cotrain_passes`` passes; the
+        rounds before it co-train once, after their whole collection. 2: round 1's labels are all bought
+        before the classifiers first admit a sample, so a sparse task's first goal label is not
+        outrun by a pass. The self-paced schedule ages by one round per round either way.
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.
@@ -150,10 +154,12 @@ class TrainingConfig(AddedKeys):
     agent_draws: AgentDraws = "shared"
     stop_patience: int = 0
     cotrain_passes: int = 1
+    passes_from_round: int = 1
 
     added_keys: ClassVar[dict[str, Any]] = {
         "agent_draws": "shared",
         "cotrain_passes": 1,
+        "passes_from_round": 1,
         "query_end_states": "random",
         "stop_patience": 0,
     }
@@ -170,6 +176,7 @@ class TrainingConfig(AddedKeys):
                 f"cotrain_passes must lie in [1, steps_per_round = {self.steps_per_round}], "
                 f"got {self.cotrain_passes}"
             )
+        check_at_least(self, 1, "passes_from_round")
         check_at_least(self, 0, "update_steps")
         if self.exploration not in ("pace", "rounds"):
             raise ValueError(f"exploration must be 'pace' or 'rounds', got {self.exploration!r}")

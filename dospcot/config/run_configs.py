@@ -44,6 +44,7 @@ REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {
     "cotraining.classifier",
     "cotraining.pseudo_rewards",
     "training.cotrain_passes",
+    "training.passes_from_round",
 }
 """The keys read by a method that learns rewards alone (``cotraining.classifier``: its section), which
 the baselines never read. ``numerics`` is not among them: every run names it in its

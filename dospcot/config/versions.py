@@ -25,7 +25,11 @@ it non-inferior on grid16, so ``defaults = 5`` opts in. Version 6, a candidate, 
 on a new class (``cotraining.refit_new_classes``): a pass early in round 1 fits the classifiers on the
 labels alone before every class has shown, and without the refit a class first labelled later is
 never fitted that way (grid16's lava, on the first seed of the defaults-5 study). The defaults-6 study
-did not show it non-inferior on grid16, so ``defaults = 6`` opts in. Nothing here imports torch.
+did not show it non-inferior on grid16, so ``defaults = 6`` opts in. Version 7, a candidate, is version
+6 with the passes from round 2 (``training.passes_from_round``): under versions 5 and 6 a sparse
+task's first pass came before any goal label, so every step it admitted read the common class's
+reward, and the agents learned that the task pays nothing; round 1 now co-trains once, as under
+version 3. Nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -109,6 +113,10 @@ def _strategy(table: Mapping[str, Any]) -> str | None:
 
 def _when_learning(value: Any) -> Callable[[Mapping[str, Any]], Any]:
     return lambda table: value if _learns_rewards(table) else None
+
+
+def _when_learning_single_rewards(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    return lambda table: value if _learns_single_rewards(table) else None
 
 
 def _when_asking(value: Any) -> Callable[[Mapping[str, Any]], Any]:
@@ -205,13 +213,20 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
             "defaults-5 study: a pass fits before every class has a label; the refit on a new class",
         ),
     ),
+    7: (
+        MovedDefault(
+            "training.passes_from_round",
+            _when_learning_single_rewards(2),
+            "defaults-6 study: a sparse task's first pass came before its goal's first label",
+        ),
+    ),
 }
 """Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
 
-BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5}
+BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6})
+CANDIDATES = frozenset({2, 4, 5, 6, 7})
 """Versions a config may opt into that no study has adopted yet."""
 
 

@@ -8,9 +8,9 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
 1. **Collect**: every agent ``learn()``s for ``steps_per_round`` env steps. Its gradient steps sample
    rewards and self-paced weights from the shared :class:`~dospcot.policies.RewardTable` at sample
    time, so what earlier rounds admitted drives this round's updates.
-   Under ``training.cotrain_passes`` c > 1 the collection comes in c parts, each but the last
-   followed by steps 2-3, so a step the agents take is rewarded in their replay a part later, not a
-   round later.
+   Under ``training.cotrain_passes`` c > 1 (from round ``training.passes_from_round`` on) the
+   collection comes in c parts, each but the last followed by steps 2-3, so a step the agents take is
+   rewarded in their replay a part later, not a round later.
    **Queries** (an active ``training.label_strategy``, :mod:`dospcot.core.queries`): a rater labels
    the samples the strategy chooses, within the budget the uniform mask would spend.
 2. **Co-train** (method ``"dospcot"``): the task turns its store into a
@@ -139,9 +139,7 @@ class CoTrainingRun:
         self.trainer: RunCoTrainer | RewardModelTrainer | None = None
         if cfg.method == "dospcot":
             # A segment's input is the sum of its steps' (dospcot.core.segments.segment_pool).
-            self.trainer = RunCoTrainer(
-                task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes, cfg.training.cotrain_passes
-            )
+            self.trainer = RunCoTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
         elif cfg.method == "reward-model":
             self.trainer = RewardModelTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
         self.class_records: list[dict] = []
@@ -226,12 +224,15 @@ class CoTrainingRun:
         return self.close_round(stats)  # 5-6.
 
     def round_parts(self) -> list[int]:
-        """The env steps of each part of a round's collection (:func:`collection_parts`), in whole
-        multiples of the agents' ``train_freq`` where every agent counts it in steps."""
+        """The env steps of each part of this round's collection (:func:`collection_parts`): one part
+        before ``training.passes_from_round``, then ``cotrain_passes``, in whole multiples of the
+        agents' ``train_freq`` where every agent counts it in steps."""
+        training = self.cfg.training
+        passes = training.cotrain_passes if self.round >= training.passes_from_round else 1
         freqs = [agent.train_freq for agent in self.agents]
         by_steps = all(freq.unit == TrainFrequencyUnit.STEP for freq in freqs)
         unit = math.lcm(*(freq.frequency for freq in freqs)) if by_steps else 1
-        return collection_parts(self.cfg.training.steps_per_round, self.cfg.training.cotrain_passes, unit)
+        return collection_parts(training.steps_per_round, passes, unit)
 
     def _draws_of(self, k: int) -> AbstractContextManager[None]:
         """Where agent ``k`` draws: its own generators under ``agent_draws = "own"``, else the global ones."""
@@ -291,7 +292,7 @@ class CoTrainingRun:
         pool = self.task.pool(np.float32 if self.segments is not None else self.trainer.dtype_np)
         if self.segments is not None:
             return self._cotrain_segments(pool)
-        result = self.trainer.step(pool)
+        result = self.trainer.step(pool, len(self.round_parts()))
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class), nan=0.0)
         true_class = self.task.true_class()  # metrics only, and the true-rewards control's classes
         if self.true_rewards:

@@ -13,6 +13,7 @@ schedule, and nothing crosses between runs.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from fractions import Fraction
 
 import numpy as np
 import torch
@@ -215,14 +216,13 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
     :param config: the schedule's hyperparameters.
     :param seeds: one seed per run; view j of run b initialises from ``(seeds[b], j)``.
     :param n_classes: K, the most reward classes a run may hold (the classifiers' outputs).
-    :param passes_per_round: the steps (passes) the driver takes per round of the schedule
-        (``training.cotrain_passes``): the schedule ages by its inverse per step.
     """
 
     _seen: np.ndarray | None = None
     """(B, K) the classes each run's labels have shown so far (None in a checkpoint older than it)."""
-    passes_per_round = 1
-    """The steps per round of the schedule (1 in a checkpoint older than the key)."""
+    _age: Fraction | None = None
+    """The rounds of the schedule done; None in a checkpoint older than it, whose :attr:`round` counts
+    them in steps of ``passes_per_round`` (1 before that key)."""
 
     def __init__(
         self,
@@ -231,10 +231,8 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         config: CoTrainingConfig,
         seeds: list[int],
         n_classes: int,
-        passes_per_round: int = 1,
     ) -> None:
         self.config, self.n_classes = config, n_classes
-        self.passes_per_round = passes_per_round
         self.n_views = len(view_dims)
         if self.n_views < 1:
             raise ValueError("co-training needs at least one view")
@@ -243,19 +241,30 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
             for j, dim in enumerate(view_dims)
         ]
         self.round = 0
+        """The steps taken (passes, where a round has several)."""
+        self._age = Fraction(0)
         self._previous: np.ndarray | None = None
         self._weights: np.ndarray | None = None
         self._seen = np.zeros((n_runs, n_classes), dtype=bool)
 
     @property
-    def add_fraction(self) -> float:
-        """add_num of the current step as a share of |U| (grows by ``add_fraction_step`` each round of
-        :attr:`passes_per_round` steps)."""
-        rounds = self.round / self.passes_per_round
-        return self.config.add_fraction_start + self.config.add_fraction_step * rounds
+    def age(self) -> Fraction:
+        """The rounds of the schedule done: a step of a round in c passes ages it by 1/c."""
+        if self._age is None:
+            return Fraction(self.round, vars(self).get("passes_per_round", 1))
+        return self._age
 
-    def step(self, pool: Pool) -> RoundResult:
-        """Run one round: for each view in turn select, fit and score; then Eq. 9; then age."""
+    @property
+    def add_fraction(self) -> float:
+        """add_num of the current step as a share of |U| (grows by ``add_fraction_step`` a round)."""
+        return self.config.add_fraction_start + self.config.add_fraction_step * float(self.age)
+
+    def step(self, pool: Pool, passes: int = 1) -> RoundResult:
+        """Run one step: for each view in turn select, fit and score; then Eq. 9; then age.
+
+        :param passes: the steps the driver takes in this round of the schedule
+            (``training.cotrain_passes``, 1 before ``training.passes_from_round``).
+        """
         cfg, m = self.config, self.n_views
         mask = torch.from_numpy(pool.class_mask)
         numerics = NUMERICS[self.numerics]
@@ -320,14 +329,16 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         # With nothing unlabelled (every reward revealed), the schedule has nothing left to admit.
         pace = np.where(n_unlabelled > 0, (pseudo_weight > 0).sum(axis=1) / np.maximum(n_unlabelled, 1), 1.0)
         # The stopping rules read rounds: a pass inside a round neither stops nor is compared with.
-        round_end = (self.round + 1) % self.passes_per_round == 0
+        age = self.age + Fraction(1, passes)
+        round_end = age.denominator == 1
         changed = self._changed_share(pseudo_class, pool.unlabelled, round_end)
         stopped = np.zeros(n_runs, dtype=bool)
-        if cfg.tol > 0 and self.round >= self.passes_per_round and round_end:
+        if cfg.tol > 0 and self.age >= 1 and round_end:
             stopped |= changed < cfg.tol
         if cfg.stop_when_fully_admitted and round_end:
             stopped |= pace >= 1.0
         self.round += 1
+        self._age = age
         return RoundResult(
             pseudo_class, pseudo_weight, weights, view_class, threshold, fit_loss, pace, changed, stopped
         )
@@ -354,7 +365,6 @@ class RunCoTrainer:
     :param config: the schedule's hyperparameters.
     :param seed: the run's seed; view j's classifier initialises from ``(seed, j)``.
     :param n_classes: K, the most reward classes the run may hold.
-    :param passes_per_round: co-training passes per round (``training.cotrain_passes``).
     """
 
     def __init__(
@@ -363,9 +373,8 @@ class RunCoTrainer:
         config: CoTrainingConfig,
         seed: int,
         n_classes: int,
-        passes_per_round: int = 1,
     ) -> None:
-        self._batch = SelfPacedCoTrainer(view_dims, 1, config, [seed], n_classes, passes_per_round)
+        self._batch = SelfPacedCoTrainer(view_dims, 1, config, [seed], n_classes)
 
     @property
     def numerics(self) -> int:
@@ -396,8 +405,8 @@ class RunCoTrainer:
             ]
         )
 
-    def step(self, pool: RunPool) -> RunRound:
-        """One round (:meth:`SelfPacedCoTrainer.step`) on the run's pool."""
+    def step(self, pool: RunPool, passes: int = 1) -> RunRound:
+        """One step (:meth:`SelfPacedCoTrainer.step`) on the run's pool, of a round in ``passes`` steps."""
         batched = Pool(
             [f[None] for f in pool.features],
             pool.labelled[None],
@@ -405,7 +414,7 @@ class RunCoTrainer:
             pool.unlabelled[None],
             pool.class_mask[None],
         )
-        return self._batch.step(batched).of_run(0)
+        return self._batch.step(batched, passes).of_run(0)
 
 
 def _label_share(pool: Pool) -> np.ndarray:

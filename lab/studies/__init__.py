@@ -29,6 +29,7 @@
     dospcot-lab study defaults-4 --docs       # version 4 (exploration by rounds) vs 3, the same seeds
     dospcot-lab study defaults-5 --docs       # version 5 (4 co-training passes a round) vs 3, likewise
     dospcot-lab study defaults-6 --docs       # version 6 (5 with the refit on a new class) vs 3, likewise
+    dospcot-lab study defaults-7 --docs       # version 7 (6 with passes from round 2) vs 3, likewise
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
     dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
 
@@ -80,6 +81,7 @@ from dospcot_lab.studies import (
     defaults_4,
     defaults_5,
     defaults_6,
+    defaults_7,
     grid_studies,
     highway_studies,
     label_sources,
@@ -131,6 +133,7 @@ STUDIES: dict[str, Study] = {
     **defaults_4.STUDIES,
     **defaults_5.STUDIES,
     **defaults_6.STUDIES,
+    **defaults_7.STUDIES,
     **sizing.STUDIES,
     **true_rewards.STUDIES,
     **views.STUDIES,

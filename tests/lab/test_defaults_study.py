@@ -15,6 +15,7 @@ from dospcot_lab.studies.defaults import TWO_AGAINST_ONE
 from dospcot_lab.studies.defaults_4 import FOUR_AGAINST_THREE
 from dospcot_lab.studies.defaults_5 import FIVE_AGAINST_THREE
 from dospcot_lab.studies.defaults_6 import SIX_AGAINST_THREE
+from dospcot_lab.studies.defaults_7 import SEVEN_AGAINST_THREE
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
@@ -117,11 +118,12 @@ def test_version_4_trains_each_preset_under_version_3_with_exploration_by_rounds
 @pytest.mark.parametrize(
     ("version", "pair", "moved"),
     [
-        (5, FIVE_AGAINST_THREE, (4, False)),  # four co-training passes a round
-        (6, SIX_AGAINST_THREE, (4, True)),  # and the refit on a new class
+        (5, FIVE_AGAINST_THREE, (4, False, 1)),  # four co-training passes a round
+        (6, SIX_AGAINST_THREE, (4, True, 1)),  # and the refit on a new class
+        (7, SEVEN_AGAINST_THREE, (4, True, 2)),  # and the passes from round 2
     ],
 )
-def test_versions_5_and_6_train_each_preset_with_their_moves_and_pair_with_numerics_2(version, pair, moved):
+def test_versions_5_to_7_train_each_preset_with_their_moves_and_pair_with_numerics_2(version, pair, moved):
     sweep, numerics_2 = STUDIES[f"defaults-{version}"].sweeps
     assert numerics_2.name == "numerics-2" and STUDIES[f"defaults-{version}"].confirmatory
     trials = sweep_spec(sweep, 20).trials(check_task=False)
@@ -129,7 +131,8 @@ def test_versions_5_and_6_train_each_preset_with_their_moves_and_pair_with_numer
     for trial in trials[:: len(trials) // 2]:
         cfg = trial.load_config()
         assert (cfg.defaults, cfg.cotraining.numerics, cfg.training.exploration) == (version, 2, "pace")
-        assert (cfg.training.cotrain_passes, cfg.cotraining.refit_new_classes) == moved
+        passes = (cfg.training.cotrain_passes, cfg.training.passes_from_round)
+        assert (passes[0], cfg.cotraining.refit_new_classes, passes[1]) == moved
     runs = [
         TrialRun(Trial("grid16-dospcot", "grid16-dospcot", params, 0), {}, [], Path())
         for params in ({"defaults": str(version)}, {"cotraining.numerics": "2"}, {"defaults": "4"})
