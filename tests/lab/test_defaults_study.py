@@ -131,8 +131,8 @@ def test_versions_5_to_7_train_each_preset_with_their_moves_and_pair_with_numeri
     for trial in trials[:: len(trials) // 2]:
         cfg = trial.load_config()
         assert (cfg.defaults, cfg.cotraining.numerics, cfg.training.exploration) == (version, 2, "pace")
-        passes = (cfg.training.cotrain_passes, cfg.training.passes_from_round)
-        assert (passes[0], cfg.cotraining.refit_new_classes, passes[1]) == moved
+        moves = (cfg.training.cotrain_passes, cfg.cotraining.refit_new_classes)
+        assert (*moves, cfg.training.passes_from_round) == moved
     runs = [
         TrialRun(Trial("grid16-dospcot", "grid16-dospcot", params, 0), {}, [], Path())
         for params in ({"defaults": str(version)}, {"cotraining.numerics": "2"}, {"defaults": "4"})
