@@ -155,7 +155,7 @@ def test_passes_inside_the_rounds_are_compared_with_exploration_by_rounds_alone(
     )
     assert any(line.startswith("| control, 4 passes a round | image | 1.000") for line in lines)
     sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
-    for task, seeds in (("doorkey", 5), ("lavagap", 10)):
+    for task in ("doorkey", "lavagap"):
         sweep = sweeps[f"true-rewards-{task}-passes"]
         assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, "training.cotrain_passes": ("4",)}
-        assert sweep.seeds == seeds
+        assert sweep.seeds == 10
