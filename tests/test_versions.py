@@ -70,6 +70,11 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     assert dataclasses.replace(sixth, defaults=7, training=later) == seventh
     assert load_config("minigrid-doorkey-oracle", ["defaults=7"]).training.passes_from_round == 1
     assert load_config("tiny", ["defaults=7", "training.segment_length=4"]).training.passes_from_round == 1
+    # version 8 is version 7 with exploration by rounds, for every method
+    rounds = dataclasses.replace(seventh.training, exploration="rounds")
+    eighth = load_config("minigrid-doorkey-dospcot", ["defaults=8"])
+    assert dataclasses.replace(seventh, defaults=8, training=rounds) == eighth
+    assert load_config("minigrid-doorkey-oracle", ["defaults=8"]).training.exploration == "rounds"
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -124,10 +129,10 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 8; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
-        r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\)$",
+        match=r"^defaults: unknown version 9; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=8"])
+        load_config("tiny", ["defaults=9"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -154,7 +159,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate))"
+        "7 (candidate), 8 (candidate))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out

@@ -30,7 +30,10 @@ did not show it non-inferior on grid16, so ``defaults = 6`` opts in. Version 7, 
 task's first pass came before any goal label, so every step it admitted read the common class's
 reward, and the agents learned that the task pays nothing; round 1 now co-trains once, as under
 version 3. The defaults-7 study held it non-inferior on grid16 but not on DoorKey, so ``defaults = 7``
-opts in. Nothing here imports torch.
+opts in. Version 8, a candidate, is version 7 with exploration by rounds: there the agents' exploration
+reached its floor after round 1, as soon as the pool was admitted, and on DoorKey the co-training path
+fed the true rewards matched the oracle only where its passes came with exploration by rounds (the
+true-rewards study). Nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -221,13 +224,20 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
             "defaults-6 study: a sparse task's first pass came before its goal's first label",
         ),
     ),
+    8: (
+        MovedDefault(
+            "training.exploration",
+            lambda table: "rounds",
+            "true-rewards study: DoorKey's path matched the oracle with passes and exploration by rounds",
+        ),
+    ),
 }
 """Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
 
-BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6}
+BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6, 7})
+CANDIDATES = frozenset({2, 4, 5, 6, 7, 8})
 """Versions a config may opt into that no study has adopted yet."""
 
 

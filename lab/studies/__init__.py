@@ -30,6 +30,7 @@
     dospcot-lab study defaults-5 --docs       # version 5 (4 co-training passes a round) vs 3, likewise
     dospcot-lab study defaults-6 --docs       # version 6 (5 with the refit on a new class) vs 3, likewise
     dospcot-lab study defaults-7 --docs       # version 7 (6 with passes from round 2) vs 3, likewise
+    dospcot-lab study defaults-8 --docs       # version 8 (7 with exploration by rounds) vs 3, likewise
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
     dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
 
@@ -82,6 +83,7 @@ from dospcot_lab.studies import (
     defaults_5,
     defaults_6,
     defaults_7,
+    defaults_8,
     grid_studies,
     highway_studies,
     label_sources,
@@ -134,6 +136,7 @@ STUDIES: dict[str, Study] = {
     **defaults_5.STUDIES,
     **defaults_6.STUDIES,
     **defaults_7.STUDIES,
+    **defaults_8.STUDIES,
     **sizing.STUDIES,
     **true_rewards.STUDIES,
     **views.STUDIES,

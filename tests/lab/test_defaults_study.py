@@ -16,6 +16,7 @@ from dospcot_lab.studies.defaults_4 import FOUR_AGAINST_THREE
 from dospcot_lab.studies.defaults_5 import FIVE_AGAINST_THREE
 from dospcot_lab.studies.defaults_6 import SIX_AGAINST_THREE
 from dospcot_lab.studies.defaults_7 import SEVEN_AGAINST_THREE
+from dospcot_lab.studies.defaults_8 import EIGHT_AGAINST_THREE
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
@@ -118,21 +119,23 @@ def test_version_4_trains_each_preset_under_version_3_with_exploration_by_rounds
 @pytest.mark.parametrize(
     ("version", "pair", "moved"),
     [
-        (5, FIVE_AGAINST_THREE, (4, False, 1)),  # four co-training passes a round
-        (6, SIX_AGAINST_THREE, (4, True, 1)),  # and the refit on a new class
-        (7, SEVEN_AGAINST_THREE, (4, True, 2)),  # and the passes from round 2
+        (5, FIVE_AGAINST_THREE, (4, False, 1, "pace")),  # four co-training passes a round
+        (6, SIX_AGAINST_THREE, (4, True, 1, "pace")),  # and the refit on a new class
+        (7, SEVEN_AGAINST_THREE, (4, True, 2, "pace")),  # and the passes from round 2
+        (8, EIGHT_AGAINST_THREE, (4, True, 2, "rounds")),  # and exploration by rounds
     ],
 )
-def test_versions_5_to_7_train_each_preset_with_their_moves_and_pair_with_numerics_2(version, pair, moved):
+def test_versions_5_to_8_train_each_preset_with_their_moves_and_pair_with_numerics_2(version, pair, moved):
     sweep, numerics_2 = STUDIES[f"defaults-{version}"].sweeps
     assert numerics_2.name == "numerics-2" and STUDIES[f"defaults-{version}"].confirmatory
     trials = sweep_spec(sweep, 20).trials(check_task=False)
     assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
     for trial in trials[:: len(trials) // 2]:
         cfg = trial.load_config()
-        assert (cfg.defaults, cfg.cotraining.numerics, cfg.training.exploration) == (version, 2, "pace")
-        moves = (cfg.training.cotrain_passes, cfg.cotraining.refit_new_classes)
-        assert (*moves, cfg.training.passes_from_round) == moved
+        assert (cfg.defaults, cfg.cotraining.numerics) == (version, 2)
+        training = cfg.training
+        moves = (training.cotrain_passes, cfg.cotraining.refit_new_classes, training.passes_from_round)
+        assert (*moves, training.exploration) == moved
     runs = [
         TrialRun(Trial("grid16-dospcot", "grid16-dospcot", params, 0), {}, [], Path())
         for params in ({"defaults": str(version)}, {"cotraining.numerics": "2"}, {"defaults": "4"})
