@@ -30,10 +30,10 @@ did not show it non-inferior on grid16, so ``defaults = 6`` opts in. Version 7, 
 task's first pass came before any goal label, so every step it admitted read the common class's
 reward, and the agents learned that the task pays nothing; round 1 now co-trains once, as under
 version 3. The defaults-7 study held it non-inferior on grid16 but not on DoorKey, so ``defaults = 7``
-opts in. Version 8, a candidate, is version 7 with exploration by rounds: there the agents' exploration
-reached its floor after round 1, as soon as the pool was admitted, and on DoorKey the co-training path
-fed the true rewards matched the oracle only where its passes came with exploration by rounds (the
-true-rewards study). Nothing here imports torch.
+opts in. Version 8, a candidate, is version 7 with exploration by rounds: under the pace DoorKey's
+agents reached their exploration floor after round 1, as soon as the pool was admitted, and there the
+co-training path fed the true rewards matched the oracle only where its passes came with exploration
+by rounds (the true-rewards study). Nothing here imports torch.
 """
 
 from __future__ import annotations
