@@ -33,6 +33,7 @@
     dospcot-lab study defaults-8 --docs       # version 8 (7 with exploration by rounds) vs 3, likewise
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
     dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
+    dospcot-lab study untuned --docs          # 5 MiniGrid tasks no one tuned, env id and views only
 
 A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
@@ -94,6 +95,7 @@ from dospcot_lab.studies import (
     second_view,
     sizing,
     true_rewards,
+    untuned,
     views,
 )
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
@@ -139,6 +141,7 @@ STUDIES: dict[str, Study] = {
     **defaults_8.STUDIES,
     **sizing.STUDIES,
     **true_rewards.STUDIES,
+    **untuned.STUDIES,
     **views.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""

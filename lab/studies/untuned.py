@@ -1,0 +1,152 @@
+"""The untuned study (exploratory): MiniGrid tasks no preset or study here was tuned on, each trained as
+a user would first train it, with the env id and two views and every other setting the library's.
+
+The oracle (every reward, the image view) and DOSPCoT (the image and the egocentric map) under the
+adopted version of the defaults, and DOSPCoT under version 2, whose label budget is 100. Issue 78
+asks, of each task: the oracle at 0.8 success or more, and DOSPCoT at 100 labels or fewer at 90% of
+the oracle's success or more (:data:`ORACLE_FLOOR`, :data:`SHARE_OF_ORACLE`)."""
+
+from __future__ import annotations
+
+from dospcot.config.versions import ADOPTED
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
+from dospcot_lab.studies.tables import cpu_per_run, labels_used
+
+TASKS = {
+    "unlock": "MiniGrid-Unlock-v0",
+    "empty-random": "MiniGrid-Empty-Random-6x6-v0",
+    "distshift": "MiniGrid-DistShift1-v0",
+    "crossing": "MiniGrid-SimpleCrossingS9N1-v0",
+    "obstacles": "MiniGrid-Dynamic-Obstacles-5x5-v0",
+}
+"""Each task's config name and env id: Unlock (the issue's), then every MiniGrid task whose goal the
+image shows without the mission's words and whose map is at most 9 cells a side, so its egocentric map
+stays within 17 x 17 x 15 inputs, that no preset or study here has trained (MiniGrid 3.2)."""
+FOLDER = "lab/studies/untuned"
+"""Where the tasks' configs are, from the repository's root (a sweep names its configs by path)."""
+DOSPCOT_VERSIONS = (ADOPTED, 2)
+"""The versions of the defaults DOSPCoT trains under: the adopted one and version 2 (the label budget)."""
+ORACLE_FLOOR = 0.8
+"""The oracle's success a task must reach (issue 78)."""
+SHARE_OF_ORACLE = 0.9
+"""The share of the oracle's success DOSPCoT must reach there, at 100 labels or fewer (issue 78)."""
+LABEL_CAP = 100
+
+
+def _config(task: str, method: str) -> str:
+    return f"{FOLDER}/{task}{'-oracle' if method == 'oracle' else ''}.toml"
+
+
+SWEEPS = (
+    Sweep("untuned-oracle", tuple(_config(t, "oracle") for t in TASKS), {}, numerics=None, defaults=ADOPTED),
+    *(
+        Sweep(
+            f"untuned-dospcot-v{version}",
+            tuple(_config(task, "dospcot") for task in TASKS),
+            {},
+            numerics=None,
+            defaults=version,
+        )
+        for version in DOSPCOT_VERSIONS
+    ),
+)
+
+
+def _arm(run: TrialRun) -> str:
+    """``oracle``, or ``dospcot-v<version of the defaults>``."""
+    return "oracle" if run.trial.name.endswith("-oracle") else f"dospcot-v{run.trial.defaults}"
+
+
+def _by_task(runs: list[TrialRun]) -> dict[str, dict[str, dict[int, TrialRun]]]:
+    """Per task, per arm, per seed: the run."""
+    grouped: dict[str, dict[str, dict[int, TrialRun]]] = {task: {} for task in TASKS}
+    for run in runs:
+        task = run.trial.name.removeprefix("untuned-").removesuffix("-oracle").removesuffix("-dospcot")
+        grouped[task].setdefault(_arm(run), {})[run.trial.seed] = run
+    return grouped
+
+
+def _success(runs: dict[int, TrialRun]) -> SeedSummary:
+    return SeedSummary.of([r.summary["mean"]["success"] for r in runs.values()])
+
+
+def _meets(oracle: SeedSummary, dospcot: SeedSummary, labels: float) -> str:
+    """Whether a task meets issue 78's bar with these means: the oracle's floor, then DOSPCoT's share."""
+    if oracle.n == 0 or dospcot.n == 0:
+        return "not run"
+    if oracle.mean < ORACLE_FLOOR:
+        return f"no: oracle below {ORACLE_FLOOR}"
+    if labels > LABEL_CAP:
+        return f"no: over {LABEL_CAP} labels"
+    return "yes" if dospcot.mean >= SHARE_OF_ORACLE * oracle.mean else f"no: below {SHARE_OF_ORACLE:.0%}"
+
+
+def _task_meets(by_arm: dict[str, dict[int, TrialRun]], arm: str) -> str:
+    """:func:`_meets` for one task's runs, with DOSPCoT's ``arm``."""
+    ours = by_arm.get(arm, {})
+    return _meets(_success(by_arm.get("oracle", {})), _success(ours), _mean_labels(ours))
+
+
+def _mean_labels(runs: dict[int, TrialRun]) -> float:
+    return SeedSummary.of([labels_used(r) for r in runs.values()]).mean if runs else float("nan")
+
+
+def tables(runs: list[TrialRun]) -> list[str]:
+    """Per task: the oracle's success, and per version of the defaults DOSPCoT's success, its share of
+    the oracle's, the labels its runs held and whether the task meets issue 78's bar."""
+    arms = [f"dospcot-v{v}" for v in DOSPCOT_VERSIONS]
+    lines = [
+        "Success: the share of greedy evaluation episodes that reach the goal (the library's 10 a round, "
+        "from the task's own start), each run's mean over its agents at its last round, then over seeds. "
+        f"The bar (issue 78): the oracle at {ORACLE_FLOOR} or more, and DOSPCoT at {LABEL_CAP} labels or "
+        f"fewer at {SHARE_OF_ORACLE:.0%} of the oracle's mean success or more. Labels: those a run held "
+        "at its end, mean over seeds.",
+        "",
+        "| task | oracle | "
+        + " | ".join(f"DOSPCoT, version {a[-1]} | share of oracle | labels | bar met" for a in arms)
+        + " |",
+        "|---|---|" + "---|---|---|---|" * len(arms),
+    ]
+    for task, by_arm in _by_task(runs).items():
+        oracle = _success(by_arm.get("oracle", {}))
+        cells = [str(oracle)]
+        for arm in arms:
+            members = by_arm.get(arm, {})
+            ours, labels = _success(members), _mean_labels(members)
+            share = f"{ours.mean / oracle.mean:.0%}" if ours.n and oracle.n and oracle.mean > 0 else "n/a"
+            cells += [str(ours), share, f"{labels:,.0f}" if ours.n else "n/a", _task_meets(by_arm, arm)]
+        lines.append(f"| {TASKS[task]} | " + " | ".join(cells) + " |")
+    cost = "; ".join(
+        f"{arm}: {cpu_per_run(members)}"
+        for arm in ("oracle", *arms)
+        if (members := [r for r in runs if _arm(r) == arm])
+    )
+    return [*lines, "", f"CPU per run (one torch thread): {cost}."]
+
+
+def glance(runs: list[TrialRun]) -> Glance:
+    """How many tasks meet the bar with version 2's DOSPCoT, and how many the oracle's floor alone."""
+    grouped = _by_task(runs)
+    measured = {t: a for t, a in grouped.items() if a.get("oracle")}
+    floor = [t for t, a in measured.items() if _success(a["oracle"]).mean >= ORACLE_FLOOR]
+    met = [t for t, a in measured.items() if _task_meets(a, "dospcot-v2") == "yes"]
+    return Glance(
+        f"oracle at {ORACLE_FLOOR} success or more on {len(floor)} of {len(measured)} tasks measured "
+        f"(of {len(TASKS)}); DOSPCoT under version 2 at {SHARE_OF_ORACLE:.0%} of it with {LABEL_CAP} "
+        f"labels or fewer on {len(met)}",
+        EXPLORATORY,
+    )
+
+
+STUDIES: dict[str, Study] = {
+    "untuned": Study(
+        SWEEPS,
+        tables,
+        "MiniGrid tasks no one tuned, trained with the library's defaults",
+        "Unlock and four MiniGrid tasks no preset was tuned on, env id and views only",
+        glance,
+        seeds=10,
+    ),
+}

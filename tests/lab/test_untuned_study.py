@@ -1,0 +1,76 @@
+"""The untuned study (lab/studies/untuned.py) on hand-made runs: each task's row reads the oracle and
+DOSPCoT under each version of the defaults, and says whether issue 78's bar is met."""
+
+import json
+from pathlib import Path
+
+from dospcot.config.versions import ADOPTED
+from dospcot.statistics import SeedSummary
+from dospcot.sweeps.report import TrialRun
+from dospcot.sweeps.sweep import Trial
+from dospcot.tasks import load_config
+from dospcot_lab.studies import STUDIES
+from dospcot_lab.studies.untuned import TASKS, glance, tables
+
+
+def _run(
+    root: Path, task: str, method: str, seed: int, success: float, defaults: int = ADOPTED, labels: float = 0
+) -> TrialRun:
+    """A run whose folder under ``root`` records 60 CPU-s for the oracle, 200 for DOSPCoT."""
+    name = f"untuned-{task}-{method}"
+    folder = root / f"{name}-v{defaults}-{seed}"
+    folder.mkdir(parents=True)
+    (folder / "run_info.json").write_text(json.dumps({"cpu_time_s": 60 if method == "oracle" else 200}))
+    summary = {"mean": {"success": success, "labelled_steps": labels}}
+    return TrialRun(Trial(f"{task}.toml", name, {}, seed, (), defaults), summary, [], folder)
+
+
+def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_its_share(tmp_path):
+    runs = [
+        # Empty room: oracle 1.0; version 2 at 0.95 with 100 labels meets it, version 3 at 0.5 does not.
+        *(_run(tmp_path, "empty-random", "oracle", s, 1.0) for s in (0, 1)),
+        *(_run(tmp_path, "empty-random", "dospcot", s, v, 2, 100) for s, v in ((0, 1.0), (1, 0.9))),
+        *(_run(tmp_path, "empty-random", "dospcot", s, 0.5, ADOPTED, 2_500) for s in (0, 1)),
+        # Unlock: the oracle below 0.8, whatever DOSPCoT does.
+        *(_run(tmp_path, "unlock", "oracle", s, v) for s, v in ((0, 0.5), (1, 0.7))),
+        *(_run(tmp_path, "unlock", "dospcot", s, 0.6, 2, 100) for s in (0, 1)),
+    ]
+    lines = tables(runs)
+    assert (
+        lines[-1]
+        == "CPU per run (one torch thread): oracle: 60 CPU-s; dospcot-v3: 200 CPU-s; dospcot-v2: 200 CPU-s."
+    )
+    rows = {
+        line.split(" | ")[0].removeprefix("| "): line
+        for line in tables(runs)
+        if line.startswith("| MiniGrid")
+    }
+    empty = rows[TASKS["empty-random"]].split(" | ")
+    assert empty[1] == str(SeedSummary.of([1.0, 1.0]))
+    # Version 3 first (the adopted version), then version 2.
+    assert empty[2:6] == [str(SeedSummary.of([0.5, 0.5])), "50%", "2,500", "no: over 100 labels"]
+    assert empty[6:10] == [str(SeedSummary.of([1.0, 0.9])), "95%", "100", "yes |"]
+    unlock = rows[TASKS["unlock"]].split(" | ")
+    assert unlock[9] == "no: oracle below 0.8 |"
+    assert rows[TASKS["crossing"]].split(" | ")[1] == str(SeedSummary.of([]))
+    assert glance(runs).headline == (
+        "oracle at 0.8 success or more on 1 of 2 tasks measured (of 5); DOSPCoT under version 2 at 90% "
+        "of it with 100 labels or fewer on 1"
+    )
+
+
+def test_every_config_names_only_its_env_id_views_and_method():
+    """The study's point: no task setting but the env id and its views, so each key resolves to the
+    library's default under the sweep's version."""
+    for sweep in STUDIES["untuned"].sweeps:
+        for path in sweep.configs:
+            text = Path(path).read_text()
+            keys = {
+                line.split("=")[0].strip() for line in text.splitlines() if "=" in line and line[0] != "#"
+            }
+            assert keys <= {"name", "task", "method", "views", "env_id", "extends"}, path
+            cfg = load_config(path, defaults=sweep.defaults)
+            assert cfg.training.rounds == 5 and cfg.gym.state_key == "" and cfg.gym.wrappers == ()
+            assert cfg.training.label_budget == (
+                100 if sweep.defaults == 2 and cfg.method == "dospcot" else 0
+            )
