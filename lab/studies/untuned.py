@@ -1,8 +1,9 @@
 """The untuned study (exploratory): MiniGrid tasks no preset or study here was tuned on, each trained as
 a user would first train it, with the env id and two views and every other setting the library's.
 
-The oracle (every reward, the image view) and DOSPCoT (the image and the egocentric map) under the
-adopted version of the defaults, and DOSPCoT under version 2, whose label budget is 100. Issue 78
+The oracle (every reward, the image view) on every task; DOSPCoT (the image and the egocentric map)
+under the adopted version of the defaults and under version 2, whose label budget is 100, on the tasks
+whose oracle reached the bar's floor (:data:`DOSPCOT_TASKS`). Issue 78
 asks, of each task: the oracle at 0.8 success or more, and DOSPCoT at 100 labels or fewer at 90% of
 the oracle's success or more (:data:`ORACLE_FLOOR`, :data:`SHARE_OF_ORACLE`)."""
 
@@ -24,6 +25,10 @@ TASKS = {
 """Each task's config name and env id: Unlock (the issue's), then every MiniGrid task whose goal the
 image shows without the mission's words and whose map is at most 9 cells a side, so its egocentric map
 stays within 17 x 17 x 15 inputs, that no preset or study here has trained (MiniGrid 3.2)."""
+DOSPCOT_TASKS = ("empty-random", "obstacles")
+"""The tasks DOSPCoT trains on: those whose oracle reached :data:`ORACLE_FLOOR` on seeds 0-2. On the
+others the bar fails at the oracle whatever DOSPCoT does, and DOSPCoT's runs there cost the most (on
+Unlock an egocentric map of 6,615 inputs, and a pool of every step met, fitted in float64)."""
 FOLDER = "lab/studies/untuned"
 """Where the tasks' configs are, from the repository's root (a sweep names its configs by path)."""
 DOSPCOT_VERSIONS = (ADOPTED, 2)
@@ -44,7 +49,7 @@ SWEEPS = (
     *(
         Sweep(
             f"untuned-dospcot-v{version}",
-            tuple(_config(task, "dospcot") for task in TASKS),
+            tuple(_config(task, "dospcot") for task in DOSPCOT_TASKS),
             {},
             numerics=None,
             defaults=version,
@@ -74,10 +79,12 @@ def _success(runs: dict[int, TrialRun]) -> SeedSummary:
 
 def _meets(oracle: SeedSummary, dospcot: SeedSummary, labels: float) -> str:
     """Whether a task meets issue 78's bar with these means: the oracle's floor, then DOSPCoT's share."""
-    if oracle.n == 0 or dospcot.n == 0:
+    if oracle.n == 0:
         return "not run"
     if oracle.mean < ORACLE_FLOOR:
         return f"no: oracle below {ORACLE_FLOOR}"
+    if dospcot.n == 0:
+        return "not run"
     if labels > LABEL_CAP:
         return f"no: over {LABEL_CAP} labels"
     return "yes" if dospcot.mean >= SHARE_OF_ORACLE * oracle.mean else f"no: below {SHARE_OF_ORACLE:.0%}"

@@ -34,6 +34,7 @@ def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_i
         # Unlock: the oracle below 0.8, whatever DOSPCoT does.
         *(_run(tmp_path, "unlock", "oracle", s, v) for s, v in ((0, 0.5), (1, 0.7))),
         *(_run(tmp_path, "unlock", "dospcot", s, 0.6, 2, 100) for s in (0, 1)),
+        _run(tmp_path, "distshift", "oracle", 0, 0.0),
     ]
     lines = tables(runs)
     assert (
@@ -53,8 +54,10 @@ def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_i
     unlock = rows[TASKS["unlock"]].split(" | ")
     assert unlock[9] == "no: oracle below 0.8 |"
     assert rows[TASKS["crossing"]].split(" | ")[1] == str(SeedSummary.of([]))
+    # DistShift: the oracle below its floor, and no DOSPCoT run: the bar fails at the oracle.
+    assert rows[TASKS["distshift"]].endswith("| no: oracle below 0.8 |")
     assert glance(runs).headline == (
-        "oracle at 0.8 success or more on 1 of 2 tasks measured (of 5); DOSPCoT under version 2 at 90% "
+        "oracle at 0.8 success or more on 1 of 3 tasks measured (of 5); DOSPCoT under version 2 at 90% "
         "of it with 100 labels or fewer on 1"
     )
 
