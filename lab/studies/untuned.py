@@ -77,8 +77,9 @@ def _success(runs: dict[int, TrialRun]) -> SeedSummary:
     return SeedSummary.of([r.summary["mean"]["success"] for r in runs.values()])
 
 
-def _meets(oracle: SeedSummary, dospcot: SeedSummary, labels: float) -> str:
-    """Whether a task meets issue 78's bar with these means: the oracle's floor, then DOSPCoT's share."""
+def _meets(oracle: SeedSummary, paired: SeedSummary, dospcot: SeedSummary, labels: float) -> str:
+    """Whether a task meets issue 78's bar: the oracle's floor over all its seeds, then DOSPCoT's share
+    of the oracle's mean on DOSPCoT's own seeds (``paired``)."""
     if oracle.n == 0:
         return "not run"
     if oracle.mean < ORACLE_FLOOR:
@@ -87,13 +88,20 @@ def _meets(oracle: SeedSummary, dospcot: SeedSummary, labels: float) -> str:
         return "not run"
     if labels > LABEL_CAP:
         return f"no: over {LABEL_CAP} labels"
-    return "yes" if dospcot.mean >= SHARE_OF_ORACLE * oracle.mean else f"no: below {SHARE_OF_ORACLE:.0%}"
+    return "yes" if dospcot.mean >= SHARE_OF_ORACLE * paired.mean else f"no: below {SHARE_OF_ORACLE:.0%}"
+
+
+def _paired_oracle(by_arm: dict[str, dict[int, TrialRun]], arm: str) -> SeedSummary:
+    """The oracle's success on the seeds DOSPCoT's ``arm`` has run, which may be fewer than its own."""
+    oracles, ours = by_arm.get("oracle", {}), by_arm.get(arm, {})
+    return _success({seed: oracles[seed] for seed in ours if seed in oracles})
 
 
 def _task_meets(by_arm: dict[str, dict[int, TrialRun]], arm: str) -> str:
     """:func:`_meets` for one task's runs, with DOSPCoT's ``arm``."""
     ours = by_arm.get(arm, {})
-    return _meets(_success(by_arm.get("oracle", {})), _success(ours), _mean_labels(ours))
+    oracle = _success(by_arm.get("oracle", {}))
+    return _meets(oracle, _paired_oracle(by_arm, arm), _success(ours), _mean_labels(ours))
 
 
 def _mean_labels(runs: dict[int, TrialRun]) -> float:
@@ -102,14 +110,15 @@ def _mean_labels(runs: dict[int, TrialRun]) -> float:
 
 def tables(runs: list[TrialRun]) -> list[str]:
     """Per task: the oracle's success, and per version of the defaults DOSPCoT's success, its share of
-    the oracle's, the labels its runs held and whether the task meets issue 78's bar."""
+    the oracle's on the same seeds, the labels its runs held and whether the task meets issue 78's bar."""
     arms = [f"dospcot-v{v}" for v in DOSPCOT_VERSIONS]
     lines = [
         "Success: the share of greedy evaluation episodes that reach the goal (the library's 10 a round, "
         "from the task's own start), each run's mean over its agents at its last round, then over seeds. "
         f"The bar (issue 78): the oracle at {ORACLE_FLOOR} or more, and DOSPCoT at {LABEL_CAP} labels or "
-        f"fewer at {SHARE_OF_ORACLE:.0%} of the oracle's mean success or more. Labels: those a run held "
-        "at its end, mean over seeds.",
+        f"fewer at {SHARE_OF_ORACLE:.0%} of the oracle's mean success or more. The share of the oracle: "
+        "DOSPCoT's mean over the oracle's on DOSPCoT's own seeds. Labels: those a run held at its end, "
+        "mean over seeds.",
         "",
         "| task | oracle | "
         + " | ".join(f"DOSPCoT, version {a[-1]} | share of oracle | labels | bar met" for a in arms)
@@ -122,7 +131,8 @@ def tables(runs: list[TrialRun]) -> list[str]:
         for arm in arms:
             members = by_arm.get(arm, {})
             ours, labels = _success(members), _mean_labels(members)
-            share = f"{ours.mean / oracle.mean:.0%}" if ours.n and oracle.n and oracle.mean > 0 else "n/a"
+            paired = _paired_oracle(by_arm, arm)
+            share = f"{ours.mean / paired.mean:.0%}" if ours.n and paired.n and paired.mean > 0 else "n/a"
             cells += [str(ours), share, f"{labels:,.0f}" if ours.n else "n/a", _task_meets(by_arm, arm)]
         lines.append(f"| {TASKS[task]} | " + " | ".join(cells) + " |")
     cost = "; ".join(

@@ -29,6 +29,8 @@ def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_i
     runs = [
         # Empty room: oracle 1.0; version 2 at 0.95 with 100 labels meets it, version 3 at 0.5 does not.
         *(_run(tmp_path, "empty-random", "oracle", s, 1.0) for s in (0, 1)),
+        # An oracle seed DOSPCoT has not run: in the oracle's cell, not in the shares.
+        _run(tmp_path, "empty-random", "oracle", 2, 0.7),
         *(_run(tmp_path, "empty-random", "dospcot", s, v, 2, 100) for s, v in ((0, 1.0), (1, 0.9))),
         *(_run(tmp_path, "empty-random", "dospcot", s, 0.5, ADOPTED, 2_500) for s in (0, 1)),
         # Unlock: the oracle below 0.8, whatever DOSPCoT does.
@@ -47,7 +49,7 @@ def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_i
         if line.startswith("| MiniGrid")
     }
     empty = rows[TASKS["empty-random"]].split(" | ")
-    assert empty[1] == str(SeedSummary.of([1.0, 1.0]))
+    assert empty[1] == str(SeedSummary.of([1.0, 1.0, 0.7]))
     # Version 3 first (the adopted version), then version 2.
     assert empty[2:6] == [str(SeedSummary.of([0.5, 0.5])), "50%", "2,500", "no: over 100 labels"]
     assert empty[6:10] == [str(SeedSummary.of([1.0, 0.9])), "95%", "100", "yes |"]
