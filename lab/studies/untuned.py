@@ -13,7 +13,7 @@ from dospcot.config.versions import ADOPTED
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
-from dospcot_lab.studies.tables import cpu_per_run, labels_used
+from dospcot_lab.studies.tables import cpu_per_run, labels_used, run_value
 
 TASKS = {
     "unlock": "MiniGrid-Unlock-v0",
@@ -39,6 +39,7 @@ ORACLE_FLOOR = 0.8
 SHARE_OF_ORACLE = 0.9
 """The share of the oracle's success DOSPCoT must reach there, at 100 labels or fewer (issue 78)."""
 LABEL_CAP = 100
+"""The most labels DOSPCoT may hold there (issue 78)."""
 
 
 def _config(task: str, method: str) -> str:
@@ -75,7 +76,7 @@ def _by_task(runs: list[TrialRun]) -> dict[str, dict[str, dict[int, TrialRun]]]:
 
 
 def _success(runs: dict[int, TrialRun]) -> SeedSummary:
-    return SeedSummary.of([r.summary["mean"]["success"] for r in runs.values()])
+    return SeedSummary.of([run_value(r, "success") for r in runs.values()])
 
 
 def _meets(oracle: SeedSummary, paired: SeedSummary, dospcot: SeedSummary, labels: float) -> str:
@@ -112,7 +113,6 @@ def _mean_labels(runs: dict[int, TrialRun]) -> float:
 def tables(runs: list[TrialRun]) -> list[str]:
     """Per task: the oracle's success, and per version of the defaults DOSPCoT's success, its share of
     the oracle's on the same seeds, the labels its runs held and whether the task meets issue 78's bar."""
-    arms = [f"dospcot-v{v}" for v in DOSPCOT_VERSIONS]
     lines = [
         "Success: the share of greedy evaluation episodes that reach the goal (the library's 10 a round, "
         "from the task's own start), each run's mean over its agents at its last round, then over seeds. "
@@ -122,23 +122,24 @@ def tables(runs: list[TrialRun]) -> list[str]:
         "mean over seeds.",
         "",
         "| task | oracle | "
-        + " | ".join(f"DOSPCoT, version {a[-1]} | share of oracle | labels | bar met" for a in arms)
+        + " | ".join(f"DOSPCoT, version {v} | share of oracle | labels | bar met" for v in DOSPCOT_VERSIONS)
         + " |",
-        "|---|---|" + "---|---|---|---|" * len(arms),
+        "|---|---|" + "---|---|---|---|" * len(DOSPCOT_VERSIONS),
     ]
     for task, by_arm in _by_task(runs).items():
         oracle = _success(by_arm.get("oracle", {}))
         cells = [str(oracle)]
-        for arm in arms:
-            members = by_arm.get(arm, {})
+        for version in DOSPCOT_VERSIONS:
+            members = by_arm.get(f"dospcot-v{version}", {})
             ours, labels = _success(members), _mean_labels(members)
-            paired = _paired_oracle(by_arm, arm)
+            paired = _paired_oracle(by_arm, f"dospcot-v{version}")
             share = f"{ours.mean / paired.mean:.0%}" if ours.n and paired.n and paired.mean > 0 else "n/a"
-            cells += [str(ours), share, f"{labels:,.0f}" if ours.n else "n/a", _task_meets(by_arm, arm)]
+            met = _meets(oracle, paired, ours, labels)
+            cells += [str(ours), share, f"{labels:,.0f}" if ours.n else "n/a", met]
         lines.append(f"| {TASKS[task]} | " + " | ".join(cells) + " |")
     cost = "; ".join(
         f"{arm}: {cpu_per_run(members)}"
-        for arm in ("oracle", *arms)
+        for arm in ("oracle", *(f"dospcot-v{v}" for v in DOSPCOT_VERSIONS))
         if (members := [r for r in runs if _arm(r) == arm])
     )
     return [*lines, "", f"CPU per run (one torch thread): {cost}."]
