@@ -660,6 +660,37 @@ def test_exploring_starts_move_training_episodes_only_and_follow_the_envs_seed()
         assert tuple(int(v) for v in env.envs[0].unwrapped.agent_pos) == (1, 1)
 
 
+def test_reachable_starts_skip_the_empty_space_a_start_cannot_reach():
+    pytest.importorskip("minigrid")
+    random_start, reachable = (
+        f"dospcot.envs.minigrid_views:{name}" for name in ("RandomStart", "ReachableStart")
+    )
+    # Where every empty cell connects (through DoorKey's locked door), both draw the same starts.
+    for seed in range(10):
+        poses = []
+        for start in (random_start, reachable):
+            env = make_gym_env("minigrid:MiniGrid-DoorKey-5x5-v0", train_wrappers=[start])
+            env.reset(seed=seed)
+            poses.append((tuple(int(v) for v in env.unwrapped.agent_pos), env.unwrapped.agent_dir))
+        assert poses[0] == poses[1]
+    # MultiRoom's two rooms sit in a 25 x 25 map of empty space: a reachable start lies inside them,
+    # where the task's own start and its goal are.
+    for seed in range(10):
+        task = make_gym_env("minigrid:MiniGrid-MultiRoom-N2-S4-v0")
+        task.reset(seed=seed)
+        inside = {(x, y) for room in task.unwrapped.rooms for x, y in _room_cells(room)}
+        env = make_gym_env("minigrid:MiniGrid-MultiRoom-N2-S4-v0", train_wrappers=[reachable])
+        env.reset(seed=seed)
+        assert tuple(int(v) for v in env.unwrapped.agent_pos) in inside
+        assert env.unwrapped.grid.get(*env.unwrapped.agent_pos) is None
+
+
+def _room_cells(room) -> list[tuple[int, int]]:
+    """The cells inside a MultiRoom room's walls."""
+    (x0, y0), (w, h) = room.top, room.size
+    return [(x, y) for x in range(x0 + 1, x0 + w - 1) for y in range(y0 + 1, y0 + h - 1)]
+
+
 def test_the_map_encoding_is_read_once_per_step_and_follows_every_change(doorkey):
     env = doorkey
     u = env.unwrapped

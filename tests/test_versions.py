@@ -11,6 +11,7 @@ import tomli_w
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
+from dospcot.config.presets import preset_names
 from dospcot.config.reference import config_reference
 from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS, lineage
 from dospcot.tasks import load_config, load_run_config
@@ -75,6 +76,18 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     eighth = load_config("minigrid-doorkey-dospcot", ["defaults=8"])
     assert dataclasses.replace(seventh, defaults=8, training=rounds) == eighth
     assert load_config("minigrid-doorkey-oracle", ["defaults=8"]).training.exploration == "rounds"
+    # version 9 is version 3 with the MiniGrid presets' agents and exploring starts on a gym task
+    untuned = "lab/studies/untuned/distshift-oracle.toml"
+    third, ninth = load_config(untuned), load_config(untuned, ["defaults=9"])
+    agents = dataclasses.replace(third.dqn, gamma=0.9, n_steps=3, train_freq=2, target_update_interval=250)
+    starts = dataclasses.replace(third.gym, train_wrappers=("dospcot.envs.minigrid_views:ReachableStart",))
+    eps = dataclasses.replace(third.training, eps_start=0.5, steps_per_round=10_000)
+    assert dataclasses.replace(third, defaults=9, dqn=agents, gym=starts, training=eps) == ninth
+    cartpole = load_config(
+        untuned, ["defaults=9", 'gym.env_id="CartPole-v1"', 'gym.views={obs="observation"}', 'views=["obs"]']
+    )
+    assert cartpole.gym.train_wrappers == () and cartpole.dqn.gamma == 0.9
+    assert load_config(untuned, ["defaults=9", "dqn.gamma=0.99"]).dqn.gamma == 0.99
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -129,12 +142,20 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 9; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
-        r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\)$",
+        match=r"^defaults: unknown version 10; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
+        r"9 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=9"])
+        load_config("tiny", ["defaults=10"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
+
+
+def test_version_9_trains_every_shipped_preset_as_version_3_does():
+    """Version 9 moves only keys a gym task leaves unset, and every preset sets them (or is no gym task)."""
+    for preset in preset_names():
+        cfg = load_config(preset)
+        assert dataclasses.replace(load_config(preset, ["defaults=9"]), defaults=cfg.defaults) == cfg, preset
 
 
 def test_no_version_moves_a_paper_protocol_key():
@@ -159,7 +180,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate))"
+        "7 (candidate), 8 (candidate), 9 (candidate))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
@@ -189,7 +210,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
         ['method="reward-model"', "cotraining.ensemble_size=[1]"],
     ],
 )
-@pytest.mark.parametrize("version", [2, 5])
+@pytest.mark.parametrize("version", [2, 5, 9])
 def test_a_versions_rules_leave_a_malformed_value_to_the_configs_own_check(version, bad):
     """A rule reads only the values it can; the config's check then names what is wrong in one line,
     rather than the rule failing with a TypeError of its own."""

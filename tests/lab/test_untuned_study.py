@@ -4,7 +4,7 @@ DOSPCoT under each version of the defaults, and says whether issue 78's bar is m
 import json
 from pathlib import Path
 
-from dospcot.config.versions import ADOPTED
+from dospcot.config.versions import ADOPTED, EXPLORING_STARTS
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
@@ -39,13 +39,11 @@ def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_i
         _run(tmp_path, "distshift", "oracle", 0, 0.0),
     ]
     lines = tables(runs)
-    assert (
-        lines[-1]
-        == "CPU per run (one torch thread): oracle: 60 CPU-s; dospcot-v3: 200 CPU-s; dospcot-v2: 200 CPU-s."
-    )
+    cost = "CPU per run (one torch thread): oracle: 60 CPU-s; dospcot-v3: 200 CPU-s; dospcot-v2: 200 CPU-s."
+    assert cost in lines
     rows = {
         line.split(" | ")[0].removeprefix("| "): line
-        for line in tables(runs)
+        for line in lines[: lines.index(cost)]
         if line.startswith("| MiniGrid")
     }
     empty = rows[TASKS["empty-random"]].split(" | ")
@@ -64,6 +62,35 @@ def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_i
     )
 
 
+def test_version_9s_oracle_pairs_with_version_3s_on_confirming_seeds_and_held_out_tasks(tmp_path):
+    runs = [
+        # DistShift1: version 9 was chosen on seeds 0-2, so only seeds 3-4 confirm it.
+        *(_run(tmp_path, "distshift", "oracle", s, 0.0) for s in range(5)),
+        *(_run(tmp_path, "distshift", "oracle", s, v, 9) for s, v in ((0, 1.0), (3, 1.0), (4, 0.6))),
+        # A held-out task: every seed confirms; an oracle seed version 9 has not run is left out.
+        *(_run(tmp_path, "multiroom", "oracle", s, v) for s, v in ((0, 0.2), (1, 0.4), (2, 1.0))),
+        *(_run(tmp_path, "multiroom", "oracle", s, 1.0, 9) for s in (0, 1)),
+    ]
+    lines = tables(runs)
+    cost = next(i for i, line in enumerate(lines) if line.startswith("CPU per run"))
+    assert lines[cost].endswith("oracle: 60 CPU-s; oracle-v9: 60 CPU-s.")
+    first = lines[:cost]
+    rows = [line for line in lines[cost:] if line.startswith("| MiniGrid")]
+    assert rows == [
+        f"| MiniGrid-DistShift1-v0 | confirming: 3-4 | {SeedSummary.of([0.0, 0.0])} | "
+        f"{SeedSummary.of([1.0, 0.6])} | {SeedSummary.of([1.0, 0.6])} | yes |",
+        f"| MiniGrid-MultiRoom-N2-S4-v0 | held out: 0-1 | {SeedSummary.of([0.2, 0.4])} | "
+        f"{SeedSummary.of([1.0, 1.0])} | {SeedSummary.of([0.8, 0.6])} | yes |",
+    ]
+    # The held-out task is in no row of the first table, and version 9's oracle in none of its cells:
+    # DistShift1's oracle there is version 3's, 0 on every seed.
+    assert not any(line.startswith("| MiniGrid-MultiRoom") for line in first)
+    assert next(line for line in first if "DistShift1" in line).startswith(
+        "| MiniGrid-DistShift1-v0 | 0.000 ["
+    )
+    assert glance(runs).headline.startswith("oracle at 0.8 success or more on 0 of 1 tasks measured")
+
+
 def test_every_config_names_only_its_env_id_views_and_method():
     """The study's point: no task setting but the env id and its views, so each key resolves to the
     library's default under the sweep's version."""
@@ -76,6 +103,7 @@ def test_every_config_names_only_its_env_id_views_and_method():
             assert keys <= {"name", "task", "method", "views", "env_id", "extends"}, path
             cfg = load_config(path, defaults=sweep.defaults)
             assert cfg.training.rounds == 5 and cfg.gym.state_key == "" and cfg.gym.wrappers == ()
+            assert cfg.gym.train_wrappers == (() if sweep.defaults != 9 else (EXPLORING_STARTS,))
             assert cfg.training.label_budget == (
                 100 if sweep.defaults == 2 and cfg.method == "dospcot" else 0
             )
