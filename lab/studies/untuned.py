@@ -76,7 +76,14 @@ SWEEPS = (
     ),
     Sweep(
         f"untuned-oracle-v{CANDIDATE}",
-        tuple(_config(t, "oracle") for t in {**TASKS, **HELD_OUT}),
+        tuple(_config(t, "oracle") for t in TASKS),
+        {},
+        numerics=None,
+        defaults=CANDIDATE,
+    ),
+    Sweep(
+        f"untuned-held-out-oracle-v{CANDIDATE}",
+        tuple(_config(t, "oracle") for t in HELD_OUT),
         {},
         numerics=None,
         defaults=CANDIDATE,
