@@ -102,11 +102,14 @@ class MovedDefault:
     :param value: the version's default for a config table (its method, views, task), or None where the
         key keeps the earlier version's default for that config.
     :param why: the study of the record that supports the move, in a few words.
+    :param sections: the task sections (``gym``, ...) of the configs the move applies to; None: every
+        config's.
     """
 
     key: str
     value: Callable[[Mapping[str, Any]], Any]
     why: str
+    sections: tuple[str, ...] | None = None
 
 
 def _method(table: Mapping[str, Any]) -> str:
@@ -176,20 +179,23 @@ def _passes(table: Mapping[str, Any]) -> int | None:
     return min(PASSES, steps) if _whole(steps) and steps >= 1 else PASSES
 
 
-def _on_gym(value: Any) -> Callable[[Mapping[str, Any]], Any]:
-    """``value`` for a gym task (``task = "gym"``), the task a user's own env is; None for the grid and
-    the highway, whose sections the presets tune."""
-    return lambda table: value if table.get("task") == "gym" else None
+GYM = ("gym",)
+"""Version 9's task sections: the gym task's, the task a user's own env is (the grid and the highway
+keep what their presets tune)."""
 
 
 def _exploring_starts(table: Mapping[str, Any]) -> list[str] | None:
-    """:data:`EXPLORING_STARTS` for a gym task whose env is MiniGrid's (an id ``MiniGrid-...``, with or
-    without the ``minigrid:`` prefix that imports it), whose random walks from the task's start seldom
-    reach a distant goal; None for any other env."""
+    """:data:`EXPLORING_STARTS` for an env of MiniGrid's (an id ``MiniGrid-...``, with or without the
+    ``minigrid:`` prefix that imports it), whose random walks from the task's start seldom reach a
+    distant goal; None for any other env."""
     env_id = _section(table, "gym").get("env_id", "")
-    if table.get("task") != "gym" or not isinstance(env_id, str):
+    if not isinstance(env_id, str):
         return None
     return [EXPLORING_STARTS] if env_id.rpartition(":")[2].startswith("MiniGrid-") else None
+
+
+def _constant(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    return lambda table: value
 
 
 def _whole(value: Any) -> bool:
@@ -271,13 +277,14 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
     ),
     9: (
         *(
-            MovedDefault(key, _on_gym(value), "untuned study: the MiniGrid presets' settings on a gym task")
+            MovedDefault(key, _constant(value), "untuned study: the MiniGrid presets' settings", GYM)
             for key, value in GYM_SETTINGS.items()
         ),
         MovedDefault(
             "gym.train_wrappers",
             _exploring_starts,
             "untuned study: exploring starts in training on MiniGrid, where the oracle missed a far goal",
+            GYM,
         ),
     ),
 }
@@ -338,6 +345,8 @@ def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tupl
     moved: dict[str, tuple[Any, str]] = {}
     for number in lineage(version):
         for rule in VERSIONS[number]:
+            if rule.sections is not None and name not in rule.sections:
+                continue
             head, _, key = rule.key.partition(".")
             if head == "{section}" and key not in fields:
                 continue
