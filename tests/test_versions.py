@@ -88,6 +88,20 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     )
     assert cartpole.gym.train_wrappers == () and cartpole.dqn.gamma == 0.9
     assert load_config(untuned, ["defaults=9", "dqn.gamma=0.99"]).dqn.gamma == 0.99
+    # version 10 is version 9 with version 2's queries; its classifiers fit in numerics 2, as version 3's
+    co_trained = untuned.replace("-oracle", "")
+    second, tenth = load_config(co_trained, ["defaults=2"]), load_config(co_trained, ["defaults=10"])
+    queries = dataclasses.replace(second.training, eps_start=0.5, steps_per_round=10_000)
+    ninth = load_config(co_trained, ["defaults=9"])
+    expected = dataclasses.replace(
+        second,
+        defaults=10,
+        dqn=ninth.dqn,
+        gym=dataclasses.replace(ninth.gym, episode_end_classes=True),
+        training=queries,
+        cotraining=dataclasses.replace(second.cotraining, numerics=2),
+    )
+    assert tenth == expected
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -142,11 +156,11 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 10; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        match=r"^defaults: unknown version 11; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
         r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
-        r"9 \(candidate\)$",
+        r"9 \(candidate\), 10 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=10"])
+        load_config("tiny", ["defaults=11"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -180,7 +194,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate), 9 (candidate))"
+        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
@@ -210,7 +224,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
         ['method="reward-model"', "cotraining.ensemble_size=[1]"],
     ],
 )
-@pytest.mark.parametrize("version", [2, 5, 9])
+@pytest.mark.parametrize("version", [2, 5, 9, 10])
 def test_a_versions_rules_leave_a_malformed_value_to_the_configs_own_check(version, bad):
     """A rule reads only the values it can; the config's check then names what is wrong in one line,
     rather than the rule failing with a TypeError of its own."""

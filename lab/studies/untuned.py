@@ -10,9 +10,13 @@ the oracle's success or more (:data:`ORACLE_FLOOR`, :data:`SHARE_OF_ORACLE`).
 The oracle also trains under version 9 of the defaults (the MiniGrid presets' agents and exploring
 starts on a gym task, :mod:`dospcot.config.versions`), chosen by hand on seeds 0-2 of the five tasks
 and confirmed on their seeds 3-9 and on four tasks held out from that choice (:data:`HELD_OUT`), each
-paired by seed with the oracle under version 3."""
+paired by seed with the oracle under version 3. DOSPCoT then trains under version 10 (version 9 with
+version 2's 100 labels) on the tasks where version 9's oracle reached the floor (:data:`QUERY_TASKS`),
+its share taken of version 9's oracle on the same seeds."""
 
 from __future__ import annotations
+
+from collections.abc import Iterable
 
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
@@ -51,6 +55,12 @@ DECLARED = 3
 """The adopted version of the defaults when the study was declared: its oracle's first arm."""
 CANDIDATE = 9
 """The version of the defaults whose oracle the study confirms against :data:`DECLARED`'s."""
+WITH_QUERIES = 10
+"""The version of the defaults DOSPCoT trains under beside :data:`CANDIDATE`'s oracle: that version with
+version 2's queries and label budget."""
+QUERY_TASKS = ("empty-random", "distshift", "obstacles", "distshift2", "obstacles6", "multiroom")
+"""The tasks DOSPCoT trains on under :data:`WITH_QUERIES`: those where :data:`CANDIDATE`'s oracle reached
+:data:`ORACLE_FLOOR` on its confirming or held-out seeds (abc2461b), named before any such run."""
 DOSPCOT_VERSIONS = (DECLARED, 2)
 """The versions of the defaults DOSPCoT trains under: the adopted one and version 2 (the label budget)."""
 ORACLE_FLOOR = 0.8
@@ -65,7 +75,7 @@ def _config(task: str, method: str) -> str:
     return f"{FOLDER}/{task}{'-oracle' if method == 'oracle' else ''}.toml"
 
 
-def _sweep(name: str, tasks: dict[str, str] | tuple[str, ...], method: str, version: int) -> Sweep:
+def _sweep(name: str, tasks: Iterable[str], method: str, version: int) -> Sweep:
     """One sweep of ``method`` on ``tasks`` under ``version`` of the defaults."""
     return Sweep(name, tuple(_config(t, method) for t in tasks), {}, numerics=None, defaults=version)
 
@@ -76,6 +86,15 @@ SWEEPS = (
     _sweep(f"untuned-oracle-v{CANDIDATE}", TASKS, "oracle", CANDIDATE),
     _sweep(f"untuned-held-out-oracle-v{CANDIDATE}", HELD_OUT, "oracle", CANDIDATE),
     *(_sweep(f"untuned-dospcot-v{v}", DOSPCOT_TASKS, "dospcot", v) for v in DOSPCOT_VERSIONS),
+    _sweep(
+        f"untuned-dospcot-v{WITH_QUERIES}", [t for t in QUERY_TASKS if t in TASKS], "dospcot", WITH_QUERIES
+    ),
+    _sweep(
+        f"untuned-held-out-dospcot-v{WITH_QUERIES}",
+        [t for t in QUERY_TASKS if t in HELD_OUT],
+        "dospcot",
+        WITH_QUERIES,
+    ),
 )
 
 
@@ -114,9 +133,10 @@ def _meets(oracle: SeedSummary, paired: SeedSummary, dospcot: SeedSummary, label
     return "yes" if dospcot.mean >= SHARE_OF_ORACLE * paired.mean else f"no: below {SHARE_OF_ORACLE:.0%}"
 
 
-def _paired_oracle(by_arm: dict[str, dict[int, TrialRun]], arm: str) -> SeedSummary:
-    """The oracle's success on the seeds DOSPCoT's ``arm`` has run, which may be fewer than its own."""
-    oracles, ours = by_arm.get("oracle", {}), by_arm.get(arm, {})
+def _paired_oracle(by_arm: dict[str, dict[int, TrialRun]], arm: str, oracle: str = "oracle") -> SeedSummary:
+    """The ``oracle`` arm's success on the seeds DOSPCoT's ``arm`` has run, which may be fewer than its
+    own."""
+    oracles, ours = by_arm.get(oracle, {}), by_arm.get(arm, {})
     return _success({seed: oracles[seed] for seed in ours if seed in oracles})
 
 
@@ -162,11 +182,16 @@ def tables(runs: list[TrialRun]) -> list[str]:
         lines.append(f"| {TASKS[task]} | " + " | ".join(cells) + " |")
     cost = "; ".join(
         f"{arm}: {cpu_per_run(members)}"
-        for arm in ("oracle", *(f"dospcot-v{v}" for v in DOSPCOT_VERSIONS), f"oracle-v{CANDIDATE}")
+        for arm in (
+            "oracle",
+            *(f"dospcot-v{v}" for v in DOSPCOT_VERSIONS),
+            f"oracle-v{CANDIDATE}",
+            f"dospcot-v{WITH_QUERIES}",
+        )
         if (members := [r for r in runs if _arm(r) == arm])
     )
-    candidate = _candidate_lines(grouped)
-    return [*lines, "", f"CPU per run (one torch thread): {cost}.", *([""] if candidate else []), *candidate]
+    later = [part for part in (_candidate_lines(grouped), _query_lines(grouped)) if part]
+    return [*lines, "", f"CPU per run (one torch thread): {cost}.", *(x for p in later for x in ["", *p])]
 
 
 def _candidate_pairs(
@@ -209,6 +234,39 @@ def _candidate_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list
         lines.append(
             f"| {TASKS.get(task) or HELD_OUT[task]} | {seeds} | {_success(old)} | {_success(new)} "
             f"| {diff} | {floor} |"
+        )
+    return lines
+
+
+def _query_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]:
+    """DOSPCoT under :data:`WITH_QUERIES` against :data:`CANDIDATE`'s oracle, per task it has run on:
+    the seeds, both arms' success on them, DOSPCoT's share and labels, and whether the bar is met."""
+    arm, oracle_arm = f"dospcot-v{WITH_QUERIES}", f"oracle-v{CANDIDATE}"
+    rows = [(t, grouped[t]) for t in QUERY_TASKS if grouped[t].get(arm)]
+    if not rows:
+        return []
+    lines = [
+        f"DOSPCoT under version {WITH_QUERIES} of the defaults (version {CANDIDATE} with version 2's "
+        f"{LABEL_CAP} labels) against the oracle under version {CANDIDATE}, on the tasks where that oracle "
+        f"reached {ORACLE_FLOOR}: success on DOSPCoT's seeds, DOSPCoT's share of the oracle's mean there, "
+        f"the labels its runs held (mean) and the bar, read with the oracle's mean over all its seeds of "
+        "the record.",
+        "",
+        f"| task | seeds | oracle, version {CANDIDATE} | DOSPCoT, version {WITH_QUERIES} | share of oracle "
+        "| labels | bar met |",
+        "|---|---|---|---|---|---|---|",
+    ]
+    for task, by_arm in rows:
+        ours, labels = _success(by_arm[arm]), _mean_labels(by_arm[arm])
+        paired = _paired_oracle(by_arm, arm, oracle_arm)
+        share = f"{ours.mean / paired.mean:.0%}" if paired.n and paired.mean > 0 else "n/a"
+        met = _meets(_success(by_arm.get(oracle_arm, {})), paired, ours, labels)
+        seeds = sorted(by_arm[arm])
+        whole = len(seeds) == seeds[-1] - seeds[0] + 1
+        span = f"{seeds[0]}-{seeds[-1]}" if whole else ", ".join(map(str, seeds))
+        lines.append(
+            f"| {TASKS.get(task) or HELD_OUT[task]} | {span} | {paired} | {ours} "
+            f"| {share} | {labels:,.0f} | {met} |"
         )
     return lines
 

@@ -93,6 +93,27 @@ def test_version_9s_oracle_pairs_with_version_3s_on_confirming_seeds_and_held_ou
     )
 
 
+def test_version_10s_dospcot_reads_its_share_of_version_9s_oracle_on_its_own_seeds(tmp_path):
+    runs = [
+        # Obstacles: version 9's oracle on seeds 3-5; DOSPCoT under version 10 on seeds 3 and 5.
+        *(_run(tmp_path, "obstacles", "oracle", s, v, 9) for s, v in ((3, 1.0), (4, 0.7), (5, 0.8))),
+        *(_run(tmp_path, "obstacles", "dospcot", s, v, 10, 100) for s, v in ((3, 0.9), (5, 0.72))),
+        # A held-out task whose DOSPCoT falls short of 90% of the oracle.
+        *(_run(tmp_path, "multiroom", "oracle", s, 1.0, 9) for s in (0, 1)),
+        *(_run(tmp_path, "multiroom", "dospcot", s, 0.5, 10, 90) for s in (0, 1)),
+        # Version 3's oracle runs are not version 9's: they leave this table alone.
+        *(_run(tmp_path, "obstacles", "oracle", s, 0.0) for s in (3, 5)),
+    ]
+    lines = tables(runs)
+    assert lines[-2:] == [
+        f"| MiniGrid-Dynamic-Obstacles-5x5-v0 | 3, 5 | {SeedSummary.of([1.0, 0.8])} | "
+        f"{SeedSummary.of([0.9, 0.72])} | 90% | 100 | yes |",
+        f"| MiniGrid-MultiRoom-N2-S4-v0 | 0-1 | {SeedSummary.of([1.0, 1.0])} | {SeedSummary.of([0.5, 0.5])} "
+        "| 50% | 90 | no: below 90% |",
+    ]
+    assert "dospcot-v10: 200 CPU-s." in next(line for line in lines if line.startswith("CPU per run"))
+
+
 def test_every_config_names_only_its_env_id_views_and_method():
     """The study's point: no task setting but the env id and its views, so each key resolves to the
     library's default under the sweep's version."""
@@ -105,7 +126,7 @@ def test_every_config_names_only_its_env_id_views_and_method():
             assert keys <= {"name", "task", "method", "views", "env_id", "extends"}, path
             cfg = load_config(path, defaults=sweep.defaults)
             assert cfg.training.rounds == 5 and cfg.gym.state_key == "" and cfg.gym.wrappers == ()
-            assert cfg.gym.train_wrappers == (() if sweep.defaults != 9 else (EXPLORING_STARTS,))
+            assert cfg.gym.train_wrappers == (() if sweep.defaults < 9 else (EXPLORING_STARTS,))
             assert cfg.training.label_budget == (
-                100 if sweep.defaults == 2 and cfg.method == "dospcot" else 0
+                100 if sweep.defaults in (2, 10) and cfg.method == "dospcot" else 0
             )
