@@ -140,11 +140,11 @@ def _paired_oracle(by_arm: dict[str, dict[int, TrialRun]], arm: str, oracle: str
     return _success({seed: oracles[seed] for seed in ours if seed in oracles})
 
 
-def _task_meets(by_arm: dict[str, dict[int, TrialRun]], arm: str) -> str:
-    """:func:`_meets` for one task's runs, with DOSPCoT's ``arm``."""
+def _task_meets(by_arm: dict[str, dict[int, TrialRun]], arm: str, oracle: str = "oracle") -> str:
+    """:func:`_meets` for one task's runs, with DOSPCoT's ``arm`` and the ``oracle`` arm."""
     ours = by_arm.get(arm, {})
-    oracle = _success(by_arm.get("oracle", {}))
-    return _meets(oracle, _paired_oracle(by_arm, arm), _success(ours), _mean_labels(ours))
+    whole = _success(by_arm.get(oracle, {}))
+    return _meets(whole, _paired_oracle(by_arm, arm, oracle), _success(ours), _mean_labels(ours))
 
 
 def _mean_labels(runs: dict[int, TrialRun]) -> float:
@@ -260,7 +260,7 @@ def _query_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str
         ours, labels = _success(by_arm[arm]), _mean_labels(by_arm[arm])
         paired = _paired_oracle(by_arm, arm, oracle_arm)
         share = f"{ours.mean / paired.mean:.0%}" if paired.n and paired.mean > 0 else "n/a"
-        met = _meets(_success(by_arm.get(oracle_arm, {})), paired, ours, labels)
+        met = _task_meets(by_arm, arm, oracle_arm)
         seeds = sorted(by_arm[arm])
         whole = len(seeds) == seeds[-1] - seeds[0] + 1
         span = f"{seeds[0]}-{seeds[-1]}" if whole else ", ".join(map(str, seeds))
@@ -273,19 +273,28 @@ def _query_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str
 
 def glance(runs: list[TrialRun]) -> Glance:
     """How many tasks meet the bar with version 2's DOSPCoT, and how many the oracle's floor alone, under
-    version 3 and, where it has run, under :data:`CANDIDATE` (the rows of its table)."""
+    version 3 and, where it has run, under :data:`CANDIDATE` (the rows of its table); then, where it has
+    run, on how many tasks DOSPCoT under :data:`WITH_QUERIES` meets the bar against that oracle."""
     grouped = _by_task(runs)
     measured = {t: a for t, a in grouped.items() if a.get("oracle") and t in TASKS}
     floor = [t for t, a in measured.items() if _success(a["oracle"]).mean >= ORACLE_FLOOR]
     met = [t for t, a in measured.items() if _task_meets(a, "dospcot-v2") == "yes"]
     candidate = [_success(new).mean >= ORACLE_FLOOR for _, _, new, _ in _candidate_pairs(grouped)]
     lifted = f"; under version {CANDIDATE} on {sum(candidate)} of {len(candidate)}"
+    arm, oracle_arm = f"dospcot-v{WITH_QUERIES}", f"oracle-v{CANDIDATE}"
+    queried = [_task_meets(grouped[t], arm, oracle_arm) == "yes" for t in QUERY_TASKS if grouped[t].get(arm)]
     return Glance(
         f"oracle at {ORACLE_FLOOR} success or more on {len(floor)} of {len(measured)} tasks measured "
         f"(of {len(TASKS)})"
         + (f"{lifted} (confirming seeds and held-out tasks)" if candidate else "")
         + f"; DOSPCoT under version 2 at {SHARE_OF_ORACLE:.0%} of it with {LABEL_CAP} labels or fewer on "
-        f"{len(met)}",
+        f"{len(met)}"
+        + (
+            f"; under version {WITH_QUERIES} at {SHARE_OF_ORACLE:.0%} of version {CANDIDATE}'s oracle on "
+            f"{sum(queried)} of {len(queried)}"
+            if queried
+            else ""
+        ),
         EXPLORATORY,
     )
 

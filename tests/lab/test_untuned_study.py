@@ -112,6 +112,7 @@ def test_version_10s_dospcot_reads_its_share_of_version_9s_oracle_on_its_own_see
         "| 50% | 90 | no: below 90% |",
     ]
     assert "dospcot-v10: 200 CPU-s." in next(line for line in lines if line.startswith("CPU per run"))
+    assert glance(runs).headline.endswith("; under version 10 at 90% of version 9's oracle on 1 of 2")
 
 
 def test_every_config_names_only_its_env_id_views_and_method():
