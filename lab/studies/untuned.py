@@ -61,6 +61,10 @@ version 2's queries and label budget."""
 QUERY_TASKS = ("empty-random", "distshift", "obstacles", "distshift2", "obstacles6", "multiroom")
 """The tasks DOSPCoT trains on under :data:`WITH_QUERIES`: those where :data:`CANDIDATE`'s oracle reached
 :data:`ORACLE_FLOOR` on its confirming or held-out seeds (abc2461b), named before any such run."""
+CANDIDATE_ORACLE = f"oracle-v{CANDIDATE}"
+"""The arm of the oracle under :data:`CANDIDATE` (:func:`_arm`)."""
+QUERY_ARM = f"dospcot-v{WITH_QUERIES}"
+"""The arm of DOSPCoT under :data:`WITH_QUERIES` (:func:`_arm`)."""
 DOSPCOT_VERSIONS = (DECLARED, 2)
 """The versions of the defaults DOSPCoT trains under: the adopted one and version 2 (the label budget)."""
 ORACLE_FLOOR = 0.8
@@ -147,6 +151,12 @@ def _task_meets(by_arm: dict[str, dict[int, TrialRun]], arm: str, oracle: str = 
     return _meets(whole, _paired_oracle(by_arm, arm, oracle), _success(ours), _mean_labels(ours))
 
 
+def _share(ours: SeedSummary, paired: SeedSummary) -> str:
+    """DOSPCoT's mean success as a share of the oracle's on the same seeds; ``n/a`` where either has no
+    run or the oracle's mean is 0."""
+    return f"{ours.mean / paired.mean:.0%}" if ours.n and paired.n and paired.mean > 0 else "n/a"
+
+
 def _mean_labels(runs: dict[int, TrialRun]) -> float:
     return SeedSummary.of([labels_used(r) for r in runs.values()]).mean if runs else float("nan")
 
@@ -176,7 +186,7 @@ def tables(runs: list[TrialRun]) -> list[str]:
             members = by_arm.get(f"dospcot-v{version}", {})
             ours, labels = _success(members), _mean_labels(members)
             paired = _paired_oracle(by_arm, f"dospcot-v{version}")
-            share = f"{ours.mean / paired.mean:.0%}" if ours.n and paired.n and paired.mean > 0 else "n/a"
+            share = _share(ours, paired)
             met = _meets(oracle, paired, ours, labels)
             cells += [str(ours), share, f"{labels:,.0f}" if ours.n else "n/a", met]
         lines.append(f"| {TASKS[task]} | " + " | ".join(cells) + " |")
@@ -185,8 +195,8 @@ def tables(runs: list[TrialRun]) -> list[str]:
         for arm in (
             "oracle",
             *(f"dospcot-v{v}" for v in DOSPCOT_VERSIONS),
-            f"oracle-v{CANDIDATE}",
-            f"dospcot-v{WITH_QUERIES}",
+            CANDIDATE_ORACLE,
+            QUERY_ARM,
         )
         if (members := [r for r in runs if _arm(r) == arm])
     )
@@ -200,7 +210,7 @@ def _candidate_pairs(
     """Per task :data:`CANDIDATE`'s oracle has run on: the task, which seeds (``confirming``, from
     :data:`EXPLORED_SEEDS` of an explored task, or ``held out``, all of a held-out task's), and by seed
     its runs and :data:`DECLARED`'s oracle runs on the same seeds."""
-    arm = f"oracle-v{CANDIDATE}"
+    arm = CANDIDATE_ORACLE
     rows = [(t, "confirming", EXPLORED_SEEDS) for t in TASKS] + [(t, "held out", 0) for t in HELD_OUT]
     pairs = []
     for task, which, first in rows:
@@ -241,8 +251,7 @@ def _candidate_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list
 def _query_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]:
     """DOSPCoT under :data:`WITH_QUERIES` against :data:`CANDIDATE`'s oracle, per task it has run on:
     the seeds, both arms' success on them, DOSPCoT's share and labels, and whether the bar is met."""
-    arm, oracle_arm = f"dospcot-v{WITH_QUERIES}", f"oracle-v{CANDIDATE}"
-    rows = [(t, grouped[t]) for t in QUERY_TASKS if grouped[t].get(arm)]
+    rows = [(t, grouped[t]) for t in QUERY_TASKS if grouped[t].get(QUERY_ARM)]
     if not rows:
         return []
     lines = [
@@ -257,16 +266,15 @@ def _query_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str
         "|---|---|---|---|---|---|---|",
     ]
     for task, by_arm in rows:
-        ours, labels = _success(by_arm[arm]), _mean_labels(by_arm[arm])
-        paired = _paired_oracle(by_arm, arm, oracle_arm)
-        share = f"{ours.mean / paired.mean:.0%}" if paired.n and paired.mean > 0 else "n/a"
-        met = _task_meets(by_arm, arm, oracle_arm)
-        seeds = sorted(by_arm[arm])
+        ours, labels = _success(by_arm[QUERY_ARM]), _mean_labels(by_arm[QUERY_ARM])
+        paired = _paired_oracle(by_arm, QUERY_ARM, CANDIDATE_ORACLE)
+        met = _task_meets(by_arm, QUERY_ARM, CANDIDATE_ORACLE)
+        seeds = sorted(by_arm[QUERY_ARM])
         whole = len(seeds) == seeds[-1] - seeds[0] + 1
         span = f"{seeds[0]}-{seeds[-1]}" if whole else ", ".join(map(str, seeds))
         lines.append(
             f"| {TASKS.get(task) or HELD_OUT[task]} | {span} | {paired} | {ours} "
-            f"| {share} | {labels:,.0f} | {met} |"
+            f"| {_share(ours, paired)} | {labels:,.0f} | {met} |"
         )
     return lines
 
@@ -281,8 +289,11 @@ def glance(runs: list[TrialRun]) -> Glance:
     met = [t for t, a in measured.items() if _task_meets(a, "dospcot-v2") == "yes"]
     candidate = [_success(new).mean >= ORACLE_FLOOR for _, _, new, _ in _candidate_pairs(grouped)]
     lifted = f"; under version {CANDIDATE} on {sum(candidate)} of {len(candidate)}"
-    arm, oracle_arm = f"dospcot-v{WITH_QUERIES}", f"oracle-v{CANDIDATE}"
-    queried = [_task_meets(grouped[t], arm, oracle_arm) == "yes" for t in QUERY_TASKS if grouped[t].get(arm)]
+    queried = [
+        _task_meets(grouped[t], QUERY_ARM, CANDIDATE_ORACLE) == "yes"
+        for t in QUERY_TASKS
+        if grouped[t].get(QUERY_ARM)
+    ]
     return Glance(
         f"oracle at {ORACLE_FLOOR} success or more on {len(floor)} of {len(measured)} tasks measured "
         f"(of {len(TASKS)})"
