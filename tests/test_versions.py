@@ -102,6 +102,11 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
         cotraining=dataclasses.replace(second.cotraining, numerics=2),
     )
     assert tenth == expected
+    # version 11 is version 10 with four co-training passes a round from round 2
+    passes = dataclasses.replace(tenth.training, cotrain_passes=4, passes_from_round=2)
+    eleventh = load_config(co_trained, ["defaults=11"])
+    assert eleventh == dataclasses.replace(tenth, defaults=11, training=passes)
+    assert load_config(untuned, ["defaults=11"]).training.cotrain_passes == 1  # the oracle co-trains nothing
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -156,11 +161,11 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 11; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        match=r"^defaults: unknown version 12; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
         r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
-        r"9 \(candidate\), 10 \(candidate\)$",
+        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=11"])
+        load_config("tiny", ["defaults=12"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -194,7 +199,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate))"
+        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
@@ -224,7 +229,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
         ['method="reward-model"', "cotraining.ensemble_size=[1]"],
     ],
 )
-@pytest.mark.parametrize("version", [2, 5, 9, 10])
+@pytest.mark.parametrize("version", [2, 5, 9, 10, 11])
 def test_a_versions_rules_leave_a_malformed_value_to_the_configs_own_check(version, bad):
     """A rule reads only the values it can; the config's check then names what is wrong in one line,
     rather than the rule failing with a TypeError of its own."""

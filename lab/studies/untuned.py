@@ -12,7 +12,10 @@ starts on a gym task, :mod:`dospcot.config.versions`), chosen by hand on seeds 0
 and confirmed on their seeds 3-9 and on four tasks held out from that choice (:data:`HELD_OUT`), each
 paired by seed with the oracle under version 3. DOSPCoT then trains under version 10 (version 9 with
 version 2's 100 labels) on the tasks where version 9's oracle reached the floor (:data:`QUERY_TASKS`),
-its share taken of version 9's oracle on the same seeds."""
+its share taken of version 9's oracle on the same seeds. On the tasks where it fell furthest short
+(:data:`LOSS_TASKS`), the true-rewards control under version 10 and DOSPCoT under version 11 (version
+10 with four co-training passes a round from round 2) split the loss into the co-training path's and
+the pseudo-rewards', on the agent of the oracle's view."""
 
 from __future__ import annotations
 
@@ -22,6 +25,7 @@ from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.tables import cpu_per_run, labels_used, paired, run_value
+from dospcot_lab.studies.true_rewards import MARGIN, PSEUDO_REWARDS, matches
 
 TASKS = {
     "unlock": "MiniGrid-Unlock-v0",
@@ -61,10 +65,24 @@ version 2's queries and label budget."""
 QUERY_TASKS = ("empty-random", "distshift", "obstacles", "distshift2", "obstacles6", "multiroom")
 """The tasks DOSPCoT trains on under :data:`WITH_QUERIES`: those where :data:`CANDIDATE`'s oracle reached
 :data:`ORACLE_FLOOR` on its confirming or held-out seeds (abc2461b), named before any such run."""
+WITH_PASSES = 11
+"""The version of the defaults that is :data:`WITH_QUERIES` with four co-training passes a round."""
+LOSS_TASKS = ("distshift", "obstacles")
+"""The explored tasks where DOSPCoT under :data:`WITH_QUERIES` fell furthest short of the oracle (12% and
+0% of it on seeds 3-6, 7106be6c), on which the true-rewards control trains under that version, named
+after reading those runs and before any control run. DOSPCoT under :data:`WITH_PASSES` trains on the
+first: there every goal step was pseudo-rewarded right by the last round and the agents still missed
+the goal, where on the second no label showed the goal on two of four seeds."""
 CANDIDATE_ORACLE = f"oracle-v{CANDIDATE}"
 """The arm of the oracle under :data:`CANDIDATE` (:func:`_arm`)."""
 QUERY_ARM = f"dospcot-v{WITH_QUERIES}"
 """The arm of DOSPCoT under :data:`WITH_QUERIES` (:func:`_arm`)."""
+CONTROL_ARM = f"control-v{WITH_QUERIES}"
+"""The arm of the true-rewards control under :data:`WITH_QUERIES` (:func:`_arm`)."""
+PASSES_ARM = f"dospcot-v{WITH_PASSES}"
+"""The arm of DOSPCoT under :data:`WITH_PASSES` (:func:`_arm`)."""
+ORACLE_VIEW = "image"
+"""The view the oracle trains its one agent on: the loss table compares the agents on it."""
 DOSPCOT_VERSIONS = (DECLARED, 2)
 """The versions of the defaults DOSPCoT trains under: the adopted one and version 2 (the label budget)."""
 ORACLE_FLOOR = 0.8
@@ -79,9 +97,11 @@ def _config(task: str, method: str) -> str:
     return f"{FOLDER}/{task}{'-oracle' if method == 'oracle' else ''}.toml"
 
 
-def _sweep(name: str, tasks: Iterable[str], method: str, version: int) -> Sweep:
-    """One sweep of ``method`` on ``tasks`` under ``version`` of the defaults."""
-    return Sweep(name, tuple(_config(t, method) for t in tasks), {}, numerics=None, defaults=version)
+def _sweep(
+    name: str, tasks: Iterable[str], method: str, version: int, grid: dict[str, tuple[str, ...]] | None = None
+) -> Sweep:
+    """One sweep of ``method`` on ``tasks`` under ``version`` of the defaults, with ``grid``'s settings."""
+    return Sweep(name, tuple(_config(t, method) for t in tasks), grid or {}, numerics=None, defaults=version)
 
 
 SWEEPS = (
@@ -99,12 +119,18 @@ SWEEPS = (
         "dospcot",
         WITH_QUERIES,
     ),
+    _sweep(
+        f"untuned-control-v{WITH_QUERIES}", LOSS_TASKS, "dospcot", WITH_QUERIES, {PSEUDO_REWARDS: ("hidden",)}
+    ),
+    _sweep(f"untuned-dospcot-v{WITH_PASSES}", LOSS_TASKS[:1], "dospcot", WITH_PASSES),
 )
 
 
 def _arm(run: TrialRun) -> str:
-    """``oracle`` (under :data:`DECLARED`), ``oracle-v<version>`` (under another) or
-    ``dospcot-v<version of the defaults>``."""
+    """``oracle`` (under :data:`DECLARED`), ``oracle-v<version>`` (under another),
+    ``control-v<version>`` (the true-rewards control) or ``dospcot-v<version of the defaults>``."""
+    if run.trial.params.get(PSEUDO_REWARDS) == "hidden":
+        return f"control-v{run.trial.defaults}"
     if not run.trial.name.endswith("-oracle"):
         return f"dospcot-v{run.trial.defaults}"
     return "oracle" if run.trial.defaults == DECLARED else f"oracle-v{run.trial.defaults}"
@@ -197,10 +223,14 @@ def tables(runs: list[TrialRun]) -> list[str]:
             *(f"dospcot-v{v}" for v in DOSPCOT_VERSIONS),
             CANDIDATE_ORACLE,
             QUERY_ARM,
+            CONTROL_ARM,
+            PASSES_ARM,
         )
         if (members := [r for r in runs if _arm(r) == arm])
     )
-    later = [part for part in (_candidate_lines(grouped), _query_lines(grouped)) if part]
+    later = [
+        part for part in (_candidate_lines(grouped), _query_lines(grouped), _loss_lines(grouped)) if part
+    ]
     return [*lines, "", f"CPU per run (one torch thread): {cost}.", *(x for p in later for x in ["", *p])]
 
 
@@ -275,6 +305,49 @@ def _query_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str
         lines.append(
             f"| {TASKS.get(task) or HELD_OUT[task]} | {span} | {paired} | {ours} "
             f"| {_share(ours, paired)} | {labels:,.0f} | {met} |"
+        )
+    return lines
+
+
+def _image_success(run: TrialRun) -> float:
+    return float(run.summary["per_view"][ORACLE_VIEW]["success"])
+
+
+def _loss_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]:
+    """Per task of :data:`LOSS_TASKS` the control has run on, on the control's seeds: the success of the
+    agent on the oracle's view under the oracle (:data:`CANDIDATE`), the control and DOSPCoT (both
+    :data:`WITH_QUERIES`) and DOSPCoT under :data:`WITH_PASSES`, and the paired differences that split
+    the loss (the path: control minus oracle; the pseudo-rewards: DOSPCoT minus control; the passes)."""
+    rows = [t for t in LOSS_TASKS if grouped[t].get(CONTROL_ARM)]
+    if not rows:
+        return []
+    arms = (CANDIDATE_ORACLE, CONTROL_ARM, QUERY_ARM, PASSES_ARM)
+    lines = [
+        f"Where DOSPCoT under version {WITH_QUERIES} loses: the true-rewards control (every admitted sample "
+        "reads its true reward, the rest of the co-training path unchanged) under the same version, and "
+        f"DOSPCoT under version {WITH_PASSES} (four co-training passes a round from round 2), against "
+        f"the oracle under version {CANDIDATE}. Success of the agent on the oracle's view "
+        f"({ORACLE_VIEW}) on the control's seeds, and differences paired by seed with their 95% "
+        f"intervals. The path matches the oracle where the control's interval holds 0 and its lower end "
+        f"lies above -{MARGIN} (the true-rewards study's rule).",
+        "",
+        "| task | seeds | oracle | control | DOSPCoT | DOSPCoT, version "
+        f"{WITH_PASSES} | path: control minus oracle | pseudo-rewards: DOSPCoT minus control "
+        f"| passes: version {WITH_PASSES} minus version {WITH_QUERIES} | path matches |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for task in rows:
+        seeds = sorted(grouped[task][CONTROL_ARM])
+        on = {arm: {s: r for s, r in grouped[task].get(arm, {}).items() if s in seeds} for arm in arms}
+        cells = [str(SeedSummary.of([_image_success(r) for r in on[arm].values()])) for arm in arms]
+        oracle, control, ours, passes = (on[arm] for arm in arms)
+        path = paired(control, oracle, "success", value=_image_success)
+        diffs = [path, paired(ours, control, "success", value=_image_success)]
+        diffs.append(paired(passes, ours, "success", value=_image_success))
+        span = ", ".join(map(str, seeds))
+        lines.append(
+            f"| {TASKS[task]} | {span} | {' | '.join(cells)} | {' | '.join(map(str, diffs))} "
+            f"| {'yes' if matches(path) else 'no'} |"
         )
     return lines
 

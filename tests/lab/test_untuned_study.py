@@ -10,6 +10,7 @@ from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot.tasks import load_config
 from dospcot_lab.studies import STUDIES
+from dospcot_lab.studies.true_rewards import PSEUDO_REWARDS
 from dospcot_lab.studies.untuned import TASKS, glance, tables
 
 
@@ -115,6 +116,56 @@ def test_version_10s_dospcot_reads_its_share_of_version_9s_oracle_on_its_own_see
     assert glance(runs).headline.endswith("; under version 10 at 90% of version 9's oracle on 1 of 2")
 
 
+def _image_run(
+    root: Path, task: str, method: str, seed: int, image: float, defaults: int, hidden: bool = False
+) -> TrialRun:
+    """A run whose agent on the image view reached ``image`` (its ego agent 1.0, which no cell reads);
+    ``hidden``: the true-rewards control's."""
+    run = _run(root / ("control" if hidden else "arm"), task, method, seed, 0.5, defaults, 100)
+    run.summary["per_view"] = {"image": {"success": image}, "ego": {"success": 1.0}}
+    if hidden:
+        run.trial.params[PSEUDO_REWARDS] = "hidden"
+    return run
+
+
+def test_the_loss_table_splits_version_10s_gap_into_the_path_and_the_pseudo_rewards(tmp_path):
+    arms = {
+        ("oracle", 9, False): {3: 1.0, 4: 1.0, 5: 0.8, 6: 0.0},  # seed 6: no control run, in no cell
+        ("dospcot", 10, True): {3: 0.8, 4: 1.0, 5: 0.8},
+        ("dospcot", 10, False): {3: 0.0, 4: 0.5, 5: 0.1},
+        ("dospcot", 11, False): {3: 1.0, 4: 0.5},
+    }
+    runs = [
+        _image_run(tmp_path / task, task, method, seed, value, version, hidden)
+        for (method, version, hidden), values in arms.items()
+        for task in ("distshift", "obstacles")
+        for seed, value in values.items()
+        if not (task == "obstacles" and hidden)  # there the control equals the oracle, seed by seed
+    ]
+    runs += [_image_run(tmp_path, "obstacles", "dospcot", s, 1.0, 10, True) for s in (3, 4)]
+    lines = tables(runs)
+    distshift, obstacles = (line.split(" | ") for line in lines[-2:])
+    assert distshift[:2] == ["| MiniGrid-DistShift1-v0", "3, 4, 5"]
+    assert distshift[2:6] == [
+        str(SeedSummary.of(v)) for v in ([1.0, 1.0, 0.8], [0.8, 1.0, 0.8], [0.0, 0.5, 0.1], [1.0, 0.5])
+    ]
+    assert distshift[6:9] == [
+        str(SeedSummary.of([0.8 - 1.0, 0.0, 0.0])),
+        str(SeedSummary.of([0.0 - 0.8, 0.5 - 1.0, 0.1 - 0.8])),
+        str(SeedSummary.of([1.0, 0.0])),
+    ]
+    # The path matches only where its interval holds 0 and its lower end lies above -0.1: a loss of
+    # 0.2 on one seed in three puts the lower end at -0.2.
+    assert distshift[9] == "no |"
+    assert obstacles[:3] == ["| MiniGrid-Dynamic-Obstacles-5x5-v0", "3, 4", str(SeedSummary.of([1.0, 1.0]))]
+    assert obstacles[6] == str(SeedSummary.of([0.0, 0.0])) and obstacles[9] == "yes |"
+    assert "control-v10: 200 CPU-s; dospcot-v11: 200 CPU-s." in next(
+        line for line in lines if line.startswith("CPU per run")
+    )
+    # Version 10's DOSPCoT is read on its own seeds in the third table, unchanged by the control's runs.
+    assert any(line.startswith("| MiniGrid-DistShift1-v0 | 3-5 |") for line in lines)
+
+
 def test_every_config_names_only_its_env_id_views_and_method():
     """The study's point: no task setting but the env id and its views, so each key resolves to the
     library's default under the sweep's version."""
@@ -129,5 +180,5 @@ def test_every_config_names_only_its_env_id_views_and_method():
             assert cfg.training.rounds == 5 and cfg.gym.state_key == "" and cfg.gym.wrappers == ()
             assert cfg.gym.train_wrappers == (() if sweep.defaults < 9 else (EXPLORING_STARTS,))
             assert cfg.training.label_budget == (
-                100 if sweep.defaults in (2, 10) and cfg.method == "dospcot" else 0
+                100 if sweep.defaults in (2, 10, 11) and cfg.method == "dospcot" else 0
             )
