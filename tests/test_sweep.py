@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -16,11 +17,20 @@ import torch
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
+from dospcot.config.presets import preset_names
 from dospcot.run import run_folder
 from dospcot.run.cores import usable_cores
 from dospcot.sweeps.report import load_runs, write_report
 from dospcot.sweeps.sweep import run_sweep
-from dospcot.sweeps.sweep_spec import SweepError, SweepSpec, Trial, open_sweep, parse_grid, trial_dir
+from dospcot.sweeps.sweep_spec import (
+    SweepError,
+    SweepSpec,
+    Trial,
+    open_sweep,
+    parse_grid,
+    stale_trials,
+    trial_dir,
+)
 from dospcot.tasks import load_config
 
 GRID = {"training.label_fraction": ("0.1", "0.5"), "cotraining.consensus_weight": ("0", "0.3")}
@@ -184,6 +194,23 @@ def test_a_trial_run_under_another_config_stops_the_sweep_with_one_line(one_tria
     message = r"1 trial\(s\) .* tiny/seed=0: training.steps_per_round was 200, is 300"
     with pytest.raises(SweepError, match=message):
         run_sweep(tmp_path / "s", spec, workers=1, show_progress=False)
+
+
+def test_the_stale_check_resolves_a_combination_once_and_still_reads_each_trials_seed(tmp_path):
+    """The check resolves a combination's config once and gives each trial its seed: sound because a
+    seed moves no other key, under any preset and version."""
+    for preset in preset_names():
+        for defaults in (1, 11):
+            assert load_config(preset, ["seed=7"], defaults) == replace(
+                load_config(preset, [], defaults), seed=7
+            )
+    trials = [Trial("tiny", "tiny", {}, seed, ()) for seed in (0, 1, 2)]
+    for trial in trials:
+        stored = trial_dir(tmp_path, trial) / "config.toml"
+        stored.parent.mkdir(parents=True)
+        # seed 2's folder holds seed 1's config
+        run_folder.write_toml(stored, load_config("tiny", [f"seed={min(trial.seed, 1)}"]).to_dict())
+    assert stale_trials(tmp_path, trials) == [("tiny/seed=2", "seed was 1, is 2")]
 
 
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`

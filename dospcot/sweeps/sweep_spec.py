@@ -94,11 +94,15 @@ class SweepSpec:
         for config in self.configs:
             for values in product(*self.grid.values()):
                 params = dict(zip(keys, values, strict=True))
-                for index, seed in enumerate(self.seeds):
+                first: RunConfig | None = None
+                for seed in self.seeds:
                     trial = Trial(config, "", params, seed, self.overrides, self.defaults)
-                    cfg = trial.load_config()
-                    if index == 0 and check_task:  # the seed changes nothing the check step reads
+                    # A seed moves no other key: the combination resolves once, and each later seed
+                    # is checked as a copy that takes it.
+                    cfg = trial.load_config() if first is None else replace(first, seed=seed)
+                    if first is None and check_task:  # the seed changes nothing the check step reads
                         get_task(cfg.task).check(cfg)
+                    first = first or cfg
                     trials.append(replace(trial, name=cfg.name))
                     kinds.add(type(cfg))
         ids = [t.trial_id for t in trials]
@@ -303,11 +307,17 @@ def stale_trials(sweep_dir: Path, trials: Sequence[Trial]) -> list[tuple[str, st
     settings the sweep no longer means.
     """
     stale = []
+    # A combination's trials differ by their seed alone, which moves no other key: each combination is
+    # resolved once, where a record's pages would otherwise resolve its configs once per run.
+    resolved: dict[tuple[Any, ...], RunConfig] = {}
     for trial in trials:
         path = trial_dir(sweep_dir, trial) / CONFIG_FILE
         if not path.is_file():
             continue
-        stored, current = load_run_config(path), trial.load_config()
+        combination = (trial.config, trial.base_overrides, tuple(trial.params.items()), trial.defaults)
+        if combination not in resolved:
+            resolved[combination] = trial.load_config()
+        stored, current = load_run_config(path), replace(resolved[combination], seed=trial.seed)
         if stored != current:
             old, new = _flat(stored.to_dict()), _flat(current.to_dict())
             key = next(k for k in sorted(old.keys() | new.keys()) if old.get(k) != new.get(k))

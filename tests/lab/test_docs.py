@@ -10,7 +10,14 @@ from pathlib import Path
 import pytest
 
 from dospcot_lab.repository import Repository
-from dospcot_lab.studies import STUDIES, check_record, get_study, header_command, render_study
+from dospcot_lab.studies import (
+    STUDIES,
+    Rendered,
+    check_record,
+    get_study,
+    header_command,
+    render_study,
+)
 from dospcot_lab.studies.declaration import EXPLORATORY, NOT_MEASURED
 from dospcot_lab.studies.pages import GLANCE, PAGES, TABLE, glance_cells, glance_table
 from dospcot_lab.studies.readme import read_block
@@ -28,16 +35,26 @@ def _without_date(text: str) -> str:
     return "\n".join(line for line in text.splitlines() if not line.startswith(DATE_LINE))
 
 
-@pytest.fixture(scope="module")
-def rendered():
-    """Every study rendered from the record as ``dospcot-lab study NAME --render-only --docs`` would,
-    without writing anything."""
-    out = {}
-    for name, study in STUDIES.items():
+class _Renders(dict):
+    """Each study rendered from the record as ``dospcot-lab study NAME --render-only --docs`` would,
+    without writing anything: on first use, then kept, so each page's test pays for its own study's
+    render and the tests of every page find them done."""
+
+    def __missing__(self, name: str) -> Rendered:
+        study = STUDIES[name]
         check_record(study, RECORD, study.seeds)  # a stale record would not stand for its study
         command = header_command(("dospcot-lab", "study"), name, ["--docs"])
-        out[name] = render_study(name, RECORD, command)
-    return out
+        self[name] = render_study(name, RECORD, command)
+        return self[name]
+
+    def every(self) -> dict[str, Rendered]:
+        """Every study's render, by name."""
+        return {name: self[name] for name in STUDIES}
+
+
+@pytest.fixture(scope="module")
+def rendered() -> _Renders:
+    return _Renders()
 
 
 @pytest.mark.parametrize("name", list(STUDIES))
@@ -49,11 +66,11 @@ def test_every_study_page_rebuilds_from_the_record_as_committed(rendered, name):
 
 
 def test_the_results_at_a_glance_and_the_readme_blocks_come_from_the_same_records(rendered):
-    rows = {name: result.glance for name, result in rendered.items()}
+    rows = {name: result.glance for name, result in rendered.every().items()}
     order = list(STUDIES)
     assert read_block(README, GLANCE) == glance_table(rows, order, "docs/results/", brief=True)
     assert read_block(RESULTS / "index.md", GLANCE) == glance_table(rows, order, "")
-    for name, result in rendered.items():
+    for name, result in rendered.every().items():
         if get_study(name).readme is not None:
             assert read_block(README, f"{name}-table") == result.readme
 
@@ -100,7 +117,7 @@ def test_a_study_without_runs_publishes_no_figure(rendered, tmp_path):
     names no number of its own on its page or row, only what would produce them."""
     command = partial(header_command, ("dospcot-lab", "study"))
     empty = {name: render_study(name, tmp_path, command(name, ["--docs"])) for name in ("highway", "budget")}
-    unpublished = {name: result for name, result in rendered.items() if result.table is None}
+    unpublished = {name: result for name, result in rendered.every().items() if result.table is None}
     assert set(unpublished) <= REGISTERED_BEFORE_RUNS, "a study of the record lost its runs"
     for name, result in {**empty, **unpublished}.items():
         assert result.table is None
@@ -298,7 +315,7 @@ def _arm_cells(page: str) -> list[str]:
 
 def test_no_table_in_the_record_names_an_arm_by_more_than_30_characters(rendered):
     """Long settings go to a settings table or a line above the table; the arm columns stay short."""
-    pages = {name: result.page for name, result in rendered.items()}
+    pages = {name: result.page for name, result in rendered.every().items()}
     long = {name: [c for c in _arm_cells(page) if len(c) > ARM_NAME_LIMIT] for name, page in pages.items()}
     assert {name: cells for name, cells in long.items() if cells} == {}
     # The check reads the method columns and the queries' first columns.
