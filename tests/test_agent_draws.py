@@ -81,6 +81,7 @@ def test_a_folder_or_checkpoint_written_before_the_key_reads_shared_whatever_the
         "agent_draws": "shared",
         "cotrain_passes": 1,
         "passes_from_round": 1,
+        "pass_kind": "cotrain",
         "query_end_states": "random",
         "stop_patience": 0,
         "rounds": 3,

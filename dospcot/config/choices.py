@@ -39,6 +39,10 @@ EndStateQueries = Literal["random", "spread"]
 (:func:`dospcot.core.end_states.spread_ends`)."""
 QuerySchedule = Literal["asap", "even", "decay"]
 """How a label budget (``training.label_budget``) spreads over the rounds (:mod:`dospcot.core.queries`)."""
+PassKind = Literal["cotrain", "score"]
+"""What a pass inside a round does (``training.cotrain_passes``): co-train (fit the classifiers, admit,
+age the schedule), or score the steps not yet admitted with the classifiers as they are
+(:mod:`dospcot.core.score_passes`)."""
 AgentDraws = Literal["shared", "own"]
 """Whose random draws a run's agents make: the global generators in turn, or each its own
 (:mod:`dospcot.core.agent_draws`)."""

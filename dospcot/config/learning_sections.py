@@ -23,6 +23,7 @@ from dospcot.config.choices import (
     LabelStrategy,
     LossKind,
     ModelKind,
+    PassKind,
     PseudoRewards,
     QuerySchedule,
     Quota,
@@ -73,6 +74,13 @@ class TrainingConfig(AddedKeys):
         rounds before it co-train once, after their whole collection. 2: round 1's labels are all bought
         before the classifiers first admit a sample, so a sparse task's first goal label is not
         outrun by a pass. The self-paced schedule ages by one round per round either way.
+    :param pass_kind: what each pass but a round's last does. ``"cotrain"``: the co-trainer's step, as
+        described under ``cotrain_passes``. ``"score"``: no fit and no step of the schedule; the
+        classifiers as the round's last co-training left them pseudo-reward the steps it did not admit,
+        each view admitting at the least score it admitted each class at then
+        (:mod:`dospcot.core.score_passes`), so a pass costs a forward pass of each classifier rather
+        than a fit over the pool. A pass before the run's first co-training, or after a class has
+        appeared or merged since the last, admits nothing. Co-training alone (``method = "dospcot"``).
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.
@@ -155,11 +163,13 @@ class TrainingConfig(AddedKeys):
     stop_patience: int = 0
     cotrain_passes: int = 1
     passes_from_round: int = 1
+    pass_kind: PassKind = "cotrain"
 
     added_keys: ClassVar[dict[str, Any]] = {
         "agent_draws": "shared",
         "cotrain_passes": 1,
         "passes_from_round": 1,
+        "pass_kind": "cotrain",
         "query_end_states": "random",
         "stop_patience": 0,
     }

@@ -39,7 +39,9 @@ SELF_PACED_KEYS: frozenset[str] = frozenset(
     )
 )
 """The ``[cotraining]`` keys of the self-paced schedule, which only co-training reads."""
-REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {
+CO_TRAINING_KEYS: frozenset[str] = SELF_PACED_KEYS | {"training.pass_kind"}
+"""The keys only co-training reads: the self-paced schedule's, and what its passes do."""
+REWARD_LEARNER_KEYS: frozenset[str] = CO_TRAINING_KEYS | {
     "cotraining.ensemble_size",
     "cotraining.classifier",
     "cotraining.pseudo_rewards",
@@ -100,7 +102,7 @@ class TrainConfig:
 
     unread_keys: ClassVar[dict[str, frozenset[str]]] = {
         "dospcot": frozenset({"cotraining.ensemble_size"}),
-        "reward-model": SELF_PACED_KEYS,
+        "reward-model": CO_TRAINING_KEYS,
         "oracle": REWARD_LEARNER_KEYS,
         "masked-zero": REWARD_LEARNER_KEYS,
         "labels-only": REWARD_LEARNER_KEYS,

@@ -10,7 +10,9 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
    time, so what earlier rounds admitted drives this round's updates.
    Under ``training.cotrain_passes`` c > 1 (from round ``training.passes_from_round`` on) the
    collection comes in c parts, each but the last followed by steps 2-3, so a step the agents take is
-   rewarded in their replay a part later, not a round later.
+   rewarded in their replay a part later, not a round later; under ``training.pass_kind = "score"``
+   each part but the last is followed by a score pass instead (:meth:`CoTrainingRun.score_pass`),
+   which pseudo-rewards the steps not yet admitted with the classifiers as they are, fitting nothing.
    **Queries** (an active ``training.label_strategy``, :mod:`dospcot.core.queries`): a rater labels
    the samples the strategy chooses, within the budget the uniform mask would spend.
 2. **Co-train** (method ``"dospcot"``): the task turns its store into a
@@ -68,6 +70,7 @@ from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
 from dospcot.core.reward_model import RewardModelTrainer
 from dospcot.core.round_records import DEPENDENCE_STATS, VIEW_STATS, class_rows, record_head, round_stats
 from dospcot.core.run_agents import make_agent, relabelling_kwargs
+from dospcot.core.score_passes import score_run
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.core.self_paced import RunCoTrainer, RunPool
 from dospcot.core.stopping import CO_TRAINER_STOPPED, GreedyPatience
@@ -142,6 +145,9 @@ class CoTrainingRun:
             self.trainer = RunCoTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
         elif cfg.method == "reward-model":
             self.trainer = RewardModelTrainer(task.feature_dims(), cfg.cotraining, cfg.seed, task.n_classes)
+        self.scored_classes: np.ndarray | None = None
+        """The classes the run had at its last co-training (their mask), which its classifiers were
+        fitted to; None before the first (score passes, ``training.pass_kind = "score"``)."""
         self.class_records: list[dict] = []
         """Every round's pseudo-rewards per hidden reward class (metrics only; :func:`class_rows`), for a
         run that learns rewards, on single-step labels."""
@@ -215,7 +221,7 @@ class CoTrainingRun:
                     with self._draws_of(k):  # a later part goes on with the episodes the last one left
                         agent.learn(steps, callback=callback, reset_num_timesteps=False)
                 if part < len(parts) - 1:  # 1a. a pass inside the round rewards the steps just taken
-                    self.cotrain(record=False)
+                    self.inner_pass()
             self.collected = True
         stats = self.label_and_cotrain()  # 1b-3.
         for k, agent in enumerate(self.agents):  # 4. policy update on the rewards and weights just written
@@ -292,7 +298,10 @@ class CoTrainingRun:
         pool = self.task.pool(np.float32 if self.segments is not None else self.trainer.dtype_np)
         if self.segments is not None:
             return self._cotrain_segments(pool)
-        result = self.trainer.step(pool, len(self.round_parts()))
+        # Score passes take no step of the schedule: the round's co-training ages it by a whole round.
+        steps = len(self.round_parts()) if self.cfg.training.pass_kind == "cotrain" else 1
+        result = self.trainer.step(pool, steps)
+        self.scored_classes = self.classes.mask.copy()
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class), nan=0.0)
         true_class = self.task.true_class()  # metrics only, and the true-rewards control's classes
         if self.true_rewards:
@@ -308,6 +317,32 @@ class CoTrainingRun:
         if record:
             self.class_records += class_rows(self.round, result, labelled, unlabelled, true_class, rewards)
         return {**stats, "labelled_steps": int(pool.labelled.sum())}
+
+    def inner_pass(self) -> None:
+        """A pass inside a round (``training.cotrain_passes``): a co-training pass, or a score pass
+        under ``training.pass_kind = "score"``."""
+        if self.cfg.training.pass_kind == "score":
+            self.score_pass()
+        else:
+            self.cotrain(record=False)
+
+    def score_pass(self) -> None:
+        """A score pass inside a round (``training.pass_kind = "score"``): the steps the last co-training
+        did not admit read the pseudo-rewards (under the true-rewards control, the hidden rewards) of
+        the samples the classifiers as it left them admit (:mod:`dospcot.core.score_passes`); nothing
+        is fitted. Before the run's first co-training, or where a class has appeared or merged since
+        it (the classifiers never fitted the classes as they are), the pass admits nothing."""
+        pool = self.task.pool(self.trainer.dtype_np)
+        before = self.scored_classes
+        if before is None or not np.array_equal(before, self.classes.mask):
+            return
+        pseudo_class, weight = score_run(self.trainer, pool)
+        admitted = np.flatnonzero(weight > 0)
+        if self.true_rewards:
+            reward = self.store.hidden_reward[admitted]
+        else:
+            reward = np.nan_to_num(self.classes.decode(pseudo_class[admitted]), nan=0.0)
+        self.table.set(admitted, reward, weight[admitted])
 
     def _cotrain_segments(self, steps: RunPool) -> dict:
         """Steps 2-3 under segment labels: co-train on segments, then turn the labelled and admitted
@@ -408,6 +443,8 @@ class CoTrainingRun:
             self.segment_classes = state["segment_classes"]
         self.table.load_state_dict(state["table"])
         self.task.classes, self.trainer = state["classes"], state["trainer"]
+        # A checkpoint is written after a round's co-training, whose classes the run still has.
+        self.scored_classes = self.classes.mask.copy() if self.round else None
         self.collected, self.class_records = state["collected"], state["class_records"]
         if self.queries is not None:
             self.queries.revealed, self.queries.met_round, self.queries.log = state["queries"]

@@ -255,6 +255,11 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         return self._age
 
     @property
+    def last_weights(self) -> np.ndarray | None:
+        """(m, B, N) each view's weights v_j over the pool of the last step, or None before any."""
+        return self._weights
+
+    @property
     def add_fraction(self) -> float:
         """add_num of the current step as a share of |U| (grows by ``add_fraction_step`` a round)."""
         return self.config.add_fraction_start + self.config.add_fraction_step * float(self.age)
@@ -405,16 +410,25 @@ class RunCoTrainer:
             ]
         )
 
+    @property
+    def batch(self) -> SelfPacedCoTrainer:
+        """The co-trainer of a batch of one run that this one wraps."""
+        return self._batch
+
     def step(self, pool: RunPool, passes: int = 1) -> RunRound:
         """One step (:meth:`SelfPacedCoTrainer.step`) on the run's pool, of a round in ``passes`` steps."""
-        batched = Pool(
-            [f[None] for f in pool.features],
-            pool.labelled[None],
-            pool.label_class[None],
-            pool.unlabelled[None],
-            pool.class_mask[None],
-        )
-        return self._batch.step(batched, passes).of_run(0)
+        return self._batch.step(batched(pool), passes).of_run(0)
+
+
+def batched(pool: RunPool) -> Pool:
+    """The pool of one run as a batch of one run."""
+    return Pool(
+        [f[None] for f in pool.features],
+        pool.labelled[None],
+        pool.label_class[None],
+        pool.unlabelled[None],
+        pool.class_mask[None],
+    )
 
 
 def _label_share(pool: Pool) -> np.ndarray:
@@ -439,4 +453,5 @@ __all__ = [
     "RunPool",
     "RunRound",
     "SelfPacedCoTrainer",
+    "batched",
 ]

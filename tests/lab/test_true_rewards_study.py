@@ -159,3 +159,24 @@ def test_passes_inside_the_rounds_are_compared_with_exploration_by_rounds_alone(
         sweep = sweeps[f"true-rewards-{task}-passes"]
         assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, "training.cotrain_passes": ("4",)}
         assert sweep.seeds == 10
+
+
+def test_score_passes_are_compared_with_exploration_by_rounds_alone():
+    """The score-passes diagnosis differs from exploration by rounds in its ten score passes alone."""
+    rounds = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1", "training.exploration": "rounds"}
+    scored = {**rounds, "training.cotrain_passes": "10", "training.pass_kind": "score"}
+    runs = _lavagap([0.0, 0.0], [1.0, 1.0], [0.0, 0.0])
+    runs += [_run("minigrid-lavagap-dospcot", s, v, rounds) for s, v in enumerate([0.5, 0.0])]
+    runs += [_run("minigrid-lavagap-dospcot", s, 1.0, scored) for s in range(2)]
+    lines = tables(runs)
+    assert (
+        f"- LavaGapS7 (image), 10 score passes a round alone: control, 10 score passes minus control, "
+        f"exploration by rounds: {SeedSummary.of([0.5, 1.0])} over 2 seeds." in lines
+    )
+    assert any(line.startswith("| control, 10 score passes | image | 1.000") for line in lines)
+    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
+    for task in ("doorkey", "lavagap"):
+        sweep = sweeps[f"true-rewards-{task}-score-passes"]
+        added = {"training.cotrain_passes": ("10",), "training.pass_kind": ("score",)}
+        assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, **added}
+        assert sweep.seeds == 10
