@@ -139,44 +139,40 @@ def test_shorter_rounds_are_a_diagnosis_of_their_own_told_apart_from_exploration
         assert grid["training.rounds"] == ("20",) and grid["training.steps_per_round"] == ("2500",)
 
 
-def test_passes_inside_the_rounds_are_compared_with_exploration_by_rounds_alone():
-    """The passes diagnosis differs from exploration by rounds in its passes alone, so besides the
-    control and the oracle it is paired with that diagnosis, seed by seed."""
+@pytest.mark.parametrize(
+    ("added", "alone", "arm", "suffix"),
+    [
+        (
+            {"training.cotrain_passes": "4"},
+            "4 co-training passes a round",
+            "control, 4 passes a round",
+            "passes",
+        ),
+        (
+            {"training.cotrain_passes": "10", "training.pass_kind": "score"},
+            "10 score passes a round",
+            "control, 10 score passes",
+            "score-passes",
+        ),
+    ],
+)
+def test_passes_inside_the_rounds_are_compared_with_exploration_by_rounds_alone(added, alone, arm, suffix):
+    """The passes diagnoses (co-training passes, score passes) differ from exploration by rounds in
+    their passes alone, so besides the control and the oracle each is paired with that diagnosis,
+    seed by seed."""
     rounds = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1", "training.exploration": "rounds"}
-    passes = {**rounds, "training.cotrain_passes": "4"}
     runs = _lavagap([0.0, 0.0], [1.0, 1.0], [0.0, 0.0])
     runs += [_run("minigrid-lavagap-dospcot", s, v, rounds) for s, v in enumerate([0.5, 0.0])]
-    runs += [_run("minigrid-lavagap-dospcot", s, 1.0, passes) for s in range(2)]
-    lines = tables(runs)
-    alone = SeedSummary.of([0.5, 1.0])
-    assert (
-        f"- LavaGapS7 (image), 4 co-training passes a round alone: control, 4 passes a round minus control, "
-        f"exploration by rounds: {alone} over 2 seeds." in lines
-    )
-    assert any(line.startswith("| control, 4 passes a round | image | 1.000") for line in lines)
-    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
-    for task in ("doorkey", "lavagap"):
-        sweep = sweeps[f"true-rewards-{task}-passes"]
-        assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, "training.cotrain_passes": ("4",)}
-        assert sweep.seeds == 10
-
-
-def test_score_passes_are_compared_with_exploration_by_rounds_alone():
-    """The score-passes diagnosis differs from exploration by rounds in its ten score passes alone."""
-    rounds = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1", "training.exploration": "rounds"}
-    scored = {**rounds, "training.cotrain_passes": "10", "training.pass_kind": "score"}
-    runs = _lavagap([0.0, 0.0], [1.0, 1.0], [0.0, 0.0])
-    runs += [_run("minigrid-lavagap-dospcot", s, v, rounds) for s, v in enumerate([0.5, 0.0])]
-    runs += [_run("minigrid-lavagap-dospcot", s, 1.0, scored) for s in range(2)]
+    runs += [_run("minigrid-lavagap-dospcot", s, 1.0, {**rounds, **added}) for s in range(2)]
     lines = tables(runs)
     assert (
-        f"- LavaGapS7 (image), 10 score passes a round alone: control, 10 score passes minus control, "
-        f"exploration by rounds: {SeedSummary.of([0.5, 1.0])} over 2 seeds." in lines
+        f"- LavaGapS7 (image), {alone} alone: {arm} minus control, exploration by rounds: "
+        f"{SeedSummary.of([0.5, 1.0])} over 2 seeds." in lines
     )
-    assert any(line.startswith("| control, 10 score passes | image | 1.000") for line in lines)
+    assert any(line.startswith(f"| {arm} | image | 1.000") for line in lines)
     sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
     for task in ("doorkey", "lavagap"):
-        sweep = sweeps[f"true-rewards-{task}-score-passes"]
-        added = {"training.cotrain_passes": ("10",), "training.pass_kind": ("score",)}
-        assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, **added}
+        sweep = sweeps[f"true-rewards-{task}-{suffix}"]
+        grid = {key: (value,) for key, value in added.items()}
+        assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, **grid}
         assert sweep.seeds == 10
