@@ -155,7 +155,8 @@ def test_a_sweep_batches_its_seeds_and_a_batchs_grouping_changes_no_members_file
 
 @pytest.mark.parametrize("seeds", [[], ["--seeds", "2"]])
 def test_a_run_or_batch_stopped_in_its_first_round_keeps_its_folders_and_resumes(tmp_path, seeds):
-    steps = ("--set", "training.steps_per_round=4000", "--set", "training.rounds=1")
+    # Long enough that the signal lands inside the round on any CPU, short enough that the resume is cheap.
+    steps = ("--set", "training.steps_per_round=1500", "--set", "training.rounds=1")
     cmd = [sys.executable, "-m", "dospcot", "train", "tiny", *seeds, *steps, "--no-progress"]
     proc = subprocess.Popen(
         [*cmd, "--runs-dir", str(tmp_path)], stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True

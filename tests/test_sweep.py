@@ -268,7 +268,7 @@ def test_the_workers_of_a_sweep_killed_alone_exit_with_it(tmp_path):
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
     try:  # the pool's worker, the manager that carries progress reports, multiprocessing's tracker
         deadline = time.monotonic() + 180
-        while not list(tmp_path.glob("orphans/trials/*/*/summary.json")):
+        while not list(tmp_path.glob("orphans/trials/*/*/tb")):  # a worker is training its first trial
             assert proc.poll() is None and time.monotonic() < deadline, "the sweep ended before the kill"
             time.sleep(0.05)
         children = _descendants(proc.pid)
