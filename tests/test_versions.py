@@ -107,6 +107,13 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     eleventh = load_config(co_trained, ["defaults=11"])
     assert eleventh == dataclasses.replace(tenth, defaults=11, training=passes)
     assert load_config(untuned, ["defaults=11"]).training.cotrain_passes == 1  # the oracle co-trains nothing
+    # version 12 is version 10 with ten score passes a round, for DOSPCoT alone
+    scored = dataclasses.replace(tenth.training, cotrain_passes=10, pass_kind="score")
+    twelfth = load_config(co_trained, ["defaults=12"])
+    assert twelfth == dataclasses.replace(tenth, defaults=12, training=scored)
+    assert load_config(untuned, ["defaults=12"]).training.pass_kind == "cotrain"
+    peer = load_config(co_trained, ["defaults=12", 'method="reward-model"', 'views=["image"]'])
+    assert (peer.training.cotrain_passes, peer.training.pass_kind) == (1, "cotrain")
     # version 2 builds on version 1, not on the adopted version 3: its classifiers fit in numerics 1
     assert load_config("grid16-dospcot", ["defaults=2"]).cotraining.numerics == 1
     reference = config_reference()
@@ -161,11 +168,11 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 12; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        match=r"^defaults: unknown version 13; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
         r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
-        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\)$",
+        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=12"])
+        load_config("tiny", ["defaults=13"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -199,7 +206,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate))"
+        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12 (candidate))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out

@@ -47,7 +47,11 @@ thousands of labels, over the 100 issue 78 allows. Version 11, a candidate, is v
 5's and version 7's passes (four co-training passes a round, from round 2): under version 10 the untuned
 study's DOSPCoT on DistShift1 ended with every goal step pseudo-rewarded right and still reached the
 goal in an eighth of the oracle's episodes, where the true-rewards study had traced such a loss to the
-round's lag. Nothing here imports torch.
+round's lag. Version 12, a candidate, is version 10 with ten score passes a round for DOSPCoT
+(``training.pass_kind = "score"``): a pass refits nothing, so it costs a forward pass of each
+classifier where version 11's refits took most of a round on MiniGrid's egocentric map, and the
+true-rewards study's control with such passes matched the oracle on DoorKey. Nothing here imports
+torch.
 """
 
 from __future__ import annotations
@@ -79,6 +83,10 @@ REWARD_LEARNERS = ("dospcot", "reward-model")
 PASSES = 4
 """Version 5's co-training passes a round (``training.cotrain_passes``): the true-rewards study's short
 rounds cut the lag by as much."""
+
+SCORE_PASSES = 10
+"""Version 12's passes a round, score passes (``training.pass_kind = "score"``): the true-rewards
+study's arm that matched the oracle on DoorKey."""
 
 GYM_SETTINGS: dict[str, Any] = {
     "training.steps_per_round": 10_000,
@@ -177,13 +185,22 @@ def _without_labelled_demonstrations(value: Any) -> Callable[[Mapping[str, Any]]
     return rule
 
 
-def _passes(table: Mapping[str, Any]) -> int | None:
-    """:data:`PASSES` co-training passes a round (at most a round's steps) for a run that learns single
-    rewards; None for one that learns none, or learns from segment labels (co-trained once a round)."""
-    if not _learns_single_rewards(table):
-        return None
-    steps = _section(table, "training").get("steps_per_round", TrainingConfig.steps_per_round)
-    return min(PASSES, steps) if _whole(steps) and steps >= 1 else PASSES
+def _passes(count: int, methods: tuple[str, ...] = REWARD_LEARNERS) -> Callable[[Mapping[str, Any]], Any]:
+    """``count`` passes a round (at most a round's steps) for a run of ``methods`` that learns single
+    rewards; None for any other run, or one that learns from segment labels (co-trained once a round)."""
+
+    def rule(table: Mapping[str, Any]) -> int | None:
+        if _method(table) not in methods or not _learns_single_rewards(table):
+            return None
+        steps = _section(table, "training").get("steps_per_round", TrainingConfig.steps_per_round)
+        return min(count, steps) if _whole(steps) and steps >= 1 else count
+
+    return rule
+
+
+def _when_co_training(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    """``value`` for a DOSPCoT run that learns single rewards (the reward model has no score pass)."""
+    return lambda table: value if _method(table) == "dospcot" and _learns_single_rewards(table) else None
 
 
 GYM = ("gym",)
@@ -243,7 +260,7 @@ came with."""
 
 PASSES_MOVE = MovedDefault(
     "training.cotrain_passes",
-    _passes,
+    _passes(PASSES),
     "true-rewards study: a step rewarded a part of a round after it is taken, not a round",
 )
 """Version 5's move (and version 11's): :data:`PASSES` co-training passes a round."""
@@ -254,6 +271,20 @@ LATER_PASSES_MOVE = MovedDefault(
     "defaults-6 study: a sparse task's first pass came before its goal's first label",
 )
 """Version 7's move (and version 11's): the passes from round 2, so round 1 co-trains once."""
+
+SCORE_PASS_MOVES = (
+    MovedDefault(
+        "training.cotrain_passes",
+        _passes(SCORE_PASSES, ("dospcot",)),
+        "true-rewards study: ten score passes a round matched the oracle on DoorKey",
+    ),
+    MovedDefault(
+        "training.pass_kind",
+        _when_co_training("score"),
+        "true-rewards study: a pass scores the steps since with the classifiers as they are, fitting none",
+    ),
+)
+"""Version 12's moves: :data:`SCORE_PASSES` score passes a round."""
 
 VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
     1: (),
@@ -302,13 +333,14 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
     ),
     10: QUERY_MOVES,
     11: (PASSES_MOVE, LATER_PASSES_MOVE),
+    12: SCORE_PASS_MOVES,
 }
 """Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
 
-BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10}
+BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11})
+CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11, 12})
 """Versions a config may opt into that no study has adopted yet."""
 
 

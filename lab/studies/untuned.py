@@ -15,7 +15,8 @@ version 2's 100 labels) on the tasks where version 9's oracle reached the floor 
 its share taken of version 9's oracle on the same seeds. On the tasks where it fell furthest short
 (:data:`LOSS_TASKS`), the true-rewards control under version 10 and DOSPCoT under version 11 (version
 10 with four co-training passes a round from round 2) split the loss into the co-training path's and
-the pseudo-rewards', on the agent of the oracle's view."""
+the pseudo-rewards', on the agent of the oracle's view. On the first of them the control and DOSPCoT
+under version 12 (version 10 with ten score passes a round) test the round's lag."""
 
 from __future__ import annotations
 
@@ -81,6 +82,12 @@ CONTROL_ARM = f"control-v{WITH_QUERIES}"
 """The arm of the true-rewards control under :data:`WITH_QUERIES` (:func:`_arm`)."""
 PASSES_ARM = f"dospcot-v{WITH_PASSES}"
 """The arm of DOSPCoT under :data:`WITH_PASSES` (:func:`_arm`)."""
+WITH_SCORE_PASSES = 12
+"""The version of the defaults that is :data:`WITH_QUERIES` with ten score passes a round, under which
+the control and DOSPCoT train on DistShift1, named after version 11's runs were stopped (their refits
+took most of each round) and before any run under it."""
+SCORE_ARMS = (f"control-v{WITH_SCORE_PASSES}", f"dospcot-v{WITH_SCORE_PASSES}")
+"""The arms of the control and of DOSPCoT under :data:`WITH_SCORE_PASSES` (:func:`_arm`)."""
 ORACLE_VIEW = "image"
 """The view the oracle trains its one agent on: the loss table compares the agents on it."""
 DOSPCOT_VERSIONS = (DECLARED, 2)
@@ -123,6 +130,14 @@ SWEEPS = (
         f"untuned-control-v{WITH_QUERIES}", LOSS_TASKS, "dospcot", WITH_QUERIES, {PSEUDO_REWARDS: ("hidden",)}
     ),
     _sweep(f"untuned-dospcot-v{WITH_PASSES}", LOSS_TASKS[:1], "dospcot", WITH_PASSES),
+    _sweep(
+        f"untuned-control-v{WITH_SCORE_PASSES}",
+        LOSS_TASKS[:1],
+        "dospcot",
+        WITH_SCORE_PASSES,
+        {PSEUDO_REWARDS: ("hidden",)},
+    ),
+    _sweep(f"untuned-dospcot-v{WITH_SCORE_PASSES}", LOSS_TASKS[:1], "dospcot", WITH_SCORE_PASSES),
 )
 
 
@@ -225,12 +240,12 @@ def tables(runs: list[TrialRun]) -> list[str]:
             QUERY_ARM,
             CONTROL_ARM,
             PASSES_ARM,
+            *SCORE_ARMS,
         )
         if (members := [r for r in runs if _arm(r) == arm])
     )
-    later = [
-        part for part in (_candidate_lines(grouped), _query_lines(grouped), _loss_lines(grouped)) if part
-    ]
+    parts = (_candidate_lines(grouped), _query_lines(grouped), _loss_lines(grouped), _score_lines(grouped))
+    later = [part for part in parts if part]
     return [*lines, "", f"CPU per run (one torch thread): {cost}.", *(x for p in later for x in ["", *p])]
 
 
@@ -348,6 +363,45 @@ def _loss_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]
         lines.append(
             f"| {TASKS[task]} | {span} | {' | '.join(cells)} | {' | '.join(map(str, diffs))} "
             f"| {'yes' if matches(path) else 'no'} |"
+        )
+    return lines
+
+
+def _score_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]:
+    """Per task of :data:`LOSS_TASKS` the control under :data:`WITH_SCORE_PASSES` has run on, on its seeds:
+    the image agent's success under the oracle, the control and DOSPCoT under :data:`WITH_QUERIES` and
+    under :data:`WITH_SCORE_PASSES`, the path under score passes (control minus oracle) and what the
+    passes change in the control and in DOSPCoT, paired by seed."""
+    control, ours = SCORE_ARMS
+    rows = [t for t in LOSS_TASKS if grouped[t].get(control)]
+    if not rows:
+        return []
+    arms = (CANDIDATE_ORACLE, CONTROL_ARM, control, QUERY_ARM, ours)
+    v, q = WITH_SCORE_PASSES, WITH_QUERIES
+    lines = [
+        f"Score passes: the control and DOSPCoT under version {v} (version {q} with ten score passes a "
+        f"round), beside both under version {q}, against the oracle under version {CANDIDATE}. Success "
+        f"of the agent on the oracle's view ({ORACLE_VIEW}) on the seeds of the control under version "
+        f"{v}, and differences paired by seed with their 95% intervals; the path matches as above.",
+        "",
+        f"| task | seeds | oracle | control, version {q} | control, version {v} | DOSPCoT, version {q} "
+        f"| DOSPCoT, version {v} | path under version {v}: control minus oracle | passes, control: "
+        f"version {v} minus version {q} | passes, DOSPCoT: version {v} minus version {q} | path matches |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    for task in rows:
+        seeds = sorted(grouped[task][control])
+        on = {arm: {s: r for s, r in grouped[task].get(arm, {}).items() if s in seeds} for arm in arms}
+        cells = [str(SeedSummary.of([_image_success(r) for r in on[arm].values()])) for arm in arms]
+        path = paired(on[control], on[CANDIDATE_ORACLE], "success", value=_image_success)
+        diffs = [
+            path,
+            paired(on[control], on[CONTROL_ARM], "success", value=_image_success),
+            paired(on[ours], on[QUERY_ARM], "success", value=_image_success),
+        ]
+        lines.append(
+            f"| {TASKS[task]} | {', '.join(map(str, seeds))} | {' | '.join(cells)} "
+            f"| {' | '.join(map(str, diffs))} | {'yes' if matches(path) else 'no'} |"
         )
     return lines
 

@@ -180,5 +180,36 @@ def test_every_config_names_only_its_env_id_views_and_method():
             assert cfg.training.rounds == 5 and cfg.gym.state_key == "" and cfg.gym.wrappers == ()
             assert cfg.gym.train_wrappers == (() if sweep.defaults < 9 else (EXPLORING_STARTS,))
             assert cfg.training.label_budget == (
-                100 if sweep.defaults in (2, 10, 11) and cfg.method == "dospcot" else 0
+                100 if sweep.defaults in (2, 10, 11, 12) and cfg.method == "dospcot" else 0
             )
+
+
+def test_the_score_pass_table_sets_version_12_beside_version_10_on_the_controls_seeds(tmp_path):
+    arms = {
+        ("oracle", 9, False): {3: 1.0, 4: 1.0},
+        ("dospcot", 10, True): {3: 0.0, 4: 0.0},
+        ("dospcot", 12, True): {3: 1.0, 4: 0.5},
+        ("dospcot", 10, False): {3: 0.0, 4: 0.2, 5: 0.4},  # seed 5: no version 12 run, in no cell
+        ("dospcot", 12, False): {3: 0.5, 4: 0.0},
+    }
+    runs = [
+        _image_run(tmp_path, "distshift", method, seed, value, version, hidden)
+        for (method, version, hidden), values in arms.items()
+        for seed, value in values.items()
+    ]
+    lines = tables(runs)
+    head = next(i for i, line in enumerate(lines) if line.startswith("Score passes:"))
+    assert lines[head + 2].startswith("| task | seeds | oracle | control, version 10 | control, version 12 |")
+    row = lines[head + 4].split(" | ")
+    assert row[:2] == ["| MiniGrid-DistShift1-v0", "3, 4"]
+    expected = ([1.0, 1.0], [0.0, 0.0], [1.0, 0.5], [0.0, 0.2], [0.5, 0.0])
+    assert row[2:7] == [str(SeedSummary.of(v)) for v in expected]
+    assert row[7:10] == [
+        str(SeedSummary.of([0.0, -0.5])),
+        str(SeedSummary.of([1.0, 0.5])),
+        str(SeedSummary.of([0.5, -0.2])),
+    ]
+    assert row[10] == "no |"  # a lower end of -0.5
+    assert "control-v12: 200 CPU-s; dospcot-v12: 200 CPU-s." in next(
+        line for line in lines if line.startswith("CPU per run")
+    )
