@@ -328,16 +328,42 @@ def _image_success(run: TrialRun) -> float:
     return float(run.summary["per_view"][ORACLE_VIEW]["success"])
 
 
+def _paired_rows(
+    grouped: dict[str, dict[str, dict[int, TrialRun]]],
+    seed_arm: str,
+    arms: tuple[str, ...],
+    differences: tuple[tuple[str, str], ...],
+) -> list[str]:
+    """One row per task of :data:`LOSS_TASKS` that ``seed_arm`` has run on, on its seeds: the success of
+    the agent on the oracle's view under each of ``arms``, each difference (one arm minus another)
+    paired by seed, the first of them the path (a control minus the oracle), and whether the path
+    matches the oracle."""
+    lines = []
+    for task in LOSS_TASKS:
+        seeds = sorted(grouped[task].get(seed_arm, {}))
+        if not seeds:
+            continue
+        on = {arm: {s: r for s, r in grouped[task].get(arm, {}).items() if s in seeds} for arm in arms}
+        cells = [str(SeedSummary.of([_image_success(r) for r in on[arm].values()])) for arm in arms]
+        diffs = [paired(on[a], on[b], "success", value=_image_success) for a, b in differences]
+        lines.append(
+            f"| {TASKS[task]} | {', '.join(map(str, seeds))} | {' | '.join(cells)} "
+            f"| {' | '.join(map(str, diffs))} | {'yes' if matches(diffs[0]) else 'no'} |"
+        )
+    return lines
+
+
 def _loss_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]:
     """Per task of :data:`LOSS_TASKS` the control has run on, on the control's seeds: the success of the
     agent on the oracle's view under the oracle (:data:`CANDIDATE`), the control and DOSPCoT (both
     :data:`WITH_QUERIES`) and DOSPCoT under :data:`WITH_PASSES`, and the paired differences that split
     the loss (the path: control minus oracle; the pseudo-rewards: DOSPCoT minus control; the passes)."""
-    rows = [t for t in LOSS_TASKS if grouped[t].get(CONTROL_ARM)]
+    arms = (CANDIDATE_ORACLE, CONTROL_ARM, QUERY_ARM, PASSES_ARM)
+    differences = ((CONTROL_ARM, CANDIDATE_ORACLE), (QUERY_ARM, CONTROL_ARM), (PASSES_ARM, QUERY_ARM))
+    rows = _paired_rows(grouped, CONTROL_ARM, arms, differences)
     if not rows:
         return []
-    arms = (CANDIDATE_ORACLE, CONTROL_ARM, QUERY_ARM, PASSES_ARM)
-    lines = [
+    return [
         f"Where DOSPCoT under version {WITH_QUERIES} loses: the true-rewards control (every admitted sample "
         "reads its true reward, the rest of the co-training path unchanged) under the same version, and "
         f"DOSPCoT under version {WITH_PASSES} (four co-training passes a round from round 2), against "
@@ -350,21 +376,8 @@ def _loss_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]
         f"{WITH_PASSES} | path: control minus oracle | pseudo-rewards: DOSPCoT minus control "
         f"| passes: version {WITH_PASSES} minus version {WITH_QUERIES} | path matches |",
         "|---|---|---|---|---|---|---|---|---|---|",
+        *rows,
     ]
-    for task in rows:
-        seeds = sorted(grouped[task][CONTROL_ARM])
-        on = {arm: {s: r for s, r in grouped[task].get(arm, {}).items() if s in seeds} for arm in arms}
-        cells = [str(SeedSummary.of([_image_success(r) for r in on[arm].values()])) for arm in arms]
-        oracle, control, ours, passes = (on[arm] for arm in arms)
-        path = paired(control, oracle, "success", value=_image_success)
-        diffs = [path, paired(ours, control, "success", value=_image_success)]
-        diffs.append(paired(passes, ours, "success", value=_image_success))
-        span = ", ".join(map(str, seeds))
-        lines.append(
-            f"| {TASKS[task]} | {span} | {' | '.join(cells)} | {' | '.join(map(str, diffs))} "
-            f"| {'yes' if matches(path) else 'no'} |"
-        )
-    return lines
 
 
 def _score_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str]:
@@ -373,12 +386,13 @@ def _score_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str
     under :data:`WITH_SCORE_PASSES`, the path under score passes (control minus oracle) and what the
     passes change in the control and in DOSPCoT, paired by seed."""
     control, ours = SCORE_ARMS
-    rows = [t for t in LOSS_TASKS if grouped[t].get(control)]
+    arms = (CANDIDATE_ORACLE, CONTROL_ARM, control, QUERY_ARM, ours)
+    differences = ((control, CANDIDATE_ORACLE), (control, CONTROL_ARM), (ours, QUERY_ARM))
+    rows = _paired_rows(grouped, control, arms, differences)
     if not rows:
         return []
-    arms = (CANDIDATE_ORACLE, CONTROL_ARM, control, QUERY_ARM, ours)
     v, q = WITH_SCORE_PASSES, WITH_QUERIES
-    lines = [
+    return [
         f"Score passes: the control and DOSPCoT under version {v} (version {q} with ten score passes a "
         f"round), beside both under version {q}, against the oracle under version {CANDIDATE}. Success "
         f"of the agent on the oracle's view ({ORACLE_VIEW}) on the seeds of the control under version "
@@ -388,22 +402,8 @@ def _score_lines(grouped: dict[str, dict[str, dict[int, TrialRun]]]) -> list[str
         f"| DOSPCoT, version {v} | path under version {v}: control minus oracle | passes, control: "
         f"version {v} minus version {q} | passes, DOSPCoT: version {v} minus version {q} | path matches |",
         "|---|---|---|---|---|---|---|---|---|---|---|",
+        *rows,
     ]
-    for task in rows:
-        seeds = sorted(grouped[task][control])
-        on = {arm: {s: r for s, r in grouped[task].get(arm, {}).items() if s in seeds} for arm in arms}
-        cells = [str(SeedSummary.of([_image_success(r) for r in on[arm].values()])) for arm in arms]
-        path = paired(on[control], on[CANDIDATE_ORACLE], "success", value=_image_success)
-        diffs = [
-            path,
-            paired(on[control], on[CONTROL_ARM], "success", value=_image_success),
-            paired(on[ours], on[QUERY_ARM], "success", value=_image_success),
-        ]
-        lines.append(
-            f"| {TASKS[task]} | {', '.join(map(str, seeds))} | {' | '.join(cells)} "
-            f"| {' | '.join(map(str, diffs))} | {'yes' if matches(path) else 'no'} |"
-        )
-    return lines
 
 
 def glance(runs: list[TrialRun]) -> Glance:
