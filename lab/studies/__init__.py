@@ -31,6 +31,7 @@
     dospcot-lab study defaults-6 --docs       # version 6 (5 with the refit on a new class) vs 3, likewise
     dospcot-lab study defaults-7 --docs       # version 7 (6 with passes from round 2) vs 3, likewise
     dospcot-lab study defaults-8 --docs       # version 8 (7 with exploration by rounds) vs 3, likewise
+    dospcot-lab study defaults-12 --docs      # version 12 (chosen labels, score passes) vs 3, likewise
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
     dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
     dospcot-lab study untuned --docs          # 5 MiniGrid tasks no one tuned, env id and views only
@@ -85,6 +86,7 @@ from dospcot_lab.studies import (
     defaults_6,
     defaults_7,
     defaults_8,
+    defaults_12,
     grid_studies,
     highway_studies,
     label_sources,
@@ -139,6 +141,7 @@ STUDIES: dict[str, Study] = {
     **defaults_6.STUDIES,
     **defaults_7.STUDIES,
     **defaults_8.STUDIES,
+    **defaults_12.STUDIES,
     **sizing.STUDIES,
     **true_rewards.STUDIES,
     **untuned.STUDIES,

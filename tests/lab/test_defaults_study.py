@@ -17,6 +17,7 @@ from dospcot_lab.studies.defaults_5 import FIVE_AGAINST_THREE
 from dospcot_lab.studies.defaults_6 import SIX_AGAINST_THREE
 from dospcot_lab.studies.defaults_7 import SEVEN_AGAINST_THREE
 from dospcot_lab.studies.defaults_8 import EIGHT_AGAINST_THREE
+from dospcot_lab.studies.defaults_12 import TWELVE_AGAINST_THREE
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
@@ -141,6 +142,21 @@ def test_versions_5_to_8_train_each_preset_with_their_moves_and_pair_with_numeri
         for params in ({"defaults": str(version)}, {"cotraining.numerics": "2"}, {"defaults": "4"})
     ]
     assert [pair.version_of(run) for run in runs] == [version, 3, None]
+
+
+def test_version_12_trains_each_preset_with_chosen_labels_and_score_passes_and_pairs_with_numerics_2():
+    sweep, numerics_2 = STUDIES["defaults-12"].sweeps
+    assert numerics_2.name == "numerics-2" and STUDIES["defaults-12"].confirmatory
+    trials = sweep_spec(sweep, 20).trials(check_task=False)
+    assert [t.config for t in trials[:: len(trials) // 2]] == ["grid16-dospcot", "minigrid-doorkey-dospcot"]
+    for trial in trials[:: len(trials) // 2]:
+        cfg = trial.load_config()
+        training, cotraining = cfg.training, cfg.cotraining
+        assert (cfg.defaults, cotraining.numerics, cotraining.refit_new_classes) == (12, 2, True)
+        assert (training.cotrain_passes, training.pass_kind, training.exploration) == (10, "score", "rounds")
+        assert (training.label_strategy, training.label_budget) == ("outcomes+disagreement", 100)
+    run = TrialRun(Trial("grid16-dospcot", "grid16-dospcot", {"defaults": "12"}, 0), {}, [], Path())
+    assert TWELVE_AGAINST_THREE.version_of(run) == 12
 
 
 def test_a_preset_short_of_its_pairs_is_decided_when_even_its_best_case_fails_the_rule(tmp_path):
