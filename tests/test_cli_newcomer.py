@@ -278,7 +278,7 @@ def test_a_hundred_million_seeds_are_refused_with_the_estimate_and_no_folder(cap
         ),
         (
             "training.rounds=100000000000",
-            "dospcot train: error: tiny: one seed would take about 1,043 CPU-years (an estimate: "
+            "dospcot train: error: tiny: one seed would take about 979 CPU-years (an estimate: "
             "60,000,000,000,000 agent steps at about 2,500/CPU-s), more than the 3.0 CPU-days a run may; "
             "lower training.rounds or training.steps_per_round, or allow more: "
             "DOSPCOT_MAX_RUN_CPU_DAYS=<CPU-days> in the environment",

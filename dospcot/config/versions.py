@@ -198,9 +198,15 @@ def _passes(count: int, methods: tuple[str, ...] = REWARD_LEARNERS) -> Callable[
     return rule
 
 
+SCORE_PASS_METHODS = ("dospcot",)
+"""The methods a score pass serves: the reward model's ensemble has no pass that scores without fitting."""
+
+
 def _when_co_training(value: Any) -> Callable[[Mapping[str, Any]], Any]:
-    """``value`` for a DOSPCoT run that learns single rewards (the reward model has no score pass)."""
-    return lambda table: value if _method(table) == "dospcot" and _learns_single_rewards(table) else None
+    """``value`` for a run of :data:`SCORE_PASS_METHODS` that learns single rewards."""
+    return lambda table: (
+        value if _method(table) in SCORE_PASS_METHODS and _learns_single_rewards(table) else None
+    )
 
 
 GYM = ("gym",)
@@ -275,7 +281,7 @@ LATER_PASSES_MOVE = MovedDefault(
 SCORE_PASS_MOVES = (
     MovedDefault(
         "training.cotrain_passes",
-        _passes(SCORE_PASSES, ("dospcot",)),
+        _passes(SCORE_PASSES, SCORE_PASS_METHODS),
         "true-rewards study: ten score passes a round matched the oracle on DoorKey",
     ),
     MovedDefault(
