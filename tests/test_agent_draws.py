@@ -7,6 +7,7 @@ from functools import cache
 
 import pytest
 import torch as th
+from small_runs import PINNED
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import TrainingConfig
@@ -15,6 +16,7 @@ from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
 SHORT = [
+    *PINNED,
     "training.rounds=2",
     "training.steps_per_round=150",
     "dqn.learning_starts=30",

@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from small_runs import PINNED
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
@@ -259,7 +260,12 @@ def test_the_python_api_raises_config_errors_with_the_users_error_as_cause(tmp_p
 
 def _stopped_for_answers(tmp_path: Path, capsys) -> Path:
     """A two-round tiny run whose file rater stopped it in round 2, round 1 finished."""
-    sets = ["training.label_fraction=0.2", 'training.label_strategy="random"', 'training.rater="file"']
+    sets = [
+        *PINNED,
+        "training.label_fraction=0.2",
+        'training.label_strategy="random"',
+        'training.rater="file"',
+    ]
     assert (
         main(
             [

@@ -13,6 +13,7 @@ import time
 import numpy as np
 import pytest
 import torch as th
+from small_runs import PINNED
 from stable_baselines3 import DQN
 from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
@@ -22,7 +23,7 @@ from dospcot.run.run_folder import BATCH_FILE
 from dospcot.run.sb3_runs import build_run
 from dospcot.tasks import load_config
 
-TINY = ["training.rounds=2", "training.steps_per_round=400"]
+TINY = [*PINNED, "training.rounds=2", "training.steps_per_round=400"]
 
 
 def _batch(seeds, *overrides: str) -> tuple[BatchedRuns, list[list[dict]]]:

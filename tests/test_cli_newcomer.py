@@ -217,7 +217,7 @@ def test_a_lock_naming_a_process_with_no_command_line_says_both_ways_to_clear_it
 
 
 def test_a_leading_dot_number_in_set_is_a_number():
-    assert load_config("tiny", ["training.label_fraction=.5"]).training.label_fraction == 0.5
+    assert load_config("tiny", ["env.step_cost=.5"]).env.step_cost == 0.5
     assert parse_override("env.step_cost=-.25") == (["env", "step_cost"], -0.25)
     assert parse_override("a=.5e1") == (["a"], 5.0)
 

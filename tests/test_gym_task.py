@@ -17,10 +17,12 @@ import numpy as np
 import pytest
 import stable_baselines3
 import torch
+from small_runs import MECHANISMS
 
 from dospcot.adapters.sensor_adapter import SensorAdapter
 from dospcot.adapters.sensor_store import KeyedStepStore, StepStore
 from dospcot.config.errors import ConfigError
+from dospcot.config.versions import ADOPTED, BUDGET
 from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.demonstrations import Demonstrations
 from dospcot.envs import minigrid_views
@@ -130,6 +132,7 @@ def unhashable_key(env: Corridor) -> list[int]:
 
 
 SETTINGS = {
+    "defaults": MECHANISMS,
     "training.rounds": 3,
     "training.steps_per_round": 1500,
     "training.eps_start": 0.5,
@@ -149,6 +152,7 @@ def _corridor_toml(tmp_path: Path, **gym_keys: str) -> Path:
     path = tmp_path / "corridor.toml"
     path.write_text(
         f"""name = "corridor"
+defaults = {MECHANISMS}
 task = "gym"
 agent = "dqn"
 views = ["onehot", "signed"]
@@ -367,6 +371,20 @@ def test_the_worked_example_runs_as_it_stands_and_its_agents_reach_the_goal(tmp_
     summary = json.loads(done.stdout)
     assert summary["mean"]["success"] == 1.0
     assert summary["mean"]["pseudo_accuracy"] > 0.95
+
+
+@pytest.mark.slow
+def test_under_the_adopted_defaults_with_only_the_envs_facts_both_agents_learn_the_corridor(tmp_path):
+    """A small sparse-reward task no setting was chosen for: the adopted version of the defaults (a gym
+    task's length and agents, labels bought by outcome and where the views disagree), given only the
+    env's episode limit and the return its goal pays."""
+    facts = {"gym.episode_steps": 20, "gym.max_return": 1.0}
+    run_dir = train_env(make_corridor, VIEWS, runs_dir=tmp_path, settings=facts, show_progress=False)
+    assert load_config(str(run_dir / "config.toml")).defaults == ADOPTED
+    summary = json.loads((run_dir / "summary.json").read_text())
+    for view in VIEWS:
+        assert summary["per_view"][view]["success"] == 1.0, view
+        assert summary["per_view"][view]["labelled_steps"] <= BUDGET
 
 
 def test_a_lambda_cannot_be_saved_in_a_config():
@@ -895,3 +913,13 @@ def test_store_features_in_float64_hold_the_float32_values():
     assert wide[0, 0] == float(np.float32(1 / 3)) != 1 / 3
     np.testing.assert_array_equal(wide[0, 2:4], [0.0, 1.0])  # the one-hot action
     assert wide[0, -1] == 1.0  # it ended its episode
+
+
+def test_the_python_api_refuses_a_share_the_versions_budget_leaves_unread_and_a_key_never_read():
+    assert gym_config(make_corridor, VIEWS).training.label_budget == BUDGET  # the adopted version's
+    with pytest.raises(ConfigError, match=r"training\.label_fraction: unread"):
+        gym_config(make_corridor, VIEWS, label_fraction=0.1)
+    uniform = {"training.label_strategy": "uniform"}
+    assert gym_config(make_corridor, VIEWS, label_fraction=0.1, settings=uniform).mask_fraction == 0.1
+    with pytest.raises(ConfigError, match='method = "oracle" never reads it'):
+        gym_config(make_corridor, VIEWS, method="oracle", settings={"cotraining.consensus_weight": 0.3})

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env as gym_check_env
 from PIL import Image
+from small_runs import PINNED
 from stable_baselines3 import DQN
 from stable_baselines3.common.env_checker import check_env as sb3_check_env
 
@@ -29,6 +30,7 @@ from dospcot.tasks import load_config
 pytest.importorskip("highway_env", reason="the `highway` extra (highway-env) is not installed")
 
 TINY = [
+    *PINNED,
     "training.rounds=2",
     "training.steps_per_round=120",
     "dqn.learning_starts=40",

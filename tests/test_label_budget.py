@@ -8,6 +8,7 @@ from functools import partial
 
 import numpy as np
 import pytest
+from small_runs import PINNED
 from test_neural_cotraining import assert_same_learners
 from test_queries import PROBABILITIES, _grid_run, _tiny_grid, _unqueried_permuted_grid
 
@@ -67,7 +68,7 @@ class _Pool:
 
 def _training(strategy: str = "random", **keys):
     overrides = [f"training.{key}={value!r}".replace("'", '"') for key, value in keys.items()]
-    return load_config("tiny", [f'training.label_strategy="{strategy}"', *overrides]).training
+    return load_config("tiny", [*PINNED, f'training.label_strategy="{strategy}"', *overrides]).training
 
 
 def test_unspent_labels_carry_forward_and_the_first_round_cap_holds():
@@ -176,7 +177,8 @@ def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_lab
 
 
 def test_the_reward_models_error_dependence_compares_its_members():
-    run = _grid_run("disagreement", *SHORT_BUDGET, 'method="reward-model"', 'views=["coords"]')
+    keys = ['training.label_strategy="disagreement"', "seed=3", 'method="reward-model"', 'views=["coords"]']
+    run = build_run(load_config("tiny", [*PINNED, *keys, *SHORT_BUDGET]))
     rows = run.run_round()
     assert {"joint_error", "independent_error", "disagreement", "error_correlation"} <= set(rows[0])
     stats = run.cotrain()  # another fit on the same pool: the figures read its members' classes
@@ -220,9 +222,9 @@ def test_leakage_permuting_unqueried_rewards_changes_nothing_under_budgets_and_t
 
 def test_budget_keys_refuse_what_they_cannot_mean():
     with pytest.raises(ConfigError, match="label_budget counts a rater's answers"):
-        load_config("tiny", ["training.label_budget=10"])
+        load_config("tiny", [*PINNED, "training.label_budget=10"])
     with pytest.raises(ConfigError, match="spread a budget counted in labels: set label_budget"):
-        load_config("tiny", ['training.label_strategy="random"', 'training.query_schedule="even"'])
+        load_config("tiny", [*PINNED, 'training.label_strategy="random"', 'training.query_schedule="even"'])
     with pytest.raises(ConfigError, match="first_round_share must lie in"):
         load_config(
             "tiny",
@@ -234,7 +236,7 @@ def test_budget_keys_refuse_what_they_cannot_mean():
             ['training.label_strategy="random"', "training.label_budget=5", 'training.query_schedule="soon"'],
         )
     with pytest.raises(ConfigError, match="segment labels need co-training"):
-        load_config("tiny", ['method="reward-model"', "training.segment_length=4"])
+        load_config("tiny", [*PINNED, 'method="reward-model"', "training.segment_length=4"])
     # One view with disagreement is the peer's own: its ensemble's members disagree.
     assert load_config(
         "tiny", ['method="reward-model"', 'views=["coords"]', 'training.label_strategy="disagreement"']
@@ -272,10 +274,12 @@ def test_the_control_one_view_co_trained_with_every_reward_labelled_is_the_oracl
     nothing when no reward is hidden: exploring by rounds, as the oracle does, the one agent learns
     exactly the oracle's parameters and scores the same every round."""
     common = ['views=["coords"]', "seed=3"]
-    oracle = build_run(load_config("tiny", ['method="oracle"', *common]))
+    oracle = build_run(load_config("tiny", [*PINNED, 'method="oracle"', *common]))
     oracle_rows = oracle.run()
     control = build_run(
-        load_config("tiny", [*common, "training.label_fraction=1.0", 'training.exploration="rounds"'])
+        load_config(
+            "tiny", [*PINNED, *common, "training.label_fraction=1.0", 'training.exploration="rounds"']
+        )
     )
     control_rows = control.run()
     for key in ("greedy_return", "success", "agreement", "eps"):

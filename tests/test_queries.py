@@ -9,6 +9,7 @@ from functools import partial
 import gymnasium as gym
 import numpy as np
 import pytest
+from small_runs import PINNED
 from test_highway import TINY as HIGHWAY_TINY
 from test_neural_cotraining import assert_same_learners
 
@@ -292,13 +293,14 @@ def test_the_file_rater_writes_the_queries_then_reads_a_persons_answers(tmp_path
 
 # --- Queries in whole runs -------------------------------------------------------------------------
 
-TINY_QUERIES = ["training.label_fraction=0.2"]
+TINY_QUERIES = [*PINNED, "training.label_fraction=0.2"]
 
 
 def _grid_run(strategy: str, *overrides: str, make_env=None, seed: int = 3) -> CoTrainingRun:
-    cfg = load_config(
-        "tiny", [*TINY_QUERIES, f'training.label_strategy="{strategy}"', f"seed={seed}", *overrides]
-    )
+    # A budget counted in labels leaves the share unread (and so refused): the share only without one.
+    budget = any(o.startswith("training.label_budget=") and o != "training.label_budget=0" for o in overrides)
+    queries = list(PINNED) if budget else TINY_QUERIES
+    cfg = load_config("tiny", [*queries, f'training.label_strategy="{strategy}"', f"seed={seed}", *overrides])
     if make_env is None:
         return build_run(cfg)
     _, views, _ = grid_world(cfg)

@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from small_runs import PINNED
 
 from dospcot.cli import main
 from dospcot.raters.answer_files import read_answers, read_rows
@@ -411,6 +412,7 @@ def _answered_in_chromium(
 
 
 TINY_SETS = [
+    *PINNED,
     "training.steps_per_round=150",
     "training.label_fraction=0.2",
     'training.label_strategy="disagreement"',

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 import torch
+from small_runs import MECHANISMS, PINNED
 
 from dospcot.cli import main
 from dospcot.config.errors import ConfigError
@@ -60,7 +61,7 @@ def test_parse_grid_keeps_lists_whole_and_rejects_bad_items():
     with pytest.raises(ConfigError, match="given twice"):
         parse_grid(["cotraining.consensus_weight=0", "cotraining.consensus_weight=0.3"])
     with pytest.raises(ConfigError, match="label_fraction"):
-        SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}).trials()
+        SweepSpec(("tiny",), {"training.label_fraction": ("0.1", "1.5")}, defaults=MECHANISMS).trials()
 
 
 def test_a_trial_whose_folder_name_would_pass_255_bytes_gets_a_shortened_one_of_its_own(tmp_path):
@@ -92,7 +93,7 @@ def test_a_trial_whose_folder_name_would_pass_255_bytes_gets_a_shortened_one_of_
 
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`; the fast tests below resume and skip trials
 def test_local_sweep_runs_every_trial_once_whatever_its_workers_and_reruns_nothing(tmp_path):
-    spec = SweepSpec(("tiny",), GRID, (0, 1))
+    spec = SweepSpec(("tiny",), GRID, (0, 1), defaults=MECHANISMS)
     result = run_sweep(tmp_path / "sweep", spec, workers=2, show_progress=False)
     assert len(result.trials) == 8 and len(result.ran) == 8 and not result.skipped and not result.failed
     summaries = _summaries(tmp_path / "sweep")
@@ -108,11 +109,16 @@ def test_local_sweep_runs_every_trial_once_whatever_its_workers_and_reruns_nothi
     assert len(again.skipped) == 8 and not again.ran
     assert _summaries(tmp_path / "sweep") == summaries
     with pytest.raises(SweepError, match="holds another sweep"):
-        open_sweep(tmp_path / "sweep", SweepSpec(("tiny",), GRID, (0, 1, 2)))
+        open_sweep(tmp_path / "sweep", SweepSpec(("tiny",), GRID, (0, 1, 2), defaults=MECHANISMS))
     # --workers defaults to the cores, so no trial's numbers may depend on it: the last trial, which ran
     # after others in one of the pool's two processes, alone in a sweep of one worker gives the same files.
     last = result.trials[-1]
-    alone = SweepSpec((last.config,), {key: (value,) for key, value in last.params.items()}, (last.seed,))
+    alone = SweepSpec(
+        (last.config,),
+        {key: (value,) for key, value in last.params.items()},
+        (last.seed,),
+        defaults=MECHANISMS,
+    )
     run_sweep(tmp_path / "alone", alone, workers=1, show_progress=False)
     for name in ("metrics.csv", "summary.json"):
         alone_file, pool_file = (trial_dir(tmp_path / s, last) / name for s in ("alone", "sweep"))
@@ -166,6 +172,7 @@ def test_the_files_git_keeps_of_a_sweep_render_it_and_resume_it_elsewhere(one_tr
         "summary.json",
         "reward_classes.json",
         "pseudo_rewards.csv",
+        "queries.csv",  # the adopted defaults buy the labels
     }
     assert any(f.suffix == ".zip" for f in files) and any("tb" in f.parts for f in files)
     elsewhere = tmp_path / "elsewhere"
@@ -216,7 +223,7 @@ def test_the_stale_check_resolves_a_combination_once_and_still_reads_each_trials
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`
 def test_ray_backend_runs_the_same_trials_to_the_same_summaries(tmp_path):
     ray = pytest.importorskip("ray", reason="the `ray` extra is not installed (pip install 'dospcot[ray]')")
-    spec = SweepSpec(("tiny",), GRID, (0, 1))
+    spec = SweepSpec(("tiny",), GRID, (0, 1), defaults=MECHANISMS)
     local = run_sweep(tmp_path / "local", spec, workers=2, show_progress=False)
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
@@ -297,7 +304,7 @@ def _state(pid: int) -> str:
 def _synthetic_sweep(root: Path, scores: dict[str, list[float]]) -> Path:
     """A sweep folder written by hand: config `a`, grid over the label fraction, seeds 0-3."""
     sweep_dir = root / "synthetic"
-    spec = SweepSpec(("a",), {"training.label_fraction": tuple(scores)}, (0, 1, 2, 3))
+    spec = SweepSpec(("a",), {"training.label_fraction": tuple(scores)}, (0, 1, 2, 3), defaults=MECHANISMS)
     open_sweep(sweep_dir, spec)
     for fraction, values in scores.items():
         for seed, score in enumerate(values):
@@ -307,7 +314,7 @@ def _synthetic_sweep(root: Path, scores: dict[str, list[float]]) -> Path:
             data = {"config": "a", "name": "a", "params": trial.params, "seed": seed, "base_overrides": []}
             (folder / "trial.json").write_text(json.dumps(data))
             # A run folder holds its config, written first.
-            cfg = load_config("tiny", [f"training.label_fraction={fraction}", f"seed={seed}"])
+            cfg = load_config("tiny", [*PINNED, f"training.label_fraction={fraction}", f"seed={seed}"])
             run_folder.write_toml(folder / "config.toml", cfg.to_dict())
             if math.isinf(score):  # an unfinished trial: no summary.json
                 continue

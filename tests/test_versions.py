@@ -24,8 +24,10 @@ def _moved(preset: str, *overrides: str) -> tuple:
 
 
 def test_a_config_without_the_key_gets_the_adopted_version_and_version_1_is_the_dataclasses():
-    assert ADOPTED == 3 and VERSIONS[1] == ()
-    cfg = load_config("grid16-dospcot")
+    assert ADOPTED == 12 and VERSIONS[1] == ()
+    for preset in ("grid16-dospcot", "minigrid-doorkey-oracle", "tiny"):
+        assert load_config(preset) == load_config(preset, ["defaults=12"])
+    cfg = load_config("grid16-dospcot", ["defaults=3"])
     assert cfg.defaults == 3
     # version 3 is version 1 with numerics 2's fits, and moves nothing else
     first = load_config("grid16-dospcot", ["defaults=1"])
@@ -46,7 +48,7 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     assert (lineage(1), lineage(2), lineage(3), lineage(4)) == ([], [2], [3], [3, 4])
     # version 4 is version 3 with exploration by rounds, and moves nothing else
     adopted, fourth = (
-        load_config("minigrid-doorkey-dospcot"),
+        load_config("minigrid-doorkey-dospcot", ["defaults=3"]),
         load_config("minigrid-doorkey-dospcot", ["defaults=4"]),
     )
     rounds = dataclasses.replace(adopted.training, exploration="rounds")
@@ -78,7 +80,7 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     assert load_config("minigrid-doorkey-oracle", ["defaults=8"]).training.exploration == "rounds"
     # version 9 is version 3 with the MiniGrid presets' agents and exploring starts on a gym task
     untuned = "lab/studies/untuned/distshift-oracle.toml"
-    third, ninth = load_config(untuned), load_config(untuned, ["defaults=9"])
+    third, ninth = load_config(untuned, ["defaults=3"]), load_config(untuned, ["defaults=9"])
     agents = dataclasses.replace(third.dqn, gamma=0.9, n_steps=3, train_freq=2, target_update_interval=250)
     starts = dataclasses.replace(third.gym, train_wrappers=("dospcot.envs.minigrid_views:ReachableStart",))
     eps = dataclasses.replace(third.training, eps_start=0.5, steps_per_round=10_000)
@@ -136,7 +138,7 @@ def test_version_2_moves_what_each_method_and_view_count_can_use():
     assert load_config("minigrid-doorkey-dospcot", ["defaults=2"]).gym.episode_end_classes
     # A highway section has no such key, and demonstrations as labels record no episode end.
     assert load_config("fasthighway-dospcot", ["defaults=2"]).training.label_budget == BUDGET
-    assert load_config("grid16-dospcot").training.query_end_states == "random"
+    assert load_config("grid16-dospcot", ["defaults=3"]).training.query_end_states == "random"
 
 
 def test_a_key_the_config_sets_keeps_its_value_under_version_2():
@@ -168,9 +170,9 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 13; the versions: 1, 2 \(candidate\), 3 \(adopted\), "
+        match=r"^defaults: unknown version 13; the versions: 1, 2 \(candidate\), 3, "
         r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
-        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12 \(candidate\)$",
+        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12 \(adopted\)$",
     ):
         load_config("tiny", ["defaults=13"])
     with pytest.raises(ConfigError, match="unknown version True"):
@@ -180,7 +182,7 @@ def test_an_unknown_version_is_one_line_naming_the_versions():
 def test_version_9_trains_every_shipped_preset_as_version_3_does():
     """Version 9 moves only keys a gym task leaves unset, and every preset sets them (or is no gym task)."""
     for preset in preset_names():
-        cfg = load_config(preset)
+        cfg = load_config(preset, ["defaults=3"])
         assert dataclasses.replace(load_config(preset, ["defaults=9"]), defaults=cfg.defaults) == cfg, preset
 
 
@@ -205,14 +207,18 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     assert main(["config", "tiny", "--set", "defaults=2"]) == 0
     out = capsys.readouterr().out
     versions = (
-        "(the versions: 1, 2 (candidate), 3 (adopted), 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12 (candidate))"
+        "(the versions: 1, 2 (candidate), 3, 4 (candidate), 5 (candidate), 6 (candidate), "
+        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12 (adopted))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
     assert "refit_new_classes = true  # default true (defaults = 1: false)" in out
     assert "numerics = 1  # default 1:" in out  # version 2 builds on version 1
     assert main(["config", "tiny"]) == 0
+    out = capsys.readouterr().out
+    assert f"under version 12 of the defaults {versions}" in out.splitlines()[0]
+    assert 'pass_kind = "score"  # default "score" (defaults = 1: "cotrain")' in out
+    assert main(["config", "tiny", "--set", "defaults=3"]) == 0
     out = capsys.readouterr().out
     assert f"under version 3 of the defaults {versions}" in out.splitlines()[0]
     assert [line for line in out.splitlines() if "(defaults = 1:" in line] == [
@@ -236,9 +242,32 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
         ['method="reward-model"', "cotraining.ensemble_size=[1]"],
     ],
 )
-@pytest.mark.parametrize("version", [2, 5, 9, 10, 11])
+@pytest.mark.parametrize("version", [2, 5, 9, 10, 11, 12])
 def test_a_versions_rules_leave_a_malformed_value_to_the_configs_own_check(version, bad):
     """A rule reads only the values it can; the config's check then names what is wrong in one line,
     rather than the rule failing with a TypeError of its own."""
     with pytest.raises(ConfigError):
         load_config("tiny", [f"defaults={version}", *bad])
+
+
+def test_a_share_set_where_the_version_buys_labels_is_refused_with_the_ways_to_a_mask_or_a_budget():
+    """Under the adopted version a rater buys 100 labels, so a share set by hand would go unread."""
+    with pytest.raises(ConfigError, match=r"^training.label_fraction: unread, since a rater buys"):
+        load_config("tiny", ["training.label_fraction=0.5"])
+    mask = load_config("tiny", ["training.label_fraction=0.5", 'training.label_strategy="uniform"'])
+    assert (mask.training.label_budget, mask.mask_fraction) == (0, 0.5)
+    # A budget of the share: the version's decaying schedule needs a budget counted in labels.
+    share = load_config("tiny", ["training.label_fraction=0.5", "training.label_budget=0"]).training
+    assert (share.label_strategy, share.query_schedule, share.label_budget) == (
+        "outcomes+disagreement",
+        "asap",
+        0,
+    )
+    # The preset's own share is no one's instruction: tiny sets one, and trains on the version's budget.
+    assert load_config("tiny").training.label_budget == BUDGET
+    assert load_config("tiny", ["defaults=3", "training.label_fraction=0.5"]).mask_fraction == 0.5
+
+
+def test_a_run_with_no_view_is_told_so_under_a_version_that_buys_labels():
+    with pytest.raises(ConfigError, match="views: need at least one view"):
+        load_config("tiny", ["views=[]"])

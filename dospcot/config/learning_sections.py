@@ -426,7 +426,7 @@ class CoTrainingConfig(AddedKeys):
     :param numerics: how the reward classifiers fit (:data:`dospcot.core.self_paced.NUMERICS`): 1, in
         float64 over the whole pool (version 1 of the defaults); 2, in float32 over the samples that
         carry weight, several times cheaper on large pools (docs/guide/profile.md), and the default
-        under the adopted version 3 of the defaults: the numerics study showed it non-inferior to 1 on
+        from version 3 of the defaults on: the numerics study showed it non-inferior to 1 on
         both its presets (docs/results/numerics.md); 3, 2's fits and agents
         whose Q-networks read a view of 0s and 1s through a sparse first layer, with a fused Adam (the
         same arithmetic as 2 in another order: equal up to float32 rounding), opt-in: the numerics-3

@@ -186,7 +186,8 @@ class TrainConfig:
 
     def check_read(self, given: set[str]) -> None:
         """Refuse the keys of ``given`` (dotted names a person wrote) that this config's ``method``
-        never reads.
+        never reads, and a label share (``training.label_fraction``) where a rater buys a budget of
+        answers, which leaves the share unread.
 
         :raises ConfigError: one line naming them and the method.
         """
@@ -197,6 +198,15 @@ class TrainConfig:
                 f'{", ".join(named)}: method = "{self.method}" never reads '
                 f"{'it' if len(named) == 1 else 'them'}; remove {'it' if len(named) == 1 else 'them'} "
                 "or choose a method that does"
+            )
+        t = self.training
+        if "training.label_fraction" in given and t.queries and t.label_budget:
+            # Under a version that buys a budget, a share set alone would be silently ignored.
+            raise ConfigError(
+                f"training.label_fraction: unread, since a rater buys training.label_budget = "
+                f'{t.label_budget} answers (label_strategy = "{t.label_strategy}", version {self.defaults} '
+                'of the defaults); for a uniform mask of that share also set training.label_strategy = '
+                '"uniform", for a budget of that share of the samples met set training.label_budget = 0'
             )
 
     @property

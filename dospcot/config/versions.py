@@ -8,11 +8,11 @@ config sets itself keeps its value whatever the version. A version's rule may de
 method and views (a strategy that asks where two views disagree needs two views), and a rule that
 returns None leaves the key at the earlier default.
 
-Version 3 is **adopted**: version 1 with the reward classifiers fitted under numerics 2, which the
-numerics study showed non-inferior on both of its presets (docs/results/numerics.md). Version 2 is a
-**candidate**, built on version 1: the settings under which the label-budget study's DOSPCoT reached
-90% of the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on. The
-defaults study did not show it non-inferior on grid16 (docs/guide/defaults.md), so ``defaults = 2``
+Version 3, adopted before version 12, is version 1 with the reward classifiers fitted under numerics 2,
+which the numerics study showed non-inferior on both of its presets (docs/results/numerics.md). Version
+2 is a **candidate**, built on version 1: the settings under which the label-budget study's DOSPCoT
+reached 90% of the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on.
+The defaults study did not show it non-inferior on grid16 (docs/guide/defaults.md), so ``defaults = 2``
 opts in. Version 4, a candidate, is version 3 with exploration by rounds: an agent's exploration falls
 with the share of rounds done, where under the pace it reached its floor as soon as the co-trainer had
 admitted the pool (after a round or two); on LavaGap the true-rewards study found that this costs
@@ -20,25 +20,25 @@ co-trained agents part of what the oracle learns from the same rewards. The defa
 show it non-inferior on grid16, so ``defaults = 4`` opts in. Version 5, a candidate, is version 3 with
 each round's co-training in four passes (``training.cotrain_passes``), so a step the agents take is
 rewarded in their replay a quarter of a round later rather than a round later: the true-rewards study
-traced much of the co-training path's loss on MiniGrid to that lag. The defaults-5 study did not show
-it non-inferior on grid16, so ``defaults = 5`` opts in. Version 6, a candidate, is version 5 with the refit
+traced much of the co-training path's loss on MiniGrid to that lag. The defaults-5 study did not show it
+non-inferior on grid16, so ``defaults = 5`` opts in. Version 6, a candidate, is version 5 with the refit
 on a new class (``cotraining.refit_new_classes``): a pass early in round 1 fits the classifiers on the
-labels alone before every class has shown, and without the refit a class first labelled later is
-never fitted that way (grid16's lava, on the first seed of the defaults-5 study). The defaults-6 study
-did not show it non-inferior on grid16, so ``defaults = 6`` opts in. Version 7, a candidate, is version
-6 with the passes from round 2 (``training.passes_from_round``): under versions 5 and 6 a sparse
-task's first pass came before any goal label, so every step it admitted read the common class's
-reward, and the agents learned that the task pays nothing; round 1 now co-trains once, as under
-version 3. The defaults-7 study held it non-inferior on grid16 but not on DoorKey, so ``defaults = 7``
-opts in. Version 8, a candidate, is version 7 with exploration by rounds: under the pace DoorKey's
-agents reached their exploration floor after round 1, as soon as the pool was admitted, and there the
-co-training path fed the true rewards matched the oracle only where its passes came with exploration
-by rounds (the true-rewards study). The defaults-8 study did not show it non-inferior on grid16, so
-``defaults = 8`` opts in. Version 9, a candidate, is version 3 with the MiniGrid presets' length
-and agents' settings for a gym task (``task = "gym"``) that sets none of its own: rounds of 10,000 steps,
-a discount of 0.9, 3-step windows, exploration from 0.5, an update every 2 steps and a target network
-moved every 250 (the settings tuned on LavaGap that carried to DoorKey), and exploring starts in
-training (``ReachableStart``) on a MiniGrid env. Under version 3 the untuned study's oracle, fed every reward,
+labels alone before every class has shown, and without the refit a class first labelled later is never
+fitted that way (grid16's lava, on the first seed of the defaults-5 study). The defaults-6 study did not
+show it non-inferior on grid16, so ``defaults = 6`` opts in. Version 7, a candidate, is version 6 with
+the passes from round 2 (``training.passes_from_round``): under versions 5 and 6 a sparse task's first
+pass came before any goal label, so every step it admitted read the common class's reward, and the
+agents learned that the task pays nothing; round 1 now co-trains once, as under version 3. The
+defaults-7 study held it non-inferior on grid16 but not on DoorKey, so ``defaults = 7`` opts in. Version
+8, a candidate, is version 7 with exploration by rounds: under the pace DoorKey's agents reached their
+exploration floor after round 1, as soon as the pool was admitted, and there the co-training path fed
+the true rewards matched the oracle only where its passes came with exploration by rounds (the
+true-rewards study). The defaults-8 study did not show it non-inferior on grid16, so ``defaults = 8``
+opts in. Version 9, a candidate, is version 3 with the MiniGrid presets' length and agents' settings for
+a gym task (``task = "gym"``) that sets none of its own: rounds of 10,000 steps, a discount of 0.9,
+3-step windows, exploration from 0.5, an update every 2 steps and a target network moved every 250 (the
+settings tuned on LavaGap that carried to DoorKey), and exploring starts in training
+(``ReachableStart``) on a MiniGrid env. Under version 3 the untuned study's oracle, fed every reward,
 reached 0.8 success on none of its five MiniGrid tasks; the presets set every one of these keys, so
 version 9 trains each of them as version 3 does. Version 10, a candidate, is version 9 with version 2's
 queries (a budget of 100 labels bought by ``outcomes+disagreement`` on a decaying schedule, each agent
@@ -47,11 +47,11 @@ thousands of labels, over the 100 issue 78 allows. Version 11, a candidate, is v
 5's and version 7's passes (four co-training passes a round, from round 2): under version 10 the untuned
 study's DOSPCoT on DistShift1 ended with every goal step pseudo-rewarded right and still reached the
 goal in an eighth of the oracle's episodes, where the true-rewards study had traced such a loss to the
-round's lag. Version 12, a candidate, is version 10 with ten score passes a round for DOSPCoT
-(``training.pass_kind = "score"``): a pass refits nothing, so it costs a forward pass of each
-classifier where version 11's refits took most of a round on MiniGrid's egocentric map, and the
-true-rewards study's control with such passes matched the oracle on DoorKey. Nothing here imports
-torch.
+round's lag. Version 12, **adopted**, is version 10 with ten score passes a round for DOSPCoT
+(``training.pass_kind = "score"``): a pass refits nothing, so it costs a forward pass of each classifier
+where version 11's refits took most of a round on MiniGrid's egocentric map, and the true-rewards
+study's control with such passes matched the oracle on DoorKey. The defaults-12 study held it
+non-inferior to version 3 on both presets (docs/results/defaults-12.md). Nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ from dospcot.config.task_sections import EnvConfig
 TaskSection = tuple[str, type]
 """A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
 
-ADOPTED = 3
+ADOPTED = 12
 """The version of the defaults a config without ``defaults`` gets."""
 
 FIRST = 1
@@ -144,11 +144,13 @@ def _learns_single_rewards(table: Mapping[str, Any]) -> bool:
 def _strategy(table: Mapping[str, Any]) -> str | None:
     """Episode ends first, then where the views (or the reward model's members) disagree; a run with one
     classifier asks where it is least sure instead. None for a run that asks no rater: one that learns
-    no reward, or learns from segment labels."""
+    no reward, learns from segment labels, or has no view (the config's own check names that)."""
     if not _learns_single_rewards(table):
         return None
     views = table.get("views", DEFAULT_VIEWS)
     classifiers = len(views) if isinstance(views, list | tuple) else 1
+    if classifiers == 0:
+        return None
     if _method(table) == "reward-model":
         size = _section(table, "cotraining").get("ensemble_size", CoTrainingConfig.ensemble_size)
         classifiers *= size if _whole(size) else CoTrainingConfig.ensemble_size
@@ -169,6 +171,17 @@ def _when_asking(value: Any) -> Callable[[Mapping[str, Any]], Any]:
     def rule(table: Mapping[str, Any]) -> Any:
         strategy = _section(table, "training").get("label_strategy") or _strategy(table)
         return value if strategy not in (None, "uniform") else None
+
+    return rule
+
+
+def _when_buying(value: Any) -> Callable[[Mapping[str, Any]], Any]:
+    """``value`` for a run that asks a rater (:func:`_when_asking`) and buys a budget counted in labels:
+    not one that sets ``training.label_budget = 0`` itself, whose budget is its label share."""
+    asking = _when_asking(value)
+
+    def rule(table: Mapping[str, Any]) -> Any:
+        return None if _section(table, "training").get("label_budget") == 0 else asking(table)
 
     return rule
 
@@ -247,7 +260,7 @@ QUERY_MOVES = (
     ),
     MovedDefault("training.agent_draws", lambda table: "own", "budget study: each agent its own draws"),
     MovedDefault("training.label_strategy", _strategy, "budget study: outcomes+disagreement"),
-    MovedDefault("training.query_schedule", _when_asking("decay"), "budget study: a decaying schedule"),
+    MovedDefault("training.query_schedule", _when_buying("decay"), "budget study: a decaying schedule"),
     MovedDefault(
         "training.query_end_states", _when_asking("spread"), "episode ends spread over their end states"
     ),
@@ -346,7 +359,7 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
 BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11, 12})
+CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11})
 """Versions a config may opt into that no study has adopted yet."""
 
 

@@ -15,7 +15,7 @@ Example (CartPole, two views: the whole state, and the pole alone)::
         return obs[2:]
 
     run_dir = train_env("CartPole-v1", {"state": "observation", "pole": pole},
-                        label_fraction=0.1, settings={"training.rounds": 3})
+                        settings={"training.rounds": 3})
 """
 
 from __future__ import annotations
@@ -45,7 +45,7 @@ def gym_config(
     method: str = "dospcot",
     agent: str = "dqn",
     seed: int = 0,
-    label_fraction: float = 0.1,
+    label_fraction: float | None = None,
     state_key: str | Callable[[gym.Env], Hashable] | None = None,
     name: str = "gym",
     settings: Mapping[str, Any] | None = None,
@@ -59,7 +59,10 @@ def gym_config(
     :param agent: every agent's kind: ``dqn`` or ``esarsa_dqn``.
     :param seed: the run's seed.
     :param label_fraction: the share of steps (with ``state_key``: of (state, action) pairs) whose
-        reward is revealed, in (0, 1].
+        reward a uniform mask reveals, in (0, 1] (``training.label_fraction``); None: the labels the
+        adopted version of the defaults buys (docs/guide/defaults.md). Refused where a rater buys a
+        budget of answers, which would leave it unread: set ``training.label_strategy`` to
+        ``"uniform"`` in ``settings`` with it.
     :param state_key: a module-level function of the unwrapped env that names its state by a hashable
         key, or ``"minigrid"``; the pool then holds (key, action) pairs, as on the grid.
     :param name: the run's name (its folder under the runs root).
@@ -79,7 +82,7 @@ def gym_config(
         "task": "gym",
         "views": list(specs),
         "gym": {"env_id": env_id, "views": specs},
-        "training": {"label_fraction": label_fraction},
+        "training": {} if label_fraction is None else {"label_fraction": label_fraction},
     }
     if state_key is not None:
         data["gym"]["state_key"] = (
@@ -87,7 +90,9 @@ def gym_config(
         )
     for key, value in (settings or {}).items():
         set_key(data, key.split("."), value, f"settings[{key!r}]")
-    return config_from_table(data)
+    cfg = config_from_table(data)
+    cfg.check_read({*(settings or {}), *(["training.label_fraction"] if label_fraction is not None else [])})
+    return cfg
 
 
 def train_env(

@@ -4,18 +4,18 @@ DOSPCoT under each version of the defaults, and says whether issue 78's bar is m
 import json
 from pathlib import Path
 
-from dospcot.config.versions import ADOPTED, EXPLORING_STARTS
+from dospcot.config.versions import EXPLORING_STARTS
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot.tasks import load_config
 from dospcot_lab.studies import STUDIES
 from dospcot_lab.studies.true_rewards import PSEUDO_REWARDS
-from dospcot_lab.studies.untuned import TASKS, glance, tables
+from dospcot_lab.studies.untuned import DECLARED, TASKS, glance, tables
 
 
 def _run(
-    root: Path, task: str, method: str, seed: int, success: float, defaults: int = ADOPTED, labels: float = 0
+    root: Path, task: str, method: str, seed: int, success: float, defaults: int = DECLARED, labels: float = 0
 ) -> TrialRun:
     """A run whose folder under ``root`` records 60 CPU-s for the oracle, 200 for DOSPCoT."""
     name = f"untuned-{task}-{method}"
@@ -33,7 +33,7 @@ def test_a_task_meets_the_bar_only_with_the_oracle_at_its_floor_and_dospcot_at_i
         # An oracle seed DOSPCoT has not run: in the oracle's cell, not in the shares.
         _run(tmp_path, "empty-random", "oracle", 2, 0.7),
         *(_run(tmp_path, "empty-random", "dospcot", s, v, 2, 100) for s, v in ((0, 1.0), (1, 0.9))),
-        *(_run(tmp_path, "empty-random", "dospcot", s, 0.5, ADOPTED, 2_500) for s in (0, 1)),
+        *(_run(tmp_path, "empty-random", "dospcot", s, 0.5, DECLARED, 2_500) for s in (0, 1)),
         # Unlock: the oracle below 0.8, whatever DOSPCoT does.
         *(_run(tmp_path, "unlock", "oracle", s, v) for s, v in ((0, 0.5), (1, 0.7))),
         *(_run(tmp_path, "unlock", "dospcot", s, 0.6, 2, 100) for s in (0, 1)),
