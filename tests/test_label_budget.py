@@ -157,7 +157,7 @@ def test_confidently_agreed_samples_are_never_queried():
 )
 def test_every_arm_buys_the_same_count_of_labels_whatever_its_agents(overrides):
     strategy = "uncertainty" if "reward-model" not in overrides[0] else "disagreement"
-    run = _grid_run(strategy, *BUDGET, 'training.query_schedule="even"', *overrides)
+    run = _grid_run(strategy, *BUDGET, 'training.query_schedule="even"', *overrides, share=False)
     per_round = []
     run.run(on_round=lambda r, rows: per_round.append(int(r.queries.revealed.sum())))
     assert per_round == [10, 20, 30]
@@ -165,7 +165,7 @@ def test_every_arm_buys_the_same_count_of_labels_whatever_its_agents(overrides):
 
 
 def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_labels_alone():
-    run = _grid_run("disagreement", *SHORT_BUDGET, 'method="reward-model"', 'views=["coords"]')
+    run = _grid_run("disagreement", *SHORT_BUDGET, 'method="reward-model"', 'views=["coords"]', share=False)
     run.run()
     pool = run.task.pool()
     probabilities = run.trainer.probabilities(pool)
@@ -177,8 +177,7 @@ def test_the_reward_model_rewards_every_unlabelled_sample_from_its_ensembles_lab
 
 
 def test_the_reward_models_error_dependence_compares_its_members():
-    keys = ['training.label_strategy="disagreement"', "seed=3", 'method="reward-model"', 'views=["coords"]']
-    run = build_run(load_config("tiny", [*PINNED, *keys, *SHORT_BUDGET]))
+    run = _grid_run("disagreement", *SHORT_BUDGET, 'method="reward-model"', 'views=["coords"]', share=False)
     rows = run.run_round()
     assert {"joint_error", "independent_error", "disagreement", "error_correlation"} <= set(rows[0])
     stats = run.cotrain()  # another fit on the same pool: the figures read its members' classes
@@ -208,12 +207,16 @@ def test_the_reward_models_error_dependence_compares_its_members():
     ],
 )
 def test_leakage_permuting_unqueried_rewards_changes_nothing_under_budgets_and_the_peer(strategy, overrides):
-    plain = _grid_run(strategy, *SHORT_BUDGET, *overrides)
+    plain = _grid_run(strategy, *SHORT_BUDGET, *overrides, share=False)
     plain.run()
     queried = np.flatnonzero(plain.queries.revealed)
     assert not np.array_equal(_unqueried_permuted_grid(queried, 0).reward, _tiny_grid().reward)
     other = _grid_run(
-        strategy, *SHORT_BUDGET, *overrides, make_env=partial(_unqueried_permuted_grid, queried, 0)
+        strategy,
+        *SHORT_BUDGET,
+        *overrides,
+        make_env=partial(_unqueried_permuted_grid, queried, 0),
+        share=False,
     )
     other.run()
     assert other.queries.log == plain.queries.log

@@ -296,10 +296,12 @@ def test_the_file_rater_writes_the_queries_then_reads_a_persons_answers(tmp_path
 TINY_QUERIES = [*PINNED, "training.label_fraction=0.2"]
 
 
-def _grid_run(strategy: str, *overrides: str, make_env=None, seed: int = 3) -> CoTrainingRun:
-    # A budget counted in labels leaves the share unread (and so refused): the share only without one.
-    budget = any(o.startswith("training.label_budget=") and o != "training.label_budget=0" for o in overrides)
-    queries = list(PINNED) if budget else TINY_QUERIES
+def _grid_run(
+    strategy: str, *overrides: str, make_env=None, seed: int = 3, share: bool = True
+) -> CoTrainingRun:
+    """A tiny run asking by ``strategy``. ``share``: with :data:`TINY_QUERIES`' label share, its budget;
+    False for ``overrides`` that set a budget counted in labels, which leaves a share unread (refused)."""
+    queries = TINY_QUERIES if share else PINNED
     cfg = load_config("tiny", [*queries, f'training.label_strategy="{strategy}"', f"seed={seed}", *overrides])
     if make_env is None:
         return build_run(cfg)
