@@ -12,6 +12,7 @@ from small_runs import PINNED, grid_config, grid_run
 
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import CoTrainingConfig
+from dospcot.core.reward_model import RewardModelTrainer
 from dospcot.core.score_passes import admission_bounds, score_run
 from dospcot.core.self_paced import RunCoTrainer, RunPool
 from dospcot.envs import GridWorld, grid_views
@@ -64,10 +65,28 @@ def test_a_pass_needs_a_step_first():
         score_run(trainer, _pool(np.ones((4, 3)), 2))
 
 
-def _run(kind: str, pseudo_rewards: str = "classifiers", seed: int = 3):
+def test_a_reward_models_pass_rewards_the_samples_met_since_its_fit_and_fits_nothing():
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(40, 3))
+    trainer = RewardModelTrainer([3, 3], CoTrainingConfig(ensemble_size=3), seed=0, n_classes=2)
+    with pytest.raises(ValueError, match="needs a reward model that has taken a step"):
+        trainer.score(_pool(x, 8))
+    trainer.step(_pool(x, 8))
+    params = [p.clone() for clf in trainer.classifiers for p in clf.parameters()]
+    pool = _pool(np.vstack([x, rng.normal(size=(3, 3))]), 8)
+    pseudo_class, weight = trainer.score(pool)
+    # The six members' (two views, three each) mean probabilities, as the step rewards every sample.
+    expected = trainer.probabilities(pool).mean(axis=0).argmax(axis=-1)
+    assert np.array_equal(pseudo_class[40:], expected[40:]) and (weight[40:] == 1.0).all()
+    assert (pseudo_class[:40] == -1).all() and (weight[:40] == 0).all()  # the step rewarded those
+    after = [p for clf in trainer.classifiers for p in clf.parameters()]
+    assert all(th.equal(a, b) for a, b in zip(params, after, strict=True))
+
+
+def _run(kind: str, pseudo_rewards: str = "classifiers", seed: int = 3, method: str = "dospcot"):
     training = {"rounds": 2, "steps_per_round": 300, "label_fraction": 0.2, "cotrain_passes": 3}
     cfg = grid_config(
-        "dospcot",
+        method,
         ("dqn", "dqn"),
         ("coords", "patch"),
         seed,
@@ -110,6 +129,20 @@ def test_a_round_co_trains_once_and_scores_between_its_parts_from_round_2():
     assert [r["round"] for r in records] == [1, 1, 2, 2] and all(r["env_steps"] == 600 for r in records[2:])
 
 
+def test_a_reward_model_run_rewards_every_step_met_since_the_last_fit_at_each_pass():
+    run = _run("score", method="reward-model")
+    run.run(until_round=1)
+    fitted = run.task.pool(run.trainer.dtype_np).unlabelled  # the keys round 1's fit rewarded
+    before = run.table.weight.copy()
+    for agent in run.agents:
+        agent.learn(100, reset_num_timesteps=False)
+    run.score_pass()
+    now = run.task.pool(run.trainer.dtype_np).unlabelled
+    since = np.flatnonzero(now & ~fitted)  # the grid's pool holds every key; these were first met since
+    assert since.size > 0 and (before[since] == 0).all() and (run.table.weight[since] == 1.0).all()
+    assert np.array_equal(run.table.weight[fitted], before[fitted])  # what the fit rewarded stands
+
+
 def test_under_the_true_rewards_control_a_pass_writes_the_hidden_rewards():
     run = _run("score", "hidden")
     run.run(until_round=1)
@@ -134,9 +167,8 @@ def test_a_run_resumed_from_its_checkpoint_scores_as_the_run_it_continues():
     assert np.array_equal(first.table.weight, resumed.table.weight)
 
 
-def test_score_passes_are_co_trainings_alone():
-    with pytest.raises(ConfigError, match='method = "reward-model" never reads it'):
-        load_config("grid16-reward-model", ['training.pass_kind="score"'])
+def test_score_passes_serve_the_methods_that_learn_rewards_alone():
+    assert load_config("grid16-reward-model", ['training.pass_kind="score"']).training.pass_kind == "score"
     with pytest.raises(ConfigError, match='method = "oracle" never reads it'):
         load_config("grid16-oracle", ['training.pass_kind="score"'])
     assert load_config("grid16-dospcot", PINNED).training.pass_kind == "cotrain"

@@ -80,7 +80,9 @@ class TrainingConfig(AddedKeys):
         each view admitting at the least score it admitted each class at then
         (:mod:`dospcot.core.score_passes`), so a pass costs a forward pass of each classifier rather
         than a fit over the pool. A pass before the run's first co-training, or after a class has
-        appeared or merged since the last, admits nothing. Co-training alone (``method = "dospcot"``).
+        appeared or merged since the last, admits nothing. The reward-model peer's pass rewards the
+        samples met since its last fit with its ensembles as they are
+        (:meth:`~dospcot.core.reward_model.RewardModelTrainer.score`).
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.

@@ -39,9 +39,8 @@ SELF_PACED_KEYS: frozenset[str] = frozenset(
     )
 )
 """The ``[cotraining]`` keys of the self-paced schedule, which only co-training reads."""
-CO_TRAINING_KEYS: frozenset[str] = SELF_PACED_KEYS | {"training.pass_kind"}
-"""The keys only co-training reads: the self-paced schedule's, and what its passes do."""
-REWARD_LEARNER_KEYS: frozenset[str] = CO_TRAINING_KEYS | {
+REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {
+    "training.pass_kind",
     "cotraining.ensemble_size",
     "cotraining.classifier",
     "cotraining.pseudo_rewards",
@@ -102,7 +101,7 @@ class TrainConfig:
 
     unread_keys: ClassVar[dict[str, frozenset[str]]] = {
         "dospcot": frozenset({"cotraining.ensemble_size"}),
-        "reward-model": CO_TRAINING_KEYS,
+        "reward-model": SELF_PACED_KEYS,
         "oracle": REWARD_LEARNER_KEYS,
         "masked-zero": REWARD_LEARNER_KEYS,
         "labels-only": REWARD_LEARNER_KEYS,

@@ -212,7 +212,9 @@ def _passes(count: int, methods: tuple[str, ...] = REWARD_LEARNERS) -> Callable[
 
 
 SCORE_PASS_METHODS = ("dospcot",)
-"""The methods a score pass serves: the reward model's ensemble has no pass that scores without fitting."""
+"""The methods version 12 gives score passes: DOSPCoT, the method the defaults-12 study measured. The
+reward-model peer takes them only where its config sets them (the views study does, so that every arm
+is rewarded with the same lag)."""
 
 
 def _when_co_training(value: Any) -> Callable[[Mapping[str, Any]], Any]:

@@ -6,8 +6,10 @@ Each view has an ensemble of E reward classifiers (the co-trainer's own model,
 parameters and fitted, every round, on its own bootstrap of the labels alone: no pseudo-label, no
 self-paced selection, no consensus between views. The mean of every member's class probabilities
 rewards every unlabelled sample, with weight 1, as the learnt reward of PEBBLE (Lee et al., 2021) and
-B-Pref rewards every transition. Queries by ``"disagreement"`` go where the members disagree
-(:meth:`RewardModelTrainer.probabilities` hands every member to the queries as a view of its own).
+B-Pref rewards every transition; a score pass inside a round (``training.pass_kind = "score"``,
+:meth:`RewardModelTrainer.score`) rewards the samples met since, with no fit. Queries by
+``"disagreement"`` go where the members disagree (:meth:`RewardModelTrainer.probabilities` hands every
+member to the queries as a view of its own).
 
 It answers :class:`~dospcot.core.sb3_round.CoTrainingRun` as the co-trainer does: ``step`` on a
 :class:`~dospcot.core.self_paced.RunPool` returns a :class:`~dospcot.core.self_paced.RunRound`.
@@ -99,6 +101,30 @@ class RewardModelTrainer(FitsUnderNumerics):
             stopped=False,
             member_class=probabilities.reshape(m * members, *pool.labelled.shape, -1).argmax(axis=-1),
         )
+
+    def score(self, pool: RunPool) -> tuple[np.ndarray, np.ndarray]:
+        """A score pass (``training.pass_kind = "score"``): the ensembles as the last step fitted them
+        reward the unlabelled samples the step did not hold (those met since), as the step rewarded every
+        unlabelled sample then. Nothing is fitted.
+
+        :param pool: the pool now: the last step's samples first, in the same order, then those since.
+        :return: (N,) int, the class of the ensembles' mean probabilities for each unlabelled sample
+            the last step did not hold, -1 for every other sample; (N,) its weight, 1 there, 0 elsewhere.
+        """
+        if self._previous is None:
+            raise ValueError("a score pass needs a reward model that has taken a step")
+        n = min(self._previous.size, pool.unlabelled.size)
+        new = pool.unlabelled.copy()
+        new[:n] &= self._previous[:n] < 0  # the step rewarded every sample it held unlabelled
+        rows = np.flatnonzero(new)
+        pseudo_class = np.full(new.shape, -1, dtype=np.int64)
+        if rows.size:
+            xs, mask = self._inputs(pool, rows)
+            probabilities = np.concatenate(
+                [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
+            )
+            pseudo_class[rows] = probabilities.mean(axis=0).argmax(axis=-1)
+        return pseudo_class, new.astype(np.float64)
 
     def probabilities(self, pool: RunPool) -> np.ndarray | None:
         """(m x E, N, K) every member's class probabilities of the pool's samples, view by view, or None

@@ -329,14 +329,18 @@ class CoTrainingRun:
     def score_pass(self) -> None:
         """A score pass inside a round (``training.pass_kind = "score"``): the steps the last co-training
         did not admit read the pseudo-rewards (under the true-rewards control, the hidden rewards) of
-        the samples the classifiers as it left them admit (:mod:`dospcot.core.score_passes`); nothing
-        is fitted. Before the run's first co-training, or where a class has appeared or merged since
+        the samples the classifiers as it left them admit (:mod:`dospcot.core.score_passes`; the reward
+        model's ensembles reward every sample met since, :meth:`RewardModelTrainer.score`); nothing is
+        fitted. Before the run's first co-training, or where a class has appeared or merged since
         it (the classifiers never fitted the classes as they are), the pass admits nothing."""
         pool = self.task.pool(self.trainer.dtype_np)
         before = self.scored_classes
         if before is None or not np.array_equal(before, self.classes.mask):
             return
-        pseudo_class, weight = score_run(self.trainer, pool)
+        if isinstance(self.trainer, RewardModelTrainer):
+            pseudo_class, weight = self.trainer.score(pool)
+        else:
+            pseudo_class, weight = score_run(self.trainer, pool)
         admitted = np.flatnonzero(weight > 0)
         if self.true_rewards:
             reward = self.store.hidden_reward[admitted]

@@ -4,9 +4,11 @@ fast highway), at four label budgets, DOSPCoT (two views) against the one-view p
 query strategy and labels: a same-sensor twin (two agents and classifiers on one view: a second model
 without a second view), the reward-model peer and self-training; the blind control (random queries)
 at the largest budget; the oracle with every reward; on the blind-spot task also DOSPCoT with both
-views blind on the same cells, its errors made dependent. Every arm trains under version 2 of the
-defaults (one schedule, one exploration setting) and numerics 2, seeds 0-9; a confirmatory study on
-other seeds and maps follows its preregistration.
+views blind on the same cells, its errors made dependent. Every arm trains under version 12 of the
+defaults, the adopted one (one schedule, one exploration setting, ten score passes a round, which the
+reward model takes by its config), and numerics 2, seeds 0-9; a confirmatory study on other seeds and
+maps follows its preregistration. A first look under version 2 (sweeps without the ``-v12`` suffix) is
+kept in the record and not read here.
 
 Arms carry short names on every table and figure (:data:`ARMS`); their full settings are in one table
 under the figure.
@@ -28,7 +30,11 @@ from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.label_curves import SHARE, Curve, labels_text
 from dospcot_lab.studies.tables import cpu_per_run, labels_used
 
-DEFAULTS, NUMERICS, SEEDS = 2, 2, 10
+DEFAULTS, NUMERICS, SEEDS = 12, 2, 10
+
+SCORE_PASSES = {"training.cotrain_passes": ("10",), "training.pass_kind": ('"score"',)}
+"""Version 12's ten score passes a round, which it gives DOSPCoT's method alone: the reward model takes
+them here by its config, so every arm's steps are rewarded a tenth of a round after they are taken."""
 
 BLIND_RATE, BLIND_SPOTS = "env.blind_spot_rate", "env.blind_spots"
 BLIND = {BLIND_RATE: ("0.5",), BLIND_SPOTS: ('"independent"',)}
@@ -52,14 +58,15 @@ ARMS: dict[str, str] = {
     "twin": "two agents and two classifiers on the one-view arms' view, each from its own initial "
     "weights and draws, co-trained as DOSPCoT is, outcomes+disagreement queries",
     "reward model": "an ensemble of reward classifiers on one view fitted on the labels alone, "
-    "rewarding every unlabelled sample; outcomes+disagreement queries (between its members)",
+    "rewarding every unlabelled sample, and between fits the samples met since (ten score passes a "
+    "round); outcomes+disagreement queries (between its members)",
     "self-training": "one view co-trained with itself (one agent, one classifier), "
     "outcomes+uncertainty queries",
     "blind": "DOSPCoT with random queries, at the largest budget only",
     "DOSPCoT, identical blind spots": "DOSPCoT where both views miss the same lava cells (blind-spot task "
     "only): the views' errors made dependent, so no view can correct the other",
 }
-"""Each arm's short name and its settings in words; every arm also takes version 2's defaults."""
+"""Each arm's short name and its settings in words; every arm also takes version 12's defaults."""
 ONE_VIEW = ("twin", "reward model", "self-training")
 """The arms that read one view, DOSPCoT's peers."""
 
@@ -68,7 +75,7 @@ def _sweeps(task: str) -> tuple[Sweep, ...]:
     prefix, view, budgets, settings = TASKS[task]
 
     def sweep(arm: str, preset: str, grid: dict[str, tuple[str, ...]]) -> Sweep:
-        name = f"views-{task}-{arm.lower().replace(' ', '-')}"
+        name = f"views-{task}-{arm.lower().replace(' ', '-')}-v{DEFAULTS}"
         grid = {**settings, **grid}
         return Sweep(name, (f"{prefix}-{preset}",), grid, numerics=NUMERICS, defaults=DEFAULTS)
 
@@ -88,7 +95,7 @@ def _sweeps(task: str) -> tuple[Sweep, ...]:
         sweep("oracle", "oracle", {}),
         sweep("DOSPCoT", "dospcot", {**spend, STRATEGY: (DISAGREEMENT,)}),
         sweep("twin", "dospcot", {**spend, STRATEGY: (DISAGREEMENT,), "views": (f'["{view}", "{view}"]',)}),
-        sweep("reward model", "reward-model", {**spend, STRATEGY: (DISAGREEMENT,)}),
+        sweep("reward model", "reward-model", {**spend, STRATEGY: (DISAGREEMENT,), **SCORE_PASSES}),
         sweep("self-training", "self-training", {**spend, STRATEGY: (UNCERTAINTY,)}),
         sweep("blind", "dospcot", {BUDGET: budgets[-1:], STRATEGY: ('"random"',)}),
         *identical,

@@ -13,6 +13,7 @@ import pytest
 
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
+from dospcot.tasks import load_config
 from dospcot_lab.studies import sweep_spec
 from dospcot_lab.studies.label_curves import Curve, labels_text
 from dospcot_lab.studies.views import STUDIES, arm_of, curves, tables, task_of
@@ -109,19 +110,25 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
     assert "| grid16 | 0.050 | 0.800 | 33 | twin > 20 |" in text  # the twin's largest budget: 20 labels
 
 
-def test_the_study_trains_every_arm_under_version_2_at_the_tasks_budgets():
+def test_the_study_trains_every_arm_under_version_12_at_the_tasks_budgets_with_score_passes():
     study = STUDIES["views"]
     specs = {sweep.name: sweep_spec(sweep, study.seeds) for sweep in study.sweeps}
-    assert all(spec.defaults == 2 for spec in specs.values())
-    twin = specs["views-doorkey-twin"]
+    assert all(spec.defaults == 12 and name.endswith("-v12") for name, spec in specs.items())
+    twin = specs["views-doorkey-twin-v12"]
     assert twin.configs == ("minigrid-doorkey-dospcot",) and twin.grid["views"] == ('["image", "image"]',)
-    assert specs["views-grid16-dospcot"].grid["training.label_budget"] == ("5", "10", "20", "40")
-    assert specs["views-fasthighway-blind"].grid["training.label_budget"] == ("800",)
+    assert specs["views-grid16-dospcot-v12"].grid["training.label_budget"] == ("5", "10", "20", "40")
+    assert specs["views-fasthighway-blind-v12"].grid["training.label_budget"] == ("800",)
+    # Version 12 gives DOSPCoT's method its score passes; the reward model takes the same by its grid.
+    peer = specs["views-lavagap-reward-model-v12"]
+    assert peer.grid["training.pass_kind"] == ('"score"',) and peer.grid["training.cotrain_passes"] == ("10",)
+    for name in ("views-lavagap-dospcot-v12", "views-lavagap-self-training-v12"):
+        cfg = load_config(specs[name].configs[0], ["defaults=12"])
+        assert (cfg.training.pass_kind, cfg.training.cotrain_passes) == ("score", 10)
     # The blind-spot task: every arm with independent blind spots, and DOSPCoT's control with identical.
-    identical = specs["views-grid16-blind-spots-dospcot-identical"].grid
+    identical = specs["views-grid16-blind-spots-dospcot-identical-v12"].grid
     assert identical["env.blind_spots"] == ('"identical"',) and identical["env.blind_spot_rate"] == ("0.5",)
-    assert specs["views-grid16-blind-spots-twin"].grid["env.blind_spots"] == ('"independent"',)
-    assert "env.blind_spot_rate" not in specs["views-grid16-twin"].grid
+    assert specs["views-grid16-blind-spots-twin-v12"].grid["env.blind_spots"] == ('"independent"',)
+    assert "env.blind_spot_rate" not in specs["views-grid16-twin-v12"].grid
     assert sum(len(spec.trials(check_task=False)) for spec in specs.values()) == 940
 
 
