@@ -12,6 +12,7 @@ import matplotlib
 matplotlib.use("Agg")  # headless: runs write PNGs on machines without a display
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.ticker import LogLocator, ScalarFormatter
 
 from dospcot.run.run_folder import atomic_write
 
@@ -74,7 +75,11 @@ def plot_bands(
     legend_below: bool = False,
 ) -> None:
     """One panel per key of ``panels`` (its title), each line with its shaded band; ``legend_below``:
-    each panel's legend under it, one line per band (for labels too long to sit inside the axes)."""
+    each panel's legend under it, one line per band (for labels too long to sit inside the axes).
+
+    A band of one point (an arm measured at one budget) shows its interval as an error bar, which a
+    shaded band of one point cannot; where every band of a panel sits at one x, the points stand a
+    little apart around it, so their bars do not hide each other, and the axis ticks that x alone."""
     cols = 1 if legend_below else min(3, len(panels))
     rows = -(-len(panels) // cols)
     width, height = 5.2, 3.8
@@ -89,14 +94,31 @@ def plot_bands(
         sharey=share_y,
     )
     for ax, (title, bands) in zip(axes.flat, panels.items(), strict=False):
-        for band in bands:
-            (line,) = ax.plot(band.x, band.mean, marker="o" if markers else None, ms=4, label=band.label)
-            ax.fill_between(band.x, band.low, band.high, color=line.get_color(), alpha=0.2, linewidth=0)
+        xs = np.unique(np.concatenate([np.asarray(band.x, dtype=float) for band in bands]))
+        one_x = xs.size == 1
+        for i, band in enumerate(bands):
+            x = np.asarray(band.x, dtype=float)
+            if one_x:  # side by side, 3% of the x apart
+                x = x * (1 + 0.03 * (i - (len(bands) - 1) / 2))
+            (line,) = ax.plot(x, band.mean, marker="o" if markers else None, ms=4, label=band.label)
+            if x.size == 1:
+                bar = np.array([band.mean - band.low, band.high - band.mean]).reshape(2, 1)
+                ax.errorbar(x, band.mean, yerr=np.clip(bar, 0, None), color=line.get_color(), capsize=3)
+            else:
+                ax.fill_between(x, band.low, band.high, color=line.get_color(), alpha=0.2, linewidth=0)
+        if one_x:
+            ax.set_xlim(xs[0] * (0.97 - 0.03 * len(bands)), xs[0] * (1.03 + 0.03 * len(bands)))
         ax.set_title(title)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
-        if log_x:
+        if log_x:  # ticks at 1, 2 and 5 of each decade, written out (budgets read as 20, not 2 x 10^1)
             ax.set_xscale("log")
+            ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+            ax.xaxis.set_major_formatter(ScalarFormatter())
+            ax.minorticks_off()
+        if one_x:  # after the scale, which sets its own ticks
+            ax.set_xticks(xs, [f"{xs[0]:g}"])
+            ax.minorticks_off()
         ax.grid(alpha=0.3)
         if legend_below:
             ax.legend(fontsize="small", loc="upper center", bbox_to_anchor=(0.5, -0.18), ncols=1)
