@@ -41,5 +41,6 @@ def test_a_one_budget_arm_shows_its_interval_and_a_one_x_panel_ticks_that_x_alon
     # A curve keeps its shaded band and ticks its log axis in plain numbers at 1, 2 and 5 a decade.
     assert not doorkey.containers and doorkey.collections
     low, high = doorkey.get_xlim()
-    shown = [t.get_text() for t, x in zip(doorkey.get_xticklabels(), doorkey.get_xticks()) if low <= x <= high]
+    ticks = zip(doorkey.get_xticklabels(), doorkey.get_xticks(), strict=True)
+    shown = [label.get_text() for label, x in ticks if low <= x <= high]
     assert shown == ["50", "100", "200"]

@@ -62,6 +62,15 @@ class StepStore(InPlaceState):
         self.label_value = np.zeros(0)
         self.hidden_reward = np.zeros(0)
         """The true reward of each step: metrics only, never the learners."""
+        self._features: dict[tuple[str, int, bool, np.dtype], tuple[np.ndarray, int]] = {}
+        """:meth:`features` of the steps built so far, by its arguments, with their count: a stored step's
+        features never change, and a score pass asks for the pool's ten times a round."""
+
+    def state_dict(self) -> dict[str, Any]:
+        """:meth:`InPlaceState.state_dict` without the features built so far, which the steps rebuild."""
+        state = super().state_dict()
+        del state["_features"]
+        return state
 
     def __len__(self) -> int:
         return self._n
@@ -129,6 +138,7 @@ class StepStore(InPlaceState):
         # A checkpoint from before ``terminal`` or ``truncated`` was stored: no run of that code read it.
         unread = {name: np.zeros(state["action"].size, bool) for name in ("terminal", "truncated")}
         super().load_state_dict({**unread, **state})
+        self._features = {}
 
     def is_new(self, key: Hashable, action: int) -> bool:
         """Whether a step of ``action`` from the state named ``key`` starts a new sample."""
@@ -139,15 +149,37 @@ class StepStore(InPlaceState):
     ) -> np.ndarray:
         """(len, 2 d + A) in ``dtype`` (float32 or float64, whatever the rows' type): view of s, one-hot
         action, view of s' of every step; with ``termination``, (len, 2 d + A + 1): then whether the
-        step ended its episode (0 or 1). The views' values are float32's in either ``dtype``."""
-        rows, n = self.rows[view], self._n
-        onehot = np.eye(n_actions, dtype=dtype)[self.action[:n]]
-        state, next_state = (_as_float32_values(rows[r[:n]]) for r in (self.state_row, self.next_row))
+        step ended its episode (0 or 1). The views' values are float32's in either ``dtype``.
+
+        Only the steps stored since the last call with the same arguments are built: the array returned
+        is a view of the features kept for the next call, so a caller reads it and never writes it."""
+        key, n = (view, n_actions, termination, np.dtype(dtype)), self._n
+        kept, built = self._features.get(key, (None, 0))
+        if kept is None or kept.shape[0] < n:
+            # Room for twice the steps: a copy each time the store doubles, not each call; np.empty's pages
+            # take memory only once rows are written to them.
+            grown = np.empty((2 * n, self._feature_width(view, n_actions, termination)), dtype)
+            if kept is not None:
+                grown[:built] = kept[:built]
+            kept = grown
+        if built < n:
+            kept[built:n] = self._build_features(view, n_actions, termination, dtype, built, n)
+        self._features[key] = (kept, n)
+        return kept[:n]
+
+    def _feature_width(self, view: str, n_actions: int, termination: bool) -> int:
+        return 2 * self.rows[view].shape[1] + n_actions + int(termination)
+
+    def _build_features(
+        self, view: str, n_actions: int, termination: bool, dtype: type, start: int, stop: int
+    ) -> np.ndarray:
+        """:meth:`features` of the steps ``start`` to ``stop`` (not included), built from the rows."""
+        rows, steps = self.rows[view], slice(start, stop)
+        onehot = np.eye(n_actions, dtype=dtype)[self.action[steps]]
+        state, next_state = (_as_float32_values(rows[r[steps]]) for r in (self.state_row, self.next_row))
         parts = [state, onehot, next_state]
         if termination:
-            parts.append(self.terminal[:n, None].astype(dtype))
-        # Built in the classifiers' dtype: a float32 copy beside their float64 one was a third of a
-        # MiniGrid run's peak memory.
+            parts.append(self.terminal[steps, None].astype(dtype))
         return np.concatenate(parts, axis=1, dtype=dtype)
 
 
