@@ -234,6 +234,27 @@ def _dependence_table(runs: list[TrialRun]) -> list[str]:
     return lines if len(lines) > 2 else []
 
 
+def _accuracy_table(task: str, runs: list[TrialRun]) -> list[str]:
+    """Per arm that rewards unlabelled samples, its pseudo-reward accuracy at each budget, mean over
+    seeds at the last round: where success saturates (the grid, whose lava does not end an episode),
+    what the classifiers got right still tells the arms apart."""
+    budgets = TASKS[task][2]
+    lines = [f"| arm | {' | '.join(f'budget {b}' for b in budgets)} |", "|---|" + "---|" * len(budgets)]
+    for arm in (a for a in ARMS if a != "blind"):
+        cells = {
+            b: [
+                r.summary["mean"]["pseudo_accuracy"]
+                for r in runs
+                if arm_of(r) == arm and r.trial.params[BUDGET] == b
+            ]
+            for b in budgets
+        }
+        if any(cells.values()):
+            shown = [f"{np.mean(v):.3f}" if v else "–" for v in cells.values()]
+            lines.append(f"| {arm} | {' | '.join(shown)} |")
+    return lines if len(lines) > 2 else []
+
+
 def _reach_against_best_peer(found: dict[str, Curve]) -> tuple[str, str | None]:
     """DOSPCoT's labels to the oracle's share (its curve in ``found``), and the one-view peer's that
     needs the fewest, named ("twin 40"; None where no peer has a curve), as :func:`labels_text` writes
@@ -269,8 +290,9 @@ def _margins(runs: list[TrialRun]) -> list[str]:
 
 
 def tables(runs: list[TrialRun]) -> list[str]:
-    """Per task, the arms' curves (:func:`_task_table`) and their classifiers' error dependence; then,
-    across tasks, dependence beside margin; then every arm's settings."""
+    """Per task, the arms' curves (:func:`_task_table`), their pseudo-reward accuracy and their
+    classifiers' error dependence; then, across tasks, dependence beside margin; then every arm's
+    settings."""
     lines = [
         "",
         f"Each budget's cell: success as a share of the oracle's mean success (labels used per run). "
@@ -284,6 +306,9 @@ def tables(runs: list[TrialRun]) -> list[str]:
         members = [r for r in runs if task_of(r) == task]
         if members:
             lines += _task_table(task, members)
+            accuracy = _accuracy_table(task, members)
+            if accuracy:
+                lines += ["", "Pseudo-reward accuracy, mean over seeds, last round:", "", *accuracy]
             dependence = _dependence_table(members)
             if dependence:
                 lines += [

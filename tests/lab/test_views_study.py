@@ -63,7 +63,7 @@ def _run(
     run_dir = folder / f"{preset}-{'-'.join(params.values())}-{seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0}))
-    mean = {"success": success, "labelled_steps": labels}
+    mean = {"success": success, "labelled_steps": labels, "pseudo_accuracy": 0.9 + success / 10}
     # metrics.csv's rows: the last round's error correlation is the one the tables read.
     rows = [{"round": 1.0, "error_correlation": 0.9}, {"round": 2.0, "error_correlation": correlation}]
     return TrialRun(Trial(preset, preset, params, seed), {"mean": mean}, rows, run_dir)
@@ -108,6 +108,10 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
     # The last round's error correlation, mean over each arm's runs: DOSPCoT's 0 and 0.1, the twin's 0.8.
     assert "| DOSPCoT | – | – | – | 0.050 | 6 |" in text and "| twin | – | – | – | 0.800 | 6 |" in text
     assert "| grid16 | 0.050 | 0.800 | 33 | twin > 20 |" in text  # the twin's largest budget: 20 labels
+    # Pseudo-reward accuracy (0.9 + success / 10 in these runs), mean over seeds per budget; the blind
+    # control is left out, and the peer's one run sits at budget 5.
+    assert "| DOSPCoT | 0.930 | 0.970 | 1.000 | – |" in text and "| twin | 0.915 | 0.935 | 0.950 | – |" in text
+    assert "| reward model | 0.950 | – | – | – |" in text and "| blind | – | – | 0.910 |" not in text
 
 
 def test_the_study_trains_every_arm_under_version_12_at_the_tasks_budgets_with_score_passes():
