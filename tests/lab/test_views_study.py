@@ -102,16 +102,20 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
     assert found["DOSPCoT"].labels_to_reach() == pytest.approx(CURVE.labels_to_reach())  # x2 labels
     assert math.isinf(found["twin"].labels_to_reach())
     text = "\n".join(tables(runs))
-    assert "| DOSPCoT | 0.30 (10) | 0.70 (20) | 1.00 (40) | – | 33 [30, 35] | 0.68 | 2 | 60 CPU-s |" in text
-    assert "| twin | 0.15 (5) | 0.35 (10) | 0.50 (20) | – | > 20 [> 20, > 20] |" in text
-    assert "| blind | – | – | 0.10 (20) | – | > 20 [> 20, > 20] | – | 1 |" in text
+    # grid16's columns: its lower budgets 1, 2 and 3, then 5, 10, 20 and 40.
+    low = "| – | – | – "
+    dospcot = f"| DOSPCoT {low}| 0.30 (10) | 0.70 (20) | 1.00 (40) | – | 33 [30, 35] | 0.68 | 2 | 60 CPU-s |"
+    assert dospcot in text
+    assert f"| twin {low}| 0.15 (5) | 0.35 (10) | 0.50 (20) | – | > 20 [> 20, > 20] |" in text
+    assert f"| blind {low}| – | – | 0.10 (20) | – | > 20 [> 20, > 20] | – | 1 |" in text
     # The last round's error correlation, mean over each arm's runs: DOSPCoT's 0 and 0.1, the twin's 0.8.
     assert "| DOSPCoT | – | – | – | 0.050 | 6 |" in text and "| twin | – | – | – | 0.800 | 6 |" in text
     assert "| grid16 | 0.050 | 0.800 | 33 | twin > 20 |" in text  # the twin's largest budget: 20 labels
     # Pseudo-reward accuracy (0.9 + success / 10 in these runs), mean over seeds per budget; the blind
     # control is left out, and the peer's one run sits at budget 5.
-    assert "| DOSPCoT | 0.930 | 0.970 | 1.000 | – |" in text and "| twin | 0.915 | 0.935 | 0.950 | – |" in text
-    assert "| reward model | 0.950 | – | – | – |" in text and "| blind | – | – | 0.910 |" not in text
+    assert f"| DOSPCoT {low}| 0.930 | 0.970 | 1.000 | – |" in text
+    assert f"| twin {low}| 0.915 | 0.935 | 0.950 | – |" in text
+    assert f"| reward model {low}| 0.950 | – | – | – |" in text and "0.910" not in text
 
 
 def test_the_study_trains_every_arm_under_version_12_at_the_tasks_budgets_with_score_passes():
@@ -133,7 +137,17 @@ def test_the_study_trains_every_arm_under_version_12_at_the_tasks_budgets_with_s
     assert identical["env.blind_spots"] == ('"identical"',) and identical["env.blind_spot_rate"] == ("0.5",)
     assert specs["views-grid16-blind-spots-twin-v12"].grid["env.blind_spots"] == ('"independent"',)
     assert "env.blind_spot_rate" not in specs["views-grid16-twin-v12"].grid
-    assert sum(len(spec.trials(check_task=False)) for spec in specs.values()) == 940
+    # Below the registered budgets, on grid16 and DoorKey, the four arms that compare views.
+    low = [name for name in specs if "-low-" in name]
+    assert sorted(low) == sorted(
+        f"views-{task}-{arm}-low-v12"
+        for task in ("grid16", "doorkey")
+        for arm in ("dospcot", "twin", "reward-model", "self-training")
+    )
+    assert specs["views-doorkey-twin-low-v12"].grid["training.label_budget"] == ("5", "10")
+    assert specs["views-grid16-reward-model-low-v12"].grid["training.pass_kind"] == ('"score"',)
+    # 940 registered trials, and 4 arms x (3 budgets on grid16 + 2 on DoorKey) x 10 seeds below them.
+    assert sum(len(spec.trials(check_task=False)) for spec in specs.values()) == 940 + 4 * 5 * 10
 
 
 @pytest.mark.parametrize(
