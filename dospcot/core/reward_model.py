@@ -119,11 +119,7 @@ class RewardModelTrainer(FitsUnderNumerics):
         rows = np.flatnonzero(new)
         pseudo_class = np.full(new.shape, -1, dtype=np.int64)
         if rows.size:
-            xs, mask = self._inputs(pool, rows)
-            probabilities = np.concatenate(
-                [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
-            )
-            pseudo_class[rows] = probabilities.mean(axis=0).argmax(axis=-1)
+            pseudo_class[rows] = self._member_probabilities(pool, rows).mean(axis=0).argmax(axis=-1)
         return pseudo_class, new.astype(np.float64)
 
     def probabilities(self, pool: RunPool) -> np.ndarray | None:
@@ -131,7 +127,11 @@ class RewardModelTrainer(FitsUnderNumerics):
         before the first round fit them."""
         if self.round == 0:
             return None
-        xs, mask = self._inputs(pool, slice(None))
+        return self._member_probabilities(pool, slice(None))
+
+    def _member_probabilities(self, pool: RunPool, rows: np.ndarray | slice) -> np.ndarray:
+        """(m x E, n, K) every member's class probabilities of the samples ``rows``, view by view."""
+        xs, mask = self._inputs(pool, rows)
         return np.concatenate(
             [clf.scores(x, mask).numpy() for clf, x in zip(self.classifiers, xs, strict=True)]
         )
