@@ -35,6 +35,8 @@
     dospcot-lab study sizing --docs           # Unlock: 5 rounds vs capped at 20 with patience, seeds 100-104
     dospcot-lab study true-rewards --docs     # the co-training path fed the true rewards, 4 tasks
     dospcot-lab study untuned --docs          # 5 MiniGrid tasks no one tuned, env id and views only
+    dospcot-lab study views --docs            # label curves: DOSPCoT, a twin, one-view peers, 5 tasks
+    dospcot-lab study views-confirm --docs    # docs/preregistration-views.md: V1-V4, seeds 200-209
 
 A study is one or more sweeps in ``runs/sweeps/``:
 rerunning the command runs only the trials not yet finished, then rebuilds the tables from every
@@ -71,7 +73,7 @@ from pathlib import Path
 
 from dospcot.config.presets import did_you_mean
 from dospcot.run.interrupts import Interrupted
-from dospcot.run.run_folder import source_commit
+from dospcot.run.run_folder import PACKAGE_DIR, source_commit
 from dospcot.sweeps.report import TrialRun, load_runs, write_report
 from dospcot.sweeps.sweep import SweepError, SweepSpec, check_not_stale, run_sweep
 from dospcot_lab.repository import Repository
@@ -99,9 +101,11 @@ from dospcot_lab.studies import (
     true_rewards,
     untuned,
     views,
+    views_confirm,
 )
 from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.pages import GLANCE, glance_cells, is_published, page, page_prose, write_glance
+from dospcot_lab.studies.preregistration import added_in, preregistered_line
 from dospcot_lab.studies.provenance import header
 from dospcot_lab.studies.readme import read_block, replace_block
 
@@ -146,6 +150,7 @@ STUDIES: dict[str, Study] = {
     **true_rewards.STUDIES,
     **untuned.STUDIES,
     **views.STUDIES,
+    **views_confirm.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 
@@ -207,10 +212,11 @@ def study_table(
     missing = (
         [f"Not finished yet, in the runs folder: sweep(s) {', '.join(unfinished)}."] if unfinished else []
     )
-    return (
-        "\n".join([*header(runs, command, sweep_dirs, study.cells_explained), *missing, *study.tables(runs)])
-        + "\n"
+    preregistered = (
+        [preregistered_line(runs, study.preregistration, runs[0].run_dir)] if study.preregistration else []
     )
+    lines = [*header(runs, command, sweep_dirs, study.cells_explained), *preregistered, *missing]
+    return "\n".join([*lines, *study.tables(runs)]) + "\n"
 
 
 def sweep_spec(sweep: Sweep, seeds: int, overrides: Sequence[str] = (), first_seed: int = 0) -> SweepSpec:
@@ -290,6 +296,15 @@ def run_study(args: argparse.Namespace, command: str, repo: Repository | None, p
                 f"{prog}: {args.study} is confirmatory and trains only from a committed checkout with no "
                 f"uncommitted change; this code runs {where} (commit it, or run from a clean clone)"
             )
+    if (
+        study.preregistration
+        and not args.render_only
+        and added_in(study.preregistration, PACKAGE_DIR) is None
+    ):
+        sys.exit(
+            f"{prog}: {args.study} follows {study.preregistration}, which this checkout has not committed: "
+            "commit the preregistration before any of its runs"
+        )
     args.seeds = args.seeds or study.seeds
     # Another --seeds or --set is another sweep: it gets its own folder.
     default = (args.seeds, args.overrides) == (study.seeds, [])

@@ -89,3 +89,7 @@ class Study:
     confirmatory: bool = False
     """Whether it tests hypotheses fixed before its runs, or decides a default: it then trains only from
     a committed checkout with no uncommitted change, so every run names the code it ran."""
+    preregistration: str | None = None
+    """The page that fixed its hypotheses before its runs (a path from the repository's root), if any: it
+    trains only once that page is committed, and its header counts the runs whose source descends from
+    the commit that added it."""

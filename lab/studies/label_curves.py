@@ -9,6 +9,7 @@ resampled together, so the interval carries the seeds' spread in the oracle's su
 from __future__ import annotations
 
 import math
+from collections.abc import Hashable
 from dataclasses import dataclass
 
 import numpy as np
@@ -27,12 +28,15 @@ class Curve:
     :param labels: (S, B) the labels each seed's run used at each budget (counted from its files).
     :param success: (S, B) each run's success.
     :param oracle: (S,) the oracle's success on each seed.
+    :param pairs: (S,) what pairs each row with another arm's (its seed, and its map on a task of several),
+        empty where the rows need no pairing.
     """
 
     budgets: np.ndarray
     labels: np.ndarray
     success: np.ndarray
     oracle: np.ndarray
+    pairs: tuple[Hashable, ...] = ()
 
     def shares(self) -> np.ndarray:
         """(S, B) each run's success as a share of the oracle's mean success."""
@@ -64,11 +68,66 @@ class Curve:
         """The area under the share curve over log labels, from the arm's smallest budget to its
         largest, divided by that width: the oracle's curve (share 1 everywhere) scores 1. NaN with one
         budget."""
-        x, y = self.share()
+        x, _ = self.share()
         if x.size < 2 or x[0] <= 0 or x[-1] == x[0]:
             return math.nan
-        log_x = np.log(x)
-        return float(np.sum((y[1:] + y[:-1]) / 2 * np.diff(log_x)) / (log_x[-1] - log_x[0]))
+        return float(_areas(self, np.arange(len(self.oracle))[None])[0])
+
+
+def labels_ratio(mine: Curve, theirs: Curve, seed: int = 0) -> tuple[float, float, float]:
+    """The labels ``mine`` needs to reach :data:`SHARE` of the oracle over the labels ``theirs`` needs, on
+    the pairs both ran, with its 95% percentile bootstrap interval (the pairs resampled together): 0
+    where only ``mine`` reaches it, inf where only ``theirs`` does, and 1 where neither does (no budget
+    tells them apart). NaN throughout where they share no pair."""
+    both = [p for p in mine.pairs if p in set(theirs.pairs)]
+    if not both:
+        return math.nan, math.nan, math.nan
+    a, b = (_rows(curve, both) for curve in (mine, theirs))
+    draws = np.random.default_rng(seed).integers(0, len(both), (RESAMPLES, len(both)))
+    ratios = [_ratio(_reach(a, index), _reach(b, index)) for index in (np.arange(len(both))[None], draws)]
+    low, high = np.percentile(ratios[1], [2.5, 97.5], method="inverted_cdf")
+    return float(ratios[0][0]), float(low), float(high)
+
+
+def area_difference(mine: Curve, theirs: Curve, seed: int = 0) -> tuple[float, float, float]:
+    """The area under ``mine`` minus the area under ``theirs`` (:meth:`Curve.area`, each over its own
+    budgets), on the pairs both ran, with its 95% percentile bootstrap interval (the pairs resampled
+    together). NaN throughout where they share no pair or a curve has one budget."""
+    both = [p for p in mine.pairs if p in set(theirs.pairs)]
+    if not both:
+        return math.nan, math.nan, math.nan
+    a, b = (_rows(curve, both) for curve in (mine, theirs))
+    draws = np.random.default_rng(seed).integers(0, len(both), (RESAMPLES, len(both)))
+    differences = _areas(a, draws) - _areas(b, draws)
+    point = _areas(a, np.arange(len(both))[None]) - _areas(b, np.arange(len(both))[None])
+    low, high = np.percentile(differences, [2.5, 97.5], method="inverted_cdf")
+    return float(point[0]), float(low), float(high)
+
+
+def _areas(curve: Curve, draws: np.ndarray) -> np.ndarray:
+    """(R,) :meth:`Curve.area` of each resample (R, S) of the curve's rows."""
+    x, y = _mean_share(curve.labels[draws], curve.success[draws], curve.oracle[draws])
+    if x.shape[1] < 2:
+        return np.full(len(x), math.nan)
+    log_x = np.log(x)
+    return np.sum((y[:, 1:] + y[:, :-1]) / 2 * np.diff(log_x, axis=1), axis=1) / (log_x[:, -1] - log_x[:, 0])
+
+
+def _rows(curve: Curve, pairs: list[Hashable]) -> Curve:
+    """``curve`` on ``pairs`` alone, in their order."""
+    index = [curve.pairs.index(p) for p in pairs]
+    return Curve(curve.budgets, curve.labels[index], curve.success[index], curve.oracle[index], tuple(pairs))
+
+
+def _reach(curve: Curve, draws: np.ndarray) -> np.ndarray:
+    """(R,) the labels to reach :data:`SHARE` on each resample (R, S) of the curve's rows."""
+    return first_reach(*_mean_share(curve.labels[draws], curve.success[draws], curve.oracle[draws]))
+
+
+def _ratio(mine: np.ndarray, theirs: np.ndarray) -> np.ndarray:
+    """``mine / theirs``, which is 0 and inf where one is inf; 1 where both are."""
+    with np.errstate(invalid="ignore"):
+        return np.where(np.isinf(mine) & np.isinf(theirs), 1.0, mine / theirs)
 
 
 def _mean_share(labels: np.ndarray, success: np.ndarray, oracle: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -17,6 +17,8 @@ under the figure.
 from __future__ import annotations
 
 import math
+import re
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +29,7 @@ from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.budget_arms import BUDGET, STRATEGY
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
+from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.label_curves import SHARE, Curve, labels_text
 from dospcot_lab.studies.tables import cpu_per_run, labels_used
 
@@ -52,12 +55,17 @@ TASKS: dict[str, tuple[str, str, tuple[str, ...], dict[str, tuple[str, ...]]]] =
 """Per task: its presets' prefix, the view of its one-view arms (the presets' own), its budgets and
 the settings every arm of it takes."""
 
-LOW_BUDGETS: dict[str, tuple[str, ...]] = {"grid16": ("1", "2", "3"), "doorkey": ("5", "10")}
+LOW_BUDGETS: dict[str, tuple[str, ...]] = {
+    "grid16": ("1", "2", "3"),
+    "doorkey": ("5", "10"),
+    "fasthighway": ("25", "50"),
+}
 """Budgets below the registered ones, added after the exploration's seeds 0-1 under version 12 (its
 first runs) had every arm at the oracle at the smallest registered budget on grid16 and DOSPCoT at 90%
-of it there on DoorKey: a curve needs budgets where the arms fail. The arms that compare views train
-them in sweeps of their own (``-low`` before the version's suffix); the blind control keeps the largest
-budget alone."""
+of it there on DoorKey, and after seed 0 of DOSPCoT on the fast highway held the oracle's success at
+100 labels: a curve needs budgets where the arms fail. The arms that compare views train them in sweeps
+of their own (``-low`` before the version's suffix); the blind control keeps the largest budget
+alone."""
 
 
 def budgets_of(task: str) -> tuple[str, ...]:
@@ -84,48 +92,75 @@ ONE_VIEW = ("twin", "reward model", "self-training")
 """The arms that read one view, DOSPCoT's peers."""
 
 
+Grid = dict[str, tuple[str, ...]]
+
+
+def _sweep(
+    study: str, task: str, arm: str, preset: str, grid: Grid, part: str = "", maps: Grid | None = None
+) -> Sweep:
+    """One arm's sweep of ``study`` on ``task``, at the settings ``grid`` adds to the task's and ``maps``'
+    (grid16's layouts)."""
+    prefix, _, _, settings = TASKS[task]
+    name = f"{study}-{task}-{arm.lower().replace(' ', '-')}{part}-v{DEFAULTS}"
+    return Sweep(
+        name,
+        (f"{prefix}-{preset}",),
+        {**settings, **(maps or {}), **grid},
+        numerics=NUMERICS,
+        defaults=DEFAULTS,
+    )
+
+
+def comparing_arms(
+    study: str, task: str, spend: Grid, part: str = "", maps: Grid | None = None
+) -> tuple[Sweep, ...]:
+    """The sweeps of the arms that compare views (DOSPCoT, the twin, the reward model, self-training) at
+    the budgets of ``spend``."""
+    view = TASKS[task][1]
+    disagreement = {**spend, STRATEGY: (DISAGREEMENT,)}
+    return (
+        _sweep(study, task, "DOSPCoT", "dospcot", disagreement, part, maps),
+        _sweep(
+            study, task, "twin", "dospcot", {**disagreement, "views": (f'["{view}", "{view}"]',)}, part, maps
+        ),
+        _sweep(study, task, "reward model", "reward-model", {**disagreement, **SCORE_PASSES}, part, maps),
+        _sweep(
+            study, task, "self-training", "self-training", {**spend, STRATEGY: (UNCERTAINTY,)}, part, maps
+        ),
+    )
+
+
+def curve_sweeps(
+    study: str, task: str, budgets: tuple[str, ...], maps: Grid | None = None
+) -> tuple[Sweep, ...]:
+    """A task's curves: the oracle, the arms that compare views at ``budgets`` and the blind control at
+    the largest."""
+    return (
+        _sweep(study, task, "oracle", "oracle", {}, maps=maps),
+        *comparing_arms(study, task, {BUDGET: budgets}, maps=maps),
+        _sweep(study, task, "blind", "dospcot", {BUDGET: budgets[-1:], STRATEGY: ('"random"',)}, maps=maps),
+    )
+
+
 def _sweeps(task: str) -> tuple[Sweep, ...]:
-    prefix, view, budgets, settings = TASKS[task]
-
-    def sweep(arm: str, preset: str, grid: dict[str, tuple[str, ...]], part: str = "") -> Sweep:
-        name = f"views-{task}-{arm.lower().replace(' ', '-')}{part}-v{DEFAULTS}"
-        grid = {**settings, **grid}
-        return Sweep(name, (f"{prefix}-{preset}",), grid, numerics=NUMERICS, defaults=DEFAULTS)
-
-    def arms(spend: dict[str, tuple[str, ...]], part: str = "") -> tuple[Sweep, ...]:
-        """The arms that compare views, at the budgets of ``spend``."""
-        return (
-            sweep("DOSPCoT", "dospcot", {**spend, STRATEGY: (DISAGREEMENT,)}, part),
-            sweep(
-                "twin",
-                "dospcot",
-                {**spend, STRATEGY: (DISAGREEMENT,), "views": (f'["{view}", "{view}"]',)},
-                part,
-            ),
-            sweep("reward model", "reward-model", {**spend, STRATEGY: (DISAGREEMENT,), **SCORE_PASSES}, part),
-            sweep("self-training", "self-training", {**spend, STRATEGY: (UNCERTAINTY,)}, part),
-        )
-
-    low = arms({BUDGET: LOW_BUDGETS[task]}, "-low") if task in LOW_BUDGETS else ()
-    spend = {BUDGET: budgets}
+    """The exploration's sweeps of ``task``: its curves at the registered budgets, DOSPCoT with identical
+    blind spots on the blind-spot task, and the arms that compare views below the registered budgets."""
+    budgets, settings = TASKS[task][2], TASKS[task][3]
     identical = (
         (
-            sweep(
+            _sweep(
+                "views",
+                task,
                 "dospcot-identical",
                 "dospcot",
-                {**spend, STRATEGY: (DISAGREEMENT,), BLIND_SPOTS: ('"identical"',)},
+                {BUDGET: budgets, STRATEGY: (DISAGREEMENT,), BLIND_SPOTS: ('"identical"',)},
             ),
         )
         if BLIND_SPOTS in settings
         else ()
     )
-    return (
-        sweep("oracle", "oracle", {}),
-        *arms(spend),
-        sweep("blind", "dospcot", {BUDGET: budgets[-1:], STRATEGY: ('"random"',)}),
-        *identical,
-        *low,
-    )
+    low = comparing_arms("views", task, {BUDGET: LOW_BUDGETS[task]}, "-low") if task in LOW_BUDGETS else ()
+    return (*curve_sweeps("views", task, budgets), *identical, *low)
 
 
 def arm_of(run: TrialRun) -> str:
@@ -158,24 +193,44 @@ def task_of(run: TrialRun) -> str | None:
     )
 
 
-def curves(runs: list[TrialRun]) -> dict[str, Curve]:
-    """Each arm's curve on one task's ``runs``, over the seeds the arm ran at every budget and the oracle
-    ran too; an arm with no such seed has none."""
-    oracle = {r.trial.seed: r.summary["mean"]["success"] for r in runs if arm_of(r) == "oracle"}
+def success_of(run: TrialRun, view: str | None = None) -> float:
+    """A run's last-round success: the mean over its agents, or (``view``) over its agents on that view
+    alone (a twin's second agent on it is named ``<view>-2``); NaN where no agent reads ``view``."""
+    if view is None:
+        return float(run.summary["mean"]["success"])
+    on_view = [
+        v["success"]
+        for k, v in run.summary["per_view"].items()
+        if re.fullmatch(rf"{re.escape(view)}(-\d+)?", k)
+    ]
+    return float(np.mean(on_view)) if on_view else math.nan
+
+
+def pair_of(run: TrialRun) -> tuple[str, int]:
+    """What pairs a run with the other arms' runs: its grid16 layout ("" on other tasks) and seed."""
+    return run.trial.params.get(LAYOUT, ""), run.trial.seed
+
+
+def curves(runs: list[TrialRun], view: str | None = None) -> dict[str, Curve]:
+    """Each arm's curve on one task's ``runs``, over the pairs (:func:`pair_of`) the arm ran at every
+    budget and the oracle ran too; an arm with no such pair has none. Success is each run's mean over its
+    agents, or (``view``) over its agents on that view (:func:`success_of`)."""
+    oracle = {pair_of(r): success_of(r, view) for r in runs if arm_of(r) == "oracle"}
     found = {}
     for arm in ARMS:
-        cells: dict[str, dict[int, TrialRun]] = {}
+        cells: dict[str, dict[tuple[str, int], TrialRun]] = {}
         for r in runs:
             if arm_of(r) == arm:
-                cells.setdefault(r.trial.params[BUDGET], {})[r.trial.seed] = r
-        seeds = sorted(set(oracle).intersection(*(set(c) for c in cells.values()))) if cells else []
-        if seeds:
+                cells.setdefault(r.trial.params[BUDGET], {})[pair_of(r)] = r
+        pairs = sorted(set(oracle).intersection(*(set(c) for c in cells.values()))) if cells else []
+        if pairs:
             order = sorted(cells, key=float)
             found[arm] = Curve(
                 np.array([float(b) for b in order]),
-                np.array([[labels_used(cells[b][s]) for b in order] for s in seeds]),
-                np.array([[cells[b][s].summary["mean"]["success"] for b in order] for s in seeds]),
-                np.array([oracle[s] for s in seeds], dtype=float),
+                np.array([[labels_used(cells[b][p]) for b in order] for p in pairs]),
+                np.array([[success_of(cells[b][p], view) for b in order] for p in pairs]),
+                np.array([oracle[p] for p in pairs], dtype=float),
+                tuple(pairs),
             )
     return found
 
@@ -186,25 +241,42 @@ def _ends(curve: Curve) -> tuple[float, float]:
     return float(np.max(curve.labels)), float(curve.labels.mean(axis=0).min())
 
 
-def _task_table(task: str, runs: list[TrialRun]) -> list[str]:
+def _task_table(task: str, runs: list[TrialRun], budgets: tuple[str, ...]) -> list[str]:
     """One task: each arm's success as a share of the oracle's at each budget (labels used beside it),
-    the labels to reach 90% of the oracle with its interval, and the area under its curve."""
-    budgets = budgets_of(task)
-    found = curves(runs)
+    the labels to reach 90% of the oracle with its interval, and the area under its curve; first over
+    each run's agents, then over its agents on the one-view arms' view alone."""
+    view = TASKS[task][1]
     oracle = [r for r in runs if arm_of(r) == "oracle"]
     lines = [
         "",
         f"### {task}",
         "",
-        f"The oracle (every reward): success {SeedSummary.of([r.summary['mean']['success'] for r in oracle])}"
+        f"The oracle (every reward): success {SeedSummary.of([success_of(r) for r in oracle])}"
         f" over {len(oracle)} seeds; {cpu_per_run(oracle)}.",
     ]
+    found = curves(runs)
     if not found:
         return lines
-    lines += [
-        "",
+    lines += ["", *_curve_rows(budgets, found, runs)]
+    on_view = curves(runs, view)
+    if any(arm in on_view for arm in ("DOSPCoT", "blind")):
+        lines += [
+            "",
+            f"The same on the {view} agent alone, the view of the one-view arms: DOSPCoT's and the blind "
+            f"control's other agent left out, and the oracle's {view} agent the target "
+            f"({SeedSummary.of([success_of(r, view) for r in oracle])}):",
+            "",
+            *_curve_rows(budgets, on_view, runs),
+        ]
+    return lines
+
+
+def _curve_rows(budgets: tuple[str, ...], found: dict[str, Curve], runs: list[TrialRun]) -> list[str]:
+    """The table of each arm's curve in ``found``: its share of the oracle at each budget with the labels
+    used, its labels to the oracle's share, the area under it, its seeds and CPU time per run."""
+    lines = [
         f"| arm | {' | '.join(f'budget {b}' for b in budgets)} | labels to {SHARE:.0%} of the oracle "
-        "[95% interval] | area under the curve | seeds | CPU time per run |",
+        "[95% interval] | area under the curve | runs per budget | CPU time per run |",
         "|---|" + "---|" * (len(budgets) + 4),
     ]
     for arm, curve in found.items():
@@ -260,11 +332,10 @@ def _dependence_table(runs: list[TrialRun]) -> list[str]:
     return lines if len(lines) > 2 else []
 
 
-def _accuracy_table(task: str, runs: list[TrialRun]) -> list[str]:
+def _accuracy_table(runs: list[TrialRun], budgets: tuple[str, ...]) -> list[str]:
     """Per arm that rewards unlabelled samples, its pseudo-reward accuracy at each budget, mean over
     seeds at the last round: where success saturates (the grid, whose lava does not end an episode),
     what the classifiers got right still tells the arms apart."""
-    budgets = budgets_of(task)
     lines = [f"| arm | {' | '.join(f'budget {b}' for b in budgets)} |", "|---|" + "---|" * len(budgets)]
     for arm in (a for a in ARMS if a != "blind"):
         cells = {
@@ -293,15 +364,16 @@ def _reach_against_best_peer(found: dict[str, Curve]) -> tuple[str, str | None]:
 
 def _margins(runs: list[TrialRun]) -> list[str]:
     """Across tasks: DOSPCoT's views' error correlation beside the twin's, and the labels each needs to
-    reach the oracle's share beside the best one-view peer's, so dependence reads against margin."""
+    reach the oracle's share beside the best one-view peer's, over each run's agents and then on the
+    one-view arms' view alone, so dependence reads against margin."""
     lines = [
         f"| task | DOSPCoT's error correlation | the twin's | DOSPCoT's labels to {SHARE:.0%} | "
-        "best one-view peer's |",
-        "|---|---|---|---|---|",
+        "best one-view peer's | on the peers' view: DOSPCoT's | best peer's |",
+        "|---|---|---|---|---|---|---|",
     ]
-    for task in TASKS:
+    for task, (_, view, _, _) in TASKS.items():
         members = [r for r in runs if task_of(r) == task]
-        found = curves(members)
+        found, on_view = curves(members), curves(members, view)
         if "DOSPCoT" not in found:
             continue
         correlation = {
@@ -309,44 +381,55 @@ def _margins(runs: list[TrialRun]) -> list[str]:
             for arm in ("DOSPCoT", "twin")
         }
         mine, peer = _reach_against_best_peer(found)
+        mine_on_view, peer_on_view = _reach_against_best_peer(on_view)
         lines.append(
-            f"| {task} | {correlation['DOSPCoT']} | {correlation['twin']} | {mine} | {peer or '–'} |"
+            f"| {task} | {correlation['DOSPCoT']} | {correlation['twin']} | {mine} | {peer or '–'} | "
+            f"{mine_on_view} | {peer_on_view or '–'} |"
         )
     return lines if len(lines) > 2 else []
 
 
-def tables(runs: list[TrialRun]) -> list[str]:
-    """Per task, the arms' curves (:func:`_task_table`), their pseudo-reward accuracy and their
-    classifiers' error dependence; then, across tasks, dependence beside margin; then every arm's
-    settings."""
-    lines = [
-        "",
-        f"Each budget's cell: success as a share of the oracle's mean success (labels used per run). "
-        f"Labels to {SHARE:.0%} of the oracle are interpolated on the arm's mean curve, with a 95% "
-        'bootstrap interval over seeds ("> N": not reached by its largest budget, N labels; "<= N": reached '
-        "at its smallest); the area "
-        "under the curve is over log labels from the arm's smallest budget to its largest, the oracle's "
-        "being 1. Figure: [views.png](views.png).",
-    ]
-    for task in TASKS:
-        members = [r for r in runs if task_of(r) == task]
-        if members:
-            lines += _task_table(task, members)
-            accuracy = _accuracy_table(task, members)
-            if accuracy:
-                lines += ["", "Pseudo-reward accuracy, mean over seeds, last round:", "", *accuracy]
-            dependence = _dependence_table(members)
-            if dependence:
-                lines += [
-                    "",
-                    "The classifiers' error dependence, last round (docs/design.md, section 4):",
-                    "",
-                ]
-                lines += dependence
-    margins = _margins(runs)
-    if margins:
-        lines += ["", "### Dependence against margin", "", *margins]
-    return [*lines, "", "| arm | settings |", "|---|---|", *(f"| {a} | {s} |" for a, s in ARMS.items())]
+def tables_linking(
+    figure_name: str, budgets: Callable[[str], tuple[str, ...]] = budgets_of
+) -> Callable[[list[TrialRun]], list[str]]:
+    """The tables of a page whose figure is ``figure_name``, each task's columns at ``budgets(task)``:
+    per task, the arms' curves (:func:`_task_table`), their pseudo-reward accuracy and their classifiers'
+    error dependence; then, across tasks, dependence beside margin; then every arm's settings."""
+
+    def tables(runs: list[TrialRun]) -> list[str]:
+        """The study's tables on ``runs``, its figure linked as ``figure_name``."""
+        lines = [
+            "",
+            f"Each budget's cell: success as a share of the oracle's mean success (labels used per run). "
+            f"Labels to {SHARE:.0%} of the oracle are interpolated on the arm's mean curve, with a 95% "
+            'bootstrap interval over seeds ("> N": not reached by its largest budget, N labels; "<= N": '
+            "reached at its smallest); the area under the curve is over log labels from the arm's smallest "
+            f"budget to its largest, the oracle's being 1. Figure: [{figure_name}]({figure_name}).",
+        ]
+        for task in TASKS:
+            members = [r for r in runs if task_of(r) == task]
+            if members:
+                lines += _task_table(task, members, budgets(task))
+                accuracy = _accuracy_table(members, budgets(task))
+                if accuracy:
+                    lines += ["", "Pseudo-reward accuracy, mean over seeds, last round:", "", *accuracy]
+                dependence = _dependence_table(members)
+                if dependence:
+                    lines += [
+                        "",
+                        "The classifiers' error dependence, last round (docs/design.md, section 4):",
+                        "",
+                    ]
+                    lines += dependence
+        margins = _margins(runs)
+        if margins:
+            lines += ["", "### Dependence against margin", "", *margins]
+        return [*lines, "", "| arm | settings |", "|---|---|", *(f"| {a} | {s} |" for a, s in ARMS.items())]
+
+    return tables
+
+
+tables = tables_linking("views.png")
 
 
 def figure(runs: list[TrialRun], path: Path) -> None:

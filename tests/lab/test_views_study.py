@@ -57,23 +57,28 @@ def _run(
     success: float,
     labels: float,
     correlation: float = math.nan,
+    per_view: dict[str, float] | None = None,
 ) -> TrialRun:
     """A finished run whose folder under ``folder`` holds a ``run_info.json`` of 60 CPU-s (the tables
-    read it)."""
+    read it); its agents' success per view is ``per_view`` (one patch agent at ``success`` if None)."""
     run_dir = folder / f"{preset}-{'-'.join(params.values())}-{seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0}))
     mean = {"success": success, "labelled_steps": labels, "pseudo_accuracy": 0.9 + success / 10}
     # metrics.csv's rows: the last round's error correlation is the one the tables read.
     rows = [{"round": 1.0, "error_correlation": 0.9}, {"round": 2.0, "error_correlation": correlation}]
-    return TrialRun(Trial(preset, preset, params, seed), {"mean": mean}, rows, run_dir)
+    views = {name: {"success": value} for name, value in (per_view or {"patch": success}).items()}
+    return TrialRun(Trial(preset, preset, params, seed), {"mean": mean, "per_view": views}, rows, run_dir)
 
 
 def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_ran(tmp_path):
     strategy, budget = "training.label_strategy", "training.label_budget"
     disagreement = {strategy: '"outcomes+disagreement"'}
     twin = {**disagreement, "views": '["patch", "patch"]'}
-    runs = [_run(tmp_path, "grid16-oracle", {}, seed, 1.0, 500.0) for seed in (0, 1)]
+    runs = [
+        _run(tmp_path, "grid16-oracle", {}, seed, 1.0, 500.0, per_view={"patch": 1.0, "rays": 1.0})
+        for seed in (0, 1)
+    ]
     for b, success in (("5", (0.2, 0.4)), ("10", (0.6, 0.8)), ("20", (1.0, 1.0))):
         for seed in (0, 1):
             runs.append(
@@ -85,10 +90,25 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
                     success[seed],
                     2.0 * float(b),
                     correlation=0.1 * seed,
+                    # Its patch agent twice as good as the mean (capped at 1), its rays agent the rest.
+                    per_view={
+                        "patch": min(1.0, 2 * success[seed]),
+                        "rays": 2 * success[seed] - min(1.0, 2 * success[seed]),
+                    },
                 )
             )
+            half = success[seed] / 2
             runs.append(
-                _run(tmp_path, "grid16-dospcot", {**twin, budget: b}, seed, success[seed] / 2, float(b), 0.8)
+                _run(
+                    tmp_path,
+                    "grid16-dospcot",
+                    {**twin, budget: b},
+                    seed,
+                    half,
+                    float(b),
+                    0.8,
+                    {"patch": half, "patch-2": half},
+                )
             )
     runs.append(_run(tmp_path, "grid16-dospcot", {strategy: '"random"', budget: "20"}, 0, 0.1, 20.0))
     runs.append(
@@ -110,7 +130,12 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
     assert f"| blind {low}| – | – | 0.10 (20) | – | > 20 [> 20, > 20] | – | 1 |" in text
     # The last round's error correlation, mean over each arm's runs: DOSPCoT's 0 and 0.1, the twin's 0.8.
     assert "| DOSPCoT | – | – | – | 0.050 | 6 |" in text and "| twin | – | – | – | 0.800 | 6 |" in text
-    assert "| grid16 | 0.050 | 0.800 | 33 | twin > 20 |" in text  # the twin's largest budget: 20 labels
+    # On the patch agent alone, DOSPCoT's shares are 0.6, 1.0 and 1.0: it reaches 0.9 at 10 + 0.3 / 0.4 x
+    # 10 labels (17.5), seed 0 alone at 18.3 and seed 1 alone at 15. The twin's two agents read patch.
+    assert f"| DOSPCoT {low}| 0.60 (10) | 1.00 (20) | 1.00 (40) | – | 18 [15, 18] |" in text
+    assert text.count(f"| twin {low}| 0.15 (5) | 0.35 (10) | 0.50 (20) | – | > 20 [> 20, > 20] |") == 2
+    # The twin's largest budget: 20 labels.
+    assert "| grid16 | 0.050 | 0.800 | 33 | twin > 20 | 18 | twin > 20 |" in text
     # Pseudo-reward accuracy (0.9 + success / 10 in these runs), mean over seeds per budget; the blind
     # control is left out, and the peer's one run sits at budget 5.
     assert f"| DOSPCoT {low}| 0.930 | 0.970 | 1.000 | – |" in text
@@ -141,13 +166,15 @@ def test_the_study_trains_every_arm_under_version_12_at_the_tasks_budgets_with_s
     low = [name for name in specs if "-low-" in name]
     assert sorted(low) == sorted(
         f"views-{task}-{arm}-low-v12"
-        for task in ("grid16", "doorkey")
+        for task in ("grid16", "doorkey", "fasthighway")
         for arm in ("dospcot", "twin", "reward-model", "self-training")
     )
+    assert specs["views-fasthighway-dospcot-low-v12"].grid["training.label_budget"] == ("25", "50")
     assert specs["views-doorkey-twin-low-v12"].grid["training.label_budget"] == ("5", "10")
     assert specs["views-grid16-reward-model-low-v12"].grid["training.pass_kind"] == ('"score"',)
-    # 940 registered trials, and 4 arms x (3 budgets on grid16 + 2 on DoorKey) x 10 seeds below them.
-    assert sum(len(spec.trials(check_task=False)) for spec in specs.values()) == 940 + 4 * 5 * 10
+    # 940 registered trials, and 4 arms x (3 budgets on grid16 + 2 on DoorKey + 2 on the fast highway) x
+    # 10 seeds below them.
+    assert sum(len(spec.trials(check_task=False)) for spec in specs.values()) == 940 + 4 * 7 * 10
 
 
 @pytest.mark.parametrize(
