@@ -38,9 +38,19 @@ def test_a_one_budget_arm_shows_its_interval_and_a_one_x_panel_ticks_that_x_alon
     spans = [seg for bar in bars for seg in bar.lines[2][0].get_segments()]
     assert [(s[0][1], s[1][1]) for s in spans] == [pytest.approx((0.6, 0.8)), pytest.approx((0.3, 0.7))]
     assert spans[0][0][0] < 20.0 < spans[1][0][0]
-    # A curve keeps its shaded band and ticks its log axis in plain numbers at 1, 2 and 5 a decade.
+    # A curve keeps its shaded band and ticks its log axis at each x measured, in plain numbers.
     assert not doorkey.containers and doorkey.collections
-    low, high = doorkey.get_xlim()
-    ticks = zip(doorkey.get_xticklabels(), doorkey.get_xticks(), strict=True)
+    assert list(doorkey.get_xticks()) == [25.0, 50.0, 100.0, 200.0]
+    assert [label.get_text() for label in doorkey.get_xticklabels()] == ["25", "50", "100", "200"]
+
+
+def test_a_log_axis_of_many_xs_ticks_1_2_and_5_a_decade_in_plain_numbers(drawn, tmp_path):
+    xs = [3.0, 6.0, 12.0, 25.0, 50.0, 100.0, 200.0, 400.0, 800.0]
+    plot_bands(
+        {"curve": [_band("DOSPCoT", xs, [0.5] * len(xs), 0.1)]}, "labels", "s", tmp_path / "f.png", log_x=True
+    )
+    ax = drawn[0].axes[0]
+    low, high = ax.get_xlim()
+    ticks = zip(ax.get_xticklabels(), ax.get_xticks(), strict=True)
     shown = [label.get_text() for label, x in ticks if low <= x <= high]
-    assert shown == ["50", "100", "200"]
+    assert shown == ["5", "10", "20", "50", "100", "200", "500", "1000"]

@@ -12,7 +12,7 @@ import matplotlib
 matplotlib.use("Agg")  # headless: runs write PNGs on machines without a display
 import matplotlib.pyplot as plt
 import numpy as np
-from matplotlib.ticker import LogLocator, ScalarFormatter
+from matplotlib.ticker import FuncFormatter, LogLocator
 
 from dospcot.run.run_folder import atomic_write
 
@@ -22,6 +22,10 @@ PANELS = (
     ("pseudo_accuracy", "pseudo-reward accuracy"),
     ("coverage", "coverage of U"),
 )
+
+MEASURED_TICKS = 8
+"""A log axis with at most this many distinct x values ticks each of them (a label curve's budgets);
+with more, it ticks 1, 2 and 5 of each decade."""
 
 
 def plot_learning_curves(records: list[dict], path: Path, names: Sequence[str], title: str = "") -> None:
@@ -111,11 +115,14 @@ def plot_bands(
         ax.set_title(title)
         ax.set_xlabel(xlabel)
         ax.set_ylabel(ylabel)
-        if log_x:  # ticks at 1, 2 and 5 of each decade, written out (budgets read as 20, not 2 x 10^1)
+        if log_x:  # written out (budgets read as 20, not 2 x 10^1)
             ax.set_xscale("log")
-            ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
-            ax.xaxis.set_major_formatter(ScalarFormatter())
             ax.minorticks_off()
+            if xs.size <= MEASURED_TICKS:  # a curve read at a few budgets: tick each one measured
+                ax.set_xticks(xs, [f"{x:.3g}" for x in xs])
+            else:  # at 1, 2 and 5 of each decade
+                ax.xaxis.set_major_locator(LogLocator(subs=(1.0, 2.0, 5.0)))
+                ax.xaxis.set_major_formatter(FuncFormatter(lambda x, _: f"{x:g}"))
         if one_x:  # after the scale, which sets its own ticks
             ax.set_xticks(xs, [f"{xs[0]:g}"])
             ax.minorticks_off()

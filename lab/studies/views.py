@@ -432,13 +432,14 @@ def tables_linking(
 tables = tables_linking("views.png")
 
 
-def figure(runs: list[TrialRun], path: Path) -> None:
+def figure(runs: list[TrialRun], path: Path, on_view: bool = False) -> None:
     """One panel per task: each arm's success as a share of the oracle's against labels used (log
-    axis), with its 95% band over seeds."""
+    axis), with its 95% band over seeds; the success of each run's agents, or (``on_view``) of its
+    agents on the one-view arms' view."""
     panels = {}
-    for task in TASKS:
+    for task, (_, view, _, _) in TASKS.items():
         bands = []
-        for arm, curve in curves([r for r in runs if task_of(r) == task]).items():
+        for arm, curve in curves([r for r in runs if task_of(r) == task], view if on_view else None).items():
             x, y = curve.share()
             shares, order = curve.shares(), np.argsort(curve.labels.mean(axis=0))
             stats = [SeedSummary.of(list(shares[:, i])) for i in order]
