@@ -13,7 +13,7 @@ from dospcot.cli import main
 from dospcot.config.errors import ConfigError
 from dospcot.config.presets import preset_names
 from dospcot.config.reference import config_reference
-from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS, lineage
+from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS, lineage, moved_for_some_methods
 from dospcot.tasks import load_config, load_run_config
 
 
@@ -122,6 +122,12 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     train, paper = reference.split('## A paper-protocol config (`task = "paper"`)')
     assert "| `numerics` | `int` | `2` (`defaults = 1`: `1`) |" in train
     assert "| `numerics` | `int` | `1` |" in paper and "defaults = 1" not in paper
+    # A key moved for some methods only names them, and what the others keep.
+    assert moved_for_some_methods()["training.cotrain_passes"] == ["dospcot"]
+    assert moved_for_some_methods()["training.label_budget"] == ["dospcot", "reward-model"]
+    assert "cotraining.numerics" not in moved_for_some_methods()
+    passes = "`10` for method `dospcot` (`defaults = 1`, and the other methods: `1`)"
+    assert f"| `cotrain_passes` | `int` | {passes} |" in train
 
 
 def test_version_2_moves_what_each_method_and_view_count_can_use():

@@ -12,7 +12,7 @@ import dataclasses
 import json
 import math
 import re
-from collections.abc import Iterator, Mapping
+from collections.abc import Iterator, Mapping, Sequence
 from typing import Any
 
 DQN_NOTES = {
@@ -144,13 +144,16 @@ def section_tables(
     key: str,
     extra_docs: Mapping[str, str] | None = None,
     adopted: Mapping[str, Any] | None = None,
+    methods: Mapping[str, Sequence[str]] | None = None,
 ) -> list[str]:
     """The markdown reference of one config section (the dataclass ``cls``, read from ``[key]``), then
     of its sub-sections; the top level's keys where ``key`` is empty.
 
     :param adopted: dotted key -> its default under the adopted version of the defaults, for each key
         that version moves (:func:`dospcot.config.versions.adopted_moves`); its cell names the first
-        version's default beside it."""
+        version's default beside it.
+    :param methods: dotted key -> the methods it is moved for, for each key of ``adopted`` that the
+        version moves for some methods only (:func:`dospcot.config.versions.moved_for_some_methods`)."""
     lines: list[str] = []
     by_section: dict[str, list[KeyRow]] = {}
     for row in key_rows(cls, key, extra_docs):
@@ -168,6 +171,12 @@ def section_tables(
             default = f"`{row.default}`"
             if adopted and row.dotted in adopted:
                 default = f"`{toml_value(adopted[row.dotted])}` (`defaults = 1`: `{row.default}`)"
+                if methods and row.dotted in methods:
+                    named = ", ".join(f"`{m}`" for m in methods[row.dotted])
+                    default = (
+                        f"`{toml_value(adopted[row.dotted])}` for method {named} (`defaults = 1`, and the "
+                        f"other methods: `{row.default}`)"
+                    )
             lines.append(f"| `{row.key}` | `{row.type}` | {default} | {meaning} |")
         for note, mapping in (
             ("Set elsewhere, not in this section", getattr(section_cls, "set_elsewhere", {})),
@@ -195,16 +204,16 @@ def config_reference(dqn_docs: Mapping[str, str] | None = None) -> str:
     """Every key of a ``dospcot train`` config and of a paper-protocol config, with its default, as
     markdown tables; ``dqn_docs``: the ``[dqn]`` keys' meanings from SB3 (:func:`sb3_dqn_docs`)."""
     from dospcot.config.run_configs import PaperConfig, TrainConfig
-    from dospcot.config.versions import adopted_moves
+    from dospcot.config.versions import adopted_moves, moved_for_some_methods
 
-    adopted = adopted_moves()
+    adopted, methods = adopted_moves(), moved_for_some_methods()
     lines = ["## A training config (`dospcot train`)", ""]
-    lines += section_tables(_root_part(TrainConfig, "TrainConfig"), "", adopted=adopted)
+    lines += section_tables(_root_part(TrainConfig, "TrainConfig"), "", adopted=adopted, methods=methods)
     for field in dataclasses.fields(TrainConfig):
         default = field_default(field)
         if dataclasses.is_dataclass(default):
             extra = dqn_docs if field.name == "dqn" else None
-            lines += section_tables(type(default), field.name, extra, adopted)
+            lines += section_tables(type(default), field.name, extra, adopted, methods)
     lines += ['## A paper-protocol config (`task = "paper"`)', ""]
     lines += section_tables(_root_part(PaperConfig, "PaperConfig"), "")
     lines += section_tables(type(PaperConfig().tabular), "tabular")

@@ -60,9 +60,9 @@ import copy
 import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, get_args
 
-from dospcot.config.choices import DEFAULT_VIEWS, method_name
+from dospcot.config.choices import DEFAULT_VIEWS, Method, method_name
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import CoTrainingConfig, TrainingConfig
 from dospcot.config.loading import set_key
@@ -395,10 +395,25 @@ def lineage(version: int) -> list[int]:
     return chain[::-1]
 
 
-def adopted_moves() -> dict[str, Any]:
-    """The keys the adopted version moves for a config that sets nothing of its own (the default
-    method, views and task): dotted key -> its default there. The configuration reference shows these."""
-    return {key: value for key, (value, _) in moved_keys({}, ("env", EnvConfig)).items()}
+def adopted_moves(method: str | None = None) -> dict[str, Any]:
+    """The keys the adopted version moves for a config that sets nothing of its own but ``method`` (None:
+    the default method; the default views and task): dotted key -> its default there. The configuration
+    reference shows these."""
+    table = {} if method is None else {"method": method}
+    return {key: value for key, (value, _) in moved_keys(table, ("env", EnvConfig)).items()}
+
+
+def moved_for_some_methods() -> dict[str, list[str]]:
+    """The keys the adopted version moves to their default for :func:`adopted_moves` under some methods
+    and not others: dotted key -> the methods it moves them for (the reward-model peer keeps one
+    co-training pass a round, say, where DOSPCoT takes ten)."""
+    adopted = adopted_moves()
+    by_method = {method: adopted_moves(method) for method in get_args(Method)}
+    found = {
+        key: [m for m, moves in by_method.items() if moves.get(key) == value]
+        for key, value in adopted.items()
+    }
+    return {key: methods for key, methods in found.items() if len(methods) < len(by_method)}
 
 
 def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tuple[Any, str]]:
