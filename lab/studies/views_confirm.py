@@ -34,6 +34,7 @@ from dospcot_lab.studies.label_curves import SHARE, Curve, area_difference, labe
 from dospcot_lab.studies.views import (
     ONE_VIEW,
     TASKS,
+    arm_of,
     curve_sweeps,
     curves,
     figure,
@@ -118,7 +119,11 @@ def hypotheses(runs: list[TrialRun]) -> tuple[list[str], dict[str, str], list[st
         counted["V4"] += v4
         finite = [
             c
-            for c in (last_round_dependence(r)["error_correlation"] for r in runs if task_of(r) == task)
+            for c in (
+                last_round_dependence(r)["error_correlation"]
+                for r in runs
+                if task_of(r) == task and arm_of(r) == "DOSPCoT"
+            )
             if not math.isnan(c)
         ]
         dependence = float(np.mean(finite)) if finite else math.nan

@@ -47,7 +47,8 @@ def _run(
 
 def _task_runs(task: str, reach: dict[str, int | None], correlation: float) -> list[TrialRun]:
     """Two seeds of every arm on ``task``: an arm succeeds from the budget of index ``reach[arm]`` on
-    (never where None); the oracle always does."""
+    (never where None); the oracle always does. DOSPCoT's classifiers' errors correlate ``correlation``,
+    every other arm's 0.5."""
     runs = [_run(task, "oracle", {}, seed, 1.0, math.nan) for seed in (0, 1)]
     for arm, (preset, params) in ARMS.items():
         for i, budget in enumerate(confirm.BUDGETS[task]):
@@ -55,7 +56,8 @@ def _task_runs(task: str, reach: dict[str, int | None], correlation: float) -> l
             for seed in (0, 1):
                 # The twin names its one view twice (its sweep's "views" setting).
                 settings = {**params, "training.label_budget": budget}
-                runs.append(_run(task, preset, settings, seed, success, correlation))
+                mine = correlation if arm == "DOSPCoT" else 0.5
+                runs.append(_run(task, preset, settings, seed, success, mine))
     return runs
 
 
