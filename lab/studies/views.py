@@ -332,18 +332,25 @@ def _dependence_table(runs: list[TrialRun]) -> list[str]:
     return lines if len(lines) > 2 else []
 
 
-def _accuracy_table(runs: list[TrialRun], budgets: tuple[str, ...]) -> list[str]:
-    """Per arm that rewards unlabelled samples, its pseudo-reward accuracy at each budget, mean over
-    seeds at the last round: where success saturates (the grid, whose lava does not end an episode),
-    what the classifiers got right still tells the arms apart."""
+REWARD_QUALITY = {
+    "pseudo_accuracy": "Pseudo-reward accuracy",
+    "worst_class_recall": "Worst-class recall (of the reward class least often given its reward, the share "
+    "of its samples given it)",
+}
+"""The pseudo-reward figures a task's tables give per arm and budget. Accuracy is dominated by the
+commonest class; worst-class recall reads 0 where no label showed a class (a goal never labelled)."""
+
+
+def _accuracy_table(
+    runs: list[TrialRun], budgets: tuple[str, ...], metric: str = "pseudo_accuracy"
+) -> list[str]:
+    """Per arm that rewards unlabelled samples, ``metric`` (:data:`REWARD_QUALITY`) at each budget, mean
+    over seeds at the last round: where success saturates (the grid, whose lava does not end an
+    episode), what the classifiers got right still tells the arms apart."""
     lines = [f"| arm | {' | '.join(f'budget {b}' for b in budgets)} |", "|---|" + "---|" * len(budgets)]
     for arm in (a for a in ARMS if a != "blind"):
         cells = {
-            b: [
-                r.summary["mean"]["pseudo_accuracy"]
-                for r in runs
-                if arm_of(r) == arm and r.trial.params[BUDGET] == b
-            ]
+            b: [r.summary["mean"][metric] for r in runs if arm_of(r) == arm and r.trial.params[BUDGET] == b]
             for b in budgets
         }
         if any(cells.values()):
@@ -410,9 +417,10 @@ def tables_linking(
             members = [r for r in runs if task_of(r) == task]
             if members:
                 lines += _task_table(task, members, budgets(task))
-                accuracy = _accuracy_table(members, budgets(task))
-                if accuracy:
-                    lines += ["", "Pseudo-reward accuracy, mean over seeds, last round:", "", *accuracy]
+                for metric, heading in REWARD_QUALITY.items():
+                    quality = _accuracy_table(members, budgets(task), metric)
+                    if quality:
+                        lines += ["", f"{heading}, mean over seeds, last round:", "", *quality]
                 dependence = _dependence_table(members)
                 if dependence:
                     lines += [

@@ -64,7 +64,12 @@ def _run(
     run_dir = folder / f"{preset}-{'-'.join(params.values())}-{seed}"
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0}))
-    mean = {"success": success, "labelled_steps": labels, "pseudo_accuracy": 0.9 + success / 10}
+    mean = {
+        "success": success,
+        "labelled_steps": labels,
+        "pseudo_accuracy": 0.9 + success / 10,
+        "worst_class_recall": success,
+    }
     # metrics.csv's rows: the last round's error correlation is the one the tables read.
     rows = [{"round": 1.0, "error_correlation": 0.9}, {"round": 2.0, "error_correlation": correlation}]
     views = {name: {"success": value} for name, value in (per_view or {"patch": success}).items()}
@@ -141,6 +146,9 @@ def test_arms_are_named_short_and_curves_keep_seeds_every_budget_and_the_oracle_
     assert f"| DOSPCoT {low}| 0.930 | 0.970 | 1.000 | – |" in text
     assert f"| twin {low}| 0.915 | 0.935 | 0.950 | – |" in text
     assert f"| reward model {low}| 0.950 | – | – | – |" in text and "0.910" not in text
+    # Worst-class recall (the runs' success here), likewise: DOSPCoT's 0.3, 0.7 and 1 at 5, 10 and 20.
+    recall = text.split("Worst-class recall")[1]
+    assert f"| DOSPCoT {low}| 0.300 | 0.700 | 1.000 | – |" in recall
 
 
 def test_the_study_trains_every_arm_under_version_12_at_the_tasks_budgets_with_score_passes():
