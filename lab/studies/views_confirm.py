@@ -168,7 +168,8 @@ def tables(runs: list[TrialRun]) -> list[str]:
         "on the grid) with a 95% bootstrap interval; 0 where only the first reaches it, inf where only the "
         "second does, 1 where neither does. The figure draws the primary measure."
     )
-    return ["", "### Hypotheses", "", *marked, "", explained, "", *lines, *_TABLES(runs)]
+    ratios = ["", explained, "", *lines] if len(lines) > 2 else []  # no task with DOSPCoT and a peer yet
+    return ["", "### Hypotheses", "", *marked, *ratios, *_TABLES(runs)]
 
 
 _TABLES = tables_linking("views-confirm.png", BUDGETS.__getitem__)
