@@ -9,7 +9,7 @@ resampled together, so the interval carries the seeds' spread in the oracle's su
 from __future__ import annotations
 
 import math
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 
 import numpy as np
@@ -68,9 +68,6 @@ class Curve:
         """The area under the share curve over log labels, from the arm's smallest budget to its
         largest, divided by that width: the oracle's curve (share 1 everywhere) scores 1. NaN with one
         budget."""
-        x, _ = self.share()
-        if x.size < 2 or x[0] <= 0 or x[-1] == x[0]:
-            return math.nan
         return float(_areas(self, np.arange(len(self.oracle))[None])[0])
 
 
@@ -79,28 +76,28 @@ def labels_ratio(mine: Curve, theirs: Curve, seed: int = 0) -> tuple[float, floa
     the pairs both ran, with its 95% percentile bootstrap interval (the pairs resampled together): 0
     where only ``mine`` reaches it, inf where only ``theirs`` does, and 1 where neither does (no budget
     tells them apart). NaN throughout where they share no pair."""
-    both = [p for p in mine.pairs if p in set(theirs.pairs)]
-    if not both:
-        return math.nan, math.nan, math.nan
-    a, b = (_rows(curve, both) for curve in (mine, theirs))
-    draws = np.random.default_rng(seed).integers(0, len(both), (RESAMPLES, len(both)))
-    ratios = [_ratio(_reach(a, index), _reach(b, index)) for index in (np.arange(len(both))[None], draws)]
-    low, high = np.percentile(ratios[1], [2.5, 97.5], method="inverted_cdf")
-    return float(ratios[0][0]), float(low), float(high)
+    return _paired(mine, theirs, lambda a, b, draws: _ratio(_reach(a, draws), _reach(b, draws)), seed)
 
 
 def area_difference(mine: Curve, theirs: Curve, seed: int = 0) -> tuple[float, float, float]:
     """The area under ``mine`` minus the area under ``theirs`` (:meth:`Curve.area`, each over its own
     budgets), on the pairs both ran, with its 95% percentile bootstrap interval (the pairs resampled
     together). NaN throughout where they share no pair or a curve has one budget."""
+    return _paired(mine, theirs, lambda a, b, draws: _areas(a, draws) - _areas(b, draws), seed)
+
+
+def _paired(
+    mine: Curve, theirs: Curve, statistic: Callable[[Curve, Curve, np.ndarray], np.ndarray], seed: int
+) -> tuple[float, float, float]:
+    """``statistic`` of two curves on the pairs both ran, (R,) from each resample (R, S) of those pairs'
+    rows: its value on every pair once, and its 95% percentile bootstrap interval."""
     both = [p for p in mine.pairs if p in set(theirs.pairs)]
     if not both:
         return math.nan, math.nan, math.nan
     a, b = (_rows(curve, both) for curve in (mine, theirs))
     draws = np.random.default_rng(seed).integers(0, len(both), (RESAMPLES, len(both)))
-    differences = _areas(a, draws) - _areas(b, draws)
-    point = _areas(a, np.arange(len(both))[None]) - _areas(b, np.arange(len(both))[None])
-    low, high = np.percentile(differences, [2.5, 97.5], method="inverted_cdf")
+    point = statistic(a, b, np.arange(len(both))[None])
+    low, high = np.percentile(statistic(a, b, draws), [2.5, 97.5], method="inverted_cdf")
     return float(point[0]), float(low), float(high)
 
 
@@ -109,8 +106,12 @@ def _areas(curve: Curve, draws: np.ndarray) -> np.ndarray:
     x, y = _mean_share(curve.labels[draws], curve.success[draws], curve.oracle[draws])
     if x.shape[1] < 2:
         return np.full(len(x), math.nan)
-    log_x = np.log(x)
-    return np.sum((y[:, 1:] + y[:, :-1]) / 2 * np.diff(log_x, axis=1), axis=1) / (log_x[:, -1] - log_x[:, 0])
+    with np.errstate(divide="ignore", invalid="ignore"):
+        log_x = np.log(x)
+        width = log_x[:, -1] - log_x[:, 0]
+        area = np.sum((y[:, 1:] + y[:, :-1]) / 2 * np.diff(log_x, axis=1), axis=1) / width
+    # No labels at the smallest budget, or one budget's worth of labels at every budget: no log width.
+    return np.where((x[:, 0] > 0) & (width > 0), area, math.nan)
 
 
 def _rows(curve: Curve, pairs: list[Hashable]) -> Curve:

@@ -41,9 +41,10 @@ def preregistered_line(runs: list[TrialRun], page: str, checkout: Path) -> str:
     added = added_in(page, checkout)
     if added is None:
         return f"Preregistration: `{page}` is not committed; no run can be said to follow it."
-    late = [
-        r for r in runs if not all(c is not None and descends(c, added, checkout) for c in source_commits(r))
-    ]
+    trained_by = {r.run_dir: source_commits(r) for r in runs}
+    # One git call per distinct commit, not per run: a study's runs share a few commits.
+    after = {c: descends(c, added, checkout) for c in {c for cs in trained_by.values() for c in cs if c}}
+    late = [r for r in runs if not all(c is not None and after[c] for c in trained_by[r.run_dir])]
     line = (
         f"Preregistration: `{page}`, first committed in {added[:7]}; {len(runs) - len(late)} of "
         f"{len(runs)} runs trained only from source that descends from that commit"
