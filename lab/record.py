@@ -1,5 +1,6 @@
 """The record's own figures, counted from its files (``runs/sweeps/``, runs/README.md): its sweeps,
-runs, files and bytes, and which runs keep which file; and the block of runs/README.md they fill.
+runs, files and bytes, and how many co-trained runs keep ``reward_classes.json``; and the block of
+runs/README.md they fill.
 
 ``dospcot-lab record --write`` writes the block (between its markers) from the record as it is;
 ``tests/lab/test_prose_figures.py`` fails while the block is stale, and checks the prose figures that
@@ -119,8 +120,25 @@ class Record:
             f"{len(self.runs):,} runs, {len(self.files):,} files, {_bytes(total)} of content, about {run} a "
             f"run ({per_name}). On a disk with {BLOCK // 1024} kB blocks, each file and folder rounded up "
             f"to whole blocks, that takes about {disk:.0f} MiB (`du -sh runs/sweeps` on such a disk, which "
-            "also counts any ignored files a run left there)."
+            "also counts any ignored files a run left there). "
+            f"{self.reward_classes_sentence()}"
         )
+
+    def reward_classes_sentence(self) -> str:
+        """How many co-trained runs keep ``reward_classes.json``, and the sweeps of those that predate
+        it."""
+        kept = set(self.with_file(self.cotrained, "reward_classes.json"))
+        lacking = sorted({self.sweep_of(run) for run in self.cotrained if run not in kept})
+        predate = f" (the {english(lacking)} runs predate it)" if lacking else ""
+        return (
+            f"`reward_classes.json`: {len(kept):,} of the record's {len(self.cotrained):,} co-trained "
+            f"runs have it{predate}."
+        )
+
+
+def english(items: list[str]) -> str:
+    """``["a", "b", "c"]`` as ``"a, b and c"``."""
+    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
 
 
 def _bytes(size: float) -> str:

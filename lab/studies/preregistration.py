@@ -10,6 +10,7 @@ import subprocess
 from pathlib import Path
 
 from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.provenance import session_commits
 
 
 def _git(checkout: Path, *args: str) -> subprocess.CompletedProcess[str]:
@@ -32,7 +33,7 @@ def descends(commit: str, ancestor: str, checkout: Path) -> bool:
 def source_commits(run: TrialRun) -> list[str | None]:
     """The commits that trained ``run``, one per session (``"+dirty"`` dropped; None: not recorded)."""
     info = json.loads((run.run_dir / "run_info.json").read_text())
-    return [c.partition("+")[0] if c else None for c in info.get("session_commits", [info.get("commit")])]
+    return [c.partition("+")[0] if c else None for c in session_commits(info)]
 
 
 def preregistered_line(runs: list[TrialRun], page: str, checkout: Path) -> str:

@@ -83,8 +83,15 @@ def _counted(counts: Counter[str]) -> str:
     return ", ".join(f"{value} ({n})" for value, n in sorted(counts.items()))
 
 
+def session_commits(info: dict[str, Any]) -> list[str | None]:
+    """The commits a run's sessions trained from, in order, as ``run_info.json`` holds them (a commit
+    with ``"+dirty"`` where its tree had uncommitted changes; None where a run did not record one). A
+    run that predates ``session_commits`` names its one ``commit``."""
+    return info.get("session_commits", [info.get("commit")])
+
+
 def _run_commits(info: dict[str, Any]) -> str:
-    sessions = [_short_commit(c) for c in info.get("session_commits", [info.get("commit")])]
+    sessions = [_short_commit(c) for c in session_commits(info)]
     return " then ".join(dict.fromkeys(sessions))  # distinct, in order
 
 

@@ -193,6 +193,11 @@ def task_of(run: TrialRun) -> str | None:
     )
 
 
+def of_task(runs: list[TrialRun], task: str) -> list[TrialRun]:
+    """The runs of ``runs`` that belong to ``task`` (:func:`task_of`)."""
+    return [r for r in runs if task_of(r) == task]
+
+
 def success_of(run: TrialRun, view: str | None = None) -> float:
     """A run's last-round success: the mean over its agents, or (``view``) over its agents on that view
     alone (a twin's second agent on it is named ``<view>-2``); NaN where no agent reads ``view``."""
@@ -379,7 +384,7 @@ def _margins(runs: list[TrialRun]) -> list[str]:
         "|---|---|---|---|---|---|---|",
     ]
     for task, (_, view, _, _) in TASKS.items():
-        members = [r for r in runs if task_of(r) == task]
+        members = of_task(runs, task)
         found, on_view = curves(members), curves(members, view)
         if "DOSPCoT" not in found:
             continue
@@ -414,7 +419,7 @@ def tables_linking(
             f"budget to its largest, the oracle's being 1. Figure: [{figure_name}]({figure_name}).",
         ]
         for task in TASKS:
-            members = [r for r in runs if task_of(r) == task]
+            members = of_task(runs, task)
             if members:
                 lines += _task_table(task, members, budgets(task))
                 for metric, heading in REWARD_QUALITY.items():
@@ -447,7 +452,7 @@ def figure(runs: list[TrialRun], path: Path, on_view: bool = False) -> None:
     panels = {}
     for task, (_, view, _, _) in TASKS.items():
         bands = []
-        for arm, curve in curves([r for r in runs if task_of(r) == task], view if on_view else None).items():
+        for arm, curve in curves(of_task(runs, task), view if on_view else None).items():
             x, y = curve.share()
             shares, order = curve.shares(), np.argsort(curve.labels.mean(axis=0))
             stats = [SeedSummary.of(list(shares[:, i])) for i in order]
@@ -463,7 +468,7 @@ def glance(runs: list[TrialRun]) -> Glance:
     one-view peer's."""
     parts = []
     for task in TASKS:
-        found = curves([r for r in runs if task_of(r) == task])
+        found = curves(of_task(runs, task))
         if "DOSPCoT" in found:
             mine, peer = _reach_against_best_peer(found)
             parts.append(f"{task}: DOSPCoT {mine}" + (f", {peer}" if peer else ""))

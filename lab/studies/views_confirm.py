@@ -39,8 +39,8 @@ from dospcot_lab.studies.views import (
     curves,
     figure,
     last_round_dependence,
+    of_task,
     tables_linking,
-    task_of,
 )
 
 FIRST_SEED, SEEDS = 200, 10
@@ -63,7 +63,7 @@ the least span of error correlations V3 can be tested on."""
 
 
 def _on_view(runs: list[TrialRun], task: str) -> dict[str, Curve]:
-    return curves([r for r in runs if task_of(r) == task], TASKS[task][1])
+    return curves(of_task(runs, task), TASKS[task][1])
 
 
 def _complete(found: dict[str, Curve], task: str) -> bool:
@@ -121,8 +121,8 @@ def hypotheses(runs: list[TrialRun]) -> tuple[list[str], dict[str, str], list[st
             c
             for c in (
                 last_round_dependence(r)["error_correlation"]
-                for r in runs
-                if task_of(r) == task and arm_of(r) == "DOSPCoT"
+                for r in of_task(runs, task)
+                if arm_of(r) == "DOSPCoT"
             )
             if not math.isnan(c)
         ]

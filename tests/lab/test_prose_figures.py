@@ -39,7 +39,7 @@ from statistics import mean
 import pytest
 
 from dospcot_lab.bench_measure import NOT_RECORDED, Provenance
-from dospcot_lab.record import SIZE_BLOCK, Record, read_block
+from dospcot_lab.record import SIZE_BLOCK, Record, english, read_block
 
 ROOT = Path(__file__).resolve().parents[2]
 NUMBER_WORDS = {w: i for i, w in enumerate("zero one two three four five six seven eight nine ten".split())}
@@ -48,11 +48,6 @@ NUMBER_WORDS = {w: i for i, w in enumerate("zero one two three four five six sev
 def flat(text: str) -> str:
     """``text`` with every run of white space one space: a sentence reads the same across line breaks."""
     return re.sub(r"\s+", " ", text)
-
-
-def english(items: list[str]) -> str:
-    """``["a", "b", "c"]`` as ``"a, b and c"``."""
-    return items[0] if len(items) == 1 else f"{', '.join(items[:-1])} and {items[-1]}"
 
 
 class Sources:
@@ -865,6 +860,25 @@ def test_runs_readme_size_is_the_records():
     """runs/README.md's size paragraph is what ``dospcot-lab record --write`` writes now."""
     block = read_block((ROOT / "runs" / "README.md").read_text(), SIZE_BLOCK)
     assert block == Record(ROOT).size_paragraph(), "stale: run `dospcot-lab record --write`"
+
+
+def test_the_reward_classes_sentence_counts_by_hand(tmp_path):
+    """Two co-trained runs (one keeps ``reward_classes.json``, one in an older sweep does not) and an
+    oracle run: 1 of 2, and the older sweep named."""
+    for sweep, trial, method, classes in (
+        ("old", "a", "dospcot", False),
+        ("new", "b", "dospcot", True),
+        ("new", "c", "oracle", False),
+    ):
+        run = tmp_path / "runs" / "sweeps" / sweep / "trials" / "cfg" / trial
+        run.mkdir(parents=True)
+        (run / "config.toml").write_text(f'method = "{method}"\n')
+        (run / "summary.json").write_text("{}")
+        if classes:
+            (run / "reward_classes.json").write_text("[0, 1]")
+    assert Record(tmp_path).reward_classes_sentence() == (
+        "`reward_classes.json`: 1 of the record's 2 co-trained runs have it (the old runs predate it)."
+    )
 
 
 def test_every_benchmark_row_says_how_it_was_made():
