@@ -179,8 +179,8 @@ def glance(runs: list[TrialRun]) -> Glance:
     """Per task, DOSPCoT's labels to 90% of the oracle over the best one-view peer's; the verdicts."""
     _, verdicts, parts = hypotheses(runs)
     return Glance(
-        f"labels to {SHARE:.0%} of the oracle, DOSPCoT over the best one-view peer, paired: "
-        + "; ".join(parts),
+        f"labels to {SHARE:.0%} of the oracle, DOSPCoT over the best one-view peer, paired (0: only "
+        "DOSPCoT reached it; inf: only the peer): " + "; ".join(parts),
         "; ".join(f"{name}: {verdict}" for name, verdict in verdicts.items()),
     )
 
