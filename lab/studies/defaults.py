@@ -15,6 +15,8 @@ from dospcot_lab.studies.declaration import Glance, Study, Sweep
 from dospcot_lab.studies.tables import (
     ADOPTION_METRICS,
     ADOPTION_SEEDS,
+    CLASS_RECALL,
+    CLASS_RECALL_NOTE,
     NON_INFERIOR_WORDS,
     adoption_glance,
     best_case,
@@ -60,7 +62,7 @@ class VersionPair:
             PRESETS,
             (self.old, self.new),
             "defaults",
-            {**ADOPTION_METRICS, "labelled_steps": "labels"},
+            {**ADOPTION_METRICS, **CLASS_RECALL, "labelled_steps": "labels"},
         )
         differences = self.by_preset(runs)
         early = []
@@ -75,6 +77,8 @@ class VersionPair:
         return [
             "",
             *rows,
+            "",
+            CLASS_RECALL_NOTE,
             "",
             f"Version {self.new} minus version {self.old}, paired by seed:",
             "",

@@ -16,6 +16,8 @@ from dospcot_lab.studies.defaults import VERSION_SWEEPS
 from dospcot_lab.studies.tables import (
     ADOPTION_METRICS,
     ADOPTION_SEEDS,
+    CLASS_RECALL,
+    CLASS_RECALL_NOTE,
     NON_INFERIOR_WORDS,
     adoption_glance,
     deciding_preset,
@@ -59,7 +61,8 @@ def _rows(runs: list[TrialRun], versions: tuple[int, ...]) -> list[str]:
     def members(preset: str, version: int) -> list[TrialRun]:
         return list(_by_seed(runs, preset, version).values())
 
-    return ["", *version_rows(members, PRESETS, versions, "numerics", ADOPTION_METRICS)]
+    columns = {**ADOPTION_METRICS, **CLASS_RECALL}
+    return ["", *version_rows(members, PRESETS, versions, "numerics", columns), "", CLASS_RECALL_NOTE]
 
 
 def tables(runs: list[TrialRun]) -> list[str]:

@@ -169,6 +169,16 @@ def cpu_per_run(runs: list[TrialRun]) -> str:
 ADOPTION_METRICS = {"success": "success", "pseudo_accuracy": "pseudo-reward accuracy"}
 """The metrics the adoption rule holds a new default to (:func:`non_inferior`), with their headings."""
 
+CLASS_RECALL = {"worst_class_recall": "worst-class recall"}
+"""Shown beside the adoption rule's metrics, outside the rule: accuracy is dominated by the commonest
+class, and a rare class (a goal no label showed) can be missed at an accuracy near 1."""
+CLASS_RECALL_NOTE = (
+    "Worst-class recall, beside the rule's metrics and outside the rule: of the reward class least often "
+    "given its reward, the share of its samples given it (last round; 0 where no label showed a class). "
+    "Accuracy counts every sample, so the commonest class fills it."
+)
+"""The sentence under a table with a :data:`CLASS_RECALL` column."""
+
 
 def version_rows(
     members_of: Callable[[str, int], list[TrialRun]],
