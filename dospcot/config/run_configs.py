@@ -204,7 +204,7 @@ class TrainConfig:
             raise ConfigError(
                 f"training.label_fraction: unread, since a rater buys training.label_budget = "
                 f'{t.label_budget} answers (label_strategy = "{t.label_strategy}", version {self.defaults} '
-                'of the defaults); for a uniform mask of that share also set training.label_strategy = '
+                "of the defaults); for a uniform mask of that share also set training.label_strategy = "
                 '"uniform", for a budget of that share of the samples met set training.label_budget = 0'
             )
 
