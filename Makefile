@@ -34,10 +34,11 @@ chromium:
 # kernels, whose numbers it also holds to the digits every kernel agrees on).
 # `--dist loadscope` keeps each test module on one worker, so a module-scoped fixture (the record's
 # pages rendered, a finished sweep, the quickstart's run) is built once, not once per worker.
-test: $(STAMP) chromium  ## the tests not marked slow, ruff, and the documentation site with --strict
+test: $(STAMP) chromium  ## the tests not marked slow, ruff (lint and format), and the documentation site with --strict
 	$(PY) -m pytest -q -n 2 --dist loadscope --ignore tests/test_output_digests.py
 	ATEN_CPU_CAPABILITY=default $(PY) -m pytest -q -n 2 tests/test_output_digests.py
 	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
 	NO_MKDOCS_2_WARNING=1 $(VENV)/bin/mkdocs build --strict
 
 test-slow: $(STAMP)
