@@ -65,6 +65,31 @@ def test_while_every_label_is_0_a_goal_reward_is_a_value_no_label_has_shown():
     np.testing.assert_array_equal(classes.encode(np.array([0.0, 0.93])), [0, 1])
 
 
+def test_the_step_class_keeps_the_steps_reward_apart_from_a_late_goals():
+    # DoorKey's labels in round 3 of a 5-label run (seed 200 of the views study): a goal at 0.4456 (a
+    # late one), a time-out at 0 (its episode cut, not ended: it went on), goals at 0.9928 and 0.9964.
+    rewards = np.array([0.4456, 0.0, 0.9928, 0.9964])
+    going_on = np.array([False, True, False, False])
+    classes = QuantileRewardClasses(2)
+    classes.fit(rewards)  # quantiles alone: the median 0.7192 splits the late goal from the others
+    np.testing.assert_allclose(classes.values, [0.2228, 0.9946])  # every step is paid 0.2228
+    classes.fit(rewards, going_on)
+    np.testing.assert_allclose(classes.values, [0.0, (0.4456 + 0.9928 + 0.9964) / 3])
+    np.testing.assert_array_equal(classes.encode(np.array([0.0, 0.4456, 0.9964])), [0, 1, 1])
+    # A hidden goal paid 0.3 sits nearer the goals' least label than 0: the goal's class.
+    np.testing.assert_array_equal(classes.encode_hidden(np.array([0.0, 0.3, 0.2])), [0, 1, 0])
+    # A step reward above every outcome (0 a step, a crash ending at -1 or -0.5) keeps the top bin.
+    classes.fit(np.array([-1.0, 0.0, -0.5, 0.0]), np.array([False, True, False, True]))
+    np.testing.assert_allclose(classes.values, [-0.75, 0.0])
+    # Steps that went on paying two values, or one lying between the outcomes: quantiles as before.
+    for going in ([True, True, False, False], [False, True, False, False]):
+        step = QuantileRewardClasses(2)
+        step.fit(np.array([0.5, 0.0, -1.0, 1.0]), np.array(going))
+        plain = QuantileRewardClasses(2)
+        plain.fit(np.array([0.5, 0.0, -1.0, 1.0]))
+        np.testing.assert_array_equal(step.values, plain.values)
+
+
 def test_one_runs_reward_classes_are_a_batch_of_runs_without_the_runs_axis():
     one, batch = RunRewardClasses(3), RewardClasses(1, 3)
     for labels in (np.array([-1.0, -100.0, -1.0]), np.array([0.0, -100.0])):

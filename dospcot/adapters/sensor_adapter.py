@@ -160,7 +160,8 @@ class SensorAdapter(StoreQueries):
         store = self.store
         n = len(store)
         labelled, unlabelled = store.labelled[:n], ~store.labelled[:n]
-        self.classes.fit(store.label_value[:n][labelled])
+        going_on = ~store.terminal[:n][labelled] if self.section.step_class else None
+        self.classes.fit(store.label_value[:n][labelled], going_on)
         label_class = np.where(labelled, self.classes.encode(store.label_value[:n]), -1)
         termination = self.section.read_termination
         features = [store.features(v, self.n_actions, termination, dtype) for v in self.cfg.views]

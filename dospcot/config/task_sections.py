@@ -161,6 +161,8 @@ class HighwayConfig:
     """Highway states have no key: every step is its own pool sample."""
     read_termination = False
     episode_end_classes = False
+    step_class = False
+    """A highway's reward is continuous: its quantiles make its classes."""
 
 
 @dataclass(frozen=True)
@@ -200,6 +202,12 @@ class GymConfig:
         episode (MiniGrid's goal) is given only to such steps: no view predicts it on a step that goes
         on, so no pseudo-reward pays a loop (:func:`dospcot.core.reward_classes.episode_end_class_mask`).
         A class also labelled on a step that goes on stays open everywhere.
+    :param step_class: where every labelled step whose episode went on pays one reward, below or above
+        every other label (MiniGrid's 0 a step), that reward keeps a class of its own, and the other
+        labels (the outcomes) share the other ``reward_classes - 1``
+        (:meth:`dospcot.core.reward_classes.QuantileRewardClasses.fit`). Without it the bins are the
+        labels' quantiles, and where queries fall mostly on episode ends and a goal pays by its time,
+        a late goal's pay can share the steps' class, which then pays every step part of a goal.
     """
 
     env_id: str = ""
@@ -215,6 +223,7 @@ class GymConfig:
     state_key: str = ""
     read_termination: bool = False
     episode_end_classes: bool = False
+    step_class: bool = False
 
     infinite_keys: ClassVar[frozenset[str]] = frozenset({"max_return"})
     """Float keys that may be infinite (``inf``: the best return is not known)."""

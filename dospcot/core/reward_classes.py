@@ -77,6 +77,31 @@ class RunRewardClasses(_ClassValues):
         _add_new_values(self.values, rewards, "the run")
 
 
+def _quantile_edges(rewards: np.ndarray, n_classes: int) -> np.ndarray:
+    """The inner edges of ``n_classes`` quantile bins of ``rewards`` (n,): one bin per distinct value
+    where there are at most ``n_classes``, however rare."""
+    distinct = np.unique(rewards)
+    if distinct.size <= n_classes:
+        return distinct[1:]
+    quantiles = np.quantile(rewards, np.arange(1, n_classes) / n_classes)
+    # A quantile at or just above the minimum would leave a bin empty. Where the reward mostly
+    # takes its smallest value (0 but for a rare goal reward) such quantiles move up to the
+    # next labelled value, so the rare rewards keep a class apart from the common one.
+    return np.unique(np.maximum(quantiles, distinct[1]))
+
+
+def _step_value(rewards: np.ndarray, going_on: np.ndarray | None) -> float | None:
+    """The one value every label of a step that went on pays, where it lies below or above every other
+    label (:meth:`QuantileRewardClasses.fit`'s step class); None where there is none."""
+    if going_on is None:
+        return None
+    steps = np.unique(rewards[np.asarray(going_on, dtype=bool)])
+    if steps.size != 1:
+        return None
+    others = rewards[rewards != steps[0]]
+    return float(steps[0]) if steps[0] < others.min() or steps[0] > others.max() else None
+
+
 class QuantileRewardClasses(_ClassValues):
     """K quantile bins of a continuous reward, for one run (docs/design.md section 2).
 
@@ -85,7 +110,9 @@ class QuantileRewardClasses(_ClassValues):
     bins follow the labels as more arrive. Duplicate edges (a reward that fills several quantiles)
     merge their bins, so a run may have fewer than K classes. Two cases keep a rare reward apart from
     a common one: labels of at most K distinct values (a sparse goal reward, 0 or 1) get one class per
-    value, and a quantile below the second-smallest labelled value moves up to it. The interface matches
+    value, and a quantile below the second-smallest labelled value moves up to it. Given which labelled
+    steps went on (:meth:`fit`'s ``going_on``), the reward they all pay keeps a bin of its own. The
+    interface matches
     :class:`RunRewardClasses`: ``values`` is (K,), ``encode`` and ``decode`` (N,) from (N,).
 
     :param n_classes: K.
@@ -103,8 +130,16 @@ class QuantileRewardClasses(_ClassValues):
         """(k - 1,) the edges :meth:`encode_hidden` reads: each midway between the largest label below
         an edge of ``edges`` and the smallest above it."""
 
-    def fit(self, rewards: np.ndarray) -> None:
-        """Set the bins from every labelled reward so far, (n,) float."""
+    def fit(self, rewards: np.ndarray, going_on: np.ndarray | None = None) -> None:
+        """Set the bins from every labelled reward so far, (n,) float.
+
+        :param going_on: (n,) bool, whether each labelled step's episode went on (the step class,
+            ``step_class``): where every such label pays one value v, below or above every other
+            label, v keeps a bin of its own and the other labels share the K - 1 others. Queries on
+            episode ends make the labels mostly outcomes, and a goal paid by its time (MiniGrid's
+            ``1 - 0.9 t / T``) then spreads over the quantiles: a late goal's low pay would share
+            the steps' bin, and every step would be paid part of a goal. None: quantiles alone.
+        """
         rewards = np.asarray(rewards, dtype=np.float64)
         n_classes = self.values.size
         self.values[:] = np.nan
@@ -113,14 +148,14 @@ class QuantileRewardClasses(_ClassValues):
             return
         distinct = np.unique(rewards)
         self.only_value = float(distinct[0]) if distinct.size == 1 else None
-        if distinct.size <= n_classes:  # a reward of few values: one class each, however rare
-            self.edges = distinct[1:]
+        step = _step_value(rewards, going_on) if n_classes > 1 and distinct.size > n_classes else None
+        if step is None:
+            self.edges = _quantile_edges(rewards, n_classes)
         else:
-            quantiles = np.quantile(rewards, np.arange(1, n_classes) / n_classes)
-            # A quantile at or just above the minimum would leave a bin empty. Where the reward mostly
-            # takes its smallest value (0 but for a rare goal reward) such quantiles move up to the
-            # next labelled value, so the rare rewards keep a class apart from the common one.
-            self.edges = np.unique(np.maximum(quantiles, distinct[1]))
+            others = rewards[rewards != step]
+            inner = _quantile_edges(others, n_classes - 1)
+            below = step < others.min()
+            self.edges = np.concatenate([[others.min()], inner] if below else [inner, [step]])
         bins = np.searchsorted(self.edges, rewards, side="right")
         for c in range(self.edges.size + 1):
             self.values[c] = rewards[bins == c].mean()
