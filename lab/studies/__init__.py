@@ -98,6 +98,7 @@ from dospcot_lab.studies import (
     queries,
     second_view,
     sizing,
+    step_class,
     true_rewards,
     untuned,
     views,
@@ -151,6 +152,7 @@ STUDIES: dict[str, Study] = {
     **untuned.STUDIES,
     **views.STUDIES,
     **views_confirm.STUDIES,
+    **step_class.STUDIES,
 }
 """Every study by name, in the order the command's help lists them."""
 

@@ -95,7 +95,7 @@ ONE_VIEW = ("twin", "reward model", "self-training")
 Grid = dict[str, tuple[str, ...]]
 
 
-def _sweep(
+def arm_sweep(
     study: str, task: str, arm: str, preset: str, grid: Grid, part: str = "", maps: Grid | None = None
 ) -> Sweep:
     """One arm's sweep of ``study`` on ``task``, at the settings ``grid`` adds to the task's and ``maps``'
@@ -119,12 +119,12 @@ def comparing_arms(
     view = TASKS[task][1]
     disagreement = {**spend, STRATEGY: (DISAGREEMENT,)}
     return (
-        _sweep(study, task, "DOSPCoT", "dospcot", disagreement, part, maps),
-        _sweep(
+        arm_sweep(study, task, "DOSPCoT", "dospcot", disagreement, part, maps),
+        arm_sweep(
             study, task, "twin", "dospcot", {**disagreement, "views": (f'["{view}", "{view}"]',)}, part, maps
         ),
-        _sweep(study, task, "reward model", "reward-model", {**disagreement, **SCORE_PASSES}, part, maps),
-        _sweep(
+        arm_sweep(study, task, "reward model", "reward-model", {**disagreement, **SCORE_PASSES}, part, maps),
+        arm_sweep(
             study, task, "self-training", "self-training", {**spend, STRATEGY: (UNCERTAINTY,)}, part, maps
         ),
     )
@@ -136,9 +136,11 @@ def curve_sweeps(
     """A task's curves: the oracle, the arms that compare views at ``budgets`` and the blind control at
     the largest."""
     return (
-        _sweep(study, task, "oracle", "oracle", {}, maps=maps),
+        arm_sweep(study, task, "oracle", "oracle", {}, maps=maps),
         *comparing_arms(study, task, {BUDGET: budgets}, maps=maps),
-        _sweep(study, task, "blind", "dospcot", {BUDGET: budgets[-1:], STRATEGY: ('"random"',)}, maps=maps),
+        arm_sweep(
+            study, task, "blind", "dospcot", {BUDGET: budgets[-1:], STRATEGY: ('"random"',)}, maps=maps
+        ),
     )
 
 
@@ -148,7 +150,7 @@ def _sweeps(task: str) -> tuple[Sweep, ...]:
     budgets, settings = TASKS[task][2], TASKS[task][3]
     identical = (
         (
-            _sweep(
+            arm_sweep(
                 "views",
                 task,
                 "dospcot-identical",
