@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -20,7 +21,18 @@ from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.budget_arms import BUDGET
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study
 from dospcot_lab.studies.tables import cpu_per_run
-from dospcot_lab.studies.views import LOW_BUDGETS, arm_sweep, comparing_arms, success_of
+from dospcot_lab.studies.views import (
+    ARMS as VIEWS_ARMS,
+)
+from dospcot_lab.studies.views import (
+    LOW_BUDGETS,
+    TASKS,
+    arm_of,
+    arm_sweep,
+    comparing_arms,
+    of_task,
+    success_of,
+)
 
 STEP_CLASS = "gym.step_class"
 """The key the study turns on."""
@@ -50,6 +62,44 @@ def steps_class_value(run: TrialRun) -> float:
     path = run.run_dir / "reward_classes.json"
     values = [v for v in json.loads(path.read_text())["rewards"] if v is not None] if path.is_file() else []
     return min(values) if values else math.nan
+
+
+def steps_paid(runs: list[TrialRun], budgets: Callable[[str], tuple[str, ...]]) -> list[str]:
+    """Per MiniGrid task of the views studies, a table: per arm and budget of ``budgets(task)``, how many
+    of the runs had a steps' class paying above 0 at their last round (:func:`steps_class_value`)."""
+    lines = []
+    for task, (prefix, *_) in TASKS.items():
+        members = of_task(runs, task) if prefix.startswith("minigrid-") else []
+        if not members:
+            continue
+        rows = []
+        for arm in VIEWS_ARMS:
+            paid = {
+                b: [
+                    steps_class_value(r) > 0
+                    for r in members
+                    if arm_of(r) == arm and r.trial.params[BUDGET] == b
+                ]
+                for b in budgets(task)
+            }
+            if any(paid.values()):
+                rows.append(
+                    f"| {arm} | "
+                    + " | ".join(f"{sum(p)} of {len(p)}" if p else "–" for p in paid.values())
+                    + " |"
+                )
+        if rows:
+            lines += [
+                "",
+                f"{task}: the runs whose steps' reward class paid above 0 at the last round, of the runs at "
+                "each budget (a MiniGrid step pays 0, so such a class pays every step part of a goal; "
+                "[step-class](step-class.md)):",
+                "",
+                "| arm | " + " | ".join(f"budget {b}" for b in budgets(task)) + " |",
+                "|---|" + "---|" * len(budgets(task)),
+                *rows,
+            ]
+    return lines
 
 
 def _cells(runs: list[TrialRun]) -> dict[tuple[str, str], dict[int, TrialRun]]:

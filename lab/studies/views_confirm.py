@@ -31,6 +31,7 @@ from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study
 from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.label_curves import SHARE, Curve, area_difference, labels_ratio
+from dospcot_lab.studies.step_class import steps_paid
 from dospcot_lab.studies.views import (
     ONE_VIEW,
     TASKS,
@@ -169,7 +170,15 @@ def tables(runs: list[TrialRun]) -> list[str]:
         "second does, 1 where neither does. The figure draws the primary measure."
     )
     ratios = ["", explained, "", *lines] if len(lines) > 2 else []  # no task with DOSPCoT and a peer yet
-    return ["", "### Hypotheses", "", *marked, *ratios, *_TABLES(runs)]
+    return [
+        "",
+        "### Hypotheses",
+        "",
+        *marked,
+        *ratios,
+        *_TABLES(runs),
+        *steps_paid(runs, BUDGETS.__getitem__),
+    ]
 
 
 _TABLES = tables_linking("views-confirm.png", BUDGETS.__getitem__)

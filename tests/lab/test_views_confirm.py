@@ -15,6 +15,7 @@ from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import sweep_spec
 from dospcot_lab.studies import views_confirm as confirm
 from dospcot_lab.studies.label_curves import Curve, area_difference, labels_ratio
+from dospcot_lab.studies.step_class import steps_paid
 
 PRESETS = {
     "grid16": "grid16",
@@ -168,3 +169,21 @@ def test_it_refuses_to_train_until_its_preregistration_is_committed(tmp_path, mo
         lab_main(["study", "views-confirm", "--runs-dir", str(tmp_path)])
     assert "follows docs/preregistration-views.md, which this checkout has not committed" in str(stop.value)
     assert started == [] and list(tmp_path.iterdir()) == []
+
+
+def test_steps_paid_counts_the_runs_whose_steps_class_paid_above_0(tmp_path):
+    # DoorKey, DOSPCoT at 5 labels: two runs, one whose lowest class paid 0.2228 (a late goal's pay
+    # merged with the steps'), one 0; at 10 labels one run paying 0. The twin never ran.
+    runs = []
+    for i, (budget, classes) in enumerate((("5", [0.2228, 0.94]), ("5", [0.0, 0.9]), ("10", [0.0, None]))):
+        folder = tmp_path / str(i)
+        folder.mkdir()
+        (folder / "reward_classes.json").write_text(f'{{"rewards": {classes}}}'.replace("None", "null"))
+        params = {"training.label_budget": budget}
+        runs.append(TrialRun(Trial("minigrid-doorkey-dospcot", "", params, i), {}, [], folder))
+    lines = steps_paid(runs, {"doorkey": ("5", "10", "25", "50")}.__getitem__)
+    assert lines[-3:] == [
+        "| arm | budget 5 | budget 10 | budget 25 | budget 50 |",
+        "|---|---|---|---|---|",
+        "| DOSPCoT | 1 of 2 | 0 of 1 | – | – |",
+    ]
