@@ -18,12 +18,10 @@ import numpy as np
 
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies import views
 from dospcot_lab.studies.budget_arms import BUDGET
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study
 from dospcot_lab.studies.tables import cpu_per_run
-from dospcot_lab.studies.views import (
-    ARMS as VIEWS_ARMS,
-)
 from dospcot_lab.studies.views import (
     LOW_BUDGETS,
     TASKS,
@@ -73,7 +71,7 @@ def steps_paid(runs: list[TrialRun], budgets: Callable[[str], tuple[str, ...]]) 
         if not members:
             continue
         rows = []
-        for arm in VIEWS_ARMS:
+        for arm in views.ARMS:
             paid = {
                 b: [
                     steps_class_value(r) > 0
