@@ -176,11 +176,11 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 13; the versions: 1, 2 \(candidate\), 3, "
+        match=r"^defaults: unknown version 14; the versions: 1, 2 \(candidate\), 3, "
         r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
-        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12 \(adopted\)$",
+        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12 \(adopted\), 13 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=13"])
+        load_config("tiny", ["defaults=14"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -214,7 +214,8 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3, 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12 (adopted))"
+        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12 (adopted), "
+        "13 (candidate))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
@@ -277,3 +278,14 @@ def test_a_share_set_where_the_version_buys_labels_is_refused_with_the_ways_to_a
 def test_a_run_with_no_view_is_told_so_under_a_version_that_buys_labels():
     with pytest.raises(ConfigError, match="views: need at least one view"):
         load_config("tiny", ["views=[]"])
+
+
+def test_version_13_keeps_the_steps_class_apart_for_a_gym_task_that_learns_rewards():
+    """Version 13 moves ``gym.step_class`` for a gym task whose method learns rewards, and nothing else:
+    the oracle and the grid keep version 12's configs."""
+    assert load_config("minigrid-doorkey-dospcot", ["defaults=13"]).gym.step_class
+    assert not load_config("minigrid-doorkey-dospcot", ["defaults=12"]).gym.step_class
+    assert not load_config("minigrid-doorkey-oracle", ["defaults=13"]).gym.step_class
+    assert load_config("grid16-dospcot", ["defaults=13"]) == dataclasses.replace(
+        load_config("grid16-dospcot", ["defaults=12"]), defaults=13
+    )

@@ -51,7 +51,10 @@ round's lag. Version 12, **adopted**, is version 10 with ten score passes a roun
 (``training.pass_kind = "score"``): a pass refits nothing, so it costs a forward pass of each classifier
 where version 11's refits took most of a round on MiniGrid's egocentric map, and the true-rewards
 study's control with such passes matched the oracle on DoorKey. The defaults-12 study held it
-non-inferior to version 3 on both presets (docs/results/defaults-12.md). Nothing here imports torch.
+non-inferior to version 3 on both presets (docs/results/defaults-12.md). Version 13, a candidate, is
+version 12 with the steps' reward in a class of its own on a gym task (``gym.step_class``): under
+queries on episode ends a MiniGrid goal paid by its time could share the steps' quantile class, which
+then paid every step part of a goal (docs/results/step-class.md). Nothing here imports torch.
 """
 
 from __future__ import annotations
@@ -355,13 +358,21 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
     10: QUERY_MOVES,
     11: (PASSES_MOVE, LATER_PASSES_MOVE),
     12: SCORE_PASS_MOVES,
+    13: (
+        MovedDefault(
+            "gym.step_class",
+            _when_learning(True),
+            "step-class study: the steps' reward kept out of a late goal's class at a few labels",
+            GYM,
+        ),
+    ),
 }
 """Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
 
-BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10}
+BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10, 13: 12}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11})
+CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11, 13})
 """Versions a config may opt into that no study has adopted yet."""
 
 

@@ -1,0 +1,40 @@
+"""The defaults-13 study (confirmatory): version 13 of the defaults (version 12 with the steps' reward
+in a class of its own on a gym task, ``gym.step_class``) against version 12, the adopted version,
+paired by seed on ``grid16-dospcot`` and ``minigrid-doorkey-dospcot``. Version 12's runs are the
+defaults-12 study's. Version 13 replaces version 12 where, on both presets, the lower end of the 95%
+interval of (version 13 minus version 12) lies above -0.05 for success and for pseudo-reward accuracy
+(non-inferiority; docs/guide/defaults.md)."""
+
+from __future__ import annotations
+
+from dospcot.sweeps.report import TrialRun
+from dospcot_lab.studies.declaration import Study, Sweep
+from dospcot_lab.studies.defaults import PRESETS, VersionPair
+from dospcot_lab.studies.defaults_12 import STUDIES as DEFAULTS_12
+from dospcot_lab.studies.tables import ADOPTION_SEEDS
+
+OLD, NEW = 12, 13
+
+
+def _version_of(run: TrialRun) -> int | None:
+    """The version a run's grid names, where it is one of the two the study compares."""
+    named = run.trial.params.get("defaults")
+    return int(named) if named in (str(OLD), str(NEW)) else None
+
+
+THIRTEEN_AGAINST_TWELVE = VersionPair(OLD, NEW, _version_of)
+"""The defaults-13 study's pair: each run names its version in its sweep's grid."""
+SWEEP = Sweep(f"defaults-{NEW}", PRESETS, {"defaults": (str(NEW),)}, batch_seeds=1, numerics=None)
+"""Version 13's runs."""
+
+STUDIES = {
+    "defaults-13": Study(
+        (SWEEP, DEFAULTS_12["defaults-12"].sweeps[0]),
+        THIRTEEN_AGAINST_TWELVE.tables,
+        "Version 13 of the defaults against version 12: the steps' own reward class",
+        "grid16 (layout 0) and MiniGrid DoorKey-5x5",
+        THIRTEEN_AGAINST_TWELVE.glance,
+        seeds=ADOPTION_SEEDS,
+        confirmatory=True,
+    ),
+}
