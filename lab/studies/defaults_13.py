@@ -24,8 +24,8 @@ def _version_of(run: TrialRun) -> int | None:
 
 THIRTEEN_AGAINST_TWELVE = VersionPair(OLD, NEW, _version_of)
 """The defaults-13 study's pair: each run names its version in its sweep's grid."""
-SWEEP = Sweep(f"defaults-{NEW}", PRESETS, {"defaults": (str(NEW),)}, batch_seeds=1, numerics=None)
-"""Version 13's runs."""
+SWEEP = Sweep(f"defaults-{NEW}", PRESETS[::-1], {"defaults": (str(NEW),)}, batch_seeds=1, numerics=None)
+"""Version 13's runs, DoorKey's first: on grid16 the version moves nothing."""
 
 STUDIES = {
     "defaults-13": Study(
