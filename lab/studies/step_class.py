@@ -2,10 +2,9 @@
 went on pays, kept in a class of its own (``gym.step_class``), gives back what the labels' quantile
 classes lost there.
 
-In the views studies' DoorKey runs at 5 and 10 labels, every arm's agents reached the goal in rounds
-2-3 and lost it by round 5, with the pseudo-rewards' classes right: the classes are the labels'
-quantiles, and with most labels on episode ends a late goal's low pay shared the steps' class, which
-then paid every step part of a goal. This study trains DOSPCoT as the views study's low-budget arm did,
+In the views studies' DoorKey runs at 5 and 10 labels, most runs of every arm failed with the
+pseudo-rewards' classes right: the classes are the labels' quantiles, and with most labels on episode
+ends a late goal's low pay shared the steps' class, which then paid every step part of a goal. This study trains DOSPCoT as the views study's low-budget arm did,
 with the step class on, and pairs it by seed with that arm's runs."""
 
 from __future__ import annotations
