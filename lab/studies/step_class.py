@@ -4,8 +4,9 @@ classes lost there.
 
 In the views studies' DoorKey runs at 5 and 10 labels, most runs of every arm failed with the
 pseudo-rewards' classes right: the classes are the labels' quantiles, and with most labels on episode
-ends a late goal's low pay shared the steps' class, which then paid every step part of a goal. This study trains DOSPCoT as the views study's low-budget arm did,
-with the step class on, and pairs it by seed with that arm's runs."""
+ends a late goal's low pay shared the steps' class, which then paid every step part of a goal. This
+study trains DOSPCoT as the views study's low-budget arm did, with the step class on, and pairs it by
+seed with that arm's runs."""
 
 from __future__ import annotations
 
