@@ -42,7 +42,12 @@ def build_parser() -> argparse.ArgumentParser:
     )
     add_overrides(study, "override a key in every trial (repeatable; the study then writes its own sweeps)")
     study.add_argument("study", metavar="STUDY", help="the study, e.g. grid16 (a wrong name lists them)")
-    study.add_argument("--seeds", type=positive_int, help="seeds 0..N-1 (default: the study's)")
+    study.add_argument(
+        "--seeds",
+        type=positive_int,
+        help="seeds 0..N-1 (default: the study's); another count, or any --set, trains into sweep folders of "
+        "its own (<sweep>-<N>seeds-<k>sets), apart from the study's",
+    )
     add_workers(study, "trials at once")
     study.add_argument(
         "--batch-seeds",
