@@ -33,7 +33,7 @@ from dospcot.core.classifier import load_classifier
 from dospcot.core.round_records import DEPENDENCE_STATS
 from dospcot.envs import GridWorld, TabularMDP
 from dospcot.run.run_folder import RunFolderError, read_checkpoint, write_csv
-from dospcot.run.run_session import ROUND_SCALARS, SEGMENT_SCALARS
+from dospcot.run.run_session import ROUND_SCALARS
 from dospcot.run.train import evaluate
 from dospcot.tasks import get_task, load_config
 from dospcot.tasks.grid import grid_world
@@ -291,7 +291,7 @@ def test_a_run_on_segment_labels_logs_and_summarises_its_decoding_error(tmp_path
     error = float(rows[-1]["step_reward_error"])
     assert error >= 0 and summary["mean"]["step_reward_error"] == pytest.approx(error)
     tags = EventAccumulator(str(run_dir / "tb" / "agent_coords")).Reload().Tags()["scalars"]
-    assert {f"dospcot/{key}" for key in (*ROUND_SCALARS, *SEGMENT_SCALARS)} <= set(tags)
+    assert {f"dospcot/{key}" for key in ROUND_SCALARS} <= set(tags)
 
 
 @pytest.mark.parametrize("agent", ["esarsa_dqn", "tabular"])
@@ -499,3 +499,17 @@ def test_a_run_stops_where_its_greedy_evaluation_stops_improving_and_says_why(tr
     assert summary["stopped_because"] == "no new best greedy evaluation in 2 rounds (training.stop_patience)"
     with pytest.raises(ConfigError, match="stop_patience must be >= 0"):
         load_config("tiny", ["training.stop_patience=-1"])
+
+
+def test_a_run_on_step_labels_reads_its_classes_values_against_the_hidden_rewards(trained):
+    """``step_reward_error`` on step labels: 0 in every round where the admitted samples read their
+    hidden rewards (the true-rewards control); in the classifiers' run, its last round's value is the one
+    summary.json keeps."""
+    control = trained('cotraining.pseudo_rewards="hidden"')
+    rows = list(csv.DictReader((control / "metrics.csv").open()))
+    assert [float(r["step_reward_error"]) for r in rows] == [0.0] * len(rows)
+    run_dir = trained()
+    rows = list(csv.DictReader((run_dir / "metrics.csv").open()))
+    error = float(rows[-1]["step_reward_error"])
+    summary = json.loads((run_dir / "summary.json").read_text())
+    assert error >= 0 and summary["mean"]["step_reward_error"] == pytest.approx(error)

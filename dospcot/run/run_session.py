@@ -56,12 +56,12 @@ ROUND_SCALARS = (
     "normalised_score",
     "agreement",
     "labelled_steps",
+    "step_reward_error",
 )
-"""The per-round, per-view TensorBoard scalars, under ``dospcot/``."""
+"""The per-round, per-view TensorBoard scalars, under ``dospcot/`` (each where it is a number: a run
+that learns no reward has no ``step_reward_error``)."""
 QUERIES_FOLDER = "queries"
 """Where a file rater writes each round's queries, ``round_<r>.csv``, for a person to answer."""
-SEGMENT_SCALARS = ("step_reward_error",)
-"""The further per-round scalars of a run on segment labels."""
 SUMMARY_METRICS = (
     "normalised_score",
     "agreement",
@@ -214,7 +214,7 @@ class RunSession:
         bought = {} if run.queries is None else _queries_per_class(run)
         for agent, row in zip(run.agents, rows, strict=True):
             # The dependence figures (NaN, so not logged, with one predictor) under dospcot/ too.
-            for key in (*ROUND_SCALARS, *DEPENDENCE_STATS, *SEGMENT_SCALARS):
+            for key in (*ROUND_SCALARS, *DEPENDENCE_STATS):
                 if math.isfinite(row[key]):
                     agent.logger.record(f"dospcot/{key}", row[key])
             for key, count in bought.items():
