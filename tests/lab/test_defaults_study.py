@@ -18,6 +18,7 @@ from dospcot_lab.studies.defaults_6 import SIX_AGAINST_THREE
 from dospcot_lab.studies.defaults_7 import SEVEN_AGAINST_THREE
 from dospcot_lab.studies.defaults_8 import EIGHT_AGAINST_THREE
 from dospcot_lab.studies.defaults_12 import TWELVE_AGAINST_THREE
+from dospcot_lab.studies.defaults_13 import THIRTEEN_AGAINST_TWELVE
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
@@ -179,3 +180,17 @@ def test_a_preset_short_of_its_pairs_is_decided_when_even_its_best_case_fails_th
     fine = [_run_4(tmp_path / "fine", "grid16-dospcot", seed, 4, 1.0) for seed in range(4)]
     assert not pair.decided_early(old + fine, pair.by_preset(old + fine))
     assert glance_4(old + fine).verdict == NOT_MEASURED
+
+
+def test_version_13_trains_doorkey_first_with_the_step_class_and_pairs_with_version_12s_runs():
+    sweep, twelve = STUDIES["defaults-13"].sweeps
+    assert twelve.name == "defaults-12" and STUDIES["defaults-13"].confirmatory
+    trials = sweep_spec(sweep, 20).trials(check_task=False)
+    assert [t.config for t in trials[:: len(trials) // 2]] == ["minigrid-doorkey-dospcot", "grid16-dospcot"]
+    doorkey = trials[0].load_config()
+    assert (doorkey.defaults, doorkey.gym.step_class, doorkey.training.label_budget) == (13, True, 100)
+    runs = [
+        TrialRun(Trial("minigrid-doorkey-dospcot", "", {"defaults": version}, 0), {}, [], Path())
+        for version in ("13", "12", "3")
+    ]
+    assert [THIRTEEN_AGAINST_TWELVE.version_of(run) for run in runs] == [13, 12, None]
