@@ -310,22 +310,17 @@ class CoTrainingRun:
         read, value = result.pseudo_weight > 0, pseudo.copy()
         if self.queries is not None:  # a bought label reaches every stored and future step of its sample
             bought = np.flatnonzero(self.queries.revealed)
-            self.table.set(bought, self.store.label_value[bought], 1.0)
             read[bought], value[bought] = True, self.store.label_value[bought]
+            self.table.set(bought, value[bought], 1.0)
         self.stopped = result.stopped
         stats = round_stats(result, pool.unlabelled, true_class, self.true_rewards)
         rewards = self.classes.decode(np.arange(self.task.n_classes))
         labelled, unlabelled = pool.labelled, pool.unlabelled
         if record:
             self.class_records += class_rows(self.round, result, labelled, unlabelled, true_class, rewards)
-        # The classes' values, not only the classes: a class that is right can pay the wrong reward (a
-        # late goal's pay in the steps' class pays every step part of a goal, at a class accuracy of 1).
-        error = np.abs(value - self.store.hidden_reward[: value.size])[read]  # metrics only
-        return {
-            **stats,
-            "labelled_steps": int(pool.labelled.sum()),
-            "step_reward_error": float(error.mean()) if read.any() else float("nan"),
-        }
+        # The classes' values too: a right class can pay the wrong reward (a late goal's in the steps').
+        error = np.abs(value - self.store.hidden_reward[: value.size])[read].mean() if read.any() else np.nan
+        return {**stats, "labelled_steps": int(labelled.sum()), "step_reward_error": float(error)}
 
     def inner_pass(self) -> None:
         """A pass inside a round (``training.cotrain_passes``): a co-training pass, or a score pass
