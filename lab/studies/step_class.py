@@ -16,6 +16,7 @@ from collections.abc import Callable
 
 import numpy as np
 
+from dospcot.run.run_folder import REWARD_CLASSES_FILE
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies import views
@@ -57,7 +58,7 @@ def _arm(run: TrialRun) -> str:
 def steps_class_value(run: TrialRun) -> float:
     """The reward the run's lowest class paid at its last round (``reward_classes.json``): DoorKey's
     steps pay 0, so above 0 every step was paid part of a goal."""
-    path = run.run_dir / "reward_classes.json"
+    path = run.run_dir / REWARD_CLASSES_FILE
     values = [v for v in json.loads(path.read_text())["rewards"] if v is not None] if path.is_file() else []
     return min(values) if values else math.nan
 
@@ -141,7 +142,9 @@ def tables(runs: list[TrialRun]) -> list[str]:
                     f"{sum(p > 0 for p in paid)} of {len(members)} | {cpu_per_run(members)} |"
                 )
     lines += ["", "The image agent's success, step class minus quantile classes, paired by seed:", ""]
-    lines += [f"- {b} labels: {_paired(cells, (b,))} over {_paired(cells, (b,)).n} seeds." for b in budgets]
+    for b in budgets:
+        one = _paired(cells, (b,))
+        lines.append(f"- {b} labels: {one} over {one.n} seeds.")
     both = _paired(cells, budgets)
     return [*lines, f"- both budgets: {both} over {both.n} pairs."]
 
