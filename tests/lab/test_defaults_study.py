@@ -194,3 +194,12 @@ def test_version_13_trains_doorkey_first_with_the_step_class_and_pairs_with_vers
         for version in ("13", "12", "3")
     ]
     assert [THIRTEEN_AGAINST_TWELVE.version_of(run) for run in runs] == [13, 12, None]
+
+
+def test_version_13_on_one_cpu_trains_version_12_again_and_reads_version_13s_runs():
+    thirteen, twelve = STUDIES["defaults-13-same-cpu"].sweeps
+    assert thirteen == STUDIES["defaults-13"].sweeps[0] and STUDIES["defaults-13-same-cpu"].confirmatory
+    trials = sweep_spec(twelve, 20).trials(check_task=False)
+    assert [t.config for t in trials[:: len(trials) // 2]] == ["minigrid-doorkey-dospcot", "grid16-dospcot"]
+    doorkey = trials[0].load_config()
+    assert (twelve.name, doorkey.defaults, doorkey.gym.step_class) == ("defaults-12-same-cpu", 12, False)
