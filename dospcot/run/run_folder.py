@@ -143,8 +143,9 @@ def source_commit(source: Path = PACKAGE_DIR) -> str | None:
 @cache
 def cpu_description() -> str:
     """The CPU's model and the instruction set torch's CPU kernels use (e.g. ``AVX512``). Runs are
-    deterministic for a seed on one kind of CPU; kernels for another instruction set round otherwise,
-    and an RL run amplifies the smallest difference, so the same seed may end elsewhere there."""
+    deterministic for a seed on one CPU model; another model rounds otherwise, even with the same
+    instruction set, and an RL run amplifies the smallest difference, so the same seed may end
+    elsewhere there."""
     model = platform.processor() or platform.machine()
     try:
         lines = Path("/proc/cpuinfo").read_text().splitlines()

@@ -6,6 +6,7 @@ for success and for pseudo-reward accuracy (non-inferiority; docs/guide/defaults
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -84,6 +85,28 @@ class VersionPair:
             "",
             *held_lines(differences, non_inferior, NON_INFERIOR_WORDS),
             *(["", *early] if early else []),
+            *self.cpu_lines(runs),
+        ]
+
+    def cpu_lines(self, runs: list[TrialRun]) -> list[str]:
+        """How many of each preset's pairs trained on one CPU model (``run_info.json``'s ``cpu``): a
+        pair from two models holds their rounding's noise as well as the versions' difference."""
+        cells = []
+        for preset in PRESETS:
+            new, old = self.by_seed(runs, preset, self.new), self.by_seed(runs, preset, self.old)
+            seeds = new.keys() & old.keys()
+            if seeds:
+                same = sum(
+                    _cpu(new[seed]) is not None and _cpu(new[seed]) == _cpu(old[seed]) for seed in seeds
+                )
+                cells.append(f"`{preset}` {same} of {len(seeds)}")
+        if not cells:
+            return []
+        return [
+            "",
+            f"Pairs trained on one CPU model (`run_info.json`'s `cpu`): {', '.join(cells)}. A pair from two "
+            "models holds their rounding's noise as well as the versions' difference: it widens the "
+            "interval and favours neither version.",
         ]
 
     def glance(self, runs: list[TrialRun]) -> Glance:
@@ -127,6 +150,11 @@ class VersionPair:
             if best["success"].n and not all(map(non_inferior, best.values())):
                 early[preset] = best
         return early
+
+
+def _cpu(run: TrialRun) -> str | None:
+    """The CPU model and torch kernels that trained ``run`` (None where it did not record them)."""
+    return json.loads((run.run_dir / "run_info.json").read_text()).get("cpu")
 
 
 TWO_AGAINST_ONE = VersionPair(1, 2, lambda run: int(run.trial.params.get("defaults", 1)))

@@ -1,5 +1,5 @@
 """The header of a study's tables: where its figures come from (runs, seeds, training time, source
-commits, CPU kernels) and, on a grid, what a lava-free timeout scores on the map."""
+commits, CPU models and kernels) and, on a grid, what a lava-free timeout scores on the map."""
 
 from __future__ import annotations
 
@@ -58,12 +58,17 @@ def _commits(info: list[dict[str, Any]]) -> str:
 
 
 def _cpus(info: list[dict[str, Any]]) -> str:
-    """The torch CPU kernels that trained the runs, with how many runs each (``run_info.json``'s
-    ``cpu``; another instruction set may end a seed elsewhere); nothing where no run recorded it."""
+    """The CPU models and torch kernels that trained the runs, with how many runs each
+    (``run_info.json``'s ``cpu``); nothing where no run recorded it. Two models with the same
+    instruction set still round differently (an Intel Xeon and an AMD EPYC, both AVX512, parted
+    grid16's seed 7 under one config), so a seed trained on each may end elsewhere."""
     if not any("cpu" in i for i in info):
         return ""
-    counts = Counter(i["cpu"].rpartition("torch kernels ")[2] if "cpu" in i else "not recorded" for i in info)
-    return f"; torch CPU kernels {_counted(counts)}"
+    counts = Counter(
+        i["cpu"].replace(", torch kernels ", " with torch kernels ") if "cpu" in i else "not recorded"
+        for i in info
+    )
+    return f"; CPUs {_counted(counts)}"
 
 
 def _defaults(runs: list[TrialRun]) -> str:

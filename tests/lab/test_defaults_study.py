@@ -203,3 +203,20 @@ def test_version_13_on_one_cpu_trains_version_12_again_and_reads_version_13s_run
     assert [t.config for t in trials[:: len(trials) // 2]] == ["minigrid-doorkey-dospcot", "grid16-dospcot"]
     doorkey = trials[0].load_config()
     assert (twelve.name, doorkey.defaults, doorkey.gym.step_class) == ("defaults-12-same-cpu", 12, False)
+
+
+def test_the_tables_count_the_pairs_trained_on_one_cpu_model(tmp_path):
+    """A pair from two CPU models parts even under one config: the page says how many pairs share one."""
+    runs = []
+    for seed in range(3):
+        for version in (12, 13):
+            run_dir = tmp_path / f"{version}-{seed}"
+            run_dir.mkdir()
+            cpu = ("Xeon" if (version, seed) == (12, 0) else "EPYC") + ", torch kernels AVX512"
+            (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0, "cpu": cpu}))
+            summary = {"mean": {"success": 1.0, "pseudo_accuracy": 0.9, "labelled_steps": 100.0}}
+            trial = Trial("grid16-dospcot", "grid16-dospcot", {"defaults": str(version)}, seed)
+            runs.append(TrialRun(trial, summary, [], run_dir))
+    assert THIRTEEN_AGAINST_TWELVE.tables(runs)[-1].startswith(
+        "Pairs trained on one CPU model (`run_info.json`'s `cpu`): `grid16-dospcot` 2 of 3."
+    )

@@ -377,8 +377,8 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
     assert "; 3 CPU-minutes of training (one torch thread per run); " in line
 
 
-def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
-    """Runs are deterministic on one kind of CPU: a study trained on two shows it."""
+def test_the_header_counts_the_cpu_models_and_kernels_where_runs_recorded_them(tmp_path):
+    """Runs are deterministic on one CPU model: a study trained on two shows it."""
     cpus = ["Xeon, torch kernels AVX512", "EPYC, torch kernels AVX2", None]
     runs = []
     for seed, cpu in enumerate(cpus):
@@ -389,9 +389,10 @@ def test_the_header_counts_the_cpu_kernels_where_runs_recorded_them(tmp_path):
         (run_dir / "config.toml").write_text(f"defaults = {1 + (seed == 0)}\n")
         runs.append(TrialRun(Trial("tiny", "tiny", {}, seed), {}, [], run_dir))
     line = header(runs, "dospcot-lab study x", [tmp_path])[0]
-    # The versions of the defaults the runs resolved under, counted as the kernels are.
+    # The versions of the defaults the runs resolved under, counted as the CPUs are.
     assert line.endswith(
-        "source commit aaaaaaa (3); torch CPU kernels AVX2 (1), AVX512 (1), not recorded (1); "
+        "source commit aaaaaaa (3); CPUs EPYC with torch kernels AVX2 (1), Xeon with torch kernels "
+        "AVX512 (1), not recorded (1); "
         "defaults versions 1 (2), 2 (1)."
     )
 
