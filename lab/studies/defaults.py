@@ -6,6 +6,7 @@ for success and for pseudo-reward accuracy (non-inferiority; docs/guide/defaults
 
 from __future__ import annotations
 
+import csv
 import json
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -89,24 +90,26 @@ class VersionPair:
         ]
 
     def cpu_lines(self, runs: list[TrialRun]) -> list[str]:
-        """How many of each preset's pairs trained on one CPU model (``run_info.json``'s ``cpu``): a
-        pair from two models holds their rounding's noise as well as the versions' difference."""
+        """How many of each preset's pairs trained on one CPU model (``run_info.json``'s ``cpu``), and
+        how many of those took one course (:func:`_course`): a pair from two models holds their
+        rounding's noise as well as the versions' difference, and a pair that took one course shows
+        the versions' settings trained alike there."""
         cells = []
         for preset in PRESETS:
             new, old = self.by_seed(runs, preset, self.new), self.by_seed(runs, preset, self.old)
             seeds = new.keys() & old.keys()
+            one_cpu = [s for s in seeds if _cpu(new[s]) is not None and _cpu(new[s]) == _cpu(old[s])]
+            alike = sum(_course(new[s]) == _course(old[s]) for s in one_cpu)
             if seeds:
-                same = sum(
-                    _cpu(new[seed]) is not None and _cpu(new[seed]) == _cpu(old[seed]) for seed in seeds
-                )
-                cells.append(f"`{preset}` {same} of {len(seeds)}")
+                cells.append(f"`{preset}` {len(one_cpu)} of {len(seeds)} (one course: {alike})")
         if not cells:
             return []
         return [
             "",
             f"Pairs trained on one CPU model (`run_info.json`'s `cpu`): {', '.join(cells)}. A pair from two "
             "models holds their rounding's noise as well as the versions' difference: it widens the "
-            "interval and favours neither version.",
+            "interval and favours neither version. One course: a pair whose two runs read the same "
+            "greedy return, success and pseudo-reward accuracy for each agent in every round.",
         ]
 
     def glance(self, runs: list[TrialRun]) -> Glance:
@@ -150,6 +153,17 @@ class VersionPair:
             if best["success"].n and not all(map(non_inferior, best.values())):
                 early[preset] = best
         return early
+
+
+def _course(run: TrialRun) -> list[tuple[str, ...]]:
+    """A run's course: per row of its ``metrics.csv`` (an agent in a round), the round, the agent, its
+    greedy return, success and pseudo-reward accuracy; empty where the run kept no metrics."""
+    path = run.run_dir / "metrics.csv"
+    if not path.exists():
+        return []
+    with path.open(newline="") as f:
+        columns = ("round", "agent", "greedy_return", "success", "pseudo_accuracy")
+        return [tuple(row.get(c, "") for c in columns) for row in csv.DictReader(f)]
 
 
 def _cpu(run: TrialRun) -> str | None:
