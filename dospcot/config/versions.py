@@ -47,14 +47,16 @@ thousands of labels, over the 100 issue 78 allows. Version 11, a candidate, is v
 5's and version 7's passes (four co-training passes a round, from round 2): under version 10 the untuned
 study's DOSPCoT on DistShift1 ended with every goal step pseudo-rewarded right and still reached the
 goal in an eighth of the oracle's episodes, where the true-rewards study had traced such a loss to the
-round's lag. Version 12, **adopted**, is version 10 with ten score passes a round for DOSPCoT
+round's lag. Version 12, adopted before version 13, is version 10 with ten score passes a round for DOSPCoT
 (``training.pass_kind = "score"``): a pass refits nothing, so it costs a forward pass of each classifier
 where version 11's refits took most of a round on MiniGrid's egocentric map, and the true-rewards
 study's control with such passes matched the oracle on DoorKey. The defaults-12 study held it
-non-inferior to version 3 on both presets (docs/results/defaults-12.md). Version 13, a candidate, is
+non-inferior to version 3 on both presets (docs/results/defaults-12.md). Version 13, **adopted**, is
 version 12 with the steps' reward in a class of its own on a gym task (``gym.step_class``): under
 queries on episode ends a MiniGrid goal paid by its time could share the steps' quantile class, which
-then paid every step part of a goal (docs/results/step-class.md). Nothing here imports torch.
+then paid every step part of a goal (docs/results/step-class.md). The defaults-13-same-cpu study held
+it non-inferior to version 12 on both presets (docs/results/defaults-13-same-cpu.md). Nothing here
+imports torch.
 """
 
 from __future__ import annotations
@@ -74,7 +76,7 @@ from dospcot.config.task_sections import EnvConfig
 TaskSection = tuple[str, type]
 """A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
 
-ADOPTED = 12
+ADOPTED = 13
 """The version of the defaults a config without ``defaults`` gets."""
 
 FIRST = 1
@@ -372,7 +374,7 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
 BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10, 13: 12}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11, 13})
+CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11})
 """Versions a config may opt into that no study has adopted yet."""
 
 
