@@ -13,7 +13,7 @@ from dospcot.cli import main
 from dospcot.config.errors import ConfigError
 from dospcot.config.presets import preset_names
 from dospcot.config.reference import config_reference
-from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS, lineage, moved_for_some_methods
+from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS, gym_moves, lineage, moved_for_some_methods
 from dospcot.tasks import load_config, load_run_config
 
 
@@ -132,6 +132,11 @@ def test_each_version_builds_on_the_one_it_names_and_the_reference_shows_the_ado
     assert "cotraining.numerics" not in moved_for_some_methods()
     passes = "`10` for method `dospcot` (`defaults = 1`, and the other methods: `1`)"
     assert f"| `cotrain_passes` | `int` | {passes} |" in train
+    # A key the adopted version moves for a gym task (a user's own env) names that default too.
+    assert '| `steps_per_round` | `int` | `5000`; for a gym task (`task = "gym"`): `10000` |' in train
+    learners = '(`task = "gym"`, method `dospcot`, `reward-model`): `true`'
+    assert f"| `step_class` | `bool` | `false`; for a gym task {learners} |" in train
+    assert gym_moves()["gym.step_class"] == (True, ["dospcot", "reward-model"])
 
 
 def test_version_2_moves_what_each_method_and_view_count_can_use():

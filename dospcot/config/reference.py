@@ -13,7 +13,9 @@ import json
 import math
 import re
 from collections.abc import Iterator, Mapping, Sequence
-from typing import Any
+from typing import Any, get_args
+
+from dospcot.config.choices import Method
 
 DQN_NOTES = {
     "n_steps": "n-step returns: each replayed sample is a window of up to n steps of one env, every reward "
@@ -145,6 +147,7 @@ def section_tables(
     extra_docs: Mapping[str, str] | None = None,
     adopted: Mapping[str, Any] | None = None,
     methods: Mapping[str, Sequence[str]] | None = None,
+    gym: Mapping[str, tuple[Any, Sequence[str]]] | None = None,
 ) -> list[str]:
     """The markdown reference of one config section (the dataclass ``cls``, read from ``[key]``), then
     of its sub-sections; the top level's keys where ``key`` is empty.
@@ -153,7 +156,9 @@ def section_tables(
         that version moves (:func:`dospcot.config.versions.adopted_moves`); its cell names the first
         version's default beside it.
     :param methods: dotted key -> the methods it is moved for, for each key of ``adopted`` that the
-        version moves for some methods only (:func:`dospcot.config.versions.moved_for_some_methods`)."""
+        version moves for some methods only (:func:`dospcot.config.versions.moved_for_some_methods`).
+    :param gym: dotted key -> its default for a gym task and the methods it holds for, for each key
+        the adopted version moves otherwise there (:func:`dospcot.config.versions.gym_moves`)."""
     lines: list[str] = []
     by_section: dict[str, list[KeyRow]] = {}
     for row in key_rows(cls, key, extra_docs):
@@ -177,6 +182,14 @@ def section_tables(
                         f"`{toml_value(adopted[row.dotted])}` for method {named} (`defaults = 1`, and the "
                         f"other methods: `{row.default}`)"
                     )
+            if gym and row.dotted in gym:
+                value, held_by = gym[row.dotted]
+                named = (
+                    ""
+                    if len(held_by) == len(get_args(Method))
+                    else f", method {', '.join(f'`{m}`' for m in held_by)}"
+                )
+                default += f'; for a gym task (`task = "gym"`{named}): `{toml_value(value)}`'
             lines.append(f"| `{row.key}` | `{row.type}` | {default} | {meaning} |")
         for note, mapping in (
             ("Set elsewhere, not in this section", getattr(section_cls, "set_elsewhere", {})),
@@ -204,16 +217,18 @@ def config_reference(dqn_docs: Mapping[str, str] | None = None) -> str:
     """Every key of a ``dospcot train`` config and of a paper-protocol config, with its default, as
     markdown tables; ``dqn_docs``: the ``[dqn]`` keys' meanings from SB3 (:func:`sb3_dqn_docs`)."""
     from dospcot.config.run_configs import PaperConfig, TrainConfig
-    from dospcot.config.versions import adopted_moves, moved_for_some_methods
+    from dospcot.config.versions import adopted_moves, gym_moves, moved_for_some_methods
 
-    adopted, methods = adopted_moves(), moved_for_some_methods()
+    adopted, methods, gym = adopted_moves(), moved_for_some_methods(), gym_moves()
     lines = ["## A training config (`dospcot train`)", ""]
-    lines += section_tables(_root_part(TrainConfig, "TrainConfig"), "", adopted=adopted, methods=methods)
+    lines += section_tables(
+        _root_part(TrainConfig, "TrainConfig"), "", adopted=adopted, methods=methods, gym=gym
+    )
     for field in dataclasses.fields(TrainConfig):
         default = field_default(field)
         if dataclasses.is_dataclass(default):
             extra = dqn_docs if field.name == "dqn" else None
-            lines += section_tables(type(default), field.name, extra, adopted, methods)
+            lines += section_tables(type(default), field.name, extra, adopted, methods, gym)
     lines += ['## A paper-protocol config (`task = "paper"`)', ""]
     lines += section_tables(_root_part(PaperConfig, "PaperConfig"), "")
     lines += section_tables(type(PaperConfig().tabular), "tabular")

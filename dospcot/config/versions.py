@@ -71,7 +71,7 @@ from dospcot.config.choices import DEFAULT_VIEWS, Method, method_name
 from dospcot.config.errors import ConfigError
 from dospcot.config.learning_sections import CoTrainingConfig, TrainingConfig
 from dospcot.config.loading import set_key
-from dospcot.config.task_sections import EnvConfig
+from dospcot.config.task_sections import EnvConfig, GymConfig
 
 TaskSection = tuple[str, type]
 """A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
@@ -427,6 +427,19 @@ def moved_for_some_methods() -> dict[str, list[str]]:
         for key, value in adopted.items()
     }
     return {key: methods for key, methods in found.items() if len(methods) < len(by_method)}
+
+
+def gym_moves() -> dict[str, tuple[Any, list[str]]]:
+    """The keys the adopted version moves otherwise for a gym task (``task = "gym"``) than for
+    :func:`adopted_moves`'s grid, under some method: dotted key -> (its default there, the methods it is
+    moved for). The configuration reference shows these beside the grid's default."""
+    grid = {method: adopted_moves(method) for method in get_args(Method)}
+    found: dict[str, tuple[Any, list[str]]] = {}
+    for method in get_args(Method):
+        for key, (value, _) in moved_keys({"method": method, "task": "gym"}, ("gym", GymConfig)).items():
+            if grid[method].get(key) != value:
+                found.setdefault(key, (value, []))[1].append(method)
+    return found
 
 
 def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tuple[Any, str]]:
