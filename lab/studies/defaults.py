@@ -7,7 +7,6 @@ for success and for pseudo-reward accuracy (non-inferiority; docs/guide/defaults
 from __future__ import annotations
 
 import csv
-import json
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -22,6 +21,7 @@ from dospcot_lab.studies.tables import (
     NON_INFERIOR_WORDS,
     adoption_glance,
     best_case,
+    cpu_pairs,
     held_lines,
     non_inferior,
     paired,
@@ -98,7 +98,7 @@ class VersionPair:
         for preset in PRESETS:
             new, old = self.by_seed(runs, preset, self.new), self.by_seed(runs, preset, self.old)
             seeds = new.keys() & old.keys()
-            one_cpu = [s for s in seeds if _cpu(new[s]) is not None and _cpu(new[s]) == _cpu(old[s])]
+            one_cpu = cpu_pairs(new, old)[0]
             alike = sum(_course(new[s]) == _course(old[s]) for s in one_cpu)
             if seeds:
                 cells.append(f"`{preset}` {len(one_cpu)} of {len(seeds)} (one course: {alike})")
@@ -164,11 +164,6 @@ def _course(run: TrialRun) -> list[tuple[str, ...]]:
     with path.open(newline="") as f:
         columns = ("round", "agent", "greedy_return", "success", "pseudo_accuracy")
         return [tuple(row.get(c, "") for c in columns) for row in csv.DictReader(f)]
-
-
-def _cpu(run: TrialRun) -> str | None:
-    """The CPU model and torch kernels that trained ``run`` (None where it did not record them)."""
-    return json.loads((run.run_dir / "run_info.json").read_text()).get("cpu")
 
 
 TWO_AGAINST_ONE = VersionPair(1, 2, lambda run: int(run.trial.params.get("defaults", 1)))

@@ -395,3 +395,20 @@ def with_headline(
         ]
 
     return tables_and_headline
+
+
+def run_cpu(run: TrialRun) -> str | None:
+    """The CPU model and torch kernels that trained ``run`` (``run_info.json``'s ``cpu``; None where it
+    did not record them)."""
+    path = run.run_dir / "run_info.json"
+    return json.loads(path.read_text()).get("cpu") if path.is_file() else None
+
+
+def cpu_pairs(a: dict[int, TrialRun], b: dict[int, TrialRun]) -> tuple[list[int], list[int]]:
+    """Of the seeds both ``a`` and ``b`` ran, those whose two runs trained on one CPU model and those
+    on two (a run that did not record its CPU is in neither). Two models round differently even with
+    one instruction set, so a pair from two holds that noise in its difference."""
+    common = sorted(a.keys() & b.keys())
+    cpus = {s: (run_cpu(a[s]), run_cpu(b[s])) for s in common}
+    known = [s for s in common if None not in cpus[s]]
+    return [s for s in known if cpus[s][0] == cpus[s][1]], [s for s in known if cpus[s][0] != cpus[s][1]]

@@ -21,7 +21,7 @@ from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.batched_seeds import PRESETS as GRID16_PRESETS
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.queries import STUDIES as QUERIES
-from dospcot_lab.studies.tables import FRACTION, paired
+from dospcot_lab.studies.tables import FRACTION, cpu_pairs, paired
 
 PSEUDO_REWARDS = "cotraining.pseudo_rewards"
 SEEDS = 10
@@ -254,7 +254,27 @@ def tables(runs: list[TrialRun]) -> list[str]:
                 if label.startswith("path"):
                     verdict = "; **" + ("matches" if matches(diff) else "does not match") + " the oracle**"
                 lines.append(f"- {name} ({views}), {label}: {diff} over {diff.n} seeds{verdict}.")
+        lines += _cpu_line(runs, task)
     return lines
+
+
+def _cpu_line(runs: list[TrialRun], task: str) -> list[str]:
+    """Where some arm's pairs with the oracle trained on two CPU models, how many, per arm: such a
+    pair's difference holds the two models' rounding as well as the arm's loss."""
+    oracle = _by_seed(runs, task, "oracle")
+    crossed = {}
+    for arm in ARMS[1:]:
+        members = _by_seed(runs, task, arm)
+        if n := len(members.keys() & oracle.keys()):
+            crossed[arm] = (len(cpu_pairs(members, oracle)[1]), n)
+    if not any(k for k, _ in crossed.values()):
+        return []
+    cells = "; ".join(f"{arm}: {k} of {n}" for arm, (k, n) in crossed.items())
+    return [
+        "",
+        f"Pairs with the oracle trained on two CPU models (`run_info.json`'s `cpu`): {cells}. Such a pair "
+        "holds the two models' rounding as well as the arm's difference: it widens the interval.",
+    ]
 
 
 def glance(runs: list[TrialRun]) -> Glance:

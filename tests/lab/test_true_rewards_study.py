@@ -2,6 +2,7 @@
 oracle splits, paired by seed, into the path's loss and the pseudo-rewards' loss, and the control
 matches the oracle only where its interval holds 0 above the margin."""
 
+import json
 from pathlib import Path
 
 import pytest
@@ -176,3 +177,21 @@ def test_passes_inside_the_rounds_are_compared_with_exploration_by_rounds_alone(
         grid = {key: (value,) for key, value in added.items()}
         assert sweep.grid == {**sweeps[f"true-rewards-{task}-rounds"].grid, **grid}
         assert sweep.seeds == 10
+
+
+def test_pairs_with_the_oracle_trained_on_two_cpu_models_are_counted_per_arm(tmp_path):
+    """Two CPU models round differently: a control paired with an oracle run from another model says so."""
+    runs = _lavagap([1.0, 1.0], [1.0, 1.0], [1.0, 1.0])
+    for i, run in enumerate(runs):
+        run_dir = tmp_path / str(i)
+        run_dir.mkdir()
+        intel = run.trial.params.get(PSEUDO_REWARDS) == "hidden" and run.trial.seed == 0
+        cpu = ("Xeon" if intel else "EPYC") + ", torch kernels AVX512"
+        (run_dir / "run_info.json").write_text(json.dumps({"cpu": cpu}))
+        runs[i] = TrialRun(run.trial, run.summary, [], run_dir)
+    assert tables(runs)[-1].startswith(
+        "Pairs with the oracle trained on two CPU models (`run_info.json`'s `cpu`): control: 1 of 2; "
+        "DOSPCoT: 0 of 2."
+    )
+    # runs that recorded no CPU (a folder without run_info.json) add no line
+    assert not tables(_lavagap([1.0], [1.0], [1.0]))[-1].startswith("Pairs with the oracle")
