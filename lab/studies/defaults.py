@@ -6,9 +6,10 @@ for success and for pseudo-reward accuracy (non-inferiority; docs/guide/defaults
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Callable
 from dataclasses import dataclass
+
+import numpy as np
 
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
@@ -91,7 +92,7 @@ class VersionPair:
 
     def cpu_lines(self, runs: list[TrialRun]) -> list[str]:
         """How many of each preset's pairs trained on one CPU model (``run_info.json``'s ``cpu``), and
-        how many of those took one course (:func:`_course`): a pair from two models holds their
+        how many of those took one course (:func:`_same_course`): a pair from two models holds their
         rounding's noise as well as the versions' difference, and a pair that took one course shows
         the versions' settings trained alike there."""
         cells = []
@@ -99,7 +100,7 @@ class VersionPair:
             new, old = self.by_seed(runs, preset, self.new), self.by_seed(runs, preset, self.old)
             seeds = new.keys() & old.keys()
             one_cpu = cpu_pairs(new, old)[0]
-            alike = sum(_course(new[s]) == _course(old[s]) for s in one_cpu)
+            alike = sum(_same_course(new[s], old[s]) for s in one_cpu)
             if seeds:
                 cells.append(f"`{preset}` {len(one_cpu)} of {len(seeds)} (one course: {alike})")
         if not cells:
@@ -155,15 +156,15 @@ class VersionPair:
         return early
 
 
-def _course(run: TrialRun) -> list[tuple[str, ...]]:
-    """A run's course: per row of its ``metrics.csv`` (an agent in a round), the round, the agent, its
-    greedy return, success and pseudo-reward accuracy; empty where the run kept no metrics."""
-    path = run.run_dir / "metrics.csv"
-    if not path.exists():
-        return []
-    with path.open(newline="") as f:
-        columns = ("round", "agent", "greedy_return", "success", "pseudo_accuracy")
-        return [tuple(row.get(c, "") for c in columns) for row in csv.DictReader(f)]
+COURSE = ("round", "agent", "greedy_return", "success", "pseudo_accuracy")
+"""The ``metrics.csv`` columns that make a run's course (:func:`_same_course`)."""
+
+
+def _same_course(a: TrialRun, b: TrialRun) -> bool:
+    """Whether two runs took one course: the same :data:`COURSE` figures for each agent in every round
+    of their ``metrics.csv`` (NaN, where a figure is undefined, matching NaN)."""
+    course_a, course_b = ([[row.get(c, np.nan) for c in COURSE] for row in r.curves] for r in (a, b))
+    return np.array_equal(np.array(course_a, float), np.array(course_b, float), equal_nan=True)
 
 
 TWO_AGAINST_ONE = VersionPair(1, 2, lambda run: int(run.trial.params.get("defaults", 1)))

@@ -5,6 +5,7 @@ versions with nothing else set."""
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from dospcot.sweeps.report import TrialRun
@@ -207,7 +208,8 @@ def test_version_13_on_one_cpu_trains_version_12_again_and_reads_version_13s_run
 
 def test_the_tables_count_the_pairs_trained_on_one_cpu_model(tmp_path):
     """A pair from two CPU models parts even under one config: the page says how many pairs share one,
-    and how many of those took one course (seed 2's version 13 reached the goal sooner)."""
+    and how many of those took one course (seed 2's version 13 reached the goal sooner; an undefined
+    figure, NaN, matches NaN)."""
     runs = []
     for seed in range(3):
         for version in (12, 13):
@@ -215,11 +217,11 @@ def test_the_tables_count_the_pairs_trained_on_one_cpu_model(tmp_path):
             run_dir.mkdir()
             cpu = ("Xeon" if (version, seed) == (12, 0) else "EPYC") + ", torch kernels AVX512"
             (run_dir / "run_info.json").write_text(json.dumps({"cpu_time_s": 60.0, "cpu": cpu}))
-            returns = "-17.0" if (version, seed) == (13, 2) else "-19.0"
-            (run_dir / "metrics.csv").write_text(f"round,agent,greedy_return,success\n1,0,{returns},1.0\n")
+            returns = -17.0 if (version, seed) == (13, 2) else -19.0
+            curves = [{"round": 1.0, "agent": 0.0, "greedy_return": returns, "pseudo_accuracy": np.nan}]
             summary = {"mean": {"success": 1.0, "pseudo_accuracy": 0.9, "labelled_steps": 100.0}}
             trial = Trial("grid16-dospcot", "grid16-dospcot", {"defaults": str(version)}, seed)
-            runs.append(TrialRun(trial, summary, [], run_dir))
+            runs.append(TrialRun(trial, summary, curves, run_dir))
     assert THIRTEEN_AGAINST_TWELVE.tables(runs)[-1].startswith(
         "Pairs trained on one CPU model (`run_info.json`'s `cpu`): `grid16-dospcot` 2 of 3 (one course: 1)."
     )
