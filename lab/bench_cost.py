@@ -33,9 +33,9 @@ COST_TASKS: dict[str, tuple[str, str]] = {
 """Each task's DOSPCoT preset and its one-agent peer."""
 COST_TARGET = 2.5
 """A DOSPCoT run's CPU time over a self-training run's, at most (two agents' floor is 2)."""
-RELEASE_TARGETS = {"grid16": 1.0, "doorkey": 1.0, "lavagap": 0.5, "fasthighway": 0.5}
-"""This release's CPU per DOSPCoT run over the last release's, at most: at least 2x less on LavaGap and
-the fast highway, no slower elsewhere."""
+RELEASE_TARGETS = {"grid16": 1.0, "doorkey": 0.5, "lavagap": 0.5, "fasthighway": 0.5}
+"""This release's CPU per DOSPCoT run over the last release's, at most: at least 2x less on the MiniGrid
+tasks and the fast highway (the agents-cost issue's bar), no slower on grid16."""
 MEMORY_TARGET = 1 / 3
 """A LavaGap DOSPCoT run's peak memory over the last release's, at most (3x less)."""
 QUICK = ("training.rounds=2",)

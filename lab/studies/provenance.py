@@ -40,13 +40,23 @@ def header(
 
 
 def _training_time(info: list[dict[str, Any]]) -> str:
-    """The runs' training time: CPU time where every run recorded it, else wall time, which counts a
-    run's waits for a core it shared."""
+    """The runs' training time: CPU time where every run recorded it, in all and per run (the mean and
+    the range, from which a new study's cost is estimated), else wall time, which counts a run's waits
+    for a core it shared."""
     if all("cpu_time_s" in i for i in info):
-        cpu = sum(i["cpu_time_s"] for i in info)
-        return f"{cpu / 60:.0f} CPU-minutes of training (one torch thread per run)"
+        cpu = [i["cpu_time_s"] for i in info]
+        return (
+            f"{sum(cpu) / 60:.0f} CPU-minutes of training (one torch thread per run; "
+            f"{_minutes(sum(cpu) / len(cpu))} a run on average, from {_minutes(min(cpu))} to "
+            f"{_minutes(max(cpu))})"
+        )
     wall = sum(i["wall_time_s"] for i in info)
     return f"{wall / 60:.0f} minutes of training, the runs' wall times summed (one torch thread per run)"
+
+
+def _minutes(seconds: float) -> str:
+    """CPU seconds as CPU-minutes: one decimal, two under a minute (a tabular run takes seconds)."""
+    return f"{seconds / 60:.1f}" if seconds >= 60 else f"{seconds / 60:.2f}"
 
 
 def _commits(info: list[dict[str, Any]]) -> str:

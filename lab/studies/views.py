@@ -23,12 +23,17 @@ from pathlib import Path
 
 import numpy as np
 
-from dospcot.core.round_records import DEPENDENCE_STATS
 from dospcot.run.plots import Band, plot_bands
 from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.budget_arms import BUDGET, STRATEGY
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
+from dospcot_lab.studies.error_dependence import (
+    by_round_table,
+    last_round_dependence,
+    last_round_table,
+    mean_text,
+)
 from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.label_curves import SHARE, Curve, labels_text
 from dospcot_lab.studies.tables import cpu_per_run, labels_used
@@ -311,32 +316,13 @@ def _curve_rows(budgets: tuple[str, ...], found: dict[str, Curve], runs: list[Tr
     return lines
 
 
-def last_round_dependence(run: TrialRun) -> dict[str, float]:
-    """The error-dependence figures of a run's last round (:data:`DEPENDENCE_STATS`; NaN where its
-    ``metrics.csv`` predates them or the round had one classifier)."""
-    last = max((row["round"] for row in run.curves), default=None)
-    row = next((row for row in run.curves if row["round"] == last), {})
-    return {key: float(row.get(key, math.nan)) for key in DEPENDENCE_STATS}
+COMPARED = ("DOSPCoT", "twin", "reward model", "DOSPCoT, identical blind spots")
+"""The arms with two classifiers or more, whose errors' dependence the pages compare."""
 
 
-def _mean(values: list[float]) -> str:
-    finite = [v for v in values if not math.isnan(v)]
-    return f"{np.mean(finite):.3f}" if finite else "–"
-
-
-def _dependence_table(runs: list[TrialRun]) -> list[str]:
-    """Per arm with two classifiers or more to compare: its runs' last-round error dependence, mean
-    over the runs (every budget)."""
-    lines = [
-        "| arm | joint error | independent error | disagreement | error correlation | runs |",
-        "|---|---|---|---|---|---|",
-    ]
-    for arm in ("DOSPCoT", "twin", "reward model", "DOSPCoT, identical blind spots"):
-        figures = [last_round_dependence(r) for r in runs if arm_of(r) == arm]
-        if figures:
-            cells = " | ".join(_mean([f[key] for f in figures]) for key in DEPENDENCE_STATS)
-            lines.append(f"| {arm} | {cells} | {len(figures)} |")
-    return lines if len(lines) > 2 else []
+def by_compared_arm(runs: list[TrialRun]) -> dict[str, list[TrialRun]]:
+    """``runs`` of the :data:`COMPARED` arms, grouped by arm in that order."""
+    return {arm: [r for r in runs if arm_of(r) == arm] for arm in COMPARED}
 
 
 REWARD_QUALITY = {
@@ -390,8 +376,9 @@ def _margins(runs: list[TrialRun]) -> list[str]:
         found, on_view = curves(members), curves(members, view)
         if "DOSPCoT" not in found:
             continue
+        grouped = by_compared_arm(members)
         correlation = {
-            arm: _mean([last_round_dependence(r)["error_correlation"] for r in members if arm_of(r) == arm])
+            arm: mean_text([last_round_dependence(r)["error_correlation"] for r in grouped[arm]])
             for arm in ("DOSPCoT", "twin")
         }
         mine, peer = _reach_against_best_peer(found)
@@ -428,7 +415,7 @@ def tables_linking(
                     quality = _accuracy_table(members, budgets(task), metric)
                     if quality:
                         lines += ["", f"{heading}, mean over seeds, last round:", "", *quality]
-                dependence = _dependence_table(members)
+                dependence = last_round_table(by_compared_arm(members))
                 if dependence:
                     lines += [
                         "",
@@ -436,6 +423,18 @@ def tables_linking(
                         "",
                     ]
                     lines += dependence
+                    lines += [
+                        "",
+                        "The same by round: the error correlation's mean over the runs whose classifiers "
+                        "both erred somewhere on the scored samples (elsewhere it is undefined; those runs "
+                        "are counted), and the disagreement's over every run. Co-training fits each view's "
+                        "classifier to the other's pseudo-rewards, which can merge the classifiers' errors "
+                        "over the rounds: the first rounds show how the views err before the exchange has "
+                        "run long, the last round what it left. Reported, outside any hypothesis (the "
+                        "preregistration reads the last round):",
+                        "",
+                        *by_round_table(by_compared_arm(members)),
+                    ]
         margins = _margins(runs)
         if margins:
             lines += ["", "### Dependence against margin", "", *margins]

@@ -29,6 +29,7 @@ from scipy.stats import spearmanr
 
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Glance, Study
+from dospcot_lab.studies.error_dependence import last_round_dependence
 from dospcot_lab.studies.grid_studies import LAYOUT
 from dospcot_lab.studies.label_curves import SHARE, Curve, area_difference, labels_ratio
 from dospcot_lab.studies.step_class import steps_paid
@@ -39,7 +40,6 @@ from dospcot_lab.studies.views import (
     curve_sweeps,
     curves,
     figure,
-    last_round_dependence,
     of_task,
     tables_linking,
 )

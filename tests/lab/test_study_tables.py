@@ -370,11 +370,16 @@ def test_the_header_names_the_commits_that_trained_the_runs(tmp_path):
         "bbbbbbb with uncommitted changes (1), not recorded (1), not recorded then bbbbbbb then aaaaaaa (1)"
         "; defaults version 1 (5)."
     )
-    for run in runs:  # every run with its CPU time: the header counts that, not the wall time
+    for run, cpu in zip(runs, (6.0, 30.0, 36.0, 36.0, 72.0), strict=True):
+        # every run with its CPU time: the header counts that, not the wall time, and per run
         info = json.loads((run.run_dir / "run_info.json").read_text())
-        (run.run_dir / "run_info.json").write_text(json.dumps({**info, "cpu_time_s": 36.0}))
+        (run.run_dir / "run_info.json").write_text(json.dumps({**info, "cpu_time_s": cpu}))
     line = header(runs, "dospcot-lab study x", [tmp_path])[0]
-    assert "; 3 CPU-minutes of training (one torch thread per run); " in line
+    # 180 CPU-s in all over 5 runs: 36 a run (0.60 CPU-minutes), from 6 s (0.10) to 72 s (1.2)
+    assert (
+        "; 3 CPU-minutes of training (one torch thread per run; 0.60 a run on average, from 0.10 to 1.2); "
+        in line
+    )
 
 
 def test_the_header_counts_the_cpu_models_and_kernels_where_runs_recorded_them(tmp_path):
