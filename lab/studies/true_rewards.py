@@ -217,6 +217,37 @@ def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
     return found
 
 
+def round_success(run: TrialRun, views: list[str]) -> dict[int, float]:
+    """The success of the run's agents on ``views`` at the end of each round, their mean, by the env
+    steps each agent had taken then."""
+    by_steps: dict[int, list[float]] = {}
+    for row in run.curves:
+        if row.get("view") in views:
+            by_steps.setdefault(int(row["env_steps"]), []).append(float(row["success"]))
+    return {n: sum(values) / len(values) for n, values in sorted(by_steps.items())}
+
+
+def _by_round(runs: list[TrialRun], task: str) -> list[str]:
+    """Per arm: the success of its agents on the oracle's views at the env steps where the oracle's
+    rounds end (an arm of shorter rounds, read at the same steps), the mean over its seeds (those
+    counted); [] where the oracle has no rows."""
+    views = oracle_views(runs, task)
+    curves = {arm: [round_success(r, views) for r in _by_seed(runs, task, arm).values()] for arm in ARMS}
+    steps = sorted({n for curve in curves["oracle"] for n in curve})
+    if not steps:
+        return []
+    lines = [
+        "| arm | " + " | ".join(f"{n:,} steps" for n in steps) + " | seeds |",
+        "|---|" + "---|" * (len(steps) + 1),
+    ]
+    for arm, found in curves.items():
+        if found:
+            means = [[c[n] for c in found if n in c] for n in steps]
+            cells = " | ".join(f"{sum(m) / len(m):.2f}" if m else "–" for m in means)
+            lines.append(f"| {arm} | {cells} | {len(found)} |")
+    return lines
+
+
 def _rows(arm: str, members: list[TrialRun]) -> list[str]:
     """One row per agent (view) of ``arm``'s runs: each metric over the seeds."""
     rows = []
@@ -254,6 +285,18 @@ def tables(runs: list[TrialRun]) -> list[str]:
                 if label.startswith("path"):
                     verdict = "; **" + ("matches" if matches(diff) else "does not match") + " the oracle**"
                 lines.append(f"- {name} ({views}), {label}: {diff} over {diff.n} seeds{verdict}.")
+        by_round = _by_round(runs, task)
+        if by_round:
+            lines += [
+                "",
+                f"{name}: success on the oracle's views ({views}) at the end of each of the oracle's "
+                "rounds (by the steps each agent had taken), the mean over each arm's seeds. The oracle's "
+                "agent reads every reward from its first step; a co-trained agent reads a step's reward "
+                "once a co-training, or a pass after one, has admitted it, so under score passes nothing "
+                "of round 1's collection is rewarded before its end.",
+                "",
+                *by_round,
+            ]
         lines += _cpu_line(runs, task)
     return lines
 

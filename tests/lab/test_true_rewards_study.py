@@ -119,7 +119,12 @@ def test_exploration_by_rounds_is_a_second_control_compared_with_the_control_and
 
 def test_shorter_rounds_are_a_diagnosis_of_their_own_told_apart_from_exploration_by_rounds_alone():
     hidden = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1", "training.exploration": "rounds"}
-    short = {**hidden, "training.rounds": "20", "training.steps_per_round": "2500"}
+    short = {
+        **hidden,
+        "training.exploration": "rounds",
+        "training.rounds": "20",
+        "training.steps_per_round": "2500",
+    }
     runs = _lavagap([0.5, 0.5], [1.0, 1.0], [0.0, 0.0])
     runs += [_run("minigrid-lavagap-dospcot", s, 1.0, short) for s in range(2)]
     runs += [_run("minigrid-lavagap-dospcot", s, 0.5, hidden) for s in range(2)]
@@ -195,3 +200,40 @@ def test_pairs_with_the_oracle_trained_on_two_cpu_models_are_counted_per_arm(tmp
     )
     # runs that recorded no CPU (a folder without run_info.json) add no line
     assert not tables(_lavagap([1.0], [1.0], [1.0]))[-1].startswith("Pairs with the oracle")
+
+
+def _with_rounds(run: TrialRun, successes: list[float], steps: int) -> TrialRun:
+    """``run`` whose agents on each view succeeded in ``successes[i]`` of the episodes after round i + 1
+    of ``steps`` env steps (the ego agent, as in :func:`_run`, never)."""
+    rows = [
+        {"round": float(i + 1), "view": view, "env_steps": float(steps * (i + 1)), "success": value}
+        for i, success in enumerate(successes)
+        for view, value in (("image", success), ("ego", 0.0))
+        if view in run.summary["views"]
+    ]
+    return TrialRun(run.trial, run.summary, rows, run.run_dir)
+
+
+def test_success_by_steps_reads_each_arm_at_the_oracles_round_ends_on_its_views():
+    hidden = {PSEUDO_REWARDS: "hidden", "training.label_fraction": "0.1"}
+    short = {
+        **hidden,
+        "training.exploration": "rounds",
+        "training.rounds": "20",
+        "training.steps_per_round": "2500",
+    }
+    runs = [
+        _with_rounds(_run("minigrid-lavagap-oracle", 0, 1.0), [0.5, 1.0], 10_000),
+        _with_rounds(_run("minigrid-lavagap-oracle", 1, 1.0), [0.0, 1.0], 10_000),
+        _with_rounds(_run("minigrid-lavagap-dospcot", 0, 0.5, hidden), [0.0, 0.5], 10_000),
+        _with_rounds(_run("minigrid-lavagap-dospcot", 1, 0.5, hidden), [0.0, 0.5], 10_000),
+        # rounds of a quarter of the oracle's: read at its 4th and 8th round, where the oracle's end
+        _with_rounds(
+            _run("minigrid-lavagap-dospcot", 0, 1.0, short), [0, 0.1, 0.2, 0.3, 0, 0, 0, 0.9], 2_500
+        ),
+    ]
+    lines = tables(runs)
+    assert "| arm | 10,000 steps | 20,000 steps | seeds |" in lines
+    assert "| oracle | 0.25 | 1.00 | 2 |" in lines  # (0.5 + 0) / 2, (1 + 1) / 2
+    assert "| control | 0.00 | 0.50 | 2 |" in lines  # the ego agent is not on the oracle's view
+    assert "| control, 20 short rounds | 0.30 | 0.90 | 1 |" in lines
