@@ -415,7 +415,8 @@ def tables_linking(
                     quality = _accuracy_table(members, budgets(task), metric)
                     if quality:
                         lines += ["", f"{heading}, mean over seeds, last round:", "", *quality]
-                dependence = last_round_table(by_compared_arm(members))
+                grouped = by_compared_arm(members)
+                dependence = last_round_table(grouped)
                 if dependence:
                     lines += [
                         "",
@@ -433,7 +434,7 @@ def tables_linking(
                         "run long, the last round what it left. Reported, outside any hypothesis (the "
                         "preregistration reads the last round):",
                         "",
-                        *by_round_table(by_compared_arm(members)),
+                        *by_round_table(grouped),
                     ]
         margins = _margins(runs)
         if margins:
