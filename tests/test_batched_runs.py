@@ -60,6 +60,33 @@ def test_each_members_saved_agent_loads_with_plain_sb3_and_gives_its_q_values():
             np.testing.assert_allclose(loaded.q_net(obs[member]).detach(), stacked[member], atol=1e-5)
 
 
+def test_a_batch_on_a_uint8_image_view_preprocesses_as_sb3_and_each_member_loads_with_its_q_values(tmp_path):
+    """MiniGrid's image is an image space to SB3 (uint8 pixels, divided by 255 before the network): the
+    stacked networks read it as each member's SB3 ``QNetwork`` does, in training and in acting."""
+    pytest.importorskip("minigrid")
+    config = tmp_path / "empty.toml"
+    config.write_text(
+        'task = "gym"\nmethod = "oracle"\nviews = ["image"]\n[gym]\n'
+        'env_id = "minigrid:MiniGrid-Empty-5x5-v0"\nviews = { image = "image" }\n'
+        "[training]\nrounds = 1\nsteps_per_round = 300\n[dqn]\nlearning_starts = 100\n"
+    )
+    runs = [build_run(load_config(str(config), [*PINNED, f"seed={seed}"])) for seed in (0, 1)]
+    batch = BatchedRuns(runs)
+    batch.run()
+    space = runs[0].agents[0].observation_space
+    assert space.dtype == np.uint8
+    obs = th.as_tensor(np.random.default_rng(0).integers(0, 11, size=(2, 4, *space.shape), dtype=np.uint8))
+    stacked = batch.learners[0].q_net(obs).detach()
+    for member, run in enumerate(batch.runs):
+        (agent,) = run.agents
+        assert agent.num_timesteps == 300
+        blob = io.BytesIO()
+        agent.save(blob)
+        blob.seek(0)
+        loaded = DQN.load(blob, device="cpu")
+        np.testing.assert_allclose(loaded.q_net(obs[member]).detach(), stacked[member], atol=1e-5)
+
+
 def _scalars(run_dir, view: str) -> dict[str, list]:
     events = EventAccumulator(str(run_dir / "tb" / f"agent_{view}")).Reload()
     return {tag: events.Scalars(tag) for tag in events.Tags()["scalars"]}

@@ -115,7 +115,14 @@ after two runs outside the record (the untuned study's DistShift1 control under 
 sample admitted from round 1) had reached that task's goal on neither seed by round 3, where the
 oracle had on both: there the path's loss is not the admissions'."""
 DIAGNOSES = (BY_ROUNDS, SHORT_ROUNDS, PASSES, SCORE_PASSES)
-ARMS = ("oracle", "control", *(d.arm for d in DIAGNOSES), "DOSPCoT")
+ADOPTED_VERSION = 13
+"""The version of the defaults a user's first run gets, under which issue 78's bar is read: the control
+and the oracle trained again under it, the preset's own settings kept and the rest the version's (its
+100 labels bought by ``outcomes+disagreement``, ten score passes a round, exploration by rounds, each
+agent's own draws, numerics 2). Added after every other arm had been read."""
+ORACLE_ADOPTED = f"oracle, version {ADOPTED_VERSION}"
+CONTROL_ADOPTED = f"control, version {ADOPTED_VERSION}"
+ARMS = ("oracle", "control", *(d.arm for d in DIAGNOSES), "DOSPCoT", ORACLE_ADOPTED, CONTROL_ADOPTED)
 
 
 def _queries_sweep(name: str) -> Sweep:
@@ -149,6 +156,17 @@ def _sweeps() -> tuple[Sweep, ...]:
             control = _control(key, {**fraction, **{k: (v,) for k, v in diagnosis.params.items()}})
             name = f"{control.name}-{diagnosis.suffix}"
             sweeps.append(dataclasses.replace(control, name=name, seeds=diagnosis.seeds[key]))
+    for key, preset in PRESET.items():
+        adopted = {"numerics": None, "defaults": ADOPTED_VERSION, "seeds": SEEDS}
+        sweeps += [
+            Sweep(f"true-rewards-{key}-oracle-v{ADOPTED_VERSION}", (f"{preset}-oracle",), {}, **adopted),
+            Sweep(
+                f"true-rewards-{key}-v{ADOPTED_VERSION}",
+                (f"{preset}-dospcot",),
+                {PSEUDO_REWARDS: ("hidden",)},
+                **adopted,
+            ),
+        ]
     return tuple(sweeps)
 
 
@@ -159,6 +177,8 @@ def _task(run: TrialRun) -> str:
 def _arm(run: TrialRun) -> str | None:
     """A run's arm: the oracle, the control or one of its diagnoses, DOSPCoT with the preset's uniform
     mask, or None (the other query strategies of the runs read from the active-queries study)."""
+    if run.trial.defaults == ADOPTED_VERSION:
+        return ORACLE_ADOPTED if run.trial.config.endswith("-oracle") else CONTROL_ADOPTED
     if run.trial.config.endswith("-oracle"):
         return "oracle"
     if run.trial.params.get(PSEUDO_REWARDS) == "hidden":
@@ -194,6 +214,9 @@ def _paired(a: dict[int, TrialRun], b: dict[int, TrialRun], views: list[str]) ->
     return paired(a, b, "success", value=lambda run: _view_value(run, views))
 
 
+ADOPTED_PATH = f"path under version {ADOPTED_VERSION}: its control minus its oracle"
+
+
 def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
     """Success of the agents on the oracle's views, paired by seed: what the path loses (control minus
     oracle), what the pseudo-rewards lose (DOSPCoT minus control), and the whole gap (DOSPCoT minus
@@ -214,6 +237,8 @@ def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
             found[f"{diagnosis.alone} alone: {diagnosis.arm} minus {diagnosis.against.arm}"] = _paired(
                 changed, against, views
             )
+    adopted = (_by_seed(runs, task, arm) for arm in (CONTROL_ADOPTED, ORACLE_ADOPTED))
+    found[ADOPTED_PATH] = _paired(*adopted, views)
     return found
 
 
@@ -302,11 +327,12 @@ def tables(runs: list[TrialRun]) -> list[str]:
 
 
 def _cpu_line(runs: list[TrialRun], task: str) -> list[str]:
-    """Where some arm's pairs with the oracle trained on two CPU models, how many, per arm: such a
-    pair's difference holds the two models' rounding as well as the arm's loss."""
-    oracle = _by_seed(runs, task, "oracle")
+    """Where some arm's pairs with its oracle (the adopted version's control: that version's oracle)
+    trained on two CPU models, how many, per arm: such a pair's difference holds the two models'
+    rounding as well as the arm's loss."""
     crossed = {}
-    for arm in ARMS[1:]:
+    for arm in (a for a in ARMS[1:] if a != ORACLE_ADOPTED):
+        oracle = _by_seed(runs, task, ORACLE_ADOPTED if arm == CONTROL_ADOPTED else "oracle")
         members = _by_seed(runs, task, arm)
         if n := len(members.keys() & oracle.keys()):
             crossed[arm] = (len(cpu_pairs(members, oracle)[1]), n)
@@ -321,16 +347,16 @@ def _cpu_line(runs: list[TrialRun], task: str) -> list[str]:
 
 
 def glance(runs: list[TrialRun]) -> Glance:
-    """The path's loss on each task measured, and on how many the control matches the oracle."""
-    measured = {
-        name: diff
-        for task, name in TASKS.items()
-        if (diff := differences(runs, task)["path: control minus oracle"]).n
-    }
+    """The path's loss on each task measured under the adopted defaults (under the first, until the
+    adopted version's control has run), and on how many the control matches the oracle."""
+    label = ADOPTED_PATH if any(_arm(r) == CONTROL_ADOPTED for r in runs) else "path: control minus oracle"
+    version = ADOPTED_VERSION if label == ADOPTED_PATH else 1
+    measured = {name: diff for task, name in TASKS.items() if (diff := differences(runs, task)[label]).n}
     parts = "; ".join(f"{name} {diff}" for name, diff in measured.items()) or "not measured yet"
     held = sum(map(matches, measured.values()))
     return Glance(
-        f"success of the oracle's agents, true-rewards control minus oracle, paired: {parts} (matches on "
+        f"success of the oracle's agents under version {version} of the defaults, true-rewards control "
+        f"minus oracle, paired: {parts} (matches on "
         f"{held} of {len(measured)} tasks measured, of {len(TASKS)})",
         EXPLORATORY,
         tuple(range(SEEDS)),

@@ -12,6 +12,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.preprocessing import preprocess_obs
 from stable_baselines3.dqn.policies import QNetwork
 from torch import nn
 
@@ -21,12 +23,24 @@ class StackedQNetwork(nn.Module):
 
     :param weights: per layer, (S, in, out) float32.
     :param biases: per layer, (S, 1, out) float32.
+    :param observation_space: the members' observation space; observations are preprocessed as SB3's
+        policies preprocess them (an image space's uint8 pixels cast to float and, under
+        ``normalize_images``, divided by 255), so a member computes what its SB3 ``QNetwork`` does.
+    :param normalize_images: SB3's flag of the same name.
     """
 
-    def __init__(self, weights: Sequence[th.Tensor], biases: Sequence[th.Tensor]) -> None:
+    def __init__(
+        self,
+        weights: Sequence[th.Tensor],
+        biases: Sequence[th.Tensor],
+        observation_space: spaces.Space,
+        normalize_images: bool = True,
+    ) -> None:
         super().__init__()
         if len(weights) != len(biases) or not weights:
             raise ValueError(f"one bias per weight, at least one layer: got {len(weights)} and {len(biases)}")
+        self.observation_space = observation_space
+        self.normalize_images = normalize_images
         self.weights = nn.ParameterList(nn.Parameter(w.detach().clone()) for w in weights)
         self.biases = nn.ParameterList(nn.Parameter(b.detach().clone()) for b in biases)
 
@@ -43,11 +57,11 @@ class StackedQNetwork(nn.Module):
             raise ValueError(f"the members' networks differ in shape: {sorted(shapes)}")
         weights = [th.stack([member[i].weight.T for member in layers]) for i in range(len(layers[0]))]
         biases = [th.stack([member[i].bias[None] for member in layers]) for i in range(len(layers[0]))]
-        return cls(weights, biases)
+        return cls(weights, biases, q_nets[0].observation_space, q_nets[0].normalize_images)
 
     def forward(self, obs: th.Tensor) -> th.Tensor:
-        """(S, B, *obs shape) observations -> (S, B, A) Q-values."""
-        x = obs.flatten(2)
+        """(S, B, *obs shape) observations (any dtype the space holds) -> (S, B, A) Q-values."""
+        x = preprocess_obs(obs, self.observation_space, self.normalize_images).flatten(2)
         last = len(self.weights) - 1
         for i, (weight, bias) in enumerate(zip(self.weights, self.biases, strict=True)):
             x = th.baddbmm(bias, x, weight)
