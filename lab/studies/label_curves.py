@@ -64,6 +64,15 @@ class Curve:
         low, high = np.percentile(first_reach(x, y), [2.5, 97.5], method="inverted_cdf")
         return float(low), float(high)
 
+    def ends(self) -> tuple[float, float]:
+        """The most labels any of the curve's runs used, and the fewest its budgets used on average: the
+        range :func:`labels_text` reads a value against."""
+        return float(np.max(self.labels)), float(self.labels.mean(axis=0).min())
+
+    def reach_text(self) -> str:
+        """:meth:`labels_to_reach` as a table cell (:func:`labels_text`)."""
+        return labels_text(self.labels_to_reach(), *self.ends())
+
     def area(self) -> float:
         """The area under the share curve over log labels, from the arm's smallest budget to its
         largest, divided by that width: the oracle's curve (share 1 everywhere) scores 1. NaN with one

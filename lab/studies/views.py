@@ -247,12 +247,6 @@ def curves(runs: list[TrialRun], view: str | None = None) -> dict[str, Curve]:
     return found
 
 
-def _ends(curve: Curve) -> tuple[float, float]:
-    """The most labels any of the curve's runs used, and the fewest its budgets used on average: the
-    range :func:`labels_text` reads a value against."""
-    return float(np.max(curve.labels)), float(curve.labels.mean(axis=0).min())
-
-
 def _task_table(task: str, runs: list[TrialRun], budgets: tuple[str, ...]) -> list[str]:
     """One task: each arm's success as a share of the oracle's at each budget (labels used beside it),
     the labels to reach 90% of the oracle with its interval, and the area under its curve; first over
@@ -302,11 +296,9 @@ def _curve_rows(budgets: tuple[str, ...], found: dict[str, Curve], runs: list[Tr
         shown = [
             f"{at[float(b)][1]:.2f} ({at[float(b)][0]:,.0f})" if float(b) in at else "–" for b in budgets
         ]
-        ends = _ends(curve)
+        ends = curve.ends()
         low, high = curve.labels_interval()
-        reach = f"{labels_text(curve.labels_to_reach(), *ends)} [{labels_text(low, *ends)}, " + (
-            f"{labels_text(high, *ends)}]"
-        )
+        reach = f"{curve.reach_text()} [{labels_text(low, *ends)}, {labels_text(high, *ends)}]"
         area = curve.area()
         members = [r for r in runs if arm_of(r) == arm]
         lines.append(
@@ -358,8 +350,8 @@ def _reach_against_best_peer(found: dict[str, Curve]) -> tuple[str, str | None]:
     them."""
     peers = {arm: found[arm].labels_to_reach() for arm in ONE_VIEW if arm in found}
     best = min(peers, key=peers.get) if peers else None
-    mine = labels_text(found["DOSPCoT"].labels_to_reach(), *_ends(found["DOSPCoT"]))
-    return mine, (f"{best} {labels_text(peers[best], *_ends(found[best]))}" if best else None)
+    mine = found["DOSPCoT"].reach_text()
+    return mine, (f"{best} {found[best].reach_text()}" if best else None)
 
 
 def _margins(runs: list[TrialRun]) -> list[str]:

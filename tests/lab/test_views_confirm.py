@@ -133,6 +133,30 @@ def test_v1_and_v2_are_met_on_two_tasks_of_four_and_v3_reads_dependence_against_
     assert set(confirm.hypotheses(runs[:-1])[1].values()) == {"not decided yet"}
 
 
+def test_the_answer_tables_each_arms_labels_per_task_and_the_readme_block_copies_it(two_pairs):
+    runs = [*_task_runs("grid16", SAVES, 0.1), *_task_runs("doorkey", SAVES, 0.2)]
+    # DoorKey's seed 1 of the reward model at its smallest budget is missing: its curve holds one pair.
+    runs = [r for r in runs if not (r.trial.config == "minigrid-doorkey-reward-model" and r.trial.seed == 1)]
+    answer = confirm.answer(runs, confirm.hypotheses(runs)[1])
+    # The study's tables put the answer between the hypotheses and the exploration's tables.
+    text = "\n".join(
+        ["### Hypotheses", "", "- **V1**: not decided yet.", "", *answer, "", "Each budget's cell"]
+    )
+    block = confirm.readme_block(text)
+    rows = {line.split(" | ")[0][2:]: line for line in block.splitlines() if line.startswith("| ")}
+    # grid16: DOSPCoT at its smallest budget (2), the reward model at 5 + 0.9 x 5 = 9.5 labels (shown
+    # 10), self-training at 10 + 0.9 x 10 = 19, the twin never within 20; no blind run. DoorKey: the
+    # reward model at 10 + 0.9 x 15 = 23.5 on its one pair left, self-training at 25 + 0.9 x 25 = 47.5.
+    assert rows["grid16"] == "| grid16 | <= 2 | > 20 | 10 | 19 | not run yet |"
+    assert rows["doorkey"] == "| doorkey | <= 5 | > 50 | 24 (1 of 2 pairs so far) | 48 | not run yet |"
+    assert rows["lavagap"] == "| lavagap | " + " | ".join(["not run yet"] * 5) + " |"
+    assert block.endswith(
+        "Pre-registered verdicts: V1 (the second view saves labels): not decided yet; V2 (the view pays, "
+        "not the second model): not decided yet."
+    )
+    assert block.startswith("Labels each arm needed") and "Each budget's cell" not in block
+
+
 def test_v3_is_not_testable_where_the_views_errors_depend_alike_on_every_task(two_pairs):
     runs = [*(r for task in confirm.BUDGETS for r in _task_runs(task, TIE, 1.0))]
     verdicts = {"V1": "not met", "V2": "not met", "V3": "not testable", "V4": "not met"}
