@@ -122,7 +122,14 @@ and the oracle trained again under it, the preset's own settings kept and the re
 agent's own draws, numerics 2). Added after every other arm had been read."""
 ORACLE_ADOPTED = f"oracle, version {ADOPTED_VERSION}"
 CONTROL_ADOPTED = f"control, version {ADOPTED_VERSION}"
-ARMS = ("oracle", "control", *(d.arm for d in DIAGNOSES), "DOSPCoT", ORACLE_ADOPTED, CONTROL_ADOPTED)
+WAITING = f"oracle, version {ADOPTED_VERSION}, round 1 at random"
+WAIT = {"training.learn_from_round": "2"}
+WAIT_TASKS = ("lavagap",)
+"""The tasks where the oracle also trains with round 1's wait (``training.learn_from_round = 2``: its
+agent acts at random and learns nothing in round 1, as a co-trained agent learns nothing before its
+round's first co-training has rewarded a step): whether round 1's wait is the path's loss. Added on
+LavaGap after its version-13 control's first seven seeds had fallen short of the oracle."""
+ARMS = ("oracle", "control", *(d.arm for d in DIAGNOSES), "DOSPCoT", ORACLE_ADOPTED, CONTROL_ADOPTED, WAITING)
 
 
 def _queries_sweep(name: str) -> Sweep:
@@ -158,6 +165,16 @@ def _sweeps() -> tuple[Sweep, ...]:
             sweeps.append(dataclasses.replace(control, name=name, seeds=diagnosis.seeds[key]))
     for key, preset in PRESET.items():
         adopted = {"numerics": None, "defaults": ADOPTED_VERSION, "seeds": SEEDS}
+        if key in WAIT_TASKS:
+            grid = {k: (v,) for k, v in WAIT.items()}
+            sweeps.append(
+                Sweep(
+                    f"true-rewards-{key}-oracle-wait-v{ADOPTED_VERSION}",
+                    (f"{preset}-oracle",),
+                    grid,
+                    **adopted,
+                )
+            )
         sweeps += [
             Sweep(f"true-rewards-{key}-oracle-v{ADOPTED_VERSION}", (f"{preset}-oracle",), {}, **adopted),
             Sweep(
@@ -178,6 +195,8 @@ def _arm(run: TrialRun) -> str | None:
     """A run's arm: the oracle, the control or one of its diagnoses, DOSPCoT with the preset's uniform
     mask, or None (the other query strategies of the runs read from the active-queries study)."""
     if run.trial.defaults == ADOPTED_VERSION:
+        if run.trial.params == WAIT:
+            return WAITING
         return ORACLE_ADOPTED if run.trial.config.endswith("-oracle") else CONTROL_ADOPTED
     if run.trial.config.endswith("-oracle"):
         return "oracle"
@@ -237,8 +256,14 @@ def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
             found[f"{diagnosis.alone} alone: {diagnosis.arm} minus {diagnosis.against.arm}"] = _paired(
                 changed, against, views
             )
-    adopted = (_by_seed(runs, task, arm) for arm in (CONTROL_ADOPTED, ORACLE_ADOPTED))
-    found[ADOPTED_PATH] = _paired(*adopted, views)
+    control, oracle, waiting = (
+        _by_seed(runs, task, arm) for arm in (CONTROL_ADOPTED, ORACLE_ADOPTED, WAITING)
+    )
+    found[ADOPTED_PATH] = _paired(control, oracle, views)
+    found[f"round 1's wait alone: {WAITING} minus {ORACLE_ADOPTED}"] = _paired(waiting, oracle, views)
+    found[f"beyond round 1's wait, version {ADOPTED_VERSION}: its control minus {WAITING}"] = _paired(
+        control, waiting, views
+    )
     return found
 
 
@@ -332,7 +357,7 @@ def _cpu_line(runs: list[TrialRun], task: str) -> list[str]:
     rounding as well as the arm's loss."""
     crossed = {}
     for arm in (a for a in ARMS[1:] if a != ORACLE_ADOPTED):
-        oracle = _by_seed(runs, task, ORACLE_ADOPTED if arm == CONTROL_ADOPTED else "oracle")
+        oracle = _by_seed(runs, task, ORACLE_ADOPTED if arm in (CONTROL_ADOPTED, WAITING) else "oracle")
         members = _by_seed(runs, task, arm)
         if n := len(members.keys() & oracle.keys()):
             crossed[arm] = (len(cpu_pairs(members, oracle)[1]), n)

@@ -11,12 +11,24 @@ from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES
-from dospcot_lab.studies.true_rewards import MARGIN, PSEUDO_REWARDS, glance, matches, tables
+from dospcot_lab.studies.true_rewards import (
+    ADOPTED_PATH,
+    ADOPTED_VERSION,
+    MARGIN,
+    PSEUDO_REWARDS,
+    WAIT,
+    glance,
+    matches,
+    tables,
+)
 
 
-def _run(config: str, seed: int, success: float, params: dict[str, str] | None = None) -> TrialRun:
-    """A run whose image agent succeeds in ``success`` of its episodes; a co-trained run's ego agent
-    never does (the oracle trains the image agent alone, so the ego agent enters no difference)."""
+def _run(
+    config: str, seed: int, success: float, params: dict[str, str] | None = None, defaults: int = 1
+) -> TrialRun:
+    """A run under version ``defaults`` of the defaults whose image agent succeeds in ``success`` of its
+    episodes; a co-trained run's ego agent never does (the oracle trains the image agent alone, so the
+    ego agent enters no difference)."""
     views = ["image"] if config.endswith("-oracle") else ["image", "ego"]
     per_view = {
         view: {
@@ -28,7 +40,7 @@ def _run(config: str, seed: int, success: float, params: dict[str, str] | None =
         for view in views
     }
     summary = {"views": views, "per_view": per_view, "mean": {}}
-    return TrialRun(Trial(config, config, params or {}, seed), summary, [], Path())
+    return TrialRun(Trial(config, config, params or {}, seed, defaults=defaults), summary, [], Path())
 
 
 def _lavagap(control: list[float], oracle: list[float], dospcot: list[float]) -> list[TrialRun]:
@@ -77,6 +89,43 @@ def test_the_control_matches_only_within_the_margin(control, matched):
         runs
     )
     assert glance(runs).headline.endswith(f"(matches on {int(matched)} of 1 tasks measured, of 4)")
+
+
+def test_the_adopted_versions_control_pairs_with_its_own_oracle_and_round_1s_wait_splits_its_loss():
+    v = ADOPTED_VERSION
+    oracle, waiting, control = [1.0, 1.0, 0.5, 1.0], [1.0, 0.5, 0.5, 1.0], [0.5, 0.5, 0.5, 1.0]
+    runs = [
+        *_lavagap([0.0] * 4, [0.0] * 4, [0.0] * 4),  # version 1's arms, all at 0: no part of these pairs
+        *(_run("minigrid-lavagap-oracle", s, x, defaults=v) for s, x in enumerate(oracle)),
+        *(_run("minigrid-lavagap-oracle", s, x, WAIT, defaults=v) for s, x in enumerate(waiting)),
+        *(
+            _run("minigrid-lavagap-dospcot", s, x, {PSEUDO_REWARDS: "hidden"}, v)
+            for s, x in enumerate(control)
+        ),
+    ]
+    lines = tables(runs)
+    path = SeedSummary.of([c - o for c, o in zip(control, oracle, strict=True)])
+    wait = SeedSummary.of([w - o for w, o in zip(waiting, oracle, strict=True)])
+    beyond = SeedSummary.of([c - w for c, w in zip(control, waiting, strict=True)])
+    assert (
+        f"- LavaGapS7 (image), {ADOPTED_PATH}: {path} over 4 seeds; **does not match the oracle**." in lines
+    )
+    named = f"oracle, version {v}, round 1 at random"
+    assert (
+        f"- LavaGapS7 (image), round 1's wait alone: {named} minus oracle, version {v}: {wait} over 4 seeds."
+        in lines
+    )
+    assert (
+        f"- LavaGapS7 (image), beyond round 1's wait, version {v}: its control minus {named}: {beyond} "
+        "over 4 seeds." in lines
+    )
+    rows = {" | ".join(line.split(" | ")[:2]): line for line in lines if line.startswith("| ")}
+    assert rows[f"| {named} | image"].startswith(f"| {named} | image | {SeedSummary.of(waiting)} |")
+    # The headline reads the adopted version once its control has run.
+    assert glance(runs).headline.startswith(
+        f"success of the oracle's agents under version {v} of the defaults"
+    )
+    assert f"LavaGapS7 {path}" in glance(runs).headline
 
 
 def test_matches_needs_zero_inside_and_the_lower_end_above_the_margin():
