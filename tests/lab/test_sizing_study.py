@@ -59,3 +59,22 @@ def test_the_capped_sweeps_are_the_budget_studys_unlock_arms_with_more_rounds():
         five, capped = sweeps[f"budget-confirm-unlock-{arm}"], sweeps[f"sizing-unlock-{arm}-{CAP}"]
         assert capped.grid == {**five.grid, "training.rounds": (str(CAP),)}
         assert (capped.configs, capped.numerics) == (five.configs, five.numerics)
+
+
+def test_each_variant_is_the_preset_oracle_with_one_setting_as_a_bare_config_has_it_paired_by_seed():
+    sweeps = {sweep.name: sweep for sweep in STUDIES["sizing"].sweeps}
+    five = sweeps["budget-confirm-unlock-oracle"]
+    assert sweeps["sizing-unlock-oracle-actions"].grid == {**five.grid, "gym.wrappers": ("[]",)}
+    assert sweeps["sizing-unlock-oracle-esarsa"].grid == {**five.grid, "agent": ("esarsa_dqn",)}
+    preset = [_run(seed, [0.0] * 4 + [s], False) for seed, s in enumerate([0.2, 0.7, 0.0])]
+    actions = [
+        TrialRun(Trial(ORACLE, ORACLE, {"gym.wrappers": "[]"}, seed), {"mean": {"success": s}}, [], Path())
+        for seed, s in ((0, 0.0), (1, 0.1))
+    ]
+    lines = tables([*preset, *actions])
+    diff = SeedSummary.of([0.0 - 0.2, 0.1 - 0.7])
+    mine, theirs = SeedSummary.of([0.0, 0.1]), SeedSummary.of([0.2, 0.7])
+    assert f"| oracle, MiniGrid's seven actions | {mine} | {theirs} | {diff} | 2 |" in lines
+    assert not any(line.startswith("| oracle, agent esarsa_dqn |") for line in lines)  # not run: no row
+    # A variant run is no 5-round run of the preset's oracle.
+    assert next(line for line in lines if "| 5 rounds (the preset) |" in line).endswith("| 3 |")
