@@ -41,8 +41,8 @@ def _capped(arm: str) -> Sweep:
 
 
 VARIANTS = {
-    "oracle, MiniGrid's seven actions": {"gym.wrappers": "[]"},
-    "oracle, agent esarsa_dqn": {"agent": "esarsa_dqn"},
+    "oracle, seven actions": {"gym.wrappers": "[]"},
+    "oracle, esarsa_dqn": {"agent": "esarsa_dqn"},
 }
 """The oracle at the preset's length with one of the preset's settings set back to what a config that
 names only the env id gets: MiniGrid's whole action set (the preset's ``DoorActions`` leaves out
