@@ -122,7 +122,7 @@ and the oracle trained again under it, the preset's own settings kept and the re
 agent's own draws, numerics 2). Added after every other arm had been read."""
 ORACLE_ADOPTED = f"oracle, version {ADOPTED_VERSION}"
 CONTROL_ADOPTED = f"control, version {ADOPTED_VERSION}"
-WAITING = f"oracle, version {ADOPTED_VERSION}, round 1 at random"
+WAITING = "oracle, round 1 at random"
 WAIT = {"training.learn_from_round": "2"}
 WAIT_TASKS = ("lavagap",)
 """The tasks where the oracle also trains with round 1's wait (``training.learn_from_round = 2``: its
