@@ -239,7 +239,8 @@ ADOPTED_PATH = f"path under version {ADOPTED_VERSION}: its control minus its ora
 def differences(runs: list[TrialRun], task: str) -> dict[str, SeedSummary]:
     """Success of the agents on the oracle's views, paired by seed: what the path loses (control minus
     oracle), what the pseudo-rewards lose (DOSPCoT minus control), and the whole gap (DOSPCoT minus
-    oracle)."""
+    oracle); each diagnosis against the control, the oracle and the diagnosis it differs from in one
+    part; and under the adopted version, the path's loss split into round 1's wait and the rest."""
     oracle, control, dospcot = (_by_seed(runs, task, arm) for arm in ("oracle", "control", "DOSPCoT"))
     views = oracle_views(runs, task)
     found = {
