@@ -351,7 +351,7 @@ FIGURES = [
     ),
     Figure(
         "queries runs and CPU-hours",
-        "README.md",
+        "docs/results/index.md",
         r"pre-registered `queries` study \([^)]*\)",
         r"\((\d[\d,]*) runs, (\d+) CPU-hours\)",
         queries_runs_and_hours,
@@ -359,7 +359,7 @@ FIGURES = [
     ),
     Figure(
         "queries verdicts",
-        "README.md",
+        "docs/results/index.md",
         r"whole in the record: Q\d(?:, Q\d)*(?: and Q\d)? are not met",
         r"(Q\d(?:, Q\d)*(?: and Q\d)?) are not met",
         queries_q_verdicts,
@@ -367,7 +367,7 @@ FIGURES = [
     ),
     Figure(
         "co-testing on MiniGrid",
-        "README.md",
+        "docs/results/index.md",
         r"co-testing barely acted \(.*?\)",
         r"(\d+)-(\d+)% of its queries on MiniGrid",
         queries_chosen_on_minigrid,
@@ -375,7 +375,7 @@ FIGURES = [
     ),
     Figure(
         "outcomes' share of the oracle",
-        "README.md",
+        "docs/results/index.md",
         r"DOSPCoT reached \d+% \(LavaGap\) and \d+% \(DoorKey\) of the oracle's success",
         r"reached (\d+)% \(LavaGap\) and (\d+)% \(DoorKey\)",
         q3_shares,
@@ -383,7 +383,7 @@ FIGURES = [
     ),
     Figure(
         "outcomes against the uniform mask",
-        "README.md",
+        "docs/results/index.md",
         r"`outcomes` beat DOSPCoT's uniform mask .*? on the grid",
         r"\(\+([\d.]+) and \+([\d.]+) success, intervals above 0\), but lost ([\d.]+) on the grid",
         lambda s, _: (
@@ -395,7 +395,7 @@ FIGURES = [
     ),
     Figure(
         "fast highway labels",
-        "README.md",
+        "docs/results/index.md",
         r"On the fast highway, whose budget grows every round, .*? excludes 0\.",
         r"DOSPCoT's arms bought ([\d,]+) labels a run and self-training's ([\d,]+)",
         lambda s, _: (
@@ -406,7 +406,7 @@ FIGURES = [
     ),
     Figure(
         "fast highway seeds",
-        "README.md",
+        "docs/results/index.md",
         r"On the fast highway, whose budget grows every round, .*? excludes 0\.",
         r"with (\d+) seeds no difference",
         lambda s, _: (s.seeds(HIGHWAY_QUERIES),),
