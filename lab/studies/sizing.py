@@ -41,27 +41,27 @@ def _capped(arm: str) -> Sweep:
 
 
 VARIANTS = {
-    "oracle, seven actions": {"gym.wrappers": "[]"},
-    "oracle, esarsa_dqn": {"agent": "esarsa_dqn"},
+    "oracle, seven actions": ("actions", {"gym.wrappers": "[]"}),
+    "oracle, esarsa_dqn": ("esarsa", {"agent": "esarsa_dqn"}),
 }
-"""The oracle at the preset's length with one of the preset's settings set back to what a config that
-names only the env id gets: MiniGrid's whole action set (the preset's ``DoorActions`` leaves out
-drop and done), and the adopted defaults' agent (the preset's is ``dqn``). Added after runs outside
-the record (seeds 0-5, trained as batches) had read almost no success under either, where the preset's
-oracle had opened the door on most of them: the untuned study's Unlock oracle differs from the preset in
-both."""
+"""Per arm, its sweep's suffix and the setting it changes: the oracle at the preset's length with one
+of the preset's settings set back to what a config that names only the env id gets: MiniGrid's whole
+action set (the preset's ``DoorActions`` leaves out drop and done), and the adopted defaults' agent
+(the preset's is ``dqn``). Added after runs outside the record (seeds 0-5, trained as batches) had read
+almost no success under either, where the preset's oracle had opened the door on most of them: the
+untuned study's Unlock oracle differs from the preset in both."""
 
 
 def _variant(name: str) -> Sweep:
     sweep = _five_rounds("oracle")
-    suffix = "actions" if "gym.wrappers" in VARIANTS[name] else "esarsa"
-    grid = {**sweep.grid, **{k: (v,) for k, v in VARIANTS[name].items()}}
+    suffix, params = VARIANTS[name]
+    grid = {**sweep.grid, **{k: (v,) for k, v in params.items()}}
     return dataclasses.replace(sweep, name=f"sizing-unlock-oracle-{suffix}", grid=grid, seeds=None)
 
 
 def _arm(run: TrialRun) -> str:
     variant = next(
-        (name for name, params in VARIANTS.items() if params.items() <= run.trial.params.items()), None
+        (name for name, (_, params) in VARIANTS.items() if params.items() <= run.trial.params.items()), None
     )
     return variant or ("oracle" if run.trial.config.endswith("-oracle") else "dospcot")
 
@@ -131,10 +131,10 @@ def tables(runs: list[TrialRun]) -> list[str]:
         "| arm | length | success | rounds trained | labels held | seeds |",
         "|---|---|---|---|---|---|",
     ]
-    differences = []
+    differences, bases = [], {}
     for arm in ARMS:
         rules = _rules(runs, arm)
-        base = rules[PRESET_LENGTH]
+        base = bases[arm] = rules[PRESET_LENGTH]
         for rule, by_seed in rules.items():
             if not by_seed:
                 continue
@@ -145,12 +145,13 @@ def tables(runs: list[TrialRun]) -> list[str]:
             if rule != PRESET_LENGTH and seeds:
                 diff = SeedSummary.of([by_seed[s][0] - base[s][0] for s in seeds])
                 differences.append(f"- {arm}, {rule} minus 5 rounds, success paired by seed: {diff}")
-    return [*lines, "", *differences, *_variants(runs)]
+    return [*lines, "", *differences, *_variants(runs, bases["oracle"])]
 
 
-def _variants(runs: list[TrialRun]) -> list[str]:
-    """Each :data:`VARIANTS` arm's success at the preset's length beside the oracle's, paired by seed."""
-    base = {seed: v[0] for seed, v in _rules(runs, "oracle")[PRESET_LENGTH].items()}
+def _variants(runs: list[TrialRun], oracle: dict[int, tuple[float, int, float]]) -> list[str]:
+    """Each :data:`VARIANTS` arm's success at the preset's length beside the oracle's there (``oracle``,
+    its 5-round rule by seed), paired by seed."""
+    base = {seed: v[0] for seed, v in oracle.items()}
     lines = []
     for name in VARIANTS:
         mine = {r.trial.seed: r.summary["mean"]["success"] for r in runs if _arm(r) == name}

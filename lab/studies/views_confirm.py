@@ -162,6 +162,8 @@ def _v3(margins: dict[str, tuple[float, float]], done: bool) -> str:
 ANSWER = "### Labels to 90% of the oracle, per task"
 """The heading of the answer's table, which the README's block copies (:func:`readme_block`)."""
 ANSWERED = ("DOSPCoT", *ONE_VIEW, "blind")
+VERDICTS = "Pre-registered verdicts: "
+"""The answer's last line starts so; the README's block ends with that line."""
 
 
 def answer(runs: list[TrialRun], verdicts: dict[str, str]) -> list[str]:
@@ -185,9 +187,6 @@ def answer(runs: list[TrialRun], verdicts: dict[str, str]) -> list[str]:
     named = {"V1": "the second view saves labels", "V2": "the view pays, not the second model"}
     marked = "; ".join(f"{name} ({named[name]}): {verdicts[name]}" for name in named)
     return [*lines, "", f"{VERDICTS}{marked}."]
-
-
-VERDICTS = "Pre-registered verdicts: "
 
 
 def _answer_cell(curve: Curve | None, task: str) -> str:

@@ -349,6 +349,7 @@ FIGURES = [
         "results at a glance (the studies the record holds no run of)",
         required=False,  # every study has runs now: the sentence may come back with a study that has none
     ),
+    # docs/results/index.md: "The studies in brief", moved there from the README
     Figure(
         "queries runs and CPU-hours",
         "docs/results/index.md",
@@ -412,6 +413,7 @@ FIGURES = [
         lambda s, _: (s.seeds(HIGHWAY_QUERIES),),
         "record (queries-fasthighway sweeps' seeds)",
     ),
+    # README.md again
     Figure(
         "fast highway headline labels",
         "README.md",
