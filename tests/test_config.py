@@ -9,7 +9,7 @@ import inspect
 
 from stable_baselines3 import DQN
 
-from dospcot.config.learning_sections import DQN_DEFAULTS, DQN_SET_ELSEWHERE, DQNConfig
+from dospcot.config.agent_sections import DQN_DEFAULTS, DQN_SET_ELSEWHERE, DQNConfig
 from dospcot.policies import ExpectedSarsaDQN
 
 DOSPCOT_FIELDS = {"net_arch", "cut_windows"}

@@ -4,6 +4,7 @@ each class at, with no fit."""
 
 import pickle
 from functools import partial
+from typing import Any
 
 import numpy as np
 import pytest
@@ -83,8 +84,10 @@ def test_a_reward_models_pass_rewards_the_samples_met_since_its_fit_and_fits_not
     assert all(th.equal(a, b) for a, b in zip(params, after, strict=True))
 
 
-def _run(kind: str, pseudo_rewards: str = "classifiers", seed: int = 3, method: str = "dospcot"):
-    training = {"rounds": 2, "steps_per_round": 300, "label_fraction": 0.2, "cotrain_passes": 3}
+def _run(
+    kind: str, pseudo_rewards: str = "classifiers", seed: int = 3, method: str = "dospcot", **training: Any
+):
+    training = {"rounds": 2, "steps_per_round": 300, "label_fraction": 0.2, "cotrain_passes": 3, **training}
     cfg = grid_config(
         method,
         ("dqn", "dqn"),
@@ -127,6 +130,60 @@ def test_a_round_co_trains_once_and_scores_between_its_parts_from_round_2():
     assert passes[2][2] > 0  # round 2's first pass admits steps round 1's co-training had not
     assert run.trainer.batch.round == 2 and run.trainer.batch.age == 2
     assert [r["round"] for r in records] == [1, 1, 2, 2] and all(r["env_steps"] == 600 for r in records[2:])
+
+
+def test_round_1s_first_labels_at_its_first_pass_reward_its_later_steps_within_the_round():
+    """``first_labels = "first_pass"``: round 1's first pass co-trains on the labels met by then, a fit
+    ahead of the round's step of the schedule, so round 1's next score pass admits steps; the round's
+    co-training and round 2 run as before."""
+    run = _run("score", first_labels="first_pass")
+    passes, fits = [], []
+    score_pass, cotrain = run.score_pass, run.cotrain
+
+    def spy_score() -> None:
+        score_pass()
+        passes.append((run.agents[0].num_timesteps, int((run.table.weight > 0).sum())))
+
+    def spy_cotrain(record: bool = True, ages: bool = True) -> dict:
+        fits.append((run.agents[0].num_timesteps, record, ages))
+        return cotrain(record, ages)
+
+    run.score_pass, run.cotrain = spy_score, spy_cotrain
+    run.run()
+    assert fits == [(100, False, False), (300, True, True), (600, True, True)]
+    assert [p[0] for p in passes] == [200, 400, 500]
+    assert passes[0][1] > 0  # round 1's second part is rewarded before the round ends
+    assert run.trainer.batch.round == 3 and run.trainer.batch.age == 2  # the early fit aged nothing
+
+
+def test_round_1s_labels_are_bought_at_its_first_pass_among_the_samples_met_by_then():
+    budget = {"label_strategy": "outcomes", "label_budget": 20, "query_schedule": "even"}
+    run = _run("score", first_labels="first_pass", **budget)
+    bought, buy_labels = [], run.buy_labels
+
+    def spy_buy() -> None:
+        buy_labels()
+        bought.append((run.agents[0].num_timesteps, int(run.queries.revealed.sum())))
+
+    run.buy_labels = spy_buy
+    run.run()
+    # Round 1's allowance (half of 20) at its first pass; its end finds nothing left; round 2 the rest.
+    assert bought == [(100, 10), (300, 10), (600, 20)]
+    round_1 = [row["sample"] for row in run.queries.log if row["round"] == 1]
+    assert len(round_1) == 10 and (run.queries.met_round[round_1] == 1).all()
+
+
+@pytest.mark.parametrize(
+    ("keys", "message"),
+    [
+        ({"cotrain_passes": 1}, "set cotrain_passes >= 2 and passes_from_round = 1"),
+        ({"passes_from_round": 2}, "set cotrain_passes >= 2 and passes_from_round = 1"),
+        ({"label_strategy": "outcomes", "rater": "file"}, "a person's answers cannot pause"),
+    ],
+)
+def test_first_labels_at_the_first_pass_needs_a_pass_in_round_1_and_the_simulated_rater(keys, message):
+    with pytest.raises(ConfigError, match=message):
+        _run("score", first_labels="first_pass", **keys)
 
 
 def test_a_reward_model_run_rewards_every_step_met_since_the_last_fit_at_each_pass():

@@ -26,8 +26,8 @@ from tensorboard.backend.event_processing.event_file_loader import EventFileLoad
 from tensorboard.compat.proto.event_pb2 import SessionLog
 
 from dospcot.cli import main
+from dospcot.config.agent_sections import DQN_DEFAULTS, DQN_SET_ELSEWHERE, DQNConfig
 from dospcot.config.errors import ConfigError
-from dospcot.config.learning_sections import DQN_DEFAULTS, DQN_SET_ELSEWHERE, DQNConfig
 from dospcot.config.presets import preset_names
 from dospcot.core.classifier import load_classifier
 from dospcot.core.round_records import DEPENDENCE_STATS

@@ -43,6 +43,9 @@ PassKind = Literal["cotrain", "score"]
 """What a pass inside a round does (``training.cotrain_passes``): co-train (fit the classifiers, admit,
 age the schedule), or score the steps not yet admitted with the classifiers as they are
 (:mod:`dospcot.core.score_passes`)."""
+FirstLabels = Literal["round_end", "first_pass"]
+"""When a run that learns rewards first co-trains (``training.first_labels``): after round 1's whole
+collection, or at round 1's first pass, its labels bought there."""
 AgentDraws = Literal["shared", "own"]
 """Whose random draws a run's agents make: the global generators in turn, or each its own
 (:mod:`dospcot.core.agent_draws`)."""

@@ -1,11 +1,9 @@
-"""The sections that set up the learners: ``[training]`` (the rounds), ``[dqn]`` and
-``[tabular_agent]`` (the agents), ``[cotraining]`` with ``[cotraining.classifier]`` (the self-paced
-co-trainer and its reward classifiers), and the paper protocol's ``[tabular]``."""
+"""The sections that set up the learning: ``[training]`` (the rounds and the labels), and
+``[cotraining]`` with ``[cotraining.classifier]`` (the self-paced co-trainer and its reward classifiers).
+The agents' sections are in :mod:`dospcot.config.agent_sections`."""
 
 from __future__ import annotations
 
-import dataclasses
-import re
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
@@ -20,6 +18,7 @@ from dospcot.config.choices import (
     WEIGHTINGS,
     AgentDraws,
     EndStateQueries,
+    FirstLabels,
     LabelStrategy,
     LossKind,
     ModelKind,
@@ -29,9 +28,6 @@ from dospcot.config.choices import (
     Quota,
     Weighting,
 )
-
-DEVICE_PATTERN = re.compile(r"cpu|cuda(:\d+)?")
-"""The devices a ``[dqn]`` section may name besides SB3's ``"auto"``."""
 
 
 class AddedKeys:
@@ -83,6 +79,15 @@ class TrainingConfig(AddedKeys):
         appeared or merged since the last, admits nothing. The reward-model peer's pass rewards the
         samples met since its last fit with its ensembles as they are
         (:meth:`~dospcot.core.reward_model.RewardModelTrainer.score`).
+    :param first_labels: when a run that learns rewards first co-trains. ``"round_end"``: after round
+        1's whole collection, so no step of round 1 is rewarded before the round's policy update.
+        ``"first_pass"``: at round 1's first pass (round 1 in ``cotrain_passes`` > 1 parts, so
+        ``passes_from_round = 1``): round 1's labels are bought there (its whole allowance, among the
+        samples met by then) and the co-trainer fits them and writes the reward table, so the passes
+        after it reward round 1's steps as they do a later round's; round 1's end buys what its
+        allowance has left and co-trains as always. That early co-training is no step of the
+        self-paced schedule (a score pass's run) or is the pass's own step (``pass_kind =
+        "cotrain"``). The simulated rater only: a person's answers cannot pause a round's collection.
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.
@@ -166,10 +171,12 @@ class TrainingConfig(AddedKeys):
     cotrain_passes: int = 1
     passes_from_round: int = 1
     pass_kind: PassKind = "cotrain"
+    first_labels: FirstLabels = "round_end"
 
     added_keys: ClassVar[dict[str, Any]] = {
         "agent_draws": "shared",
         "cotrain_passes": 1,
+        "first_labels": "round_end",
         "passes_from_round": 1,
         "pass_kind": "cotrain",
         "query_end_states": "random",
@@ -201,7 +208,24 @@ class TrainingConfig(AddedKeys):
         check_at_least(self, 0, "query_recent_rounds", "label_budget", "query_pool_factor")
         if self.rater == "file" and not self.queries:
             raise ValueError('rater = "file" answers queries: set label_strategy to an active strategy')
+        self._check_first_labels()
         self._check_budget()
+
+    def _check_first_labels(self) -> None:
+        if self.first_labels == "round_end":
+            return
+        if self.cotrain_passes < 2 or self.passes_from_round != 1:
+            raise ValueError(
+                'first_labels = "first_pass" co-trains at round 1\'s first pass: set cotrain_passes >= 2 '
+                f"and passes_from_round = 1 (got {self.cotrain_passes} and {self.passes_from_round})"
+            )
+        if self.segment_length > 1:
+            raise ValueError('first_labels = "first_pass" co-trains single rewards: set segment_length = 1')
+        if self.rater == "file":
+            raise ValueError(
+                'first_labels = "first_pass" buys labels in the middle of round 1\'s collection, which a '
+                'person\'s answers cannot pause: use rater = "simulated" or first_labels = "round_end"'
+            )
 
     def _check_budget(self) -> None:
         if self.query_schedule not in QUERY_SCHEDULES:
@@ -235,145 +259,6 @@ class TrainingConfig(AddedKeys):
         """Env steps per agent before ``learn_from_round``: the agents learn nothing while they take
         them (every agent's ``learning_starts`` is at least this)."""
         return (self.learn_from_round - 1) * self.steps_per_round
-
-
-DQN_DEFAULTS: dict[str, Any] = {
-    # SB3's defaults suit Atari's millions of steps; dospcot's runs take tens of thousands of steps on
-    # small tasks with short horizons: a faster learner that starts sooner, moves its target network
-    # more often and discounts more.
-    "learning_rate": 1e-3,
-    "buffer_size": 100_000,
-    "learning_starts": 500,
-    "batch_size": 64,
-    "gamma": 0.97,
-    "target_update_interval": 500,
-    # SB3's "auto" takes a GPU wherever torch sees one; a run stays on the CPU unless asked, where it is
-    # deterministic for its seed and where networks this small train faster (BENCHMARKS.md, GPU column).
-    "device": "cpu",
-}
-"""Where a ``[dqn]`` default differs from stable-baselines3's ``DQN``; every other default is SB3's."""
-
-DQN_SET_ELSEWHERE: dict[str, str] = {
-    "exploration_initial_eps": "training.eps_start",
-    "exploration_final_eps": "training.eps_end",
-    "exploration_fraction": "training.eps_start and eps_end (the co-trainer's pace moves eps)",
-    "policy_kwargs": "dqn.net_arch",
-    "seed": "the run's seed",
-    "tensorboard_log": "the run folder",
-    "verbose": "the run (its progress bar and TensorBoard)",
-}
-"""SB3 ``DQN`` arguments a ``[dqn]`` section may not hold, and what sets them instead."""
-
-
-@dataclass(frozen=True)
-class DQNConfig:
-    """Keyword arguments of every neural agent: each of stable-baselines3 ``DQN``'s that a TOML value
-    can hold, under its own name and with its own default except those of :data:`DQN_DEFAULTS`; the
-    arguments a ``[dqn]`` section may not hold are :data:`DQN_SET_ELSEWHERE`
-    (``tests/test_config.py`` checks both against SB3's signature). Two fields are dospcot's:
-    ``net_arch`` and ``cut_windows``.
-
-    :param learning_rate: Adam's step size (a number; SB3 also takes a schedule).
-    :param buffer_size: replay capacity, in steps (a run caps it at its total steps).
-    :param learning_starts: env steps before the first gradient step.
-    :param batch_size: replayed samples per gradient step.
-    :param tau: the target network's soft-update coefficient (1: a hard copy).
-    :param gamma: the agents' discount (not the co-regularisation weight, ``cotraining.consensus_weight``).
-    :param train_freq: env steps between updates.
-    :param gradient_steps: gradient steps per update (-1: as many as env steps).
-    :param optimize_memory_usage: SB3's memory-efficient replay buffer.
-    :param n_steps: the longest n-step window of a replayed sample.
-    :param target_update_interval: env steps between target-network updates.
-    :param max_grad_norm: the gradient-clipping norm.
-    :param stats_window_size: episodes SB3's rollout statistics average over.
-    :param device: ``"cpu"``, ``"cuda"``, ``"cuda:<i>"`` or SB3's ``"auto"``.
-    :param net_arch: hidden layer widths of the Q-network (SB3's ``policy_kwargs["net_arch"]``).
-    :param cut_windows: :class:`~dospcot.policies.ExpectedSarsaDQN`'s own: under the max target
-        (``agent = "dqn"``), end n-step windows before the first exploratory action.
-    """
-
-    learning_rate: float = DQN_DEFAULTS["learning_rate"]
-    buffer_size: int = DQN_DEFAULTS["buffer_size"]
-    learning_starts: int = DQN_DEFAULTS["learning_starts"]
-    batch_size: int = DQN_DEFAULTS["batch_size"]
-    tau: float = 1.0
-    gamma: float = DQN_DEFAULTS["gamma"]
-    train_freq: int = 4
-    gradient_steps: int = 1
-    optimize_memory_usage: bool = False
-    n_steps: int = 1
-    target_update_interval: int = DQN_DEFAULTS["target_update_interval"]
-    max_grad_norm: float = 10.0
-    stats_window_size: int = 100
-    device: str = DQN_DEFAULTS["device"]
-    net_arch: tuple[int, ...] = (128, 128)
-    cut_windows: bool = True
-
-    set_elsewhere: ClassVar[dict[str, str]] = DQN_SET_ELSEWHERE
-
-    def __post_init__(self) -> None:
-        check_at_least(
-            self, 1, "buffer_size", "batch_size", "train_freq", "target_update_interval", "n_steps"
-        )
-        check_at_least(self, 0, "learning_starts")
-        check_positive(self, "max_grad_norm", "stats_window_size")
-        if self.gradient_steps < 1 and self.gradient_steps != -1:
-            raise ValueError(
-                f"gradient_steps must be >= 1, or -1 (as many as env steps), got {self.gradient_steps}"
-            )
-        if self.buffer_size < self.batch_size:
-            raise ValueError(
-                f"buffer_size must hold a batch (batch_size {self.batch_size}), got {self.buffer_size}"
-            )
-        if not 0 < self.gamma <= 1 or not 0 < self.tau <= 1:
-            raise ValueError(f"gamma and tau must lie in (0, 1], got {self.gamma}, {self.tau}")
-        if self.learning_rate <= 0:
-            raise ValueError(f"learning_rate must be > 0, got {self.learning_rate}")
-        if not self.net_arch or any(width < 1 for width in self.net_arch):
-            raise ValueError(
-                f"net_arch needs one or more hidden layer widths, each >= 1, got {list(self.net_arch)}"
-            )
-        if self.device != "auto" and DEVICE_PATTERN.fullmatch(self.device) is None:
-            raise ValueError(f"device must be 'cpu', 'cuda', 'cuda:<index>' or 'auto', got {self.device!r}")
-
-    def sb3_kwargs(self) -> dict[str, Any]:
-        """The agents' keyword arguments: SB3 ``DQN``'s and ``cut_windows``."""
-        kwargs = dataclasses.asdict(self)
-        kwargs["policy_kwargs"] = {"net_arch": list(kwargs.pop("net_arch"))}
-        return kwargs
-
-
-@dataclass(frozen=True)
-class TabularAgentConfig:
-    """Keyword arguments of every ``tabular`` agent (:class:`dospcot.policies.TabularExpectedSarsa`):
-    a Q-table over the view's observations, updated by replayed Expected-SARSA steps.
-
-    :param learning_rate: the step size alpha in (0, 1].
-    :param gamma: the discount.
-    :param batch_size: replayed samples per update.
-    :param train_freq: env steps between updates.
-    :param gradient_steps: updates each time.
-    :param learning_starts: env steps before the first update.
-    :param buffer_size: replay capacity, in steps.
-    :param n_steps: the longest n-step window a replayed sample spans (1: one-step updates).
-    """
-
-    learning_rate: float = 0.5
-    gamma: float = 0.97
-    batch_size: int = 32
-    train_freq: int = 1
-    gradient_steps: int = 1
-    learning_starts: int = 0
-    buffer_size: int = 100_000
-    n_steps: int = 1
-
-    def __post_init__(self) -> None:
-        if not 0 < self.learning_rate <= 1 or not 0 < self.gamma <= 1:
-            raise ValueError(
-                f"learning_rate and gamma must lie in (0, 1], got {self.learning_rate}, {self.gamma}"
-            )
-        check_at_least(self, 1, "batch_size", "train_freq", "gradient_steps", "buffer_size", "n_steps")
-        check_at_least(self, 0, "learning_starts")
 
 
 @dataclass(frozen=True)

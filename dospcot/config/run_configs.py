@@ -12,14 +12,10 @@ import dataclasses
 from dataclasses import dataclass, field
 from typing import Any, ClassVar, Literal
 
+from dospcot.config.agent_sections import DQNConfig, TabularAgentConfig
 from dospcot.config.choices import DEFAULT_VIEWS, OLD_METHOD_NAMES, Method
 from dospcot.config.errors import ConfigError
-from dospcot.config.learning_sections import (
-    CoTrainingConfig,
-    DQNConfig,
-    TabularAgentConfig,
-    TrainingConfig,
-)
+from dospcot.config.learning_sections import CoTrainingConfig, TrainingConfig
 from dospcot.config.paper_sections import TabularConfig
 from dospcot.config.task_sections import DemonstrationsConfig, EnvConfig, GymConfig, HighwayConfig
 from dospcot.config.versions import ADOPTED, FIRST
@@ -46,6 +42,7 @@ REWARD_LEARNER_KEYS: frozenset[str] = SELF_PACED_KEYS | {
     "cotraining.pseudo_rewards",
     "training.cotrain_passes",
     "training.passes_from_round",
+    "training.first_labels",
 }
 """The keys read by a method that learns rewards alone (``cotraining.classifier``: its section), which
 the baselines never read. ``numerics`` is not among them: every run names it in its

@@ -148,7 +148,7 @@ class BatchedRuns:
                 self._write_back(k)
             if part < len(parts) - 1:  # 1a. a pass inside the round (training.cotrain_passes)
                 for run in self.runs:
-                    run.inner_pass()
+                    run.inner_pass(part)
         for run in self.runs:
             run.collected = True
         stats = [run.label_and_cotrain() for run in self.runs]  # 2. label and co-train

@@ -57,12 +57,13 @@ class RewardModelTrainer(FitsUnderNumerics):
         mask = pool.class_mask if pool.class_mask.ndim == 1 else pool.class_mask[rows]
         return xs, torch.from_numpy(np.ascontiguousarray(mask))[None].expand(members, *mask.shape)
 
-    def step(self, pool: RunPool, passes: int = 1) -> RunRound:
+    def step(self, pool: RunPool, passes: int = 1, ages: bool = True) -> RunRound:
         """One step: every member refits on its bootstrap of the labels; the ensembles' mean class
         rewards every sample of U with weight 1.
 
         :param passes: the steps of this round (``training.cotrain_passes``), as the co-trainer takes
             them; the ensembles have no schedule to age, so every step is fitted alike.
+        :param ages: as the co-trainer's; no schedule ages here either way.
         """
         self.round += 1
         members, m = self.config.ensemble_size, len(self.classifiers)

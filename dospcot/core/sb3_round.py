@@ -13,6 +13,8 @@ to bottom, in :meth:`CoTrainingRun.run_round`:
    rewarded in their replay a part later, not a round later; under ``training.pass_kind = "score"``
    each part but the last is followed by a score pass instead (:meth:`CoTrainingRun.score_pass`),
    which pseudo-rewards the steps not yet admitted with the classifiers as they are, fitting nothing.
+   Under ``training.first_labels = "first_pass"`` round 1's first pass buys round 1's labels and
+   co-trains (:meth:`CoTrainingRun.first_labels`), so round 1's later steps are rewarded in the round.
    **Queries** (an active ``training.label_strategy``, :mod:`dospcot.core.queries`): a rater labels
    the samples the strategy chooses, within the budget the uniform mask would spend.
 2. **Co-train** (method ``"dospcot"``): the task turns its store into a
@@ -54,7 +56,6 @@ reward reaches only the metrics, but under the true-rewards control (``cotrainin
 
 from __future__ import annotations
 
-import io
 import math
 from collections.abc import Callable
 from contextlib import AbstractContextManager, nullcontext
@@ -64,12 +65,13 @@ import gymnasium as gym
 import numpy as np
 from stable_baselines3.common.type_aliases import MaybeCallback, TrainFrequencyUnit
 
-from dospcot.core.agent_draws import AgentDraws, global_draws, set_global_draws
+from dospcot.core.agent_draws import AgentDraws
 from dospcot.core.queries import Rater, RewardQueries, SimulatedRater
 from dospcot.core.reward_classes import QuantileRewardClasses, RunRewardClasses
 from dospcot.core.reward_model import RewardModelTrainer
 from dospcot.core.round_records import DEPENDENCE_STATS, VIEW_STATS, class_rows, record_head, round_stats
 from dospcot.core.run_agents import make_agent, relabelling_kwargs
+from dospcot.core.run_state import load_run_state, run_state
 from dospcot.core.score_passes import score_run
 from dospcot.core.segments import SegmentLabelWrapper, SegmentStore, segment_pool, step_rewards
 from dospcot.core.self_paced import RunCoTrainer, RunPool
@@ -138,7 +140,7 @@ class CoTrainingRun:
             if self.agent_draws is not None:
                 self.agent_draws.add()  # as SB3 seeded the generators for agent k
         for k in range(len(self.agents)):
-            self._give_demonstrations(k)
+            self.give_demonstrations(k)
         self.trainer: RunCoTrainer | RewardModelTrainer | None = None
         if cfg.method == "dospcot":
             # A segment's input is the sum of its steps' (dospcot.core.segments.segment_pool).
@@ -163,7 +165,7 @@ class CoTrainingRun:
         env = self.task.agent_env(k, view)
         return env if self.segments is None else SegmentLabelWrapper(env, self.segments)
 
-    def _give_demonstrations(self, k: int) -> None:
+    def give_demonstrations(self, k: int) -> None:
         """Agent ``k``'s large-margin loss reads the task's demonstrations in its own view (a neural
         agent's, with the loss on; a saved agent holds none, so a loaded one gets them again)."""
         if self.cfg.agent_kinds[k] == "tabular" or self.cfg.demonstrations.margin_loss_weight == 0:
@@ -221,7 +223,7 @@ class CoTrainingRun:
                     with self._draws_of(k):  # a later part goes on with the episodes the last one left
                         agent.learn(steps, callback=callback, reset_num_timesteps=False)
                 if part < len(parts) - 1:  # 1a. a pass inside the round rewards the steps just taken
-                    self.inner_pass()
+                    self.inner_pass(part)
             self.collected = True
         stats = self.label_and_cotrain()  # 1b-3.
         for k, agent in enumerate(self.agents):  # 4. policy update on the rewards and weights just written
@@ -256,15 +258,19 @@ class CoTrainingRun:
     def label_and_cotrain(self) -> dict:
         """Steps 1b-3 of a collected round: buy labels, co-train and write the pseudo-rewards; returns
         the round's co-training figures."""
-        if self.queries is not None:  # 1b. buy labels (a file rater may stop the run here)
-            rng = np.random.default_rng(query_seed(self.cfg.seed, self.round))
-            self.queries.buy(self.round, self.task, self._probabilities, rng)
+        self.buy_labels()  # 1b. (a file rater may stop the run here)
         self.collected = False
         if self.trainer is not None:  # 2-3. co-train, pseudo-rewards
             stats = self.cotrain()
         else:  # a baseline has no co-trainer, but its labels are its effort too
             stats = {"labelled_steps": int(self.store.labelled.sum())}
         return stats
+
+    def buy_labels(self) -> None:
+        """Buy what the round's allowance has left, under an active label strategy."""
+        if self.queries is not None:
+            rng = np.random.default_rng(query_seed(self.cfg.seed, self.round))
+            self.queries.buy(self.round, self.task, self._probabilities, rng)
 
     def close_round(self, stats: dict) -> list[dict]:
         """Steps 5-6 of a round whose policies are updated: age, then record."""
@@ -287,12 +293,14 @@ class CoTrainingRun:
         elif out_of_patience:
             self.stopped, self.stop_reason = True, self.patience.reason()
 
-    def cotrain(self, record: bool = True) -> dict:
+    def cotrain(self, record: bool = True, ages: bool = True) -> dict:
         """Steps 2-3 of a round: co-train on the task's pool and write the pseudo-rewards and their
         weights into the reward table; returns the round's co-training figures.
 
         :param record: keep the pseudo-rewards per class in :attr:`class_records` (False for a pass
             inside a round, ``training.cotrain_passes``: a round keeps its last pass's).
+        :param ages: whether the co-trainer's step ages its schedule (False: a fit ahead of the round's
+            step, :meth:`first_labels`).
         """
         # Segment features are sums of step features, taken in float32 as they always were.
         pool = self.task.pool(np.float32 if self.segments is not None else self.trainer.dtype_np)
@@ -300,7 +308,7 @@ class CoTrainingRun:
             return self._cotrain_segments(pool)
         # Score passes take no step of the schedule: the round's co-training ages it by a whole round.
         steps = len(self.round_parts()) if self.cfg.training.pass_kind == "cotrain" else 1
-        result = self.trainer.step(pool, steps)
+        result = self.trainer.step(pool, steps, ages)
         self.scored_classes = self.classes.mask.copy()
         pseudo = np.nan_to_num(self.classes.decode(result.pseudo_class), nan=0.0)
         true_class = self.task.true_class()  # metrics only, and the true-rewards control's classes
@@ -322,13 +330,26 @@ class CoTrainingRun:
         error = np.abs(value - self.store.hidden_reward[: value.size])[read].mean() if read.any() else np.nan
         return {**stats, "labelled_steps": int(labelled.sum()), "step_reward_error": float(error)}
 
-    def inner_pass(self) -> None:
-        """A pass inside a round (``training.cotrain_passes``): a co-training pass, or a score pass
-        under ``training.pass_kind = "score"``."""
-        if self.cfg.training.pass_kind == "score":
+    def inner_pass(self, part: int) -> None:
+        """A pass inside a round (``training.cotrain_passes``) after its collection's part ``part``
+        (0-based): a co-training pass, or a score pass under ``training.pass_kind = "score"``; round
+        1's first under ``training.first_labels = "first_pass"`` buys labels first
+        (:meth:`first_labels`)."""
+        training = self.cfg.training
+        if self.round == 1 and part == 0 and training.first_labels == "first_pass":
+            self.first_labels()
+        elif training.pass_kind == "score":
             self.score_pass()
         else:
             self.cotrain(record=False)
+
+    def first_labels(self) -> None:
+        """Round 1's labels bought at its first pass, among the samples met by then, and fitted there,
+        so the steps round 1 takes after it read rewards before the round ends; the pass's own step of
+        the schedule under co-training passes, a fit ahead of the round's step under score passes."""
+        self.buy_labels()
+        if self.trainer is not None:
+            self.cotrain(record=False, ages=self.cfg.training.pass_kind == "cotrain")
 
     def score_pass(self) -> None:
         """A score pass inside a round (``training.pass_kind = "score"``): the steps the last co-training
@@ -405,68 +426,12 @@ class CoTrainingRun:
         return self.task.reference_returns()
 
     def state_dict(self) -> dict[str, Any]:
-        """Everything the next rounds depend on, picklable: agents (SB3 zips as bytes), their replay
-        buffers, the store, the reward table, the co-trainer and the global and action-space RNGs.
-
-        The envs hold no state across rounds (each round starts from seeded resets). The dict refers
-        to live objects: pickle it at once (as ``dospcot train`` does), do not keep it.
-        """
-        zips = []
-        for agent in self.agents:
-            blob = io.BytesIO()
-            agent.save(blob)
-            zips.append(blob.getvalue())
-        return {
-            "round": self.round,
-            "stopped": self.stopped,
-            "patience": (self.stop_reason, *self.patience.state()),
-            "agents": zips,
-            "buffers": [agent.replay_buffer for agent in self.agents],
-            "action_space_rng": [agent.action_space.np_random.bit_generator.state for agent in self.agents],
-            "store": self.store.state_dict(),
-            "segments": None if self.segments is None else self.segments.state_dict(),
-            "segment_classes": self.segment_classes,
-            "table": self.table.state_dict(),
-            "classes": self.classes,
-            "trainer": self.trainer,
-            "collected": self.collected,
-            "class_records": self.class_records,
-            "queries": None
-            if self.queries is None
-            else (self.queries.revealed, self.queries.met_round, self.queries.log),
-            # SB3 draws exploration and replay batches from the legacy global generators.
-            "rng": global_draws(),
-            "agent_draws": None if self.agent_draws is None else self.agent_draws.states,
-        }
+        """Everything the next rounds depend on, picklable (:func:`dospcot.core.run_state.run_state`)."""
+        return run_state(self)
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
         """Continue from :meth:`state_dict` (this object must be built from the same spec and config)."""
-        self.round, self.stopped = state["round"], state["stopped"]
-        self.stop_reason, *patience = state["patience"]
-        self.patience.load_state(tuple(patience))
-        self.store.load_state_dict(state["store"])  # in place: the store wrappers keep pointing at it
-        if self.segments is not None:
-            self.segments.load_state_dict(state["segments"])
-        if state["segment_classes"] is not None:  # None: a checkpoint written before they were kept
-            self.segment_classes = state["segment_classes"]
-        self.table.load_state_dict(state["table"])
-        self.task.classes, self.trainer = state["classes"], state["trainer"]
-        # A checkpoint is written after a round's co-training, whose classes the run still has.
-        self.scored_classes = self.classes.mask.copy() if self.round else None
-        self.collected, self.class_records = state["collected"], state["class_records"]
-        if self.queries is not None:
-            self.queries.revealed, self.queries.met_round, self.queries.log = state["queries"]
-        for k, agent in enumerate(self.agents):
-            loaded = type(agent).load(io.BytesIO(state["agents"][k]), env=agent.get_env())
-            loaded.replay_buffer = state["buffers"][k]
-            loaded.replay_buffer.reward_table = agent.replay_buffer.reward_table
-            loaded.action_space.np_random.bit_generator.state = state["action_space_rng"][k]
-            self.agents[k] = loaded
-            self._give_demonstrations(k)
-        if self.agent_draws is not None:
-            self.agent_draws.states = state["agent_draws"]
-        # Loading re-seeds the global generators (SB3's _setup_model): restore them last.
-        set_global_draws(state["rng"])
+        load_run_state(self, state)
 
     def _records(self, stats: dict) -> list[dict]:
         policy = self.evaluate_policies()

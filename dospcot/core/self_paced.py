@@ -264,11 +264,14 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         """add_num of the current step as a share of |U| (grows by ``add_fraction_step`` a round)."""
         return self.config.add_fraction_start + self.config.add_fraction_step * float(self.age)
 
-    def step(self, pool: Pool, passes: int = 1) -> RoundResult:
+    def step(self, pool: Pool, passes: int = 1, ages: bool = True) -> RoundResult:
         """Run one step: for each view in turn select, fit and score; then Eq. 9; then age.
 
         :param passes: the steps the driver takes in this round of the schedule
             (``training.cotrain_passes``, 1 before ``training.passes_from_round``).
+        :param ages: whether the step ages the schedule by 1/``passes``; False: a fit ahead of the
+            round's step (``training.first_labels = "first_pass"`` under score passes), which neither
+            ages, stops nor is compared with.
         """
         cfg, m = self.config, self.n_views
         mask = torch.from_numpy(pool.class_mask)
@@ -334,8 +337,8 @@ class SelfPacedCoTrainer(FitsUnderNumerics):
         # With nothing unlabelled (every reward revealed), the schedule has nothing left to admit.
         pace = np.where(n_unlabelled > 0, (pseudo_weight > 0).sum(axis=1) / np.maximum(n_unlabelled, 1), 1.0)
         # The stopping rules read rounds: a pass inside a round neither stops nor is compared with.
-        age = self.age + Fraction(1, passes)
-        round_end = age.denominator == 1
+        age = self.age + Fraction(int(ages), passes)
+        round_end = ages and age.denominator == 1
         changed = self._changed_share(pseudo_class, pool.unlabelled, round_end)
         stopped = np.zeros(n_runs, dtype=bool)
         if cfg.tol > 0 and self.age >= 1 and round_end:
@@ -415,9 +418,9 @@ class RunCoTrainer:
         """The co-trainer of a batch of one run that this one wraps."""
         return self._batch
 
-    def step(self, pool: RunPool, passes: int = 1) -> RunRound:
+    def step(self, pool: RunPool, passes: int = 1, ages: bool = True) -> RunRound:
         """One step (:meth:`SelfPacedCoTrainer.step`) on the run's pool, of a round in ``passes`` steps."""
-        return self._batch.step(batched(pool), passes).of_run(0)
+        return self._batch.step(batched(pool), passes, ages).of_run(0)
 
 
 def batched(pool: RunPool) -> Pool:
