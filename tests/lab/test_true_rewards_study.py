@@ -14,6 +14,7 @@ from dospcot_lab.studies import STUDIES
 from dospcot_lab.studies.true_rewards import (
     ADOPTED_PATH,
     ADOPTED_VERSION,
+    EARLY_LABELS,
     MARGIN,
     PSEUDO_REWARDS,
     WAIT,
@@ -126,6 +127,34 @@ def test_the_adopted_versions_control_pairs_with_its_own_oracle_and_round_1s_wai
         f"success of the oracle's agents under version {v} of the defaults"
     )
     assert f"LavaGapS7 {path}" in glance(runs).headline
+
+
+def test_early_labels_pair_with_the_adopted_oracle_and_control_and_train_the_adopted_presets():
+    v = ADOPTED_VERSION
+    oracle, control, early = [1.0, 1.0, 0.5, 1.0], [0.5, 0.5, 0.5, 1.0], [1.0, 0.5, 0.5, 1.0]
+    runs = [
+        *(_run("minigrid-doorkey-oracle", s, x, defaults=v) for s, x in enumerate(oracle)),
+        *(
+            _run("minigrid-doorkey-dospcot", s, x, {PSEUDO_REWARDS: "hidden"}, v)
+            for s, x in enumerate(control)
+        ),
+        *(_run("minigrid-doorkey-dospcot", s, x, EARLY_LABELS, v) for s, x in enumerate(early)),
+    ]
+    lines = tables(runs)
+    path = SeedSummary.of([e - o for e, o in zip(early, oracle, strict=True)])
+    alone = SeedSummary.of([e - c for e, c in zip(early, control, strict=True)])
+    named = f"control v{v}, early labels"
+    assert (
+        f"- DoorKey-5x5 (image), path under early labels, version {v}: {named} minus oracle, version {v}: "
+        f"{path} over 4 seeds; **does not match the oracle**." in lines
+    )
+    alone_line = f"- DoorKey-5x5 (image), early labels alone: {named} minus control, version {v}: {alone}"
+    assert f"{alone_line} over 4 seeds." in lines
+    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
+    for task in ("doorkey", "lavagap", "fasthighway", "grid16"):
+        sweep = sweeps[f"true-rewards-{task}-early-labels-v{v}"]
+        assert sweep.defaults == v and sweep.grid == {k: (x,) for k, x in EARLY_LABELS.items()}
+        assert sweep.configs == sweeps[f"true-rewards-{task}-v{v}"].configs
 
 
 def test_matches_needs_zero_inside_and_the_lower_end_above_the_margin():
