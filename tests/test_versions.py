@@ -13,7 +13,8 @@ from dospcot.cli import main
 from dospcot.config.errors import ConfigError
 from dospcot.config.presets import preset_names
 from dospcot.config.reference import config_reference
-from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS, gym_moves, lineage, moved_for_some_methods
+from dospcot.config.version_defaults import gym_moves, lineage, moved_for_some_methods
+from dospcot.config.versions import ADOPTED, BUDGET, VERSIONS
 from dospcot.tasks import load_config, load_run_config
 
 
@@ -185,11 +186,11 @@ def test_version_2s_budget_fits_a_run_too_short_to_meet_it():
 def test_an_unknown_version_is_one_line_naming_the_versions():
     with pytest.raises(
         ConfigError,
-        match=r"^defaults: unknown version 14; the versions: 1, 2 \(candidate\), 3, "
+        match=r"^defaults: unknown version 15; the versions: 1, 2 \(candidate\), 3, "
         r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
-        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12, 13 \(adopted\)$",
+        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12, 13 \(adopted\), 14 \(candidate\)$",
     ):
-        load_config("tiny", ["defaults=14"])
+        load_config("tiny", ["defaults=15"])
     with pytest.raises(ConfigError, match="unknown version True"):
         load_config("tiny", ["defaults=true"])
 
@@ -223,7 +224,8 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3, 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12, 13 (adopted))"
+        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12, 13 (adopted), "
+        "14 (candidate))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
@@ -297,3 +299,23 @@ def test_version_13_keeps_the_steps_class_apart_for_a_gym_task_that_learns_rewar
     assert load_config("grid16-dospcot", ["defaults=13"]) == dataclasses.replace(
         load_config("grid16-dospcot", ["defaults=12"]), defaults=13
     )
+
+
+def test_version_14_buys_round_1s_labels_at_its_first_pass_where_dospcot_has_one():
+    """Version 14 moves ``training.first_labels`` for DOSPCoT alone, and only where round 1 comes in
+    passes and the rater is simulated (the key's own check refuses it elsewhere); nothing else moves."""
+    cfg = load_config("minigrid-doorkey-dospcot", ["defaults=14"])
+    assert cfg.training.first_labels == "first_pass"
+    before = load_config("minigrid-doorkey-dospcot", ["defaults=13"])
+    assert dataclasses.replace(cfg, defaults=13, training=before.training) == before
+    assert dataclasses.replace(cfg.training, first_labels="round_end") == before.training
+    for preset, sets in [
+        ("minigrid-doorkey-oracle", []),
+        ("grid16-reward-model", []),
+        ("grid16-dospcot", ["training.cotrain_passes=1"]),
+        ("grid16-dospcot", ["training.passes_from_round=2"]),
+        ("grid16-dospcot", ["training.steps_per_round=1"]),
+        ("grid16-dospcot", ['training.rater="file"']),
+        ("grid16-dospcot", ["training.segment_length=4"]),
+    ]:
+        assert load_config(preset, ["defaults=14", *sets]).training.first_labels == "round_end", sets

@@ -204,7 +204,7 @@ def _config(args: argparse.Namespace, command: str) -> int:
     from dospcot.config.loading import config_table
     from dospcot.config.reference import annotated_toml, config_rows, sb3_dqn_docs
     from dospcot.config.run_configs import TrainConfig
-    from dospcot.config.versions import moved_keys, versions_text
+    from dospcot.config.version_defaults import moved_keys, versions_text
     from dospcot.tasks import get_task, load_config
     from dospcot.tasks.loading import task_section
 

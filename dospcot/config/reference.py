@@ -153,12 +153,12 @@ def section_tables(
     of its sub-sections; the top level's keys where ``key`` is empty.
 
     :param adopted: dotted key -> its default under the adopted version of the defaults, for each key
-        that version moves (:func:`dospcot.config.versions.adopted_moves`); its cell names the first
+        that version moves (:func:`dospcot.config.version_defaults.adopted_moves`); its cell names the first
         version's default beside it.
     :param methods: dotted key -> the methods it is moved for, for each key of ``adopted`` that the
-        version moves for some methods only (:func:`dospcot.config.versions.moved_for_some_methods`).
+        version moves for some methods only (:func:`dospcot.config.version_defaults.moved_for_some_methods`).
     :param gym: dotted key -> its default for a gym task and the methods it holds for, for each key
-        the adopted version moves otherwise there (:func:`dospcot.config.versions.gym_moves`)."""
+        the adopted version moves otherwise there (:func:`dospcot.config.version_defaults.gym_moves`)."""
     lines: list[str] = []
     by_section: dict[str, list[KeyRow]] = {}
     for row in key_rows(cls, key, extra_docs):
@@ -217,7 +217,7 @@ def config_reference(dqn_docs: Mapping[str, str] | None = None) -> str:
     """Every key of a ``dospcot train`` config and of a paper-protocol config, with its default, as
     markdown tables; ``dqn_docs``: the ``[dqn]`` keys' meanings from SB3 (:func:`sb3_dqn_docs`)."""
     from dospcot.config.run_configs import PaperConfig, TrainConfig
-    from dospcot.config.versions import adopted_moves, gym_moves, moved_for_some_methods
+    from dospcot.config.version_defaults import adopted_moves, gym_moves, moved_for_some_methods
 
     adopted, methods, gym = adopted_moves(), moved_for_some_methods(), gym_moves()
     lines = ["## A training config (`dospcot train`)", ""]
@@ -247,7 +247,7 @@ def annotated_toml(
     (:func:`config_rows`); sections ``table`` leaves out are left out.
 
     :param moved: dotted key -> the default the config's version of the defaults gives it, for each key
-        whose default that version moved (:func:`dospcot.config.versions.moved_keys`); its comment
+        whose default that version moved (:func:`dospcot.config.version_defaults.moved_keys`); its comment
         names the version's default and the first version's.
     """
     lines = [f"# {heading}"] if heading else []

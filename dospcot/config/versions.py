@@ -55,23 +55,21 @@ non-inferior to version 3 on both presets (docs/results/defaults-12.md). Version
 version 12 with the steps' reward in a class of its own on a gym task (``gym.step_class``): under
 queries on episode ends a MiniGrid goal paid by its time could share the steps' quantile class, which
 then paid every step part of a goal (docs/results/step-class.md). The defaults-13-same-cpu study held
-it non-inferior to version 12 on both presets (docs/results/defaults-13-same-cpu.md). Nothing here
-imports torch.
+it non-inferior to version 12 on both presets (docs/results/defaults-13-same-cpu.md). Version 14, a
+candidate, is version 13 with round 1's labels bought and fitted at round 1's first pass
+(``training.first_labels = "first_pass"``) for DOSPCoT: under version 13 no step of round 1 was rewarded
+before the round's end, and the true-rewards study's control, fed the true rewards, ended round 1 at
+0.00 success on DoorKey where the oracle stood at 0.83. Nothing here imports torch.
 """
 
 from __future__ import annotations
 
-import copy
-import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, get_args
+from typing import Any
 
-from dospcot.config.choices import DEFAULT_VIEWS, Method, method_name
-from dospcot.config.errors import ConfigError
+from dospcot.config.choices import DEFAULT_VIEWS, method_name
 from dospcot.config.learning_sections import CoTrainingConfig, TrainingConfig
-from dospcot.config.loading import set_key
-from dospcot.config.task_sections import EnvConfig, GymConfig
 
 TaskSection = tuple[str, type]
 """A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
@@ -110,7 +108,7 @@ that the task's start connects to."""
 
 BUDGET = 100
 """Version 2's label budget: the answers a run may buy, whatever its length (lowered to the samples a
-short run meets, :func:`fit_budget`)."""
+short run meets, :func:`dospcot.config.version_defaults.fit_budget`)."""
 
 
 @dataclass(frozen=True)
@@ -312,6 +310,17 @@ SCORE_PASS_MOVES = (
 )
 """Version 12's moves: :data:`SCORE_PASSES` score passes a round."""
 
+
+def _early_labels(table: Mapping[str, Any]) -> str | None:
+    """``"first_pass"`` for a run of :data:`SCORE_PASS_METHODS` that learns single rewards, whose round 1
+    comes in passes (its own ``cotrain_passes`` of 2 or more, else version 12's, from round 1) and whose
+    rater is simulated; None for any other run (``training.first_labels`` needs all three)."""
+    training = _section(table, "training")
+    passes = training.get("cotrain_passes", _passes(SCORE_PASSES, SCORE_PASS_METHODS)(table))
+    in_parts = _whole(passes) and passes >= 2 and training.get("passes_from_round", 1) == 1
+    simulated = training.get("rater", "simulated") == "simulated"
+    return _when_co_training("first_pass")(table) if in_parts and simulated else None
+
 VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
     1: (),
     2: QUERY_MOVES,
@@ -368,127 +377,18 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
             GYM,
         ),
     ),
+    14: (
+        MovedDefault(
+            "training.first_labels",
+            _early_labels,
+            "true-rewards study: round 1's labels bought at its first pass, so its later steps are rewarded",
+        ),
+    ),
 }
 """Each version's moved defaults, on top of the version it builds on (:data:`BASES`)."""
 
-BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10, 13: 12}
+BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10, 13: 12, 14: 13}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11})
+CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11, 14})
 """Versions a config may opt into that no study has adopted yet."""
-
-
-def version_of(table: Mapping[str, Any]) -> int:
-    """The version of the defaults ``table`` was written against: its ``defaults``, else :data:`ADOPTED`.
-
-    :raises ConfigError: an unknown version.
-    """
-    version = table.get("defaults", ADOPTED)
-    if isinstance(version, bool) or not isinstance(version, int) or version not in VERSIONS:
-        raise ConfigError(f"defaults: unknown version {version!r}; {versions_text()}")
-    return version
-
-
-def versions_text() -> str:
-    """The versions in words, for messages and ``dospcot config``."""
-    words = []
-    for version in VERSIONS:
-        state = " (adopted)" if version == ADOPTED else " (candidate)" if version in CANDIDATES else ""
-        words.append(f"{version}{state}")
-    return "the versions: " + ", ".join(words)
-
-
-def lineage(version: int) -> list[int]:
-    """The versions whose moves make up ``version``'s defaults, oldest first (without the first
-    version, which moves nothing): ``version`` after the versions it builds on (:data:`BASES`)."""
-    chain = []
-    while version != FIRST:
-        chain.append(version)
-        version = BASES[version]
-    return chain[::-1]
-
-
-def adopted_moves(method: str | None = None) -> dict[str, Any]:
-    """The keys the adopted version moves for a config that sets nothing of its own but ``method`` (None:
-    the default method; the default views and task): dotted key -> its default there. The configuration
-    reference shows these."""
-    table = {} if method is None else {"method": method}
-    return {key: value for key, (value, _) in moved_keys(table, ("env", EnvConfig)).items()}
-
-
-def moved_for_some_methods() -> dict[str, list[str]]:
-    """The keys the adopted version moves to their default for :func:`adopted_moves` under some methods
-    and not others: dotted key -> the methods it moves them for (the reward-model peer keeps one
-    co-training pass a round, say, where DOSPCoT takes ten)."""
-    adopted = adopted_moves()
-    by_method = {method: adopted_moves(method) for method in get_args(Method)}
-    found = {
-        key: [m for m, moves in by_method.items() if moves.get(key) == value]
-        for key, value in adopted.items()
-    }
-    return {key: methods for key, methods in found.items() if len(methods) < len(by_method)}
-
-
-def gym_moves() -> dict[str, tuple[Any, list[str]]]:
-    """The keys the adopted version moves otherwise for a gym task (``task = "gym"``) than for
-    :func:`adopted_moves`'s grid, under some method: dotted key -> (its default there, the methods it is
-    moved for). The configuration reference shows these beside the grid's default."""
-    grid = {method: adopted_moves(method) for method in get_args(Method)}
-    found: dict[str, tuple[Any, list[str]]] = {}
-    for method in get_args(Method):
-        for key, (value, _) in moved_keys({"method": method, "task": "gym"}, ("gym", GymConfig)).items():
-            if grid[method].get(key) != value:
-                found.setdefault(key, (value, []))[1].append(method)
-    return found
-
-
-def moved_keys(table: Mapping[str, Any], section: TaskSection) -> dict[str, tuple[Any, str]]:
-    """The keys ``table``'s version moves for it and that it does not set itself: dotted key -> (the
-    version's value, why).
-
-    :param section: the config's task section: its name, and its dataclass, whose fields say which
-        ``{section}`` keys it has.
-    """
-    version = version_of(table)
-    name, fields = section[0], {f.name for f in dataclasses.fields(section[1])}
-    moved: dict[str, tuple[Any, str]] = {}
-    for number in lineage(version):
-        for rule in VERSIONS[number]:
-            if rule.sections is not None and name not in rule.sections:
-                continue
-            head, _, key = rule.key.partition(".")
-            if head == "{section}" and key not in fields:
-                continue
-            dotted = f"{name}.{key}" if head == "{section}" else rule.key
-            value = rule.value(table)
-            if value is not None and not _has(table, dotted):
-                moved[dotted] = (value, rule.why)
-    return moved
-
-
-def with_version_defaults(table: Mapping[str, Any], section: TaskSection) -> dict[str, Any]:
-    """``table`` with the defaults its version moves filled in where it sets nothing itself."""
-    out = copy.deepcopy(dict(table))
-    for key, (value, _) in moved_keys(table, section).items():
-        set_key(out, key.split("."), value, f"defaults = {version_of(table)}")
-    return out
-
-
-def fit_budget(table: Mapping[str, Any], section: TaskSection, most_samples: int) -> dict[str, Any] | None:
-    """``table`` with the version's label budget lowered to ``most_samples`` (a run too short to meet
-    :data:`BUDGET` samples), or None where the budget is the config's own or fits."""
-    moved = moved_keys(table, section)
-    if "training.label_budget" not in moved or moved["training.label_budget"][0] <= most_samples:
-        return None
-    out = copy.deepcopy(dict(table))
-    set_key(out, ["training", "label_budget"], most_samples, "training.label_budget")
-    return out
-
-
-def _has(table: Mapping[str, Any], key: str) -> bool:
-    part: Any = table
-    for name in key.split("."):
-        if not isinstance(part, Mapping) or name not in part:
-            return False
-        part = part[name]
-    return True

@@ -19,7 +19,7 @@ from dospcot.config.loading import (
     type_hints,
 )
 from dospcot.config.run_configs import PaperConfig, RunConfig, TrainConfig
-from dospcot.config.versions import fit_budget, version_of, with_version_defaults
+from dospcot.config.version_defaults import fit_budget, version_of, with_version_defaults
 from dospcot.tasks.registry import get_task
 
 

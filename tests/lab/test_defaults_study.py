@@ -20,6 +20,7 @@ from dospcot_lab.studies.defaults_7 import SEVEN_AGAINST_THREE
 from dospcot_lab.studies.defaults_8 import EIGHT_AGAINST_THREE
 from dospcot_lab.studies.defaults_12 import TWELVE_AGAINST_THREE
 from dospcot_lab.studies.defaults_13 import THIRTEEN_AGAINST_TWELVE
+from dospcot_lab.studies.defaults_14 import FOURTEEN_AGAINST_THIRTEEN
 from dospcot_lab.studies.tables import ADOPTION_SEEDS
 
 glance, tables = TWO_AGAINST_ONE.glance, TWO_AGAINST_ONE.tables
@@ -225,3 +226,21 @@ def test_the_tables_count_the_pairs_trained_on_one_cpu_model(tmp_path):
     assert THIRTEEN_AGAINST_TWELVE.tables(runs)[-1].startswith(
         "Pairs trained on one CPU model (`run_info.json`'s `cpu`): `grid16-dospcot` 2 of 3 (one course: 1)."
     )
+
+
+def test_version_14_trains_doorkey_first_with_early_labels_and_pairs_with_version_13s_runs():
+    fourteen, thirteen = STUDIES["defaults-14"].sweeps
+    assert thirteen == STUDIES["defaults-13"].sweeps[0] and STUDIES["defaults-14"].confirmatory
+    trials = sweep_spec(fourteen, 20).trials(check_task=False)
+    assert [t.config for t in trials[:: len(trials) // 2]] == ["minigrid-doorkey-dospcot", "grid16-dospcot"]
+    doorkey = trials[0].load_config()
+    assert (doorkey.defaults, doorkey.training.first_labels, doorkey.gym.step_class) == (
+        14,
+        "first_pass",
+        True,
+    )
+    runs = [
+        TrialRun(Trial("minigrid-doorkey-dospcot", "", {"defaults": version}, 0), {}, [], Path())
+        for version in ("14", "13", "12")
+    ]
+    assert [FOURTEEN_AGAINST_THIRTEEN.version_of(run) for run in runs] == [14, 13, None]
