@@ -321,6 +321,7 @@ def _early_labels(table: Mapping[str, Any]) -> str | None:
     simulated = training.get("rater", "simulated") == "simulated"
     return _when_co_training("first_pass")(table) if in_parts and simulated else None
 
+
 VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
     1: (),
     2: QUERY_MOVES,
