@@ -85,9 +85,9 @@ class TrainingConfig(AddedKeys):
         ``passes_from_round = 1``): round 1's labels are bought there (its whole allowance, among the
         samples met by then) and the co-trainer fits them and writes the reward table, so the passes
         after it reward round 1's steps as they do a later round's; round 1's end buys what its
-        allowance has left and co-trains as always. That early co-training is no step of the
-        self-paced schedule (a score pass's run) or is the pass's own step (``pass_kind =
-        "cotrain"``). The simulated rater only: a person's answers cannot pause a round's collection.
+        allowance has left and co-trains as always. Under score passes the early co-training does not
+        age the self-paced schedule; under co-training passes (``pass_kind = "cotrain"``) it is the
+        pass's own step. The simulated rater only: a person's answers cannot pause a round's collection.
     :param update_steps: gradient steps each agent takes at the end of every round, after the
         co-trainer wrote that round's pseudo-rewards and before the agents are evaluated (the policy
         update), so the last round's pseudo-rewards are learned too; 0: none.
