@@ -58,8 +58,8 @@ then paid every step part of a goal (docs/results/step-class.md). The defaults-1
 it non-inferior to version 12 on both presets (docs/results/defaults-13-same-cpu.md). Version 14, a
 candidate, is version 13 with round 1's labels bought and fitted at round 1's first pass
 (``training.first_labels = "first_pass"``) for DOSPCoT: under version 13 no step of round 1 was rewarded
-before the round's end, and the true-rewards study's control, fed the true rewards, ended round 1 at
-0.00 success on DoorKey where the oracle stood at 0.83. Nothing here imports torch.
+before the round's end, and the true-rewards study's control, fed the true rewards, ended round 1 on
+DoorKey without a success where the oracle had most of its own. Nothing here imports torch.
 """
 
 from __future__ import annotations

@@ -135,8 +135,8 @@ EARLY_TASKS = ("doorkey", "lavagap", "fasthighway", "grid16")
 """The adopted version's control with round 1's labels bought and fitted at its first pass
 (``training.first_labels = "first_pass"``), so round 1's later steps are rewarded within the round as the
 oracle's are from its first: whether round 1's wait for its labels is the path's loss. Added after the
-version-13 control had fallen short on DoorKey (0.00 success after round 1, the oracle 0.83) and LavaGap,
-and before any of its runs."""
+version-13 control had fallen short on DoorKey (no success after round 1, where the oracle had most of
+its own) and LavaGap, and before any of its runs."""
 ARMS = (
     "oracle",
     "control",
