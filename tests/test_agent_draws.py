@@ -82,6 +82,7 @@ def test_a_folder_or_checkpoint_written_before_the_key_reads_shared_whatever_the
     assert old_table == {
         "agent_draws": "shared",
         "cotrain_passes": 1,
+        "first_labels": "round_end",
         "passes_from_round": 1,
         "pass_kind": "cotrain",
         "query_end_states": "random",

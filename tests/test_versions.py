@@ -25,9 +25,12 @@ def _moved(preset: str, *overrides: str) -> tuple:
 
 
 def test_a_config_without_the_key_gets_the_adopted_version_and_version_1_is_the_dataclasses():
-    assert ADOPTED == 13 and VERSIONS[1] == ()
+    assert ADOPTED == 14 and VERSIONS[1] == ()
     for preset in ("grid16-dospcot", "minigrid-doorkey-oracle", "tiny"):
-        assert load_config(preset) == load_config(preset, ["defaults=13"])
+        assert load_config(preset) == load_config(preset, ["defaults=14"])
+    # version 14 buys round 1's labels at its first pass for DOSPCoT
+    assert load_config("grid16-dospcot").training.first_labels == "first_pass"
+    assert load_config("grid16-dospcot", ["defaults=13"]).training.first_labels == "round_end"
     # version 13 keeps the steps' reward class apart where a gym task's method learns rewards
     assert load_config("minigrid-doorkey-dospcot").gym.step_class
     assert not load_config("minigrid-doorkey-dospcot", ["defaults=12"]).gym.step_class
@@ -188,7 +191,7 @@ def test_an_unknown_version_is_one_line_naming_the_versions():
         ConfigError,
         match=r"^defaults: unknown version 15; the versions: 1, 2 \(candidate\), 3, "
         r"4 \(candidate\), 5 \(candidate\), 6 \(candidate\), 7 \(candidate\), 8 \(candidate\), "
-        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12, 13 \(adopted\), 14 \(candidate\)$",
+        r"9 \(candidate\), 10 \(candidate\), 11 \(candidate\), 12, 13, 14 \(adopted\)$",
     ):
         load_config("tiny", ["defaults=15"])
     with pytest.raises(ConfigError, match="unknown version True"):
@@ -224,8 +227,8 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     out = capsys.readouterr().out
     versions = (
         "(the versions: 1, 2 (candidate), 3, 4 (candidate), 5 (candidate), 6 (candidate), "
-        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12, 13 (adopted), "
-        "14 (candidate))"
+        "7 (candidate), 8 (candidate), 9 (candidate), 10 (candidate), 11 (candidate), 12, 13, "
+        "14 (adopted))"
     )
     assert f"under version 2 of the defaults {versions}" in out.splitlines()[0]
     assert 'exploration = "rounds"  # default "rounds" (defaults = 1: "pace")' in out
@@ -233,7 +236,7 @@ def test_dospcot_config_names_the_version_and_each_moved_defaults_first_value(ca
     assert "numerics = 1  # default 1:" in out  # version 2 builds on version 1
     assert main(["config", "tiny"]) == 0
     out = capsys.readouterr().out
-    assert f"under version 13 of the defaults {versions}" in out.splitlines()[0]
+    assert f"under version 14 of the defaults {versions}" in out.splitlines()[0]
     assert 'pass_kind = "score"  # default "score" (defaults = 1: "cotrain")' in out
     assert main(["config", "tiny", "--set", "defaults=3"]) == 0
     out = capsys.readouterr().out

@@ -9,58 +9,58 @@ method and views (a strategy that asks where two views disagree needs two views)
 returns None leaves the key at the earlier default.
 
 Version 3, adopted before version 12, is version 1 with the reward classifiers fitted under numerics 2,
-which the numerics study showed non-inferior on both of its presets (docs/results/numerics.md). Version
-2 is a **candidate**, built on version 1: the settings under which the label-budget study's DOSPCoT
-reached 90% of the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on.
-The defaults study did not show it non-inferior on grid16 (docs/guide/defaults.md), so ``defaults = 2``
-opts in. Version 4, a candidate, is version 3 with exploration by rounds: an agent's exploration falls
-with the share of rounds done, where under the pace it reached its floor as soon as the co-trainer had
+which the numerics study showed non-inferior on both of its presets (docs/results/numerics.md). Version 2
+is a **candidate**, built on version 1: the settings under which the label-budget study's DOSPCoT reached
+90% of the oracle on DoorKey and LavaGap and carried to a MiniGrid task no preset was tuned on. The
+defaults study did not show it non-inferior on grid16 (docs/guide/defaults.md), so ``defaults = 2`` opts
+in. Version 4, a candidate, is version 3 with exploration by rounds: an agent's exploration falls with
+the share of rounds done, where under the pace it reached its floor as soon as the co-trainer had
 admitted the pool (after a round or two); on LavaGap the true-rewards study found that this costs
-co-trained agents part of what the oracle learns from the same rewards. The defaults-4 study did not
-show it non-inferior on grid16, so ``defaults = 4`` opts in. Version 5, a candidate, is version 3 with
-each round's co-training in four passes (``training.cotrain_passes``), so a step the agents take is
-rewarded in their replay a quarter of a round later rather than a round later: the true-rewards study
-traced much of the co-training path's loss on MiniGrid to that lag. The defaults-5 study did not show it
-non-inferior on grid16, so ``defaults = 5`` opts in. Version 6, a candidate, is version 5 with the refit
-on a new class (``cotraining.refit_new_classes``): a pass early in round 1 fits the classifiers on the
-labels alone before every class has shown, and without the refit a class first labelled later is never
-fitted that way (grid16's lava, on the first seed of the defaults-5 study). The defaults-6 study did not
-show it non-inferior on grid16, so ``defaults = 6`` opts in. Version 7, a candidate, is version 6 with
-the passes from round 2 (``training.passes_from_round``): under versions 5 and 6 a sparse task's first
-pass came before any goal label, so every step it admitted read the common class's reward, and the
-agents learned that the task pays nothing; round 1 now co-trains once, as under version 3. The
-defaults-7 study held it non-inferior on grid16 but not on DoorKey, so ``defaults = 7`` opts in. Version
-8, a candidate, is version 7 with exploration by rounds: under the pace DoorKey's agents reached their
-exploration floor after round 1, as soon as the pool was admitted, and there the co-training path fed
-the true rewards matched the oracle only where its passes came with exploration by rounds (the
-true-rewards study). The defaults-8 study did not show it non-inferior on grid16, so ``defaults = 8``
-opts in. Version 9, a candidate, is version 3 with the MiniGrid presets' length and agents' settings for
-a gym task (``task = "gym"``) that sets none of its own: rounds of 10,000 steps, a discount of 0.9,
-3-step windows, exploration from 0.5, an update every 2 steps and a target network moved every 250 (the
-settings tuned on LavaGap that carried to DoorKey), and exploring starts in training
-(``ReachableStart``) on a MiniGrid env. Under version 3 the untuned study's oracle, fed every reward,
-reached 0.8 success on none of its five MiniGrid tasks; the presets set every one of these keys, so
-version 9 trains each of them as version 3 does. Version 10, a candidate, is version 9 with version 2's
-queries (a budget of 100 labels bought by ``outcomes+disagreement`` on a decaying schedule, each agent
-its own draws, exploration by rounds, the refit): under version 9 a co-trained run's 5% mask holds
-thousands of labels, over the 100 issue 78 allows. Version 11, a candidate, is version 10 with version
-5's and version 7's passes (four co-training passes a round, from round 2): under version 10 the untuned
-study's DOSPCoT on DistShift1 ended with every goal step pseudo-rewarded right and still reached the
-goal in an eighth of the oracle's episodes, where the true-rewards study had traced such a loss to the
-round's lag. Version 12, adopted before version 13, is version 10 with ten score passes a round for DOSPCoT
-(``training.pass_kind = "score"``): a pass refits nothing, so it costs a forward pass of each classifier
-where version 11's refits took most of a round on MiniGrid's egocentric map, and the true-rewards
-study's control with such passes matched the oracle on DoorKey. The defaults-12 study held it
-non-inferior to version 3 on both presets (docs/results/defaults-12.md). Version 13, **adopted**, is
-version 12 with the steps' reward in a class of its own on a gym task (``gym.step_class``): under
-queries on episode ends a MiniGrid goal paid by its time could share the steps' quantile class, which
-then paid every step part of a goal (docs/results/step-class.md). The defaults-13-same-cpu study held
-it non-inferior to version 12 on both presets (docs/results/defaults-13-same-cpu.md). Version 14, a
-candidate, is version 13 with round 1's labels bought and fitted at round 1's first pass
-(``training.first_labels = "first_pass"``) for DOSPCoT: under version 13 no step of round 1 was rewarded
-before the round's end, and the true-rewards study's control, fed the true rewards, ended round 1 on
-DoorKey without a success where the oracle had most of its own. Nothing here imports torch.
-"""
+co-trained agents part of what the oracle learns from the same rewards. The defaults-4 study did not show
+it non-inferior on grid16, so ``defaults = 4`` opts in. Version 5, a candidate, is version 3 with each
+round's co-training in four passes (``training.cotrain_passes``), so a step the agents take is rewarded
+in their replay a quarter of a round later rather than a round later: the true-rewards study traced much
+of the co-training path's loss on MiniGrid to that lag. The defaults-5 study did not show it non-inferior
+on grid16, so ``defaults = 5`` opts in. Version 6, a candidate, is version 5 with the refit on a new
+class (``cotraining.refit_new_classes``): a pass early in round 1 fits the classifiers on the labels
+alone before every class has shown, and without the refit a class first labelled later is never fitted
+that way (grid16's lava, on the first seed of the defaults-5 study). The defaults-6 study did not show it
+non-inferior on grid16, so ``defaults = 6`` opts in. Version 7, a candidate, is version 6 with the passes
+from round 2 (``training.passes_from_round``): under versions 5 and 6 a sparse task's first pass came
+before any goal label, so every step it admitted read the common class's reward, and the agents learned
+that the task pays nothing; round 1 now co-trains once, as under version 3. The defaults-7 study held it
+non-inferior on grid16 but not on DoorKey, so ``defaults = 7`` opts in. Version 8, a candidate, is
+version 7 with exploration by rounds: under the pace DoorKey's agents reached their exploration floor
+after round 1, as soon as the pool was admitted, and there the co-training path fed the true rewards
+matched the oracle only where its passes came with exploration by rounds (the true-rewards study). The
+defaults-8 study did not show it non-inferior on grid16, so ``defaults = 8`` opts in. Version 9, a
+candidate, is version 3 with the MiniGrid presets' length and agents' settings for a gym task (``task =
+"gym"``) that sets none of its own: rounds of 10,000 steps, a discount of 0.9, 3-step windows,
+exploration from 0.5, an update every 2 steps and a target network moved every 250 (the settings tuned on
+LavaGap that carried to DoorKey), and exploring starts in training (``ReachableStart``) on a MiniGrid
+env. Under version 3 the untuned study's oracle, fed every reward, reached 0.8 success on none of its
+five MiniGrid tasks; the presets set every one of these keys, so version 9 trains each of them as version
+3 does. Version 10, a candidate, is version 9 with version 2's queries (a budget of 100 labels bought by
+``outcomes+disagreement`` on a decaying schedule, each agent its own draws, exploration by rounds, the
+refit): under version 9 a co-trained run's 5% mask holds thousands of labels, over the 100 issue 78
+allows. Version 11, a candidate, is version 10 with version 5's and version 7's passes (four co-training
+passes a round, from round 2): under version 10 the untuned study's DOSPCoT on DistShift1 ended with
+every goal step pseudo-rewarded right and still reached the goal in an eighth of the oracle's episodes,
+where the true-rewards study had traced such a loss to the round's lag. Version 12, adopted before
+version 13, is version 10 with ten score passes a round for DOSPCoT (``training.pass_kind = "score"``): a
+pass refits nothing, so it costs a forward pass of each classifier where version 11's refits took most of
+a round on MiniGrid's egocentric map, and the true-rewards study's control with such passes matched the
+oracle on DoorKey. The defaults-12 study held it non-inferior to version 3 on both presets
+(docs/results/defaults-12.md). Version 13, adopted before version 14, is version 12 with the steps'
+reward in a class of its own on a gym task (``gym.step_class``): under queries on episode ends a MiniGrid
+goal paid by its time could share the steps' quantile class, which then paid every step part of a goal
+(docs/results/step-class.md). The defaults-13-same-cpu study held it non-inferior to version 12 on both
+presets (docs/results/defaults-13-same-cpu.md). Version 14, **adopted**, is version 13 with round 1's
+labels bought and fitted at round 1's first pass (``training.first_labels = "first_pass"``) for DOSPCoT:
+under version 13 no step of round 1 was rewarded before the round's end, and the true-rewards study's
+control, fed the true rewards, ended round 1 on DoorKey without a success where the oracle had most of
+its own. The defaults-14 study held it non-inferior to version 13 on both presets
+(docs/results/defaults-14.md). Nothing here imports torch."""
 
 from __future__ import annotations
 
@@ -74,7 +74,7 @@ from dospcot.config.learning_sections import CoTrainingConfig, TrainingConfig
 TaskSection = tuple[str, type]
 """A config's task section: its name (``env``, ``gym``, ``highway``) and its dataclass."""
 
-ADOPTED = 13
+ADOPTED = 14
 """The version of the defaults a config without ``defaults`` gets."""
 
 FIRST = 1
@@ -391,5 +391,5 @@ VERSIONS: dict[int, tuple[MovedDefault, ...]] = {
 BASES = {2: 1, 3: 1, 4: 3, 5: 3, 6: 5, 7: 6, 8: 7, 9: 3, 10: 9, 11: 10, 12: 10, 13: 12, 14: 13}
 """The version each later version builds on: its defaults are that version's, then its own moves."""
 
-CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11, 14})
+CANDIDATES = frozenset({2, 4, 5, 6, 7, 8, 9, 10, 11})
 """Versions a config may opt into that no study has adopted yet."""

@@ -5,17 +5,15 @@ same config."""
 from __future__ import annotations
 
 import io
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from dospcot.core.agent_draws import global_draws, set_global_draws
 
-if TYPE_CHECKING:
-    from dospcot.core.sb3_round import CoTrainingRun
 
-
-def run_state(run: CoTrainingRun) -> dict[str, Any]:
-    """Everything the next rounds of ``run`` depend on, picklable: agents (SB3 zips as bytes), their replay
-    buffers, the store, the reward table, the co-trainer and the global and action-space RNGs.
+def run_state(run: Any) -> dict[str, Any]:
+    """Everything the next rounds of ``run`` depend on, picklable: agents (SB3 zips as bytes), their
+    replay buffers, the store, the reward table, the co-trainer and the global and action-space RNGs.
+    ``run`` is a :class:`~dospcot.core.sb3_round.CoTrainingRun`, which imports this module.
 
     The envs hold no state across rounds (each round starts from seeded resets). The dict refers
     to live objects: pickle it at once (as ``dospcot train`` does), do not keep it.
@@ -49,7 +47,7 @@ def run_state(run: CoTrainingRun) -> dict[str, Any]:
     }
 
 
-def load_run_state(run: CoTrainingRun, state: dict[str, Any]) -> None:
+def load_run_state(run: Any, state: dict[str, Any]) -> None:
     """Continue ``run`` from :func:`run_state` (``run`` must be built from the same spec and config)."""
     run.round, run.stopped = state["round"], state["stopped"]
     run.stop_reason, *patience = state["patience"]
