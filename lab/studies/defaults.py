@@ -48,6 +48,16 @@ class VersionPair:
     new: int
     version_of: Callable[[TrialRun], int | None]
 
+    @classmethod
+    def named_in_grid(cls, old: int, new: int) -> VersionPair:
+        """The pair whose runs each name their version in their sweep's grid (``defaults``)."""
+
+        def version_of(run: TrialRun) -> int | None:
+            named = run.trial.params.get("defaults")
+            return int(named) if named in (str(old), str(new)) else None
+
+        return cls(old, new, version_of)
+
     def by_seed(self, runs: list[TrialRun], preset: str, version: int) -> dict[int, TrialRun]:
         """The runs of ``preset`` standing for ``version``, by seed."""
         return {r.trial.seed: r for r in runs if r.trial.config == preset and self.version_of(r) == version}

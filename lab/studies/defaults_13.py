@@ -11,7 +11,6 @@ kernels round differently, so its pairs parted where the two versions' settings 
 
 from __future__ import annotations
 
-from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Study, Sweep
 from dospcot_lab.studies.defaults import PRESETS, VersionPair
 from dospcot_lab.studies.defaults_12 import STUDIES as DEFAULTS_12
@@ -20,13 +19,7 @@ from dospcot_lab.studies.tables import ADOPTION_SEEDS
 OLD, NEW = 12, 13
 
 
-def _version_of(run: TrialRun) -> int | None:
-    """The version a run's grid names, where it is one of the two the study compares."""
-    named = run.trial.params.get("defaults")
-    return int(named) if named in (str(OLD), str(NEW)) else None
-
-
-THIRTEEN_AGAINST_TWELVE = VersionPair(OLD, NEW, _version_of)
+THIRTEEN_AGAINST_TWELVE = VersionPair.named_in_grid(OLD, NEW)
 """The defaults-13 study's pair: each run names its version in its sweep's grid."""
 SWEEP = Sweep(f"defaults-{NEW}", PRESETS[::-1], {"defaults": (str(NEW),)}, batch_seeds=1, numerics=None)
 """Version 13's runs, DoorKey's first: on grid16 the version moves nothing."""

@@ -8,7 +8,6 @@ docs/guide/defaults.md)."""
 
 from __future__ import annotations
 
-from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.declaration import Study, Sweep
 from dospcot_lab.studies.defaults import PRESETS, VersionPair
 from dospcot_lab.studies.defaults_13 import SWEEP as VERSION_13
@@ -17,13 +16,7 @@ from dospcot_lab.studies.tables import ADOPTION_SEEDS
 OLD, NEW = 13, 14
 
 
-def _version_of(run: TrialRun) -> int | None:
-    """The version a run's grid names, where it is one of the two the study compares."""
-    named = run.trial.params.get("defaults")
-    return int(named) if named in (str(OLD), str(NEW)) else None
-
-
-FOURTEEN_AGAINST_THIRTEEN = VersionPair(OLD, NEW, _version_of)
+FOURTEEN_AGAINST_THIRTEEN = VersionPair.named_in_grid(OLD, NEW)
 """The defaults-14 study's pair: each run names its version in its sweep's grid."""
 SWEEP = Sweep(f"defaults-{NEW}", PRESETS[::-1], {"defaults": (str(NEW),)}, batch_seeds=1, numerics=None)
 """Version 14's runs, DoorKey's first."""

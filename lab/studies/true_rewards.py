@@ -131,7 +131,6 @@ round's first co-training has rewarded a step): whether round 1's wait is the pa
 LavaGap after its version-13 control's first seven seeds had fallen short of the oracle."""
 EARLY = f"control v{ADOPTED_VERSION}, early labels"
 EARLY_LABELS = {PSEUDO_REWARDS: "hidden", "training.first_labels": "first_pass"}
-EARLY_TASKS = ("doorkey", "lavagap", "fasthighway", "grid16")
 """The adopted version's control with round 1's labels bought and fitted at its first pass
 (``training.first_labels = "first_pass"``), so round 1's later steps are rewarded within the round as the
 oracle's are from its first: whether round 1's wait for its labels is the path's loss. Added after the
@@ -192,10 +191,9 @@ def _sweeps() -> tuple[Sweep, ...]:
                     **adopted,
                 )
             )
-        if key in EARLY_TASKS:
-            early = {k: (v,) for k, v in EARLY_LABELS.items()}
-            name = f"true-rewards-{key}-early-labels-v{ADOPTED_VERSION}"
-            sweeps.append(Sweep(name, (f"{preset}-dospcot",), early, **adopted))
+        early = {k: (v,) for k, v in EARLY_LABELS.items()}
+        name = f"true-rewards-{key}-early-labels-v{ADOPTED_VERSION}"
+        sweeps.append(Sweep(name, (f"{preset}-dospcot",), early, **adopted))
         sweeps += [
             Sweep(f"true-rewards-{key}-oracle-v{ADOPTED_VERSION}", (f"{preset}-oracle",), {}, **adopted),
             Sweep(
