@@ -157,6 +157,28 @@ def test_early_labels_pair_with_the_adopted_oracle_and_control_and_train_the_ado
         assert sweep.configs == sweeps[f"true-rewards-{task}-v{v}"].configs
 
 
+def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_twenty_seeds_and_the_rest_over_ten():
+    v = ADOPTED_VERSION
+    hidden = {PSEUDO_REWARDS: "hidden"}
+    oracle, early = [1.0] * 20, [1.0] * 19 + [0.5]
+    runs = [
+        *(_run("minigrid-lavagap-oracle", s, x, defaults=v) for s, x in enumerate(oracle)),
+        *(_run("minigrid-lavagap-dospcot", s, x, EARLY_LABELS, v) for s, x in enumerate(early)),
+        # The version's control trains ten seeds: a run past them is not read.
+        *(_run("minigrid-lavagap-dospcot", s, 1.0, hidden, v) for s in range(11)),
+    ]
+    lines = tables(runs)
+    path = SeedSummary.of([e - o for e, o in zip(early, oracle, strict=True)])
+    named = f"control v{v}, early labels"
+    assert any(f"{named} minus oracle, version {v}: {path} over 20 seeds" in line for line in lines)
+    assert any(f"{ADOPTED_PATH}: 0.000" in line and "over 10 seeds" in line for line in lines)
+    sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
+    for task, seeds in (("lavagap", 20), ("grid16", 20), ("doorkey", 10), ("fasthighway", 10)):
+        for arm in ("early-labels", "oracle"):
+            assert sweeps[f"true-rewards-{task}-{arm}-v{v}"].seeds == seeds
+        assert sweeps[f"true-rewards-{task}-v{v}"].seeds == 10
+
+
 def test_matches_needs_zero_inside_and_the_lower_end_above_the_margin():
     assert not matches(SeedSummary(0.2, 0.1, 0.3, 0.2, 10))  # above the oracle: not "within noise"
     assert not matches(SeedSummary(-0.05, -MARGIN, 0.0, -0.05, 10))  # the lower end at the margin
