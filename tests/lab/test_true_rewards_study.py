@@ -157,7 +157,7 @@ def test_early_labels_pair_with_the_adopted_oracle_and_control_and_train_the_ado
         assert sweep.configs == sweeps[f"true-rewards-{task}-v{v}"].configs
 
 
-def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_twenty_seeds_and_the_rest_over_ten():
+def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_their_seeds_and_the_rest_over_ten():
     v = ADOPTED_VERSION
     hidden = {PSEUDO_REWARDS: "hidden"}
     oracle, early = [1.0] * 20, [1.0] * 19 + [0.5]
@@ -173,7 +173,7 @@ def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_twenty_seeds_
     assert any(f"{named} minus oracle, version {v}: {path} over 20 seeds" in line for line in lines)
     assert any(f"{ADOPTED_PATH}: 0.000" in line and "over 10 seeds" in line for line in lines)
     sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
-    for task, seeds in (("lavagap", 20), ("grid16", 20), ("doorkey", 10), ("fasthighway", 10)):
+    for task, seeds in (("lavagap", 40), ("grid16", 40), ("doorkey", 10), ("fasthighway", 10)):
         for arm in ("early-labels", "oracle"):
             assert sweeps[f"true-rewards-{task}-{arm}-v{v}"].seeds == seeds
         assert sweeps[f"true-rewards-{task}-v{v}"].seeds == 10
