@@ -15,6 +15,7 @@ from dospcot_lab.studies.true_rewards import (
     ADOPTED_PATH,
     ADOPTED_VERSION,
     EARLY_LABELS,
+    EARLY_VERSION,
     MARGIN,
     PSEUDO_REWARDS,
     WAIT,
@@ -177,6 +178,29 @@ def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_their_seeds_a
         for arm in ("early-labels", "oracle"):
             assert sweeps[f"true-rewards-{task}-{arm}-v{v}"].seeds == seeds
         assert sweeps[f"true-rewards-{task}-v{v}"].seeds == 10
+
+
+def test_the_glance_reads_version_14s_control_once_the_early_labels_arm_has_run_on_every_task():
+    v = ADOPTED_VERSION
+    configs = {
+        "lavagap": "minigrid-lavagap",
+        "fasthighway": "fasthighway",
+        "doorkey": "minigrid-doorkey",
+        "grid16": "grid16",
+    }
+    runs = [_run(f"{c}-oracle", s, 1.0, defaults=v) for c in configs.values() for s in range(3)]
+    runs += [
+        _run(f"{c}-dospcot", s, 1.0, {PSEUDO_REWARDS: "hidden"}, v)
+        for c in configs.values()
+        for s in range(3)
+    ]
+    early = [_run(f"{c}-dospcot", s, 0.5, EARLY_LABELS, v) for c in configs.values() for s in range(3)]
+    # On three tasks of four the glance still reads the adopted version's control.
+    assert glance(runs + early[:9]).headline.startswith(f"success of the oracle's agents under version {v} ")
+    found = glance(runs + early)
+    assert found.headline.startswith(f"success of the oracle's agents under version {EARLY_VERSION} ")
+    assert f"DoorKey-5x5 {SeedSummary.of([-0.5] * 3)}" in found.headline
+    assert found.seeds == (0, 1, 2)
 
 
 def test_matches_needs_zero_inside_and_the_lower_end_above_the_margin():
