@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import statistics
 from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
@@ -202,6 +203,18 @@ def version_rows(
                 cells = [*(over_seeds(members, metric) for metric in columns), cpu_per_run(members)]
                 lines.append(f"| `{preset}` | {version} | {' | '.join(cells)} | {len(members)} |")
     return lines
+
+
+def seeds_to_clear(differences: Sequence[float], margin: float, power: float = 0.8) -> int | None:
+    """Seeds a paired comparison needs so that, where the true difference is 0, its 95% interval's lower
+    end lies above ``-margin`` in ``power`` of such studies, from the spread of ``differences`` (one per
+    seed): ``ceil(((z_0.975 + z_power) * sd / margin) ** 2)``, under the normal approximation (the
+    half-width is 1.96 standard errors, and the mean must land above ``half-width - margin``), and at
+    least 2 (an interval needs two). None from fewer than two differences."""
+    if len(differences) < 2:
+        return None
+    z = statistics.NormalDist().inv_cdf
+    return max(2, math.ceil(((z(0.975) + z(power)) * statistics.stdev(differences) / margin) ** 2))
 
 
 def paired(

@@ -21,7 +21,7 @@ from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.batched_seeds import PRESETS as GRID16_PRESETS
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.queries import STUDIES as QUERIES
-from dospcot_lab.studies.tables import FRACTION, cpu_pairs, paired
+from dospcot_lab.studies.tables import FRACTION, cpu_pairs, paired, seeds_to_clear
 
 PSEUDO_REWARDS = "cotraining.pseudo_rewards"
 SEEDS = 10
@@ -139,10 +139,10 @@ its own) and LavaGap, and before any of its runs."""
 EXTENDED_SEEDS = {"lavagap": 40, "grid16": 40}
 """The tasks where the early-labels control and the adopted version's oracle train more seeds than
 :data:`SEEDS`, and how many: on LavaGap and grid16 their first ten pairs left an interval centred near 0
-and too wide for the rule to decide (on grid16 one seed of each arm lost the goal at the last round).
-With the seed-to-seed spread of those pairs' differences, an interval around a true difference of 0
-clears the margin in four runs of five at about forty seeds. Extended after the first ten had been read
-and before any new seed ran; the rule is unchanged."""
+and too wide for the rule to decide (on grid16 one seed of each arm lost the goal at the last round),
+and the spread of those ten differences put the seeds the rule needs at about forty
+(:func:`_seeds_needed`). Extended after the first ten had been read and before any new seed ran; the
+rule is unchanged."""
 ARMS = (
     "oracle",
     "control",
@@ -386,6 +386,7 @@ def tables(runs: list[TrialRun]) -> list[str]:
                 if label.startswith("path"):
                     verdict = "; **" + ("matches" if matches(diff) else "does not match") + " the oracle**"
                 lines.append(f"- {name} ({views}), {label}: {diff} over {diff.n} seeds{verdict}.")
+        lines += _seeds_needed(runs, task)
         by_round = _by_round(runs, task)
         if by_round:
             lines += [
@@ -400,6 +401,24 @@ def tables(runs: list[TrialRun]) -> list[str]:
             ]
         lines += _cpu_line(runs, task)
     return lines
+
+
+def _seeds_needed(runs: list[TrialRun], task: str) -> list[str]:
+    """How many seeds the early-labels arm's pairs with its oracle need to decide the rule where the
+    true difference is 0, from the spread of their differences (:func:`seeds_to_clear`)."""
+    early, oracle = _by_seed(runs, task, EARLY), _by_seed(runs, task, ORACLE_ADOPTED)
+    views = oracle_views(runs, task)
+    diffs = [
+        _view_value(early[s], views) - _view_value(oracle[s], views)
+        for s in sorted(early.keys() & oracle.keys())
+    ]
+    if (needed := seeds_to_clear(diffs, MARGIN)) is None:
+        return []
+    return [
+        f"- {TASKS[task]} ({', '.join(views)}), seeds the rule needs: where {EARLY} and {ORACLE_ADOPTED} "
+        f"truly differ by 0, {needed} pairs give an interval whose lower end lies above -{MARGIN} in four "
+        f"studies of five, from the spread of the {len(diffs)} differences so far (normal approximation)."
+    ]
 
 
 def _cpu_line(runs: list[TrialRun], task: str) -> list[str]:

@@ -29,6 +29,7 @@ from dospcot_lab.studies.label_sources import (
 from dospcot_lab.studies.minigrid import minigrid_tables
 from dospcot_lab.studies.provenance import header
 from dospcot_lab.studies.second_view import second_view_tables
+from dospcot_lab.studies.tables import seeds_to_clear
 
 """The command the docs name, a shim of :func:`dospcot_lab.studies.main`."""
 
@@ -553,3 +554,12 @@ def test_highway_envs_cost_bound_judges_its_first_dospcot_run_and_trains_it_firs
     assert STUDIES["fasthighway"].sweeps[0].configs == tuple(
         f"fasthighway-{m}" for m in ("oracle", "masked-zero", "self-training", "dospcot")
     )
+
+
+def test_seeds_to_clear_is_the_normal_approximations_count_of_pairs():
+    # sd of (0.1, -0.1) is sqrt(0.02); (1.959964 + 0.841621) * 0.141421 / 0.1 = 3.96206, squared 15.70.
+    assert seeds_to_clear([0.1, -0.1], 0.1) == 16
+    # Twice the margin takes a quarter of the pairs: 3.92 rounds up to 4.
+    assert seeds_to_clear([0.1, -0.1], 0.2) == 4
+    assert seeds_to_clear([0.0, 0.0, 0.0], 0.1) == 2  # no spread: an interval still needs two
+    assert seeds_to_clear([0.5], 0.1) is None

@@ -173,6 +173,8 @@ def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_their_seeds_a
     named = f"control v{v}, early labels"
     assert any(f"{named} minus oracle, version {v}: {path} over 20 seeds" in line for line in lines)
     assert any(f"{ADOPTED_PATH}: 0.000" in line and "over 10 seeds" in line for line in lines)
+    # 19 differences of 0 and one of -0.5: sd 0.1118, (2.8016 * 0.1118 / 0.1) ** 2 = 9.81, so 10 pairs.
+    assert any("seeds the rule needs" in line and ", 10 pairs give" in line for line in lines)
     sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
     for task, seeds in (("lavagap", 40), ("grid16", 40), ("doorkey", 10), ("fasthighway", 10)):
         for arm in ("early-labels", "oracle"):
