@@ -17,6 +17,7 @@ from dospcot_lab.studies.true_rewards import (
     EARLY_LABELS,
     EARLY_VERSION,
     MARGIN,
+    PRESET,
     PSEUDO_REWARDS,
     WAIT,
     glance,
@@ -184,12 +185,7 @@ def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_their_seeds_a
 
 def test_the_glance_reads_version_14s_control_once_the_early_labels_arm_has_run_on_every_task():
     v = ADOPTED_VERSION
-    configs = {
-        "lavagap": "minigrid-lavagap",
-        "fasthighway": "fasthighway",
-        "doorkey": "minigrid-doorkey",
-        "grid16": "grid16",
-    }
+    configs = PRESET
     runs = [_run(f"{c}-oracle", s, 1.0, defaults=v) for c in configs.values() for s in range(3)]
     runs += [
         _run(f"{c}-dospcot", s, 1.0, {PSEUDO_REWARDS: "hidden"}, v)
