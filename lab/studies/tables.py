@@ -232,6 +232,18 @@ def paired(
         ``metric`` then names it in the error).
     :raises ValueError: the runs compared were trained under more than one numerics version.
     """
+    return SeedSummary.of(paired_differences(a, b, metric, across_numerics, value))
+
+
+def paired_differences(
+    a: dict[int, TrialRun],
+    b: dict[int, TrialRun],
+    metric: str,
+    across_numerics: bool = False,
+    value: Callable[[TrialRun], float] | None = None,
+) -> list[float]:
+    """:func:`paired`'s differences, a minus b, one per seed both ran, in seed order (its parameters and
+    its error)."""
     figure = value or (lambda run: run_value(run, metric))
     seeds = sorted(set(a) & set(b))
     versions = {numerics_of(r) for s in seeds for r in (a[s], b[s])}
@@ -240,7 +252,7 @@ def paired(
             f"a comparison of {metric} mixes runs of numerics versions {sorted(versions)}: train every arm "
             "under one version (cotraining.numerics) before comparing them"
         )
-    return SeedSummary.of([figure(a[s]) - figure(b[s]) for s in seeds])
+    return [figure(a[s]) - figure(b[s]) for s in seeds]
 
 
 def held_lines(

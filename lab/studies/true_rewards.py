@@ -21,7 +21,7 @@ from dospcot_lab.studies.batched_seeds import ALONE
 from dospcot_lab.studies.batched_seeds import PRESETS as GRID16_PRESETS
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
 from dospcot_lab.studies.queries import STUDIES as QUERIES
-from dospcot_lab.studies.tables import FRACTION, cpu_pairs, paired, seeds_to_clear
+from dospcot_lab.studies.tables import FRACTION, cpu_pairs, paired, paired_differences, seeds_to_clear
 
 PSEUDO_REWARDS = "cotraining.pseudo_rewards"
 SEEDS = 10
@@ -408,10 +408,7 @@ def _seeds_needed(runs: list[TrialRun], task: str) -> list[str]:
     true difference is 0, from the spread of their differences (:func:`seeds_to_clear`)."""
     early, oracle = _by_seed(runs, task, EARLY), _by_seed(runs, task, ORACLE_ADOPTED)
     views = oracle_views(runs, task)
-    diffs = [
-        _view_value(early[s], views) - _view_value(oracle[s], views)
-        for s in sorted(early.keys() & oracle.keys())
-    ]
+    diffs = paired_differences(early, oracle, "success", value=lambda run: _view_value(run, views))
     if (needed := seeds_to_clear(diffs, MARGIN)) is None:
         return []
     return [
