@@ -68,8 +68,10 @@ def _on_view(runs: list[TrialRun], task: str) -> dict[str, Curve]:
 
 
 def _complete(found: dict[str, Curve], task: str) -> bool:
-    """Whether DOSPCoT, the twin and every one-view peer have their whole curve on ``task``."""
-    return all(arm in found and len(found[arm].pairs) == PAIRS[task] for arm in ("DOSPCoT", *ONE_VIEW))
+    """Whether every arm on ``task`` has run every pair: DOSPCoT, each one-view peer and the blind
+    control, which no hypothesis reads but the preregistration waits for before any verdict (a curve
+    holds only the pairs the oracle ran too)."""
+    return all(arm in found and len(found[arm].pairs) == PAIRS[task] for arm in ANSWERED)
 
 
 def _best_peer(found: dict[str, Curve]) -> str:
