@@ -151,14 +151,15 @@ def _met(held: bool, done: bool) -> str:
 
 
 def _v3(margins: dict[str, tuple[float, float]], done: bool) -> str:
-    """V3's verdict: the rank correlation of DOSPCoT's error correlation with its margin across tasks."""
+    """V3's verdict, and the rank correlation of DOSPCoT's error correlation with its margin across the
+    tasks that it read."""
     if not done:
         return "not decided yet"
     known = [(c, m) for c, m in margins.values() if not math.isnan(c)]
     if len(known) < 3 or np.ptp([c for c, _ in known]) < SPAN:
         return "not testable"
     rank = spearmanr(*zip(*known, strict=True)).statistic
-    return "met" if rank <= RANK else "not met"
+    return f"{'met' if rank <= RANK else 'not met'} (rank correlation {rank:+.2f} over {len(known)} tasks)"
 
 
 ANSWER = "### Labels to 90% of the oracle, per task"
