@@ -61,6 +61,9 @@ PAIRS = {task: SEEDS * (len(LAYOUTS) if task in MAPS else 1) for task in BUDGETS
 SAVES, TASKS_NEEDED, RANK, SPAN = 0.5, 2, -0.8, 0.2
 """The preregistration's thresholds: V1's ratio, the tasks V1 and V2 need, V3's rank correlation and
 the least span of error correlations V3 can be tested on."""
+ANSWERED = ("DOSPCoT", *ONE_VIEW, "blind")
+"""The arms whose labels to 90% of the oracle the study answers with, and each of which must have run
+every pair before any hypothesis is decided."""
 
 
 def _on_view(runs: list[TrialRun], task: str) -> dict[str, Curve]:
@@ -164,7 +167,6 @@ def _v3(margins: dict[str, tuple[float, float]], done: bool) -> str:
 
 ANSWER = "### Labels to 90% of the oracle, per task"
 """The heading of the answer's table, which the README's block copies (:func:`readme_block`)."""
-ANSWERED = ("DOSPCoT", *ONE_VIEW, "blind")
 VERDICTS = "Pre-registered verdicts: "
 """The answer's last line starts so; the README's block ends with that line."""
 
