@@ -16,6 +16,7 @@ from dospcot_lab.studies import sweep_spec
 from dospcot_lab.studies import views_confirm as confirm
 from dospcot_lab.studies.label_curves import Curve, area_difference, labels_ratio
 from dospcot_lab.studies.step_class import steps_paid
+from dospcot_lab.studies.views import arm_of
 
 PRESETS = {
     "grid16": "grid16",
@@ -132,7 +133,7 @@ def test_v1_and_v2_are_met_on_two_tasks_of_four_and_v3_reads_dependence_against_
     assert verdicts == {"V1": "met", "V2": "met", "V3": v3, "V4": "met"}
     assert "grid16 0.21 [0.21, 0.21]" in parts and len(parts) == 4
     # One run missing, of a peer or of the blind control, which no hypothesis reads: nothing is decided.
-    peer = next(i for i, r in enumerate(runs) if r.trial.config.endswith("-self-training"))
+    peer = next(i for i, r in enumerate(runs) if arm_of(r) == "self-training")
     for left_out in (peer, len(runs) - 1):
         rest = runs[:left_out] + runs[left_out + 1 :]
         assert set(confirm.hypotheses(rest)[1].values()) == {"not decided yet"}
@@ -143,11 +144,7 @@ def test_the_answer_tables_each_arms_labels_per_task_and_the_readme_block_copies
     # DoorKey's seed 1 of the reward model at its smallest budget is missing: its curve holds one pair.
     runs = [r for r in runs if not (r.trial.config == "minigrid-doorkey-reward-model" and r.trial.seed == 1)]
     # And DoorKey's blind control has not run.
-    runs = [
-        r
-        for r in runs
-        if not (r.trial.config == "minigrid-doorkey-dospcot" and "random" in str(r.trial.params))
-    ]
+    runs = [r for r in runs if not (r.trial.config == "minigrid-doorkey-dospcot" and arm_of(r) == "blind")]
     answer = confirm.answer(runs, confirm.hypotheses(runs)[1])
     # The study's tables put the answer between the hypotheses and the exploration's tables.
     text = "\n".join(
