@@ -10,6 +10,7 @@ Repetitions of ours and the peer alternate, so drift in the machine's speed hits
 from __future__ import annotations
 
 import dataclasses
+import fcntl
 import platform
 from collections.abc import Callable, Sequence
 from datetime import UTC, datetime
@@ -35,7 +36,7 @@ from dospcot_lab.bench_env_rows import (
     bench_minigrid_wrappers,
     bench_store_memory,
 )
-from dospcot_lab.bench_measure import Provenance, Row, short_commit
+from dospcot_lab.bench_measure import NOT_RECORDED, Provenance, Row, short_commit
 from dospcot_lab.bench_rows import (
     bench_cotraining_overhead,
     bench_esarsa_dqn,
@@ -147,7 +148,10 @@ NOTES = [
     "- The cost rows (`cost_TASK`, `release_TASK`, `release_memory`) train whole `dospcot train` runs, each "
     "a subprocess on one torch thread, at the preset's full length over seeds 0-2 (the seeds are the "
     "repetitions), and read each run's CPU time (user + system) and peak resident memory from `os.wait4`: "
-    "the interpreter's start and imports count, as in a user's run. The last release (the peer of the "
+    "the interpreter's start and imports count, as in a user's run. A cost row's peer is the DOSPCoT "
+    "run's agents trained alone: per seed, the sum of the preset's self-training run on each of the "
+    "DOSPCoT preset's views (`views = [VIEW]`), so the ratio is what co-training adds to its agents' own "
+    "cost. The last release (the peer of the "
     "release rows) runs from commit 700346f's source installed into the user's cache (`pip install "
     "--target`); a run serves every row that needs it, so a task's rows cost one set of runs.",
     "- The GPU column holds the rows that have a GPU form, measured by `dospcot-lab bench --device cuda` on "
@@ -293,12 +297,13 @@ def run_benchmarks(
                     f"the rows measured before the stop, in {out}: {done}" if rows else "nothing"
                 ) from None
             rows.append(dataclasses.replace(row, made=Provenance.now(name, row)))
+            names = list(chosen)[: len(rows)]
             if device != "cpu":
-                out.write_text(_with_gpu_rows(table, rows, list(chosen)[: len(rows)], command, repeats))
+                _landed(out, lambda now: _with_gpu_rows(now, rows, names, command, repeats))  # noqa: B023
             elif table is None:
                 out.write_text(render(rows, command))
             else:
-                out.write_text(_with_rows(table, rows, list(chosen)[: len(rows)], command))
+                _landed(out, lambda now: _with_rows(now, rows, names, command))  # noqa: B023
     if not only and device == "cpu":  # a full run's rows are the whole table
         out.write_text(render(rows, command, text))
     return rows
@@ -345,6 +350,34 @@ def _add_note(lines: list[str], note: str) -> None:
     lines[header - 1 : header - 1] = ["", note]
 
 
+def _rows_of_benchmark(lines: list[str], row: Row) -> list[int]:
+    """The indices of the table's rows of ``row``'s name that its benchmark may have written: those whose
+    *made by* cell names ``row``'s benchmark, or names none (a row written before rows carried their
+    provenance). Rows of one name from other benchmarks (the cost rows, one per task) are not its."""
+    own = NOT_RECORDED if row.made is None else row.made.bench
+    found = []
+    for i, line in enumerate(lines):
+        if line.startswith(f"| {row.name} | "):
+            try:
+                bench = Provenance.parse(_cells(line)[-2]).bench
+            except ValueError:
+                bench = NOT_RECORDED
+            if bench in (own, NOT_RECORDED) or own == NOT_RECORDED:
+                found.append(i)
+    return found
+
+
+def _landed(out: Path, update: Callable[[str], str]) -> None:
+    """Write ``update`` of ``out``'s text as it reads now, holding a lock on the file meanwhile: two
+    ``--only`` runs into one file (each on its own core) keep each other's rows."""
+    with out.open("r+") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)  # released as the file closes
+        text = update(handle.read())
+        handle.seek(0)
+        handle.write(text)
+        handle.truncate()
+
+
 def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> str:
     """``text`` (a BENCHMARKS.md) with ``rows`` (of the benchmarks ``names``) in its table and a line
     saying when they were rerun; each row keeps its GPU figure."""
@@ -352,7 +385,7 @@ def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> st
     for row in rows:
         at = _row_at(lines, row)
         same = at is not None  # only then does the old GPU figure describe this row
-        named = [i for i, line in enumerate(lines) if line.startswith(f"| {row.name} | ")]
+        named = _rows_of_benchmark(lines, row)
         if at is None and len(named) == 1 and [r.name for r in rows].count(row.name) == 1:
             at = named[0]  # the benchmark's setting changed: its one old row describes it no more
         if at is None:  # a new row

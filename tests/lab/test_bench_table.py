@@ -287,3 +287,38 @@ def test_bench_note_of_a_row_stays_when_another_row_of_its_name_is_rerun(tmp_pat
         "0.700, yes (7.00 steps/s vs 10.00 steps/s) |",
         "0.500, yes (5.00 steps/s vs 10.00 steps/s) |",
     ]
+
+
+def test_two_only_runs_into_one_file_keep_each_others_rows(tmp_path, monkeypatch):
+    """Two ``--only`` runs writing one file, each on its own core: a row lands into the file as it reads
+    then, so the other run's row, landed meanwhile, stays, and so does its note."""
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot-lab bench"))
+
+    def a_while_the_other_lands(quick: bool, repeats: int) -> bench_measure.Row:
+        bench.run_benchmarks(out, False, 3, "dospcot-lab bench --only C", only=["C"])
+        return _row("A", 20.0)
+
+    rows = {"A": a_while_the_other_lands, "C": lambda quick, repeats: _row("C", 2.0)}
+    monkeypatch.setattr(bench, "BENCHMARKS", rows)
+    bench.run_benchmarks(out, False, 3, "dospcot-lab bench --only A", only=["A"])
+    lines = out.read_text().splitlines()
+    table = {line.split(" | ")[0]: line for line in lines if line.startswith("| ")}
+    assert "| 2.000 |" in table["| A"] and "| 0.600 |" in table["| B"] and "| 0.200 |" in table["| C"]
+    notes = [line.rsplit(": ", 1)[1] for line in lines if line.startswith("Rerun alone by")]
+    assert sorted(notes) == ["A.", "C."]
+
+
+def test_rows_of_one_name_from_two_benchmarks_sit_side_by_side(tmp_path, monkeypatch):
+    """The cost rows share a name, one per task: a task's row, its setting new, does not take the row
+    another task's benchmark wrote."""
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text(bench.render([_row("B", 6.0)], "dospcot-lab bench"))
+    doorkey = dataclasses.replace(_row("Cost", 2.0), setting="doorkey")
+    lavagap = dataclasses.replace(_row("Cost", 3.0), setting="lavagap")
+    rows = {"cost_doorkey": lambda quick, repeats: doorkey, "cost_lavagap": lambda quick, repeats: lavagap}
+    monkeypatch.setattr(bench, "BENCHMARKS", rows)
+    bench.run_benchmarks(out, False, 3, "dospcot-lab bench --only cost_doorkey", only=["cost_doorkey"])
+    bench.run_benchmarks(out, False, 3, "dospcot-lab bench --only cost_lavagap", only=["cost_lavagap"])
+    costs = [line for line in out.read_text().splitlines() if line.startswith("| Cost | ")]
+    assert [line.split(" | ")[1] for line in costs] == ["doorkey", "lavagap"]
