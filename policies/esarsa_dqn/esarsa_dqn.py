@@ -56,6 +56,7 @@ from stable_baselines3 import DQN
 from stable_baselines3.common.policies import BasePolicy
 from stable_baselines3.common.torch_layers import FlattenExtractor
 from stable_baselines3.common.utils import polyak_update
+from torch.nn.utils import clip_grads_with_norm_, get_total_norm
 
 from dospcot.policies.esarsa_dqn.buffers import RelabellingReplayBuffer, _binary
 from dospcot.policies.esarsa_dqn.sparse_inputs import (
@@ -155,6 +156,8 @@ class ExpectedSarsaDQN(DQN):
     fused_adam: bool = False
     _sparse_weights: tuple[th.nn.Parameter, ...] = ()
     """The online Q-network's sparse first-layer weight, when it has one (the optimiser's)."""
+    _clipped: list[th.nn.Parameter]
+    """The policy's parameters in its order, listed once: those whose gradients a step clips."""
 
     def __init__(
         self,
@@ -267,6 +270,7 @@ class ExpectedSarsaDQN(DQN):
         super()._setup_model()
         self.n_steps = n_steps
         self._setup_fast_paths()
+        self._clipped = list(self.policy.parameters())
         # DQN's _on_step reads eps from this schedule, which would restart at every learn().
         self.exploration_schedule = self._exploration_schedule
 
@@ -385,7 +389,7 @@ class ExpectedSarsaDQN(DQN):
                 loss = loss + demo_loss
             self.policy.optimizer.zero_grad()
             loss.backward()
-            th.nn.utils.clip_grad_norm_(self.policy.parameters(), self.max_grad_norm)
+            self._clip_gradients()
             self.policy.optimizer.step()
         self._n_updates += gradient_steps
         self.logger.record("train/n_updates", self._n_updates, exclude="tensorboard")
@@ -393,6 +397,14 @@ class ExpectedSarsaDQN(DQN):
             self.logger.record("train/loss", float(np.mean(losses)))
         if margin_losses:  # weighted, as it enters the loss
             self.logger.record("train/margin_loss", float(np.mean(margin_losses)))
+
+    def _clip_gradients(self) -> None:
+        """SB3's ``clip_grad_norm_(policy.parameters(), max_grad_norm)`` in the same arithmetic, without
+        the work that changes nothing: the parameters are listed once, and where the coefficient clamps
+        to 1 (the norm within the bound, most steps) the gradients are not multiplied by it."""
+        norm = get_total_norm([p.grad for p in self._clipped if p.grad is not None])
+        if not bool(self.max_grad_norm / (norm + 1e-6) >= 1.0):  # a NaN norm is multiplied in, as there
+            clip_grads_with_norm_(self._clipped, self.max_grad_norm, norm)
 
     def update(self, gradient_steps: int) -> None:
         """``gradient_steps`` of :meth:`train` on the replay buffer as it reads now, without acting: the
@@ -447,4 +459,5 @@ class ExpectedSarsaDQN(DQN):
             "_demo_obs",
             "_demo_actions",
             "_sparse_weights",
+            "_clipped",
         ]
