@@ -64,6 +64,22 @@ def test_q_target_training_matches_stock_dqn():
         assert th.allclose(p, q, atol=1e-6)
 
 
+@pytest.mark.parametrize("max_grad_norm", [10.0, 1e-3])  # the norm within the bound, and clipped
+def test_gradients_are_clipped_bit_for_bit_as_clip_grad_norm_does(monkeypatch, max_grad_norm):
+    kwargs = dict(learning_starts=50, train_freq=1, seed=3, buffer_size=1000, batch_size=16)
+    ours = ExpectedSarsaDQN("MlpPolicy", onehot_cliff(), max_grad_norm=max_grad_norm, **kwargs)
+    ours.learn(200)
+    stock = ExpectedSarsaDQN("MlpPolicy", onehot_cliff(), max_grad_norm=max_grad_norm, **kwargs)
+    monkeypatch.setattr(
+        stock,
+        "_clip_gradients",
+        lambda: th.nn.utils.clip_grad_norm_(stock.policy.parameters(), stock.max_grad_norm),
+    )
+    stock.learn(200)
+    for p, q in zip(ours.policy.parameters(), stock.policy.parameters(), strict=True):
+        assert th.equal(p, q)
+
+
 def test_weighted_huber_loss_by_hand_and_zero_weight_gradient():
     current = th.tensor([[1.0], [2.0], [3.0]], requires_grad=True)
     target = th.tensor([[1.5], [0.0], [3.2]])
