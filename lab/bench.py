@@ -284,6 +284,9 @@ def run_benchmarks(
     except OSError as err:
         raise ValueError(f"--out {out}: cannot make its folder ({err.strerror or err})") from None
     torch.set_num_threads(1)
+    # The source's commit as the run starts: a row landing in a tracked --out (BENCHMARKS.md), this
+    # run's or another's, leaves the checkout dirty for the rows after it, with the source unchanged.
+    commit = short_commit()
     rows: list[Row] = []
     chosen = {name: catalogue[name] for name in only} if only else catalogue
     with tqdm(chosen.items(), desc="dospcot-lab bench", unit="row", dynamic_ncols=True) as bar:
@@ -296,7 +299,7 @@ def run_benchmarks(
                 raise Interrupted(
                     f"the rows measured before the stop, in {out}: {done}" if rows else "nothing"
                 ) from None
-            rows.append(dataclasses.replace(row, made=Provenance.now(name, row)))
+            rows.append(dataclasses.replace(row, made=Provenance.now(name, row, commit)))
             names = list(chosen)[: len(rows)]
             if device != "cpu":
                 _landed(out, lambda now: _with_gpu_rows(now, rows, names, command, repeats))  # noqa: B023

@@ -107,17 +107,16 @@ class Provenance:
     cpu: str
 
     @classmethod
-    def now(cls, bench: str, row: Row) -> Provenance:
+    def now(cls, bench: str, row: Row, commit: str) -> Provenance:
         """The provenance of ``row``, measured just now by benchmark ``bench`` on this machine: its
-        repetitions counted from its measurements, the commit of the checkout that ran it (``+dirty``
-        where tracked files differed from it; :func:`~dospcot.run.run_folder.source_commit`) and the CPU
-        model with torch's kernels (:func:`~dospcot.run.run_folder.cpu_description`, from
-        ``/proc/cpuinfo``, else :mod:`platform`)."""
+        repetitions counted from its measurements, ``commit`` (the checkout's as the run started,
+        :func:`short_commit`) and the CPU model with torch's kernels
+        (:func:`~dospcot.run.run_folder.cpu_description`, from ``/proc/cpuinfo``, else :mod:`platform`)."""
         return cls(
             bench,
             str(max(row.ours.count, row.peer.count)),
             f"{datetime.now(UTC):%Y-%m-%d %H:%M} UTC",
-            short_commit(),
+            commit,
             cpu_description(),
         )
 

@@ -175,7 +175,7 @@ def _made(bench_name: str, line: str) -> bool:
     """Whether ``line``'s *made by* cell is the one run_benchmarks writes for a row of :func:`_row` that
     benchmark ``bench_name`` measured on this machine (3 repetitions; the date, a minute's, aside)."""
     made = bench_measure.Provenance.parse(bench._cells(line)[-2])
-    now = bench_measure.Provenance.now(bench_name, _row(bench_name, 1.0))
+    now = bench_measure.Provenance.now(bench_name, _row(bench_name, 1.0), bench_measure.short_commit())
     return dataclasses.replace(made, date=now.date) == now
 
 
@@ -246,7 +246,7 @@ def test_bench_stamps_every_row_with_how_it_was_made(tmp_path, monkeypatch):
         {"one_rep": lambda quick, repeats: one, "A": lambda quick, repeats: _row("A", 5.0)},
     )
     monkeypatch.setattr(bench_measure, "cpu_description", lambda: "Test CPU Model 9000, torch kernels AVX2")
-    monkeypatch.setattr(bench_measure, "short_commit", lambda: "abc1234+dirty")
+    monkeypatch.setattr(bench, "short_commit", lambda: "abc1234+dirty")
     assert main(["bench", "--out", str(out)]) == 0
     text = out.read_text()
     rows = {line.split(" | ")[0]: line for line in text.splitlines() if line.startswith("| ")}
@@ -322,3 +322,20 @@ def test_rows_of_one_name_from_two_benchmarks_sit_side_by_side(tmp_path, monkeyp
     bench.run_benchmarks(out, False, 3, "dospcot-lab bench --only cost_lavagap", only=["cost_lavagap"])
     costs = [line for line in out.read_text().splitlines() if line.startswith("| Cost | ")]
     assert [line.split(" | ")[1] for line in costs] == ["doorkey", "lavagap"]
+
+
+def test_every_row_of_a_run_names_the_commit_its_source_had_as_the_run_started(tmp_path, monkeypatch):
+    """The first row landing in a tracked BENCHMARKS.md leaves the checkout dirty; the rows after it
+    were measured by the same source, so they name the same commit."""
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text(bench.render([_row("A", 5.0), _row("B", 6.0)], "dospcot-lab bench"))
+    states = iter(["abc1234", "abc1234+dirty", "abc1234+dirty"])
+    monkeypatch.setattr(bench, "short_commit", lambda: next(states))
+    rows = {"A": lambda quick, repeats: _row("A", 7.0), "B": lambda quick, repeats: _row("B", 8.0)}
+    monkeypatch.setattr(bench, "BENCHMARKS", rows)
+    bench.run_benchmarks(out, False, 3, "dospcot-lab bench --only A --only B", only=["A", "B"])
+    table = [line for line in out.read_text().splitlines() if line.startswith(("| A |", "| B |"))]
+    assert [bench_measure.Provenance.parse(bench._cells(line)[-2]).commit for line in table] == [
+        "abc1234",
+        "abc1234",
+    ]
