@@ -188,3 +188,14 @@ def test_training_loads_neither_the_lab_nor_the_statistics(tmp_path):
     )
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
     assert json.loads(out.stdout.splitlines()[-1]) == [0, []]
+
+
+def test_the_training_stack_loads_matplotlib_only_to_write_the_plot():
+    """A run imports matplotlib as it writes its plot, at its end, so its peak memory is its fits'."""
+    script = (
+        "import sys\n"
+        "import dospcot.cli.commands, dospcot.run.run_session, dospcot.run.sb3_runs, dospcot.run.train\n"
+        "print('matplotlib' in sys.modules)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True)
+    assert out.stdout.split() == ["False"]

@@ -22,7 +22,6 @@ from dospcot.core.round_records import CLASS_COLUMNS, DEPENDENCE_STATS
 from dospcot.core.sb3_round import CoTrainingRun
 from dospcot.raters.file_rater import FileRater, action_names
 from dospcot.run.interrupts import Interrupted
-from dospcot.run.plots import plot_learning_curves
 from dospcot.run.run_folder import (
     CHECKPOINT_FILE,
     METRICS_FILE,
@@ -186,6 +185,10 @@ class RunSession:
         for agent in run.agents:
             agent.logger.close()
         title = f"{cfg.name} (seed {cfg.seed})"
+        # matplotlib (some 20 MB resident) loads here, after the fits: a run's peak memory is then its
+        # fits' alone, not theirs with the plotting stack's.
+        from dospcot.run.plots import plot_learning_curves
+
         plot_learning_curves(self.records, run_dir / "learning_curves.png", self.cfg.agent_names, title=title)
         resumed = {"session_commits": self.commits} if self.sessions > 1 else {}
         cpu = self._cpu_now()
