@@ -302,7 +302,7 @@ def run_benchmarks(
             rows.append(dataclasses.replace(row, made=Provenance.now(name, row, commit)))
             names = list(chosen)[: len(rows)]
             if device != "cpu":
-                _landed(out, lambda now: _with_gpu_rows(now, rows, names, command, repeats))  # noqa: B023
+                _landed(out, lambda now: _with_gpu_rows(now, rows, names, command, repeats, commit))  # noqa: B023
             elif table is None:
                 out.write_text(render(rows, command))
             else:
@@ -353,21 +353,27 @@ def _add_note(lines: list[str], note: str) -> None:
     lines[header - 1 : header - 1] = ["", note]
 
 
-def _rows_of_benchmark(lines: list[str], row: Row) -> list[int]:
-    """The indices of the table's rows of ``row``'s name that its benchmark may have written: those whose
-    *made by* cell names ``row``'s benchmark, or names none (a row written before rows carried their
-    provenance). Rows of one name from other benchmarks (the cost rows, one per task) are not its."""
-    own = NOT_RECORDED if row.made is None else row.made.bench
-    found = []
+def _old_row(lines: list[str], row: Row, rows: list[Row]) -> int | None:
+    """The index of the row that ``row`` replaces where its setting changed: the one row of its name
+    that its benchmark wrote (by the *made by* cell), or, where none did, the one row of its name
+    written before rows carried their provenance, unless another row of this run (``rows``) shares
+    the name and might be the one it describes. Rows of one name from other benchmarks (the cost rows,
+    one per task) are never its. None: no such row."""
+    own, unknown = [], []
     for i, line in enumerate(lines):
         if line.startswith(f"| {row.name} | "):
             try:
                 bench = Provenance.parse(_cells(line)[-2]).bench
             except ValueError:
                 bench = NOT_RECORDED
-            if bench in (own, NOT_RECORDED) or own == NOT_RECORDED:
-                found.append(i)
-    return found
+            if bench == NOT_RECORDED:
+                unknown.append(i)
+            elif row.made is not None and bench == row.made.bench:
+                own.append(i)
+    if own:
+        return own[0] if len(own) == 1 else None
+    alone = [r.name for r in rows].count(row.name) == 1
+    return unknown[0] if len(unknown) == 1 and alone else None
 
 
 def _landed(out: Path, update: Callable[[str], str]) -> None:
@@ -388,9 +394,8 @@ def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> st
     for row in rows:
         at = _row_at(lines, row)
         same = at is not None  # only then does the old GPU figure describe this row
-        named = _rows_of_benchmark(lines, row)
-        if at is None and len(named) == 1 and [r.name for r in rows].count(row.name) == 1:
-            at = named[0]  # the benchmark's setting changed: its one old row describes it no more
+        if at is None:  # the benchmark's setting changed: its one old row describes it no more
+            at = _old_row(lines, row, rows)
         if at is None:  # a new row
             at = _after_table(lines)
             lines.insert(at, _table_line(row))
@@ -407,10 +412,13 @@ def _with_rows(text: str, rows: list[Row], names: list[str], command: str) -> st
     return "\n".join(lines) + "\n"
 
 
-def _with_gpu_rows(text: str, rows: list[Row], names: list[str], command: str, repeats: int) -> str:
+def _with_gpu_rows(
+    text: str, rows: list[Row], names: list[str], command: str, repeats: int, commit: str
+) -> str:
     """``text`` (a BENCHMARKS.md) with ``rows`` (of the benchmarks ``names``), measured on the GPU, in
     the GPU column of its rows of the same benchmark and setting (a row the table lacks goes last, with
-    no CPU figure), and a line naming the GPU, the command and the benchmarks."""
+    no CPU figure), and a line naming the GPU, the command, ``commit`` (the source's as the run started)
+    and the benchmarks."""
     lines = _table_lines(text)
     for row in rows:
         at = _row_at(lines, row)
@@ -423,7 +431,7 @@ def _with_gpu_rows(text: str, rows: list[Row], names: list[str], command: str, r
     gpu = f"{torch.cuda.get_device_name()}, torch {torch.__version__}, Python {platform.python_version()}"
     _add_note(
         lines,
-        f"{GPU_NOTE} `{command}` ({gpu}; CPU {cpu_description()}; commit {short_commit()}; wall time, "
+        f"{GPU_NOTE} `{command}` ({gpu}; CPU {cpu_description()}; commit {commit}; wall time, "
         f"median of {repeats} repetitions) on {datetime.now(UTC):%Y-%m-%d %H:%M} UTC: {'; '.join(names)}.",
     )
     return "\n".join(lines) + "\n"

@@ -339,3 +339,28 @@ def test_every_row_of_a_run_names_the_commit_its_source_had_as_the_run_started(t
         "abc1234",
         "abc1234",
     ]
+
+
+def test_rows_of_one_name_rerun_together_with_new_settings_each_replace_their_own(tmp_path, monkeypatch):
+    """Both cost rows rerun in one run, each with a new setting: each takes the row its own benchmark
+    wrote, and the table holds no stale copy."""
+    out = tmp_path / "BENCHMARKS.md"
+    out.write_text(bench.render([_row("B", 6.0)], "dospcot-lab bench"))
+
+    def cost_rows(suffix: str) -> dict:
+        """cost_doorkey's and cost_lavagap's rows, their settings the task's name and ``suffix``."""
+        rows = {
+            task: dataclasses.replace(_row("Cost", 2.0), setting=task + suffix)
+            for task in ("doorkey", "lavagap")
+        }
+        return {f"cost_{task}": (lambda quick, repeats, row=row: row) for task, row in rows.items()}
+
+    for suffix in ("", ", longer"):
+        monkeypatch.setattr(bench, "BENCHMARKS", cost_rows(suffix))
+        bench.run_benchmarks(
+            out, False, 3, "dospcot-lab bench --only both", only=["cost_doorkey", "cost_lavagap"]
+        )
+    costs_now = [
+        line.split(" | ")[1] for line in out.read_text().splitlines() if line.startswith("| Cost | ")
+    ]
+    assert costs_now == ["doorkey, longer", "lavagap, longer"]
