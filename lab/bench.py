@@ -201,7 +201,7 @@ def _gpu_cell(row: Row) -> str:
 
 
 def _target(row: Row) -> str:
-    return f"{'>=' if row.higher_is_better else '<='} {row.target}"
+    return f"{'>=' if row.higher_is_better else '<='} {row.target_text}"
 
 
 def _table_line(row: Row, gpu: str = NO_FIGURE) -> str:

@@ -92,6 +92,11 @@ class Row:
         """Whether the ratio meets the target (at least it, or at most it where lower is better)."""
         return self.ratio >= self.target if self.higher_is_better else self.ratio <= self.target
 
+    @property
+    def target_text(self) -> str:
+        """The target as the table writes it: rounded to 3 decimals, as the ratio is (1/3 reads 0.333)."""
+        return str(round(self.target, 3))
+
 
 @dataclass(frozen=True)
 class Provenance:

@@ -171,7 +171,8 @@ def _bench(args: argparse.Namespace, command: str) -> int:
         )
     rows = run_benchmarks(args.out, args.quick, args.repeats, command, args.only, args.device)
     for row in rows:
-        print(f"{row.name}: ratio {row.ratio:.3f} (target {row.target}, {'met' if row.met else 'not met'})")
+        verdict = "met" if row.met else "not met"
+        print(f"{row.name}: ratio {row.ratio:.3f} (target {row.target_text}, {verdict})")
     print(f"wrote {args.out}")
     return 0
 

@@ -364,3 +364,9 @@ def test_rows_of_one_name_rerun_together_with_new_settings_each_replace_their_ow
         line.split(" | ")[1] for line in out.read_text().splitlines() if line.startswith("| Cost | ")
     ]
     assert costs_now == ["doorkey, longer", "lavagap, longer"]
+
+
+def test_a_target_of_a_third_is_written_as_the_ratio_is_rounded(tmp_path):
+    row = dataclasses.replace(_row("A", 3.0), higher_is_better=False, target=1 / 3)
+    line = next(line for line in bench.render([row], "cmd").splitlines() if line.startswith("| A"))
+    assert "| 0.300 | <= 0.333 | yes |" in line and "0.3333" not in line
