@@ -16,6 +16,8 @@ from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot_lab.studies.budget_confirm import SWEEPS as BUDGET_SWEEPS
 from dospcot_lab.studies.declaration import EXPLORATORY, Glance, Study, Sweep
+from dospcot_lab.studies.untuned import FOLDER as UNTUNED_FOLDER
+from dospcot_lab.studies.untuned import ORACLE_FLOOR
 
 CAP = 20
 """The capped arms' rounds."""
@@ -26,6 +28,31 @@ PRESET_LENGTH = "5 rounds (the preset)"
 """The budget study's runs, read on the seeds the capped arm has run (all ten before it has any)."""
 FIRST_SEED, SEEDS = 100, 5
 """The budget study's Unlock seeds (its arms ran 100-109); the capped arms run the first five."""
+
+
+UNTUNED_VERSION = 14
+"""The version of the defaults the untuned study's Unlock oracle trains under here: the adopted one when
+its sweep was declared (pinned, so the sweep keeps it when the default moves)."""
+UNTUNED_ROUNDS = 30
+"""The rounds of that oracle's runs: six times the version's 5."""
+UNTUNED_AGENTS = ("esarsa_dqn", "dqn")
+"""Its agents: the version's, and the DoorKey presets' (the max target with windows cut at exploratory
+actions)."""
+UNTUNED_READ = (5, 10, 20, 30)
+"""The rounds its table reads."""
+
+
+def _untuned() -> Sweep:
+    """The untuned study's Unlock oracle (a config naming only the env id and its view) under
+    :data:`UNTUNED_VERSION`, for :data:`UNTUNED_ROUNDS` rounds, under each of :data:`UNTUNED_AGENTS`."""
+    grid = {"training.rounds": (str(UNTUNED_ROUNDS),), "agent": UNTUNED_AGENTS}
+    return Sweep(
+        f"sizing-unlock-untuned-oracle-{UNTUNED_ROUNDS}",
+        (f"{UNTUNED_FOLDER}/unlock-oracle.toml",),
+        grid,
+        numerics=None,
+        defaults=UNTUNED_VERSION,
+    )
 
 
 def _five_rounds(arm: str) -> Sweep:
@@ -60,6 +87,8 @@ def _variant(name: str) -> Sweep:
 
 
 def _arm(run: TrialRun) -> str:
+    if run.trial.config.startswith(UNTUNED_FOLDER):
+        return f"untuned, {run.trial.params['agent']}"
     variant = next(
         (name for name, (_, params) in VARIANTS.items() if params.items() <= run.trial.params.items()), None
     )
@@ -145,7 +174,7 @@ def tables(runs: list[TrialRun]) -> list[str]:
             if rule != PRESET_LENGTH and seeds:
                 diff = SeedSummary.of([by_seed[s][0] - base[s][0] for s in seeds])
                 differences.append(f"- {arm}, {rule} minus 5 rounds, success paired by seed: {diff}")
-    return [*lines, "", *differences, *_variants(runs, bases["oracle"])]
+    return [*lines, "", *differences, *_variants(runs, bases["oracle"]), *_untuned_lines(runs)]
 
 
 def _variants(runs: list[TrialRun], oracle: dict[int, tuple[float, int, float]]) -> list[str]:
@@ -172,6 +201,34 @@ def _variants(runs: list[TrialRun], oracle: dict[int, tuple[float, int, float]])
     return [*header, *lines] if lines else []
 
 
+def _untuned_lines(runs: list[TrialRun]) -> list[str]:
+    """Per agent of the :func:`_untuned` sweep: its success at each of :data:`UNTUNED_READ`'s rounds and
+    at each run's best round, over seeds, and the runs that reached the untuned study's 0.8 there."""
+    lines = []
+    for agent in UNTUNED_AGENTS:
+        mine = [_per_round(r) for r in runs if _arm(r) == f"untuned, {agent}"]
+        done = [rounds for rounds in mine if len(rounds) >= UNTUNED_ROUNDS]
+        if not done:
+            continue
+        read = [SeedSummary.of([_mean(rounds[n - 1], "success") for rounds in done]) for n in UNTUNED_READ]
+        best = [max(_mean(rows, "success") for rows in rounds) for rounds in done]
+        floor = sum(_mean(rounds[-1], "success") >= ORACLE_FLOOR for rounds in done)
+        cells = " | ".join(map(str, read))
+        lines.append(f"| {agent} | {cells} | {SeedSummary.of(best)} | {floor} of {len(done)} |")
+    header = [
+        "",
+        f"The untuned study's Unlock oracle (`{UNTUNED_FOLDER}/unlock-oracle.toml`: the env id and the image "
+        f"view, every other setting the library's) under version {UNTUNED_VERSION} of the defaults, trained "
+        f"{UNTUNED_ROUNDS} rounds, under the version's agent and under the presets' (`dqn`): success at a "
+        "round, mean over seeds; its best round, each run's highest success at any round; and the runs whose "
+        f"last round reached the untuned study's floor of {ORACLE_FLOOR}.",
+        "",
+        f"| agent | {' | '.join(f'round {n}' for n in UNTUNED_READ)} | its best round | at {ORACLE_FLOOR} |",
+        f"|---|{'---|' * len(UNTUNED_READ)}---|---|",
+    ]
+    return [*header, *lines] if lines else []
+
+
 def glance(runs: list[TrialRun]) -> Glance:
     """The oracle's success under patience 3 capped at :data:`CAP`, against the preset's 5 rounds."""
     rules = _rules(runs, "oracle")
@@ -184,7 +241,11 @@ def glance(runs: list[TrialRun]) -> Glance:
 
 STUDIES: dict[str, Study] = {
     "sizing": Study(
-        (*(sweep for arm in ARMS for sweep in (_capped(arm), _five_rounds(arm))), *map(_variant, VARIANTS)),
+        (
+            *(sweep for arm in ARMS for sweep in (_capped(arm), _five_rounds(arm))),
+            *map(_variant, VARIANTS),
+            _untuned(),
+        ),
         tables,
         "Training sized to the task: rounds capped, stopped by the greedy evaluation's patience",
         "MiniGrid Unlock with the DoorKey presets (no preset sized for it)",
