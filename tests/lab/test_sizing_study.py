@@ -7,7 +7,15 @@ from dospcot.statistics import SeedSummary
 from dospcot.sweeps.report import TrialRun
 from dospcot.sweeps.sweep import Trial
 from dospcot_lab.studies import STUDIES
-from dospcot_lab.studies.sizing import CAP, glance, tables
+from dospcot_lab.studies.sizing import (
+    CAP,
+    UNTUNED_FOLDER,
+    UNTUNED_READ,
+    UNTUNED_ROUNDS,
+    UNTUNED_VERSION,
+    glance,
+    tables,
+)
 
 ORACLE = "minigrid-doorkey-oracle"
 
@@ -78,3 +86,35 @@ def test_each_variant_is_the_preset_oracle_with_one_setting_as_a_bare_config_has
     assert not any(line.startswith("| oracle, esarsa_dqn |") for line in lines)  # not run: no row
     # A variant run is no 5-round run of the preset's oracle.
     assert next(line for line in lines if "| 5 rounds (the preset) |" in line).endswith("| 3 |")
+
+
+def test_the_untuned_oracle_under_the_adopted_defaults_is_read_at_its_rounds_per_agent():
+    sweep = next(
+        s for s in STUDIES["sizing"].sweeps if s.name == f"sizing-unlock-untuned-oracle-{UNTUNED_ROUNDS}"
+    )
+    assert sweep.configs == (f"{UNTUNED_FOLDER}/unlock-oracle.toml",)
+    assert (sweep.defaults, sweep.numerics) == (UNTUNED_VERSION, None)
+    config = f"{UNTUNED_FOLDER}/unlock-oracle.toml"
+
+    def run(seed: int, agent: str, success: list[float]) -> TrialRun:
+        curves = [{"round": str(n), "success": str(s)} for n, s in enumerate(success, 1)]
+        params = {"training.rounds": str(UNTUNED_ROUNDS), "agent": agent}
+        return TrialRun(Trial(config, "untuned-unlock-oracle", params, seed), {}, curves, Path())
+
+    rising = [n / UNTUNED_ROUNDS for n in range(1, UNTUNED_ROUNDS + 1)]  # 1.0 at its last round
+    runs = [
+        run(100, "dqn", rising),
+        run(101, "dqn", [0.0] * 9 + [0.9] + [0.5] * (UNTUNED_ROUNDS - 10)),
+        run(102, "dqn", [0.0] * 12),  # not finished: left out
+        _run(100, [0.0] * 5, False),  # the preset's oracle: its own rows, untouched
+    ]
+    lines = tables(runs)
+    row = next(line for line in lines if line.startswith("| dqn |"))
+    read = [
+        SeedSummary.of([n / UNTUNED_ROUNDS, 0.0 if n < 10 else (0.9 if n == 10 else 0.5)])
+        for n in UNTUNED_READ
+    ]
+    best = SeedSummary.of([1.0, 0.9])
+    assert row == f"| dqn | {' | '.join(map(str, read))} | {best} | 1 of 2 |"
+    assert not any(line.startswith("| esarsa_dqn |") for line in lines)  # not run: no row
+    assert next(line for line in lines if "| 5 rounds (the preset) |" in line).endswith("| 1 |")
