@@ -1,6 +1,7 @@
 """The co-training core on its own: reward classes, the key pool's features, one SelfPacedCoTrainer
 round after another, each against figures worked out by hand."""
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -377,8 +378,6 @@ def test_numerics_2_fits_in_float32_and_a_config_pickled_before_the_key_reads_as
 
 @pytest.mark.parametrize("numerics", [2, 3])
 def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path, numerics):
-    import json
-
     from dospcot.run.run_session import RunSession
     from dospcot.run.sb3_runs import build_run
     from dospcot.tasks import load_config
@@ -394,6 +393,32 @@ def test_run_info_names_the_numerics_version_runs_are_trained_with(tmp_path, num
     session.run.run(on_round=lambda run, rows: session.after_round(rows))
     session.finish()
     assert json.loads((tmp_path / "run_info.json").read_text())["numerics"] == numerics
+
+
+def test_a_finished_session_drops_its_replay_buffers_before_it_loads_the_plotting_stack(
+    tmp_path, monkeypatch
+):
+    """The buffers, saved with no agent, are what a run holds most of: gone before matplotlib loads."""
+    from dospcot.run import plots
+    from dospcot.run.run_session import RunSession
+    from dospcot.tasks import load_config
+
+    cfg = load_config("tiny", ["training.rounds=1", "training.steps_per_round=200"])
+    (tmp_path / "config.toml").write_text("")
+    session = RunSession(tmp_path, cfg, None, "dospcot train tiny")
+    session.run.run(on_round=lambda run, rows: session.after_round(rows))
+    assert all(agent.replay_buffer.size() == 200 for agent in session.run.agents)
+    held, plot = [], plots.plot_learning_curves
+
+    def plot_and_note(*args, **kwargs) -> None:
+        held.append([agent.replay_buffer for agent in session.run.agents])
+        plot(*args, **kwargs)
+
+    monkeypatch.setattr(plots, "plot_learning_curves", plot_and_note)
+    session.finish()
+    assert held == [[None] * len(cfg.views)]
+    assert (tmp_path / "learning_curves.png").stat().st_size > 0
+    assert json.loads((tmp_path / "summary.json").read_text())["rounds"] == 1
 
 
 def _late_class_pool(late_class: bool) -> tuple[Pool, np.ndarray]:

@@ -184,9 +184,13 @@ class RunSession:
         run, run_dir, cfg = self.run, self.run_dir, self.cfg
         for agent in run.agents:
             agent.logger.close()
+        summary = run_summary(self.records, run)
+        # matplotlib (some 40 MB resident) loads here, after the fits, and once the replay buffers (the
+        # largest arrays a run holds, saved with no agent) are dropped: the memory they give back then
+        # holds the plotting stack, rather than the stack adding to the run's peak.
+        for agent in run.agents:
+            agent.replay_buffer = None
         title = f"{cfg.name} (seed {cfg.seed})"
-        # matplotlib (some 20 MB resident) loads here, after the fits: a run's peak memory is then its
-        # fits' alone, not theirs with the plotting stack's.
         from dospcot.run.plots import plot_learning_curves
 
         plot_learning_curves(self.records, run_dir / "learning_curves.png", self.cfg.agent_names, title=title)
@@ -206,7 +210,7 @@ class RunSession:
             **batched,
         )
         # Last, so that its presence marks a finished run (``dospcot sweep`` skips those on resume).
-        write_json(run_dir / SUMMARY_FILE, run_summary(self.records, run))
+        write_json(run_dir / SUMMARY_FILE, summary)
         # A finished run is never resumed, and its checkpoint holds every replay buffer (about a GB on
         # a 32 x 32 grid): a sweep of finished runs would fill a disk.
         (run_dir / CHECKPOINT_FILE).unlink(missing_ok=True)
