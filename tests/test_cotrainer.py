@@ -353,6 +353,34 @@ def test_a_fit_on_the_weighted_samples_alone_is_the_fit_on_the_whole_pool():
         torch.testing.assert_close(p, q, rtol=1e-9, atol=1e-12)
 
 
+def test_a_weighted_fit_whose_every_sample_carries_weight_reads_the_pool_itself_bit_for_bit():
+    import torch
+
+    from dospcot.core.classifier import BatchedRewardClassifier, ClassifierConfig
+    from dospcot.core.self_paced import NUMERICS, _fit
+
+    rng = np.random.default_rng(2)
+    x = torch.from_numpy(rng.normal(size=(1, 40, 4)).astype(np.float32))
+    y = torch.from_numpy(rng.integers(0, 2, size=(1, 40)))
+    weight = torch.from_numpy(rng.uniform(0.1, 1.0, size=(1, 40)).astype(np.float32))
+    mask = torch.ones(1, 2, dtype=torch.bool)
+    read = []
+
+    def fitted(pool: torch.Tensor, weight: torch.Tensor) -> tuple[torch.Tensor, list[torch.Tensor]]:
+        clf = BatchedRewardClassifier(1, 4, 2, ClassifierConfig(epochs=40), [3]).to(torch.float32)
+        fit = clf.fit
+        clf.fit = lambda features, *rest: read.append(features) or fit(features, *rest)
+        return _fit(clf, NUMERICS[2], pool, y, weight, mask), [p.detach() for p in clf.parameters()]
+
+    (loss, params), (copy_loss, copy_params) = fitted(x, weight), fitted(x.clone(), weight)
+    assert read[0] is x  # the pool itself, where a subset of every sample was a copy of it
+    assert torch.equal(loss, copy_loss)
+    assert all(torch.equal(p, q) for p, q in zip(params, copy_params, strict=True))
+    weight[0, 5] = 0.0  # a sample without weight: the fit reads the others alone
+    fitted(x, weight)
+    assert read[-1].shape == (1, 39, 4)
+
+
 def test_numerics_2_fits_in_float32_and_a_config_pickled_before_the_key_reads_as_1():
     import dataclasses
     import pickle

@@ -116,9 +116,11 @@ def _fit(
     kept = None if runs is None or runs.all() else [p.detach().clone() for p in clf.parameters()]
     if numerics.weighted_only and x.shape[0] == 1:
         keep = weight[0] > 0
-        if mask.dim() == 3:
-            mask = mask[:, keep]
-        x, y, weight = x[:, keep], y[:, keep], weight[:, keep]
+        # Where every sample carries weight, the subset is the pool itself in its order: no copy of it.
+        if not bool(keep.all()):
+            if mask.dim() == 3:
+                mask = mask[:, keep]
+            x, y, weight = x[:, keep], y[:, keep], weight[:, keep]
     loss = clf.fit(x, y, weight, mask)
     if kept is not None:
         others = torch.from_numpy(~runs)
