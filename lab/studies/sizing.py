@@ -4,7 +4,9 @@ MiniGrid-Unlock-v0 under the DoorKey presets' settings, as the budget study's B4
 rounds of 10,000 steps, its oracle at 0.240), against the same runs capped at :data:`CAP` rounds. A
 stop by the greedy evaluation's patience (``training.stop_patience``) leaves the rounds before it as
 the capped run trained them, so each patience's outcome is read off the capped runs' curves with the
-library's own rule (:class:`~dospcot.core.stopping.GreedyPatience`), with no run of its own."""
+library's own rule (:class:`~dospcot.core.stopping.GreedyPatience`), with no run of its own. A last arm
+trains the untuned study's Unlock oracle itself under the adopted defaults for :data:`UNTUNED_ROUNDS`
+rounds, under two agents."""
 
 from __future__ import annotations
 
@@ -202,8 +204,9 @@ def _variants(runs: list[TrialRun], oracle: dict[int, tuple[float, int, float]])
 
 
 def _untuned_lines(runs: list[TrialRun]) -> list[str]:
-    """Per agent of the :func:`_untuned` sweep: its success at each of :data:`UNTUNED_READ`'s rounds and
-    at each run's best round, over seeds, and the runs that reached the untuned study's 0.8 there."""
+    """Per agent of the :func:`_untuned` sweep, over its finished runs: the success at each of
+    :data:`UNTUNED_READ`'s rounds and at each run's best round, and the runs whose last round reached the
+    untuned study's floor for the oracle."""
     lines = []
     for agent in UNTUNED_AGENTS:
         mine = [_per_round(r) for r in runs if _arm(r) == f"untuned, {agent}"]
