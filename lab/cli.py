@@ -11,7 +11,15 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from dospcot.cli.parser import OneLineParser, add_overrides, add_workers, file_path, folder_path, positive_int
+from dospcot.cli.parser import (
+    CommandParser,
+    OneLineParser,
+    add_overrides,
+    add_workers,
+    file_path,
+    folder_path,
+    positive_int,
+)
 from dospcot_lab.repository import NotARepository, Repository, find_repository, repository_at
 
 QUICK_BENCH_OUT = Path("runs/bench-quick.md")
@@ -32,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="the checkout to read and write (default: the one holding the working folder)",
     )
-    commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=CommandParser)
     study = commands.add_parser(
         "study",
         description="Run a study's sweeps (only the trials not yet finished), then print its tables from "

@@ -308,3 +308,17 @@ def test_a_run_or_batch_stopped_while_it_is_built_says_what_it_kept_and_resumes(
     monkeypatch.setattr(RunSession, "__init__", built)
     assert main(["train", "--resume", str(first), "--no-progress"]) == 0
     assert all((folder / "summary.json").is_file() for folder in (tmp_path / "tiny").iterdir())
+
+
+def test_seed_trains_one_run_of_that_seed_and_a_seeds_range_a_batch_of_its_seeds(tmp_path):
+    sets = [a for s in TINY for a in ("--set", s)]
+    assert (
+        main(["train", "tiny", "--seed", "3", "--runs-dir", str(tmp_path / "one"), "--no-progress", *sets])
+        == 0
+    )
+    (alone,) = (tmp_path / "one" / "tiny").iterdir()
+    assert json.loads((alone / "summary.json").read_text())["seed"] == 3
+    args = ["train", "tiny", "--seeds", "3-4", "--runs-dir", str(tmp_path / "batch"), "--no-progress", *sets]
+    assert main([*args]) == 0
+    folders = sorted((tmp_path / "batch" / "tiny").iterdir())
+    assert [json.loads((f / "summary.json").read_text())["seed"] for f in folders] == [3, 4]

@@ -62,7 +62,16 @@ def _refused(argv: list[str], where: Path) -> str:
         (["sweep", "tiny", "--seeds", "1,99999999999999999999"], "--seeds takes seeds up to"),
         # A --set that something else would replace.
         (["train", "tiny", "--seeds", "2", "--set", "seed=5"], "--seeds gives the seeds here"),
-        (["sweep", "tiny", "--set", "seed=5"], "--seeds gives the seeds here"),
+        (["sweep", "tiny", "--set", "seed=5"], "give the seed as --seeds 5-5 instead"),
+        # A prefix of an option is not that option: --seed 3 is not a batch of seeds 0-2.
+        (["sweep", "tiny", "--seed", "3"], "unrecognized arguments: --seed 3; did you mean '--seeds'"),
+        (["train", "tiny", "--see", "3"], "unrecognized arguments: --see 3"),
+        (["train", "tiny", "--seed", "3", "--seeds", "2"], "--seed and --seeds: give one"),
+        (["train", "tiny", "--seed", "3", "--set", "seed=4"], "give the seed as --seed 4 instead"),
+        (["train", "tiny", "--seed", "-1"], "--seed takes a seed from 0 to"),
+        (["train", "--resume", "x", "--seed", "1"], "takes no CONFIG, --set, --seed or --seeds"),
+        (["train", "tiny", "--seeds", "5-3"], "a range runs from a seed >= 0 up to a seed no smaller"),
+        (["sweep", "tiny", "--seeds", "1-x"], "a list (0,3,7) or a range (100-104)"),
         (
             ["sweep", "tiny", "--grid", "training.rounds=1,2", "--set", "training.rounds=3"],
             "--grid training.rounds sets training.rounds in every trial",

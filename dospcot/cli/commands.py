@@ -31,9 +31,9 @@ def _train(args: argparse.Namespace, command: str) -> int:
     torch.set_num_threads(args.threads)
     progress = not args.no_progress
     if args.resume is not None:
-        if args.config or args.overrides or args.seeds:
+        if args.config or args.overrides or args.seeds or args.seed is not None:
             raise ConfigError(
-                "--resume RUN_DIR takes no CONFIG, --set or --seeds: the run folder holds its config"
+                "--resume RUN_DIR takes no CONFIG, --set, --seed or --seeds: the run folder holds its config"
             )
         if batch_members(args.resume) is not None:
             run_dirs = resume_batch(args.resume, show_progress=progress, command=command)
@@ -43,7 +43,13 @@ def _train(args: argparse.Namespace, command: str) -> int:
         if not args.config:
             raise ConfigError(f"give a CONFIG: a preset ({', '.join(preset_names())}) or a path to a .toml")
         check_overrides(args.overrides, seeds_option="--seeds" if args.seeds is not None else None)
-        cfg = load_config(args.config, args.overrides)
+        overrides = args.overrides
+        if args.seed is not None:
+            if args.seeds is not None:
+                raise ConfigError("--seed and --seeds: give one (--seed trains one run, --seeds a batch)")
+            check_overrides(args.overrides, seeds_option="--seed")
+            overrides = [*overrides, f"seed={args.seed}"]
+        cfg = load_config(args.config, overrides)
         seeds = len(args.seeds) if args.seeds is not None else 1
         warn("train", check_sizes([cfg], seeds, batch=seeds))
         if args.seeds is not None:

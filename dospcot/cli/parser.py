@@ -19,8 +19,17 @@ SEED_MAX = 2**63 - 1
 
 def parse_seeds(text: str) -> Sequence[int]:
     """``"10"`` -> seeds 0..9 (a ``range``: a huge count is refused by its size check, not built);
-    ``"3,5,7"`` -> those seeds."""
+    ``"3,5,7"`` -> those seeds; ``"100-104"`` -> seeds 100 to 104, both ends included (a ``range``)."""
     try:
+        if "-" in text.strip().lstrip("-"):
+            first, last = (int(end) for end in text.split("-", 1))
+            if first < 0 or last < first:
+                raise argparse.ArgumentTypeError(
+                    f"--seeds {text}: a range runs from a seed >= 0 up to a seed no smaller, as in 100-104"
+                )
+            if last > SEED_MAX:
+                raise argparse.ArgumentTypeError(f"--seeds takes seeds up to {SEED_MAX:,}, got {last}")
+            return range(first, last + 1)
         if "," in text:
             items = [s.strip() for s in text.split(",")]
             if "" in items:
@@ -32,7 +41,7 @@ def parse_seeds(text: str) -> Sequence[int]:
             seeds = range(int(text))
     except ValueError:
         raise argparse.ArgumentTypeError(
-            f"--seeds takes a count (10) or a list (0,3,7), got {text!r}"
+            f"--seeds takes a count (10), a list (0,3,7) or a range (100-104), got {text!r}"
         ) from None
     if not seeds:
         raise argparse.ArgumentTypeError(
@@ -66,6 +75,12 @@ def parse_fraction(text: str) -> float:
 def positive_int(text: str) -> int:
     wanted = "expected a positive integer, got {text}"
     return _number(text, int, lambda v: v >= 1, wanted, wanted)
+
+
+def seed_value(text: str) -> int:
+    """``--seed``: a config's seed, a 64-bit integer >= 0."""
+    wanted = f"--seed takes a seed from 0 to {SEED_MAX:,}, got {{text}}"
+    return _number(text, int, lambda v: 0 <= v <= SEED_MAX, wanted, wanted)
 
 
 def folder_path(text: str) -> Path:
@@ -123,7 +138,12 @@ def add_workers(parser: argparse.ArgumentParser, help: str) -> None:
 
 class OneLineParser(argparse.ArgumentParser):
     """An ``ArgumentParser`` whose usage errors are one line (and exit status 2), as every other
-    error of the CLI."""
+    error of the CLI, and which takes no abbreviated option: argparse would read ``--seed 3`` as
+    ``--seeds 3``, a batch of seeds 0-2 where one run of seed 3 was meant."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
 
     def error(self, message: str) -> NoReturn:
         wrong = re.match(r"argument (\S+): invalid choice: '([^']*)' \(choose from (.*)\)$", message)
@@ -134,6 +154,26 @@ class OneLineParser(argparse.ArgumentParser):
             hint = did_you_mean(wrong.group(2), choices, "choose from", shown=None)
             message = f"argument {wrong.group(1)}: invalid choice: {wrong.group(2)!r}{hint}"
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+class CommandParser(OneLineParser):
+    """A command's parser (``dospcot train``, ...): it names what it does not take itself, with the
+    option meant where one is close, rather than leaving the top parser to say it of ``dospcot``."""
+
+    def parse_known_args(  # type: ignore[override]
+        self, args: Sequence[str] | None = None, namespace: argparse.Namespace | None = None
+    ) -> tuple[argparse.Namespace, list[str]]:
+        parsed, extras = super().parse_known_args(args, namespace)
+        if extras:
+            from dospcot.config.presets import did_you_mean
+
+            options = [o for o in self._option_string_actions if o.startswith("--")]
+            hints = [
+                did_you_mean(e.partition("=")[0], options, "", shown=0) for e in extras if e.startswith("--")
+            ]
+            hint = next((h for h in hints if "did you mean" in h), "")
+            self.error(f"unrecognized arguments: {' '.join(extras)}{hint}")
+        return parsed, extras
 
 
 DESCRIPTION = (
@@ -151,7 +191,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     parser = OneLineParser(prog="dospcot", description=DESCRIPTION)
     parser.add_argument("--version", action="version", version=f"dospcot {__version__}")
-    commands = parser.add_subparsers(dest="command", required=True, parser_class=OneLineParser)
+    commands = parser.add_subparsers(dest="command", required=True, parser_class=CommandParser)
     train = commands.add_parser(
         "train",
         help="train one run of a config (a shipped preset or a .toml path)",
@@ -166,11 +206,12 @@ def build_parser() -> argparse.ArgumentParser:
     train.add_argument(
         "--runs-dir", type=folder_path, default=Path("runs"), help="where runs write (default runs)"
     )
+    train.add_argument("--seed", type=seed_value, help="the run's seed (the same as --set seed=N)")
     train.add_argument(
         "--seeds",
         type=parse_seeds,
         help="train these seeds of the config as one batch in one process, a run folder each: a count "
-        "(10 means seeds 0-9) or a comma list (docs/batched_seeds.md)",
+        "(10 means seeds 0-9), a comma list (0,3,7) or a range (100-104) (docs/batched_seeds.md)",
     )
     train.add_argument("--list", action="store_true", help="list the shipped presets and exit")
     train.add_argument(

@@ -80,9 +80,9 @@ def check_overrides(
     grid_name: str = "--grid",
 ) -> None:
     """Refuse ``--set`` overrides that would lose to something else without a word: a key set twice
-    (or a key and its section), a key a ``--grid`` also sets, or ``seed`` where a ``--seeds``
-    option (``seeds_option``, e.g. ``"--seeds"``) gives the seeds. ``grid_name`` names the grid in the
-    error (a study's sweeps vary keys of their own).
+    (or a key and its section), a key a ``--grid`` also sets, or ``seed`` where an option
+    (``seeds_option``: ``"--seeds"`` or ``"--seed"``) gives the seeds. ``grid_name`` names the grid in
+    the error (a study's sweeps vary keys of their own).
 
     :raises ConfigError: one line naming the key and what to give instead.
     """
@@ -91,9 +91,11 @@ def check_overrides(
         path, _ = parse_override(override)
         key = ".".join(path)
         if seeds_option is not None and key == "seed":
+            seed = override.partition("=")[2].strip()
+            given = seed if seeds_option == "--seed" else f"{seed}-{seed}"  # "--seeds 5" is seeds 0-4
             raise ConfigError(
                 f"--set {override}: {seeds_option} gives the seeds here and would replace it; give the "
-                f"seed as {seeds_option} {override.partition('=')[2].strip()} instead"
+                f"seed as {seeds_option} {given} instead"
             )
         for other, text in seen.items():
             if key == other or key.startswith(f"{other}.") or other.startswith(f"{key}."):
