@@ -17,6 +17,7 @@ import torch
 from small_runs import MECHANISMS, PINNED
 
 from dospcot.cli import main
+from dospcot.cli.parser import parse_seeds
 from dospcot.config.errors import ConfigError
 from dospcot.config.presets import preset_names
 from dospcot.run import run_folder
@@ -29,6 +30,7 @@ from dospcot.sweeps.sweep_spec import (
     Trial,
     open_sweep,
     parse_grid,
+    seeds_option,
     stale_trials,
     trial_dir,
 )
@@ -425,7 +427,7 @@ def test_resume_with_more_seeds_runs_only_the_new_seeds_and_refuses_to_drop_one(
     assert (sweep_dir / "sweep.json").read_text() == before
     # The same sweep with more seeds, named as a new one, says how to add them.
     assert main(["sweep", "tiny", *one_round, "--seeds", "3"]) == 2
-    assert f"to add seeds to it: dospcot sweep --resume {sweep_dir} --seeds 0,1,2" in capsys.readouterr().err
+    assert f"to add seeds to it: dospcot sweep --resume {sweep_dir} --seeds 0-2" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize(
@@ -485,3 +487,11 @@ def test_changed_run_records_do_not_mark_the_source_dirty(tmp_path):
         assert run_folder.source_commit(tmp_path) == head + "+dirty"
     finally:
         run_folder.source_commit.cache_clear()
+
+
+@pytest.mark.parametrize(
+    ("seeds", "text"), [((0, 1, 2), "0-2"), ((100, 101), "100-101"), ((5,), "5-5"), ((0, 4, 9), "0,4,9")]
+)
+def test_the_seeds_a_message_suggests_read_back_as_those_seeds(seeds, text):
+    assert seeds_option(seeds) == text
+    assert list(parse_seeds(text)) == list(seeds)

@@ -212,6 +212,15 @@ def _split_top_level(text: str) -> list[str]:
     return [*parts, text[start:]]
 
 
+def seeds_option(seeds: Sequence[int]) -> str:
+    """``seeds`` as ``--seeds`` reads them: a range (``100-104``) where they run up one by one, else a
+    comma list. A lone seed is a range of one (``--seeds 5`` would be the count, seeds 0-4)."""
+    first, last = seeds[0], seeds[-1]
+    if list(seeds) == list(range(first, last + 1)):
+        return f"{first}-{last}"
+    return ",".join(map(str, seeds))
+
+
 def open_sweep(sweep_dir: Path, spec: SweepSpec | None) -> SweepSpec:
     """Create ``sweep_dir`` for ``spec``, or reopen it (``spec=None`` or the same spec) to resume.
 
@@ -230,7 +239,7 @@ def open_sweep(sweep_dir: Path, spec: SweepSpec | None) -> SweepSpec:
                 raise SweepError(
                     f"{sweep_dir} holds another sweep (these configs and grid, with seeds "
                     f"{', '.join(map(str, stored.seeds))}); to add seeds to it: dospcot sweep --resume "
-                    f"{sweep_dir} --seeds {','.join(map(str, spec.seeds))}"
+                    f"{sweep_dir} --seeds {seeds_option(spec.seeds)}"
                 )
             raise SweepError(
                 f"{sweep_dir} holds another sweep ({', '.join(stored.configs)}, grid "
