@@ -21,7 +21,7 @@ def parse_seeds(text: str) -> Sequence[int]:
     """``"10"`` -> seeds 0..9 (a ``range``: a huge count is refused by its size check, not built);
     ``"3,5,7"`` -> those seeds; ``"100-104"`` -> seeds 100 to 104, both ends included (a ``range``)."""
     try:
-        if "-" in text.strip().lstrip("-"):
+        if "-" in text.strip()[1:]:  # a range's dash follows its first seed
             first, last = (int(end) for end in text.split("-", 1))
             if first < 0 or last < first:
                 raise argparse.ArgumentTypeError(
@@ -168,10 +168,8 @@ class CommandParser(OneLineParser):
             from dospcot.config.presets import did_you_mean
 
             options = [o for o in self._option_string_actions if o.startswith("--")]
-            hints = [
-                did_you_mean(e.partition("=")[0], options, "", shown=0) for e in extras if e.startswith("--")
-            ]
-            hint = next((h for h in hints if "did you mean" in h), "")
+            hints = (did_you_mean(e.partition("=")[0], options, None) for e in extras if e.startswith("--"))
+            hint = next((h for h in hints if h), "")
             self.error(f"unrecognized arguments: {' '.join(extras)}{hint}")
         return parsed, extras
 

@@ -24,15 +24,18 @@ def preset_names() -> list[str]:
     return sorted(p.name[:-5] for p in _presets().iterdir() if p.name.endswith(".toml"))
 
 
-def did_you_mean(name: str, names: Iterable[str], what: str, shown: int | None = 6) -> str:
+def did_you_mean(name: str, names: Iterable[str], what: str | None, shown: int | None = 6) -> str:
     """``"; did you mean 'grid16'?"`` where some of ``names`` are close to ``name`` (:mod:`difflib`,
-    letter case aside), else ``"; <what>: a, b, ..."`` with the first ``shown`` names (None: all): a
-    misspelling is answered with the name meant, not with a list to search."""
+    letter case aside), else ``"; <what>: a, b, ..."`` with the first ``shown`` names (None: all), or
+    ``""`` where ``what`` is None: a misspelling is answered with the name meant, not with a list to
+    search."""
     names = list(names)
     by_lower = {n.lower(): n for n in names}
     close = [by_lower[c] for c in difflib.get_close_matches(name.lower(), list(by_lower), n=3, cutoff=0.6)]
     if close:
         return "; did you mean " + " or ".join(repr(c) for c in close) + "?"
+    if what is None:
+        return ""
     listed = names if shown is None else names[:shown]
     return f"; {what}: " + ", ".join(listed) + (", ..." if len(listed) < len(names) else "")
 
