@@ -251,6 +251,20 @@ def _by_seed(runs: list[TrialRun], task: str, arm: str) -> dict[int, TrialRun]:
     return {r.trial.seed: r for r in runs if _task(r) == task and _arm(r) == arm and r.trial.seed < limit}
 
 
+def declared_pairs(task: str, label: str) -> int | None:
+    """The pairs on which ``label``'s difference on ``task`` is read against the rule: the early-labels
+    path's seeds as declared (:data:`EXTENDED_SEEDS`), which an extension raises before its seeds run,
+    so that a difference over fewer pairs is shown but not yet judged; None for the other differences,
+    read on the seeds both sides ran."""
+    return _seeds(task, EARLY) if label == EARLY_PATH else None
+
+
+def judged(task: str, label: str, diff: SeedSummary) -> bool:
+    """Whether ``diff`` is read against the rule: every declared pair has run (:func:`declared_pairs`)."""
+    declared = declared_pairs(task, label)
+    return declared is None or diff.n >= declared
+
+
 def matches(diff: SeedSummary) -> bool:
     """Whether the control's success minus the oracle's matches within noise (:data:`MARGIN`)."""
     return diff.low <= 0 <= diff.high and diff.low > -MARGIN
@@ -388,7 +402,9 @@ def tables(runs: list[TrialRun]) -> list[str]:
         for label, diff in differences(runs, task).items():
             if diff.n:
                 verdict = ""
-                if label.startswith("path"):
+                if label.startswith("path") and not judged(task, label, diff):
+                    verdict = f"; the rule is read once all {declared_pairs(task, label)} pairs have run"
+                elif label.startswith("path"):
                     verdict = "; **" + ("matches" if matches(diff) else "does not match") + " the oracle**"
                 lines.append(f"- {name} ({views}), {label}: {diff} over {diff.n} seeds{verdict}.")
         lines += _seeds_needed(runs, task)
@@ -457,12 +473,13 @@ def _glance_path(runs: list[TrialRun]) -> tuple[str, int]:
 
 def glance(runs: list[TrialRun]) -> Glance:
     """The path's loss on each task measured under the newest defaults whose control has run on every
-    task (see :func:`_glance_path`), on the seeds both sides ran, and on how many the control matches the
-    oracle."""
+    task (see :func:`_glance_path`), on the seeds both sides ran, and on how many of the tasks it is
+    judged on (:func:`judged`) the control matches the oracle."""
     label, version = _glance_path(runs)
-    measured = {name: diff for task, name in TASKS.items() if (diff := differences(runs, task)[label]).n}
-    parts = "; ".join(f"{name} {diff}" for name, diff in measured.items()) or "not measured yet"
-    held = sum(map(matches, measured.values()))
+    measured = {task: diff for task in TASKS if (diff := differences(runs, task)[label]).n}
+    parts = "; ".join(f"{TASKS[task]} {diff}" for task, diff in measured.items()) or "not measured yet"
+    decided = [diff for task, diff in measured.items() if judged(task, label, diff)]
+    held = sum(map(matches, decided))
     seeds = range(SEEDS)
     if label == EARLY_PATH:  # the seeds both sides ran, more on the tasks of EXTENDED_SEEDS
         pairs = [_by_seed(runs, t, EARLY).keys() & _by_seed(runs, t, ORACLE_ADOPTED).keys() for t in TASKS]
@@ -470,7 +487,7 @@ def glance(runs: list[TrialRun]) -> Glance:
     return Glance(
         f"success of the oracle's agents under version {version} of the defaults, true-rewards control "
         f"minus oracle, paired: {parts} (matches on "
-        f"{held} of {len(measured)} tasks measured, of {len(TASKS)})",
+        f"{held} of {len(decided)} tasks judged, of {len(TASKS)})",
         EXPLORATORY,
         tuple(seeds),
     )

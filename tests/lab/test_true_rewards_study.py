@@ -15,6 +15,7 @@ from dospcot_lab.studies.true_rewards import (
     ADOPTED_PATH,
     ADOPTED_VERSION,
     EARLY_LABELS,
+    EARLY_PATH,
     EARLY_VERSION,
     MARGIN,
     PRESET,
@@ -91,7 +92,7 @@ def test_the_control_matches_only_within_the_margin(control, matched):
     assert f"- LavaGapS7 (image), path: control minus oracle: {diff} over 10 seeds; {verdict}." in tables(
         runs
     )
-    assert glance(runs).headline.endswith(f"(matches on {int(matched)} of 1 tasks measured, of 4)")
+    assert glance(runs).headline.endswith(f"(matches on {int(matched)} of 1 tasks judged, of 4)")
 
 
 def test_the_adopted_versions_control_pairs_with_its_own_oracle_and_round_1s_wait_splits_its_loss():
@@ -148,7 +149,7 @@ def test_early_labels_pair_with_the_adopted_oracle_and_control_and_train_the_ado
     named = f"control v{v}, early labels"
     assert (
         f"- DoorKey-5x5 (image), path under early labels, version {v}: {named} minus oracle, version {v}: "
-        f"{path} over 4 seeds; **does not match the oracle**." in lines
+        f"{path} over 4 seeds; the rule is read once all 10 pairs have run." in lines
     )
     alone_line = f"- DoorKey-5x5 (image), early labels alone: {named} minus control, version {v}: {alone}"
     assert f"{alone_line} over 4 seeds." in lines
@@ -233,7 +234,7 @@ def test_exploration_by_rounds_is_a_second_control_compared_with_the_control_and
         f"- LavaGapS7 (image), path under exploration by rounds: its control minus oracle: {path} over 2 "
         "seeds; **matches the oracle**."
     ) in lines
-    assert glance(runs).headline.endswith("(matches on 0 of 1 tasks measured, of 4)")  # the control's alone
+    assert glance(runs).headline.endswith("(matches on 0 of 1 tasks judged, of 4)")  # the control's alone
     sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
     by_rounds = sweeps["true-rewards-lavagap-rounds"]
     assert by_rounds.grid == {**sweeps["true-rewards-lavagap"].grid, "training.exploration": ("rounds",)}
@@ -359,3 +360,24 @@ def test_success_by_steps_reads_each_arm_at_the_oracles_round_ends_on_its_views(
     assert "| oracle | 0.25 | 1.00 | 2 |" in lines  # (0.5 + 0) / 2, (1 + 1) / 2
     assert "| control | 0.00 | 0.50 | 2 |" in lines  # the ego agent is not on the oracle's view
     assert "| control, 20 short rounds | 0.30 | 0.90 | 1 |" in lines
+
+
+def test_the_early_labels_path_is_judged_only_once_every_declared_pair_has_run():
+    v = ADOPTED_VERSION
+    hidden = {PSEUDO_REWARDS: "hidden"}
+    runs = [_run("minigrid-doorkey-dospcot", s, 1.0, hidden, v) for s in range(10)]
+    runs += [_run("minigrid-doorkey-oracle", s, 1.0, defaults=v) for s in range(10)]
+    early = [_run("minigrid-doorkey-dospcot", s, 1.0, EARLY_LABELS, v) for s in range(10)]
+    for task, preset in PRESET.items():  # the glance reads the early-labels path once it ran on every task
+        if task != "doorkey":
+            runs += [
+                _run(f"{preset}-oracle", 0, 1.0, defaults=v),
+                _run(f"{preset}-dospcot", 0, 1.0, EARLY_LABELS, v),
+            ]
+    line = f"- DoorKey-5x5 (image), {EARLY_PATH}: {SeedSummary.of([0.0] * 9)} over 9 seeds"
+    assert f"{line}; the rule is read once all 10 pairs have run." in tables(runs + early[:9])
+    # Nine of ten pairs equal: an interval of 0 that would match, not yet judged, nor counted as held.
+    assert glance(runs + early[:9]).headline.endswith("(matches on 0 of 0 tasks judged, of 4)")
+    line = f"- DoorKey-5x5 (image), {EARLY_PATH}: {SeedSummary.of([0.0] * 10)} over 10 seeds"
+    assert f"{line}; **matches the oracle**." in tables(runs + early)
+    assert glance(runs + early).headline.endswith("(matches on 1 of 1 tasks judged, of 4)")
