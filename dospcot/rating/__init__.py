@@ -86,7 +86,7 @@ def rate_command(
     from dospcot.raters.file_rater import QueriesPending
     from dospcot.rating.server import rate  # the web server, imported only when the command runs
 
-    options = {"config": None, "overrides": [], "seeds": None, "threads": 1}
+    options = {"config": None, "overrides": [], "seed": None, "seeds": None, "threads": 1}
     while rate(args) and args.then_train:  # every query answered, and the page asked to resume
         try:
             return train(
