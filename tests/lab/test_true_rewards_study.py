@@ -178,7 +178,7 @@ def test_the_extended_tasks_pair_early_labels_with_the_oracle_over_their_seeds_a
     # 19 differences of 0 and one of -0.5: sd 0.1118, (2.8016 * 0.1118 / 0.1) ** 2 = 9.81, so 10 pairs.
     assert any("seeds the rule needs" in line and ", 10 pairs give" in line for line in lines)
     sweeps = {sweep.name: sweep for sweep in STUDIES["true-rewards"].sweeps}
-    for task, seeds in (("lavagap", 40), ("grid16", 40), ("doorkey", 10), ("fasthighway", 40)):
+    for task, seeds in (("lavagap", 40), ("grid16", 40), ("doorkey", 10), ("fasthighway", 100)):
         for arm in ("early-labels", "oracle"):
             assert sweeps[f"true-rewards-{task}-{arm}-v{v}"].seeds == seeds
         assert sweeps[f"true-rewards-{task}-v{v}"].seeds == 10
