@@ -42,13 +42,11 @@ def _train(args: argparse.Namespace, command: str) -> int:
     else:
         if not args.config:
             raise ConfigError(f"give a CONFIG: a preset ({', '.join(preset_names())}) or a path to a .toml")
-        check_overrides(args.overrides, seeds_option="--seeds" if args.seeds is not None else None)
-        overrides = args.overrides
-        if args.seed is not None:
-            if args.seeds is not None:
-                raise ConfigError("--seed and --seeds: give one (--seed trains one run, --seeds a batch)")
-            check_overrides(args.overrides, seeds_option="--seed")
-            overrides = [*overrides, f"seed={args.seed}"]
+        if args.seed is not None and args.seeds is not None:
+            raise ConfigError("--seed and --seeds: give one (--seed trains one run, --seeds a batch)")
+        option = "--seeds" if args.seeds is not None else "--seed" if args.seed is not None else None
+        check_overrides(args.overrides, seeds_option=option)
+        overrides = args.overrides if args.seed is None else [*args.overrides, f"seed={args.seed}"]
         cfg = load_config(args.config, overrides)
         seeds = len(args.seeds) if args.seeds is not None else 1
         warn("train", check_sizes([cfg], seeds, batch=seeds))
