@@ -418,6 +418,9 @@ TINY_SETS = [
     'training.label_strategy="disagreement"',
 ]
 MINIGRID_SETS = [
+    # A person's answers cannot pause round 1's collection, so a file-rated run buys round 1's labels at
+    # its end whatever the version; the simulated twin must buy them there too to train the same run.
+    'training.first_labels="round_end"',
     "training.rounds=2",
     "training.steps_per_round=200",
     "dqn.learning_starts=50",

@@ -25,7 +25,7 @@ def test_bench_quick_never_writes_benchmarks_md(tmp_path, capsys, monkeypatch):
 
 @pytest.mark.slow  # over 30 s on 2 cores: `make test-slow`
 def test_bench_quick_writes_every_row(tmp_path):
-    out = tmp_path / "BENCHMARKS.md"
+    out = tmp_path / "bench-quick.md"
     assert main(["bench", "--quick", "--repeats", "3", "--out", str(out)]) == 0
     text = out.read_text()
     assert text.count("ExpectedSarsaDQN (target=") == 4 and "median of 3 repetitions" in text
@@ -36,7 +36,8 @@ def test_bench_quick_writes_every_row(tmp_path):
     assert "FastHighwayVec vs highway-env's highway-fast-v0: env steps per second" in text
     assert "Tabular agents, vectorised vs a per-step Python loop: agent steps per second" in text
     assert "| ratio | target | met |" in text
-    assert text.count("A DOSPCoT run vs a self-training run: CPU time per run") == 4
+    cost = "A DOSPCoT run vs its agents alone (a self-training run per view): CPU time per run"
+    assert text.count(cost) == 4
     assert text.count("This release vs the last (700346f): CPU time per DOSPCoT run") == 4
     assert "This release vs the last (700346f): peak memory per DOSPCoT run" in text
 
